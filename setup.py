@@ -1,0 +1,36 @@
+"""ament_python package rubber_rig (also installable with pip for the no-ROS path of the README)."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'rubber_rig'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(exclude=['test', 'test.*']),
+    package_data={package_name: ['**/*.yaml', '**/*.dbc', '**/*.json']},
+    include_package_data=True,
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+        ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.json')),
+    ],
+    install_requires=['setuptools'],
+    zip_safe=False,
+    maintainer='rubber_rig developers',
+    maintainer_email='rubber-rig@example.org',
+    description='ROS 2 node suite for hardware-in-the-loop rubber-element test rigs',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'rubber-rig = rubber_rig.cli.main:main',
+            'rig_driver = rubber_rig.nodes.rig_driver:main',
+            'excitation = rubber_rig.nodes.excitation:main',
+            'element_model = rubber_rig.nodes.element_model:main',
+            'recorder = rubber_rig.nodes.recorder:main',
+        ],
+    },
+)
