@@ -1,0 +1,27 @@
+"""Topic names and QoS profiles shared by every node of the suite (and the recorder).
+
+QoS choices:
+- Streams that must not lose a sample (``samples``, ``setpoints``, ``prediction``): RELIABLE with a deep
+  KEEP_LAST history. Sensor-data QoS (best effort) would silently drop batches under load, and the suite
+  promises to count every gap; batching keeps the message rate low (1 kHz rig -> ~50 msg/s).
+- Per-cycle results (``cycle_metrics``): RELIABLE, moderate depth.
+- State that a late joiner must see at once (``status``, ``model_parameters``, ``program``): RELIABLE +
+  TRANSIENT_LOCAL, depth 1 (the last value is latched, like a ROS 1 latched topic).
+"""
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+SAMPLES = 'samples'                  # msg_defs/msg/RigSampleBatch, rig_driver -> all
+SETPOINTS = 'setpoints'              # msg_defs/msg/SetpointBatch, excitation -> rig_driver
+STATUS = 'status'                    # msg_defs/msg/RigStatus, rig_driver (latched)
+PREDICTION = 'prediction'            # msg_defs/msg/ModelPrediction, element_model
+CYCLE_METRICS = 'cycle_metrics'      # msg_defs/msg/CycleMetrics, element_model
+MODEL_PARAMETERS = 'model_parameters'  # msg_defs/msg/ModelParameters, element_model (latched)
+PROGRAM = 'program'                  # std_msgs/msg/String (program YAML), excitation (latched)
+DIAGNOSTICS = '/diagnostics'         # diagnostic_msgs/msg/DiagnosticArray (absolute, as in every ROS 2 system)
+
+STREAM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                        reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+EVENT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
+                       reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
