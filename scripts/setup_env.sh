@@ -14,6 +14,21 @@ hash_of() { cat "$@" 2>/dev/null | sha256sum | cut -c1-16; }
 up_to_date() { [ -f "$STAMPS/$1" ] && [ "$(cat "$STAMPS/$1")" = "$2" ]; }
 mark() { mkdir -p "$STAMPS"; printf '%s' "$2" > "$STAMPS/$1"; }
 
+# 0. system tools for the rosidl build (Debian packages); only installed when missing ---------------------------
+missing=()
+command -v cmake >/dev/null || missing+=(cmake)
+command -v g++ >/dev/null || missing+=(g++)
+command -v make >/dev/null || missing+=(make)
+if [ ${#missing[@]} -gt 0 ]; then
+  if command -v apt-get >/dev/null && [ "$(id -u)" = 0 ]; then
+    log "installing ${missing[*]} (apt-get)"
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}" >/dev/null
+  else
+    echo "rubber_rig needs ${missing[*]} to generate the msg_defs interfaces: install them (e.g. sudo apt-get install ${missing[*]})" >&2
+    exit 1
+  fi
+fi
+
 # 1. interpreter + venv ---------------------------------------------------------------------------
 PY="${PYTHON:-}"
 if [ -z "$PY" ]; then
@@ -34,13 +49,18 @@ fi
 REQ_HASH="$(hash_of "$ROOT/requirements.txt")"
 if ! up_to_date requirements "$REQ_HASH"; then
   log "installing Python dependencies (requirements.txt)"
-  "$VENV/bin/python" -m pip install -q -r "$ROOT/requirements.txt"
+  mkdir -p "$ROOT/build"
+  if ! "$VENV/bin/python" -m pip install -q -r "$ROOT/requirements.txt" >"$ROOT/build/pip-requirements.log" 2>&1; then
+    grep -v '^WARNING: Location' "$ROOT/build/pip-requirements.log" >&2
+    echo "pip could not install requirements.txt (full log: build/pip-requirements.log)" >&2
+    exit 1
+  fi
   mark requirements "$REQ_HASH"
   rm -f "$STAMPS/msg_defs"
 fi
 
 # 3. msg_defs: real rosidl generation with cmake into the venv prefix ------------------------------------------
-MSG_HASH="$(cd "$ROOT" && hash_of $(find msg_defs -type f | sort) scripts/setup_env.sh)"
+MSG_HASH="$(cd "$ROOT" && hash_of $(find msg_defs -type f | sort))"
 if ! up_to_date msg_defs "$MSG_HASH"; then
   log "generating msg_defs interfaces (rosidl, cmake)"
   # Quirk 3 of the note: exported cmake targets of the wheels carry the include paths of the build machine.
@@ -72,6 +92,8 @@ fi
 PKG_HASH="$(hash_of "$ROOT/setup.py" "$ROOT/setup.cfg")"
 if ! up_to_date package "$PKG_HASH"; then
   log "installing rubber_rig (editable)"
-  "$VENV/bin/python" -m pip install -q --no-deps --no-build-isolation -e "$ROOT"
+  mkdir -p "$ROOT/build"
+  "$VENV/bin/python" -m pip install -q --no-deps --no-build-isolation -e "$ROOT" >"$ROOT/build/pip-install.log" 2>&1 \
+    || { cat "$ROOT/build/pip-install.log" >&2; exit 1; }
   mark package "$PKG_HASH"
 fi
