@@ -1,0 +1,225 @@
+"""msg_defs <-> core conversions shared by the nodes (the only place that knows both sides).
+
+Everything is SI on both sides. Arrays go into messages as float64 sequences; rosidl-generated Python
+messages accept numpy arrays directly (``array.array('d')`` underneath), which keeps 1-10 kHz batches cheap.
+"""
+from __future__ import annotations
+
+import array
+import math
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+
+from builtin_interfaces.msg import Time
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from msg_defs.msg import (BlockSummary, BranchForce, CycleMetrics, CycleProperties, ModelParameters,
+                          ModelPrediction, RigLimits, RigSampleBatch, RigStatus, SetpointBatch)
+
+STATE_NAMES = {RigStatus.STATE_UNCONFIGURED: 'unconfigured', RigStatus.STATE_IDLE: 'idle',
+               RigStatus.STATE_RUNNING: 'running', RigStatus.STATE_HOLDING: 'holding',
+               RigStatus.STATE_RAMPING_DOWN: 'ramping_down', RigStatus.STATE_FAULT: 'fault'}
+STATE_BY_NAME = {v: k for k, v in STATE_NAMES.items()}
+
+
+# -- time --------------------------------------------------------------------------------------------------
+def stamp(t: float) -> Time:
+    """Seconds (float) -> builtin_interfaces/Time."""
+    sec = math.floor(t)
+    return Time(sec=int(sec), nanosec=min(int(round((t - sec) * 1e9)), 999_999_999))
+
+
+def to_seconds(t: Time) -> float:
+    return t.sec + t.nanosec * 1e-9
+
+
+def f64(values) -> array.array:
+    """Any float sequence -> array.array('d'): the setter of a rosidl float64[] field takes it without a
+    per-element Python check (about 10x cheaper than assigning a numpy array directly)."""
+    out = array.array('d')
+    out.frombytes(np.ascontiguousarray(values, dtype=np.float64).tobytes())
+    return out
+
+
+def as_array(seq) -> np.ndarray:
+    """A float64[] field (array.array) -> numpy view without copying."""
+    return np.frombuffer(seq, dtype=np.float64) if len(seq) else np.zeros(0)
+
+
+def _get(obj: Any, name: str, default=None):
+    """Read a field from a dataclass-like object or a mapping (the core returns either)."""
+    if isinstance(obj, Mapping):
+        return obj.get(name, default)
+    return getattr(obj, name, default)
+
+
+# -- samples and setpoints ------------------------------------------------------------------------------------
+def sample_batch_msg(first_sequence: int, t0: float, sample_period: float, displacement, force, setpoint,
+                     temperature: float, status_flags: int, frames_lost: int) -> RigSampleBatch:
+    msg = RigSampleBatch()
+    msg.header.stamp = stamp(t0)
+    msg.first_sequence = int(first_sequence)
+    msg.sample_period = float(sample_period)
+    msg.displacement = f64(displacement)
+    msg.force = f64(force)
+    msg.setpoint = f64(setpoint)
+    msg.temperature = float(temperature)
+    msg.status_flags = int(status_flags)
+    msg.frames_lost = int(frames_lost)
+    return msg
+
+
+def batch_arrays(msg: RigSampleBatch) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(displacement, force, setpoint) of a RigSampleBatch as numpy arrays (zero-copy where possible)."""
+    return as_array(msg.displacement), as_array(msg.force), as_array(msg.setpoint)
+
+
+def setpoint_batch_msg(first_sequence: int, sample_period: float, displacement, block_index: int,
+                       t: float | None = None) -> SetpointBatch:
+    msg = SetpointBatch()
+    if t is not None:
+        msg.header.stamp = stamp(t)
+    msg.first_sequence = int(first_sequence)
+    msg.sample_period = float(sample_period)
+    msg.displacement = f64(displacement)
+    msg.block_index = int(block_index)
+    return msg
+
+
+# -- status and diagnostics -----------------------------------------------------------------------------------
+def limits_msg(limits: Any) -> RigLimits:
+    msg = RigLimits()
+    for name in ('displacement_min', 'displacement_max', 'velocity_max', 'force_max'):
+        value = _get(limits, name)
+        if value is not None:
+            setattr(msg, name, float(value))
+    return msg
+
+
+def state_code(state: Any) -> int:
+    """Core state (int, enum or name) -> RigStatus.STATE_*."""
+    if isinstance(state, str):
+        return STATE_BY_NAME.get(state.lower(), RigStatus.STATE_FAULT)
+    name = getattr(state, 'name', None)
+    if isinstance(name, str) and name.lower() in STATE_BY_NAME:
+        return STATE_BY_NAME[name.lower()]
+    return int(getattr(state, 'value', state))
+
+
+def status_msg(snapshot: Any, limits: Any, sample_rate: float, t: float) -> RigStatus:
+    """A driver status snapshot (fields as in RigStatus) -> RigStatus."""
+    msg = RigStatus()
+    msg.header.stamp = stamp(t)
+    msg.state = state_code(_get(snapshot, 'state', RigStatus.STATE_UNCONFIGURED))
+    msg.state_name = STATE_NAMES.get(msg.state, 'unknown')
+    msg.faults = int(_get(snapshot, 'faults', 0) or 0)
+    msg.fault_messages = [str(m) for m in (_get(snapshot, 'messages', None)
+                                            or _get(snapshot, 'fault_messages', None) or [])]
+    msg.limits = limits_msg(limits)
+    msg.sample_rate = float(sample_rate)
+    counters = _get(snapshot, 'counters', None) or {}
+    for name in ('samples_received', 'frames_lost', 'frames_late', 'frames_malformed', 'frames_unknown'):
+        value = _get(snapshot, name, None)
+        if value is None:
+            value = _get(counters, name, 0)
+        setattr(msg, name, int(value or 0))
+    temperature = _get(snapshot, 'temperature', None)
+    msg.temperature = float('nan') if temperature is None else float(temperature)
+    return msg
+
+
+def fault_names(faults: int) -> list[str]:
+    names = [n for n in dir(RigStatus) if n.startswith('FAULT_') and n != 'FAULT_NONE']
+    return sorted(n[6:].lower() for n in names if faults & getattr(RigStatus, n))
+
+
+def diagnostics_msg(status: RigStatus, hardware_id: str, extra: Mapping[str, Any] | None = None,
+                    name: str = 'rig_driver') -> DiagnosticArray:
+    """RigStatus -> diagnostic_msgs/DiagnosticArray (OK running/idle, WARN frame loss, ERROR fault)."""
+    d = DiagnosticStatus()
+    d.name = name
+    d.hardware_id = hardware_id
+    if status.state == RigStatus.STATE_FAULT or status.faults:
+        d.level = DiagnosticStatus.ERROR
+        d.message = 'fault: ' + ', '.join(fault_names(status.faults) or ['unknown'])
+    elif status.frames_lost or status.frames_malformed:
+        d.level = DiagnosticStatus.WARN
+        d.message = f'{status.state_name}; {status.frames_lost} frames lost, {status.frames_malformed} malformed'
+    else:
+        d.level = DiagnosticStatus.OK
+        d.message = status.state_name
+    values = {'state': status.state_name, 'faults': status.faults, 'sample_rate': status.sample_rate,
+              'samples_received': status.samples_received, 'frames_lost': status.frames_lost,
+              'frames_late': status.frames_late, 'frames_malformed': status.frames_malformed,
+              'frames_unknown': status.frames_unknown, 'temperature': status.temperature}
+    values.update(extra or {})
+    d.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
+    arr = DiagnosticArray()
+    arr.header.stamp = status.header.stamp
+    arr.status = [d]
+    return arr
+
+
+# -- element model -------------------------------------------------------------------------------------------------
+def prediction_msg(batch: RigSampleBatch, predicted, branch_names: Iterable[str] = (), branches=None) -> ModelPrediction:
+    msg = ModelPrediction()
+    msg.header = batch.header
+    msg.first_sequence = batch.first_sequence
+    msg.sample_period = batch.sample_period
+    f = as_array(batch.force)
+    predicted = np.asarray(predicted, dtype=np.float64)
+    msg.displacement = batch.displacement  # already array.array('d'): no copy through numpy
+    msg.measured_force = batch.force
+    msg.predicted_force = f64(predicted)
+    msg.residual = f64(f - predicted)
+    if branches is not None:
+        msg.branches = [BranchForce(name=str(n), force=f64(b))
+                        for n, b in zip(branch_names, branches)]
+    return msg
+
+
+def cycle_properties_msg(m: Any) -> CycleProperties:
+    msg = CycleProperties()
+    for name in ('k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy_harmonic', 'energy_loop'):
+        value = _get(m, name)
+        setattr(msg, name, float('nan') if value is None else float(value))
+    return msg
+
+
+def cycle_metrics_msg(measured: Any, model: Any, block_index: int, cycle_index: int, t: float) -> CycleMetrics:
+    msg = CycleMetrics()
+    msg.header.stamp = stamp(t)
+    msg.block_index = int(block_index)
+    msg.cycle_index = int(cycle_index)
+    msg.frequency = float(_get(measured, 'frequency', float('nan')))
+    msg.amplitude = float(_get(measured, 'amplitude', float('nan')))
+    msg.mean = float(_get(measured, 'mean', float('nan')))
+    msg.measured = cycle_properties_msg(measured)
+    msg.model = cycle_properties_msg(model)
+    return msg
+
+
+def model_parameters_msg(model_name: str, parameter_set: str, temperature: float,
+                         values: Mapping[str, float], t: float) -> ModelParameters:
+    msg = ModelParameters()
+    msg.header.stamp = stamp(t)
+    msg.model_name = model_name
+    msg.parameter_set = parameter_set
+    msg.temperature = float(temperature)
+    msg.names = [str(k) for k in values]
+    msg.values = [float(v) for v in values.values()]
+    return msg
+
+
+def block_summary_msg(s: Any, index: int | None = None) -> BlockSummary:
+    msg = BlockSummary()
+    msg.block_index = int(_get(s, 'block_index', index if index is not None else -1))
+    msg.name = str(_get(s, 'name', '') or '')
+    msg.waveform = str(_get(s, 'waveform', '') or '')
+    for name in ('frequency', 'target_amplitude', 'achieved_amplitude', 'mean'):
+        value = _get(s, name)
+        setattr(msg, name, float('nan') if value is None else float(value))
+    msg.cycles = int(_get(s, 'cycles', 0) or 0)
+    msg.completed = bool(_get(s, 'completed', False))
+    msg.message = str(_get(s, 'message', '') or '')
+    return msg

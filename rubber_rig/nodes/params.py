@@ -1,0 +1,67 @@
+"""Declaring parameters with descriptors, and errors that name the parameter.
+
+Every node parameter is declared with a description and, for numbers, a range: rclpy then refuses an
+out-of-range value from a parameter file, the command line or ``ros2 param set`` with a message naming the
+parameter. Cross-field rules (e.g. ``limits.displacement_min < limits.displacement_max``) are checked by the
+node at start and raise :class:`ParameterError`, whose message starts with the parameter's name.
+"""
+from __future__ import annotations
+
+from typing import Any, Sequence
+
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+
+
+class ParameterError(ValueError):
+    """A parameter value is invalid; the message names the parameter (``<node>.<param>: why``)."""
+
+    def __init__(self, node_name: str, name: str, why: str):
+        self.parameter = name
+        super().__init__(f"parameter '{name}' of node '{node_name}': {why}")
+
+
+def declare(node: Node, name: str, default: Any, description: str, *, range: tuple | None = None,
+            choices: Sequence[str] | None = None, read_only: bool = False, units: str = '') -> Any:
+    """Declare one parameter with a descriptor and return its (validated) value."""
+    d = ParameterDescriptor(description=f'{description}' + (f' [{units}]' if units else ''),
+                            read_only=read_only)
+    if range is not None:
+        lo, hi = range
+        if isinstance(default, bool):
+            raise TypeError('no range for a bool parameter')
+        if isinstance(default, int):
+            d.integer_range = [IntegerRange(from_value=int(lo), to_value=int(hi), step=0)]
+        else:
+            d.floating_point_range = [FloatingPointRange(from_value=float(lo), to_value=float(hi), step=0.0)]
+        d.additional_constraints = f'{lo} <= {name} <= {hi}'
+    if choices is not None:
+        d.additional_constraints = 'one of: ' + ', '.join(choices)
+    _promote_int_override(node, name, default)
+    try:
+        value = node.declare_parameter(name, default, d).value
+    except (InvalidParameterValueException, InvalidParameterTypeException) as exc:  # rclpy's range check: re-raise naming node and field
+        raise ParameterError(node.get_name(), name, str(exc)) from None
+    if choices is not None and value not in choices:
+        raise ParameterError(node.get_name(), name, f'{value!r} is not one of {", ".join(choices)}')
+    return value
+
+
+def _promote_int_override(node: Node, name: str, default: Any) -> None:
+    """YAML writes ``sample_rate: 1000`` as an integer; accept it for a double parameter as ros2 users expect.
+
+    rclpy keeps the overrides from parameter files and the constructor in ``_parameter_overrides`` until the
+    parameter is declared; an integer there would be refused as the wrong type.
+    """
+    overrides = getattr(node, '_parameter_overrides', {})
+    p = overrides.get(name)
+    if isinstance(default, float) and p is not None and p.type_ == Parameter.Type.INTEGER:
+        overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(p.value))
+
+
+def check(node: Node, condition: bool, name: str, why: str) -> None:
+    """Raise ParameterError naming ``name`` unless ``condition`` holds."""
+    if not condition:
+        raise ParameterError(node.get_name(), name, why)
