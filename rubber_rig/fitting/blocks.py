@@ -1,0 +1,209 @@
+"""Split a recording into its test blocks and measure each block's steady cycles.
+
+A block is one harmonic excitation (frequency, amplitude, mean). Boundaries come from, in order:
+1. the recorded block index channel (the rig stamps every sample with its program block),
+2. otherwise detection of steady periodic segments: cycles are cut at upward zero crossings of the
+   displacement (with hysteresis against noise), and consecutive cycles with the same period and
+   amplitude (within `tolerance`) form a segment. Taper-in/out cycles change amplitude and therefore
+   fall outside the segments.
+The recorded program (if any) then labels blocks with their nominal frequency and amplitude.
+
+Inside a block, the first `settle_cycles` steady cycles are skipped (seed 000: Berg's friction loop
+is steady after about three cycles) and the remaining whole cycles are analysed.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .metrics import harmonic_properties
+
+
+@dataclass
+class BlockResult:
+    """Measured properties of one block (SI units)."""
+    index: int                 # block number in the recording (program order when known)
+    start: int                 # first analysed sample
+    stop: int                  # one past the last analysed sample
+    cycles: int                # analysed cycles
+    skipped_cycles: int        # settling cycles skipped
+    frequency: float
+    amplitude: float
+    mean: float
+    k_dyn: float
+    loss_angle: float
+    damping: float
+    energy: float              # loop area per cycle [J]
+    c_eq: float
+    nominal_frequency: float | None = None
+    nominal_amplitude: float | None = None
+    segment: tuple = (0, 0)    # samples of the whole block (settling included)
+    recording: str = ''
+
+    def as_dict(self) -> dict:
+        return {k: (list(v) if isinstance(v, tuple) else v) for k, v in self.__dict__.items()}
+
+
+@dataclass
+class SplitReport:
+    blocks: list = field(default_factory=list)
+    messages: list = field(default_factory=list)   # human-readable warnings, one per problem
+
+
+def _noise_level(x):
+    # third differences cancel a smooth signal well at rig rates; MAD -> sigma; 20 = var factor of d^3
+    d3 = np.diff(x, 3)
+    if d3.size == 0:
+        return 0.0
+    return float(1.4826 * np.median(np.abs(d3 - np.median(d3))) / np.sqrt(20.0))
+
+
+def _cycles(x):
+    """Upward zero crossings (sample index just after the crossing) of x about its median."""
+    x = np.asarray(x, float)
+    if x.size < 4:
+        return np.zeros(0, int)
+    xc = x - np.median(x)
+    peak = np.percentile(np.abs(xc), 99)
+    h = max(5.0 * _noise_level(x), 0.02 * peak)
+    below = xc < -h
+    above = xc > h
+    idx = np.flatnonzero(below | above)
+    state = above[idx]
+    rising = np.flatnonzero(~state[:-1] & state[1:])   # last 'below' sample, then first 'above'
+    crossings = []
+    for r in rising:
+        lo, hi = idx[r], idx[r + 1]
+        # first sample above zero after the last one below -h: the crossing to within one sample
+        crossings.append(lo + 1 + int(np.argmax(xc[lo + 1:hi + 1] > 0)))
+    return np.asarray(crossings, int)
+
+
+def _steady_runs(x, crossings, tolerance):
+    """Runs of consecutive cycles with the same period and amplitude: list of (c_first, c_last)."""
+    n = len(crossings) - 1
+    if n < 1:
+        return []
+    periods = np.diff(crossings).astype(float)
+    amps = np.array([0.5 * np.ptp(x[crossings[c]:crossings[c + 1]]) for c in range(n)])
+    means = np.array([np.mean(x[crossings[c]:crossings[c + 1]]) for c in range(n)])
+    runs = []
+    start = 0
+    for c in range(1, n + 1):
+        if c < n:
+            p_ref = np.median(periods[start:c])
+            a_ref = np.median(amps[start:c])
+            same = (abs(periods[c] - p_ref) <= tolerance * p_ref + 1.5
+                    and abs(amps[c] - a_ref) <= tolerance * a_ref
+                    and abs(means[c] - np.median(means[start:c])) <= tolerance * a_ref)
+            if same:
+                continue
+        runs.append((start, c - 1))
+        start = c
+    return runs
+
+
+def _nominal(program_block):
+    if not program_block:
+        return None, None
+    f = program_block.get('frequency')
+    a = program_block.get('amplitude')
+    return (float(f) if f is not None else None), (float(a) if a is not None else None)
+
+
+def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
+                 settle_cycles: int = 3, min_cycles: int = 2, tolerance: float = 0.03,
+                 recording: str = '') -> SplitReport:
+    """Find the blocks of a recording and measure their steady cycles.
+
+    displacement, force: arrays [m], [N] sampled every `dt` s. block_index: optional per-sample
+    program block number (negative = between blocks). program_blocks: optional list of dicts with
+    at least 'frequency' [Hz] and 'amplitude' [m] (e.g. the recorded test program's sine blocks), used
+    to label blocks and to report blocks that are missing from the recording.
+    """
+    x = np.asarray(displacement, float)
+    f = np.asarray(force, float)
+    if x.shape != f.shape:
+        raise ValueError(f'displacement ({x.size} samples) and force ({f.size} samples) differ in length')
+    report = SplitReport()
+    finite = np.isfinite(x) & np.isfinite(f)
+
+    segments = []   # (label, start, stop)
+    if block_index is not None:
+        bi = np.asarray(block_index)
+        change = np.flatnonzero(np.diff(bi) != 0) + 1
+        bounds = np.concatenate([[0], change, [bi.size]])
+        for s, e in zip(bounds[:-1], bounds[1:]):
+            if bi[s] >= 0:
+                segments.append((int(bi[s]), int(s), int(e)))
+    else:
+        segments.append((None, 0, x.size))
+
+    expected = list(program_blocks or [])
+    seen_labels = set()
+    counter = 0
+    for label, s, e in segments:
+        seg_ok = finite[s:e]
+        if not seg_ok.all():
+            # analyse the longest finite stretch; say what was lost
+            bad = np.flatnonzero(~seg_ok)
+            report.messages.append(
+                f'{recording}block {label if label is not None else "?"}: {bad.size} samples with missing '
+                f'values (NaN); only the longest complete stretch is analysed')
+            edges = np.concatenate([[-1], bad, [e - s]])
+            k = int(np.argmax(np.diff(edges)))
+            s, e = s + edges[k] + 1, s + edges[k + 1]
+        xs = x[s:e]
+        crossings = _cycles(xs)
+        runs = _steady_runs(xs, crossings, tolerance)
+        if label is not None:
+            runs = [max(runs, key=lambda r: r[1] - r[0])] if runs else []
+        for c0, c1 in runs:
+            n_steady = c1 - c0 + 1
+            if label is None and n_steady < 2:
+                continue   # detection: single odd cycles are tapers / transitions, not blocks
+            lab = label if label is not None else counter
+            nominal = expected[lab] if (label is not None and 0 <= lab < len(expected)) else None
+            nf, na = _nominal(nominal)
+            if n_steady < settle_cycles + min_cycles:
+                desc = f'{nf:g} Hz, {na * 1e3:g} mm' if nf and na else f'{n_steady} cycles'
+                report.messages.append(
+                    f'{recording}block {lab} ({desc}): only {n_steady} steady cycles, need '
+                    f'{settle_cycles + min_cycles} ({settle_cycles} settling + {min_cycles} analysed); skipped')
+                if label is None:
+                    counter += 1
+                seen_labels.add(lab)
+                continue
+            a0 = s + crossings[c0 + settle_cycles]
+            a1 = s + crossings[c1 + 1]
+            ncyc = n_steady - settle_cycles
+            freq = ncyc / ((a1 - a0) * dt)
+            props = harmonic_properties(x[a0:a1], f[a0:a1], dt, frequency=freq)
+            report.blocks.append(BlockResult(
+                index=int(lab), start=int(a0), stop=int(a1), cycles=int(ncyc),
+                skipped_cycles=int(settle_cycles), frequency=float(props['frequency']),
+                amplitude=float(props['amplitude']), mean=float(props['mean']),
+                k_dyn=float(props['k_dyn']), loss_angle=float(props['loss_angle']),
+                damping=float(props['damping']), energy=float(props['energy_loop']),
+                c_eq=float(props['c_eq']), nominal_frequency=nf, nominal_amplitude=na,
+                segment=(int(s + crossings[c0]), int(s + crossings[c1 + 1])), recording=recording))
+            seen_labels.add(lab)
+            if label is None:
+                counter += 1
+
+    if block_index is not None and expected:
+        missing = [i for i in range(len(expected)) if i not in seen_labels]
+        if missing:
+            last = max(seen_labels) if seen_labels else -1
+            tail = [i for i in missing if i > last]
+            if tail:
+                report.messages.append(
+                    f'{recording}recording ends before block {tail[0]} of {len(expected)} '
+                    f'(truncated): blocks {tail[0]}-{len(expected) - 1} missing')
+            inner = [i for i in missing if i <= last]
+            if inner:
+                report.messages.append(f'{recording}blocks {inner} of the program are not in the recording')
+    if not report.blocks:
+        report.messages.append(f'{recording}no usable steady block found')
+    return report
