@@ -1,0 +1,218 @@
+"""load_recording: MCAP recordings (ours, or `ros2 bag record`'s of the same topics) -> numpy arrays.
+
+Topics are found by message type, not by name, so namespaces do not matter:
+- msg_defs/msg/RigSampleBatch (or RigSample) -> per-sample ``time`` [s since the first sample],
+  ``time_ns`` (absolute), ``displacement`` [m], ``force`` [N], ``setpoint`` [m], ``temperature``
+  [degC], ``status`` (status_flags), ``sequence``; a batch's temperature and status apply to all its
+  samples. If several topics carry samples, the one named ``samples`` wins.
+- msg_defs/msg/ModelPrediction -> ``prediction`` and ``residual`` [N], joined on the sample sequence
+  (NaN where no prediction was recorded).
+- msg_defs/msg/SetpointBatch -> ``block_index`` joined on the sequence (-1 where unknown).
+- every other topic -> ``messages[topic]``: list of (log_time_ns, decoded message).
+- metadata: the ``rubber_rig`` record (specimen, temperature, model, ...) of the first file;
+  ``closing``: the loss reports (``rubber_rig.close``) of the files; ``gaps``: sequence gaps computed
+  from the data itself (so they are known for foreign recordings too).
+"""
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .errors import RecordingError
+from .gaps import GapTracker
+from .mcapio import Decoders, decode_metadata, read_file, recording_files
+from .writer import CLOSE_METADATA_NAME, METADATA_NAME
+
+BATCH = 'msg_defs/msg/RigSampleBatch'
+SAMPLE = 'msg_defs/msg/RigSample'
+PREDICTION = 'msg_defs/msg/ModelPrediction'
+SETPOINTS = 'msg_defs/msg/SetpointBatch'
+SIGNALS = ('time', 'displacement', 'force', 'setpoint', 'prediction', 'residual', 'temperature',
+           'status', 'sequence', 'block_index')
+
+
+@dataclass
+class Recording:
+    files: list
+    metadata: dict = field(default_factory=dict)
+    closing: list = field(default_factory=list)
+    topics: dict = field(default_factory=dict)      # topic -> {'type', 'count', 'qos'}
+    messages: dict = field(default_factory=dict)    # other topics: topic -> [(log_time_ns, msg)]
+    other_metadata: dict = field(default_factory=dict)
+    gaps: list = field(default_factory=list)
+    samples_lost: int = 0
+    complete: bool = True
+    start_ns: int = 0
+    end_ns: int = 0
+    sample_period: float = float('nan')
+    time_ns: np.ndarray = None
+    time: np.ndarray = None
+    displacement: np.ndarray = None
+    force: np.ndarray = None
+    setpoint: np.ndarray = None
+    temperature: np.ndarray = None
+    status: np.ndarray = None
+    sequence: np.ndarray = None
+    prediction: np.ndarray = None
+    residual: np.ndarray = None
+    block_index: np.ndarray = None
+
+    @property
+    def duration(self) -> float:
+        return (self.end_ns - self.start_ns) * 1e-9
+
+    @property
+    def signals(self) -> dict:
+        return {name: getattr(self, name) for name in SIGNALS}
+
+    def __len__(self):
+        return len(self.sequence)
+
+
+def _pick(topics_of_type, preferred):
+    if not topics_of_type:
+        return None
+    for topic in topics_of_type:
+        if topic.rstrip('/').split('/')[-1] == preferred:
+            return topic
+    return sorted(topics_of_type)[0]
+
+
+def load_recording(path, *, allow_truncated: bool = False) -> Recording:
+    """Load a recording (file, directory of split files, or list of files) into arrays.
+
+    A truncated file (writer killed) raises RecordingError suggesting ``rubber-rig recover``, unless
+    ``allow_truncated`` (then everything up to the last complete chunk is read)."""
+    files = recording_files(path)
+    rec = Recording(files=[str(f) for f in files])
+    raw = []                                   # (log_time, topic, type, schema, data, file)
+    for f in files:
+        schemas, channels, messages, metadata, complete = read_file(Path(f), allow_truncated)
+        rec.complete &= complete
+        for name, values in metadata:
+            if name == METADATA_NAME:
+                if not rec.metadata:
+                    rec.metadata = decode_metadata(values)
+            elif name == CLOSE_METADATA_NAME:
+                rec.closing.append(decode_metadata(values))
+            else:
+                rec.other_metadata.setdefault(name, values)
+        for channel_id, log_time, publish_time, sequence, data in messages:
+            channel = channels.get(channel_id)
+            if channel is None:
+                raise RecordingError(f'{f}: message on unknown channel {channel_id}')
+            schema = schemas.get(channel.schema_id)
+            if schema is None:
+                raise RecordingError(f'{f}: topic {channel.topic} has no schema')
+            if channel.message_encoding != 'cdr':
+                raise RecordingError(f'{f}: topic {channel.topic} is encoded as '
+                                     f'{channel.message_encoding!r}; only cdr is supported')
+            info = rec.topics.setdefault(channel.topic, {
+                'type': schema.name, 'count': 0,
+                'qos': channel.metadata.get('offered_qos_profiles', '')})
+            info['count'] += 1
+            raw.append((log_time, channel.topic, schema.name, schema, data, f))
+    if raw:
+        rec.start_ns = min(r[0] for r in raw)
+        rec.end_ns = max(r[0] for r in raw)
+    by_type = {}
+    for topic, info in rec.topics.items():
+        by_type.setdefault(info['type'], []).append(topic)
+    sample_topic = _pick(by_type.get(BATCH), 'samples') or _pick(by_type.get(SAMPLE), 'samples')
+    pred_topic = _pick(by_type.get(PREDICTION), 'prediction')
+    setp_topic = _pick(by_type.get(SETPOINTS), 'setpoints')
+    decoders = {}
+    samples, predictions, setpoints = [], [], []
+    for log_time, topic, type_name, schema, data, f in raw:
+        dec = decoders.setdefault(f, Decoders(f))
+        if topic == sample_topic:
+            samples.append(dec.decode(schema, data, topic))
+        elif topic == pred_topic:
+            predictions.append(dec.decode(schema, data, topic))
+        elif topic == setp_topic:
+            setpoints.append(dec.decode(schema, data, topic))
+        elif type_name not in (BATCH, SAMPLE, PREDICTION, SETPOINTS):
+            rec.messages.setdefault(topic, []).append((log_time, dec.decode(schema, data, topic)))
+    _fill_samples(rec, samples, sample_topic)
+    _join(rec, predictions, setpoints)
+    return rec
+
+
+def _stamp_ns(msg) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+def _fill_samples(rec: Recording, samples, topic):
+    tracker = GapTracker()
+    t, d, fo, sp, te, st, seq = [], [], [], [], [], [], []
+    periods = []
+    for m in samples:
+        if hasattr(m, 'first_sequence'):                       # RigSampleBatch
+            n = len(m.displacement)
+            first = int(m.first_sequence)
+            period = float(m.sample_period)
+            periods.append(period)
+            t.append(_stamp_ns(m) + np.round(np.arange(n) * period * 1e9).astype(np.int64))
+            d.append(np.asarray(m.displacement, dtype=float))
+            fo.append(np.asarray(m.force, dtype=float))
+            sp.append(np.asarray(m.setpoint, dtype=float))
+            te.append(np.full(n, float(m.temperature)))
+            st.append(np.full(n, int(m.status_flags), dtype=np.uint32))
+            seq.append(np.arange(first, first + n, dtype=np.uint64))
+        else:                                                  # RigSample
+            n, first = 1, int(m.sequence)
+            t.append(np.array([_stamp_ns(m)], dtype=np.int64))
+            d.append(np.array([m.displacement]))
+            fo.append(np.array([m.force]))
+            sp.append(np.array([m.setpoint]))
+            te.append(np.array([m.temperature]))
+            st.append(np.array([m.status_flags], dtype=np.uint32))
+            seq.append(np.array([first], dtype=np.uint64))
+        if len(fo[-1]) != n or len(sp[-1]) != n:
+            raise RecordingError(f'{topic}: batch at sequence {first} has arrays of different '
+                                 f'lengths ({n}, {len(fo[-1])}, {len(sp[-1])})')
+        tracker.observe(topic, first, n)
+    cat = (lambda parts, dtype: np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype))
+    rec.time_ns = cat(t, np.int64)
+    rec.time = (rec.time_ns - rec.time_ns[0]) * 1e-9 if len(rec.time_ns) else np.zeros(0)
+    rec.displacement, rec.force, rec.setpoint = cat(d, float), cat(fo, float), cat(sp, float)
+    rec.temperature, rec.status, rec.sequence = cat(te, float), cat(st, np.uint32), cat(seq, np.uint64)
+    rec.gaps = [e for e in tracker.events if e['kind'] == 'gap']
+    rec.samples_lost = tracker.samples_lost
+    if periods:
+        rec.sample_period = float(np.median(periods))
+
+
+def _lookup(rec_seq, seq, values, fill):
+    """values at rec_seq positions, joined on sequence numbers (``seq`` -> ``values``)."""
+    out = np.full(len(rec_seq), fill, dtype=np.asarray(values).dtype if len(values) else float)
+    if not len(seq) or not len(rec_seq):
+        return out
+    order = np.argsort(seq, kind='stable')
+    seq, values = seq[order], np.asarray(values)[order]
+    idx = np.clip(np.searchsorted(seq, rec_seq), 0, len(seq) - 1)
+    hit = seq[idx] == rec_seq
+    out[hit] = values[idx[hit]]
+    return out
+
+
+def _join(rec: Recording, predictions, setpoints):
+    pseq, pforce, presid = [], [], []
+    for m in predictions:
+        n, first = len(m.predicted_force), int(m.first_sequence)
+        pseq.append(np.arange(first, first + n, dtype=np.uint64))
+        pforce.append(np.asarray(m.predicted_force, dtype=float))
+        resid = np.asarray(m.residual, dtype=float)
+        presid.append(resid if len(resid) == n else np.full(n, np.nan))
+    cat = (lambda parts, dtype: np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype))
+    seq = cat(pseq, np.uint64)
+    rec.prediction = _lookup(rec.sequence, seq, cat(pforce, float), np.nan)
+    rec.residual = _lookup(rec.sequence, seq, cat(presid, float), np.nan)
+    sseq, blocks = [], []
+    for m in setpoints:
+        n, first = len(m.displacement), int(m.first_sequence)
+        sseq.append(np.arange(first, first + n, dtype=np.uint64))
+        blocks.append(np.full(n, int(m.block_index), dtype=np.int32))
+    rec.block_index = _lookup(rec.sequence, cat(sseq, np.uint64), cat(blocks, np.int32), -1)
+    if rec.block_index.dtype != np.int32:
+        rec.block_index = rec.block_index.astype(np.int32)

@@ -1,0 +1,214 @@
+"""Recorder: a recording session over RecordingWriter files (ROS-free; the recorder node wires it up).
+
+- start / stop / split, automatic splits by size and by duration. A split happens between two
+  messages, so every message lands in exactly one file (none lost, none duplicated).
+- Sequence gaps are tracked across the files of one recording (a gap across a split is still seen).
+- A write error (disk full, file too large) stops the recording cleanly: the file keeps everything up
+  to its last complete chunk, the error is kept in ``error`` and messages that arrive afterwards are
+  counted as not recorded (never silently lost).
+- Snapshot: with ``snapshot_duration_s`` > 0 the last N seconds (log time) are kept in memory, and
+  ``snapshot()`` writes them to their own file, recording or not (like rosbag2's snapshot mode).
+"""
+import time
+from collections import deque
+from datetime import datetime, timezone
+from pathlib import Path
+
+from .errors import RecordingError, RecordingWriteError
+from .gaps import GapTracker
+from .writer import RecordingWriter
+
+
+def _stamp(ns: int) -> str:
+    return datetime.fromtimestamp(ns / 1e9, tz=timezone.utc).strftime('%Y%m%d-%H%M%S')
+
+
+class Recorder:
+    def __init__(self, output_dir, *, metadata: dict = None, compression: str = 'zstd',
+                 split_size_bytes: int = 0, split_duration_s: float = 0.0, chunk_size: int = 1 << 20,
+                 flush_interval_s: float = 1.0, snapshot_duration_s: float = 0.0):
+        self.output_dir = Path(output_dir)
+        self.metadata = dict(metadata or {})
+        self.compression = compression
+        self.split_size_bytes = int(split_size_bytes)
+        self.split_duration_ns = int(split_duration_s * 1e9)
+        # a chunk must be well below the split size, or the size check would only see whole chunks
+        self.chunk_size = min(chunk_size, max(4096, self.split_size_bytes // 8)) \
+            if self.split_size_bytes else chunk_size
+        self.flush_interval_s = flush_interval_s
+        self.snapshot_duration_ns = int(snapshot_duration_s * 1e9)
+        self._buffer = deque()
+        self._qos = {}                       # topic -> offered QoS (list of dicts or YAML)
+        self.writer = None
+        self.gaps = GapTracker()
+        self.files = []                      # files of the current/last recording, in order
+        self.reports = []                    # loss report of each closed file
+        self.error = None                    # RecordingWriteError that stopped the recording
+        self.not_recorded_after_error = 0
+        self.messages_written = 0
+        self.dropped = 0
+        self._base = None
+        self._index = 0
+
+    # -- state -------------------------------------------------------------------------------
+    @property
+    def recording(self) -> bool:
+        return self.writer is not None
+
+    @property
+    def current_file(self):
+        return self.writer.path if self.writer is not None else None
+
+    def set_qos(self, topic: str, qos) -> None:
+        self._qos[topic] = qos
+
+    def stats(self) -> dict:
+        w = self.writer
+        return {
+            'recording': self.recording,
+            'file': str(w.path) if w else '',
+            'files': len(self.files),
+            'messages_written': self.messages_written + (w.messages_written if w else 0),
+            'messages_dropped': self.dropped + (sum(w.dropped.values()) if w else 0)
+            + self.not_recorded_after_error,
+            'not_recorded_after_error': self.not_recorded_after_error,
+            'bytes_current_file': w.size_estimate if w else 0,
+            'error': str(self.error) if self.error else '',
+            **self.gaps.summary(),
+        }
+
+    # -- control -----------------------------------------------------------------------------
+    def start(self, path=None) -> Path:
+        """Start a new recording: ``path`` names its directory (default: output_dir/rubber_rig_<utc>).
+        Files inside are <name>_0.mcap, <name>_1.mcap, ... as rosbag2 names split files."""
+        if self.recording:
+            return self.writer.path
+        now = time.time_ns()
+        base = Path(path) if path else self.output_dir / f'rubber_rig_{_stamp(now)}'
+        if base.suffix == '.mcap':
+            base = base.with_suffix('')
+        try:
+            base.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise RecordingWriteError(f'cannot create recording directory {base}: {exc.strerror}',
+                                      exc.errno) from None
+        self._base, self._index = base, 0
+        self.gaps = GapTracker()
+        self.files, self.reports = [], []
+        self.error, self.not_recorded_after_error = None, 0
+        self.messages_written = self.dropped = 0
+        self._open()
+        return self.writer.path
+
+    def _open(self):
+        path = self._base / f'{self._base.name}_{self._index}.mcap'
+        self._index += 1
+        metadata = dict(self.metadata, recording=self._base.name, file_index=str(self._index - 1))
+        self.writer = RecordingWriter(path, metadata, compression=self.compression,
+                                      chunk_size=self.chunk_size, flush_interval_s=self.flush_interval_s,
+                                      gaps=self.gaps)
+        self.files.append(path)
+
+    def _close_writer(self):
+        w, self.writer = self.writer, None
+        if w is None:
+            return
+        try:
+            self.reports.append(w.close())
+        except RecordingWriteError as exc:
+            self.error = self.error or exc
+        self.messages_written += w.messages_written
+        self.dropped += sum(w.dropped.values())
+
+    def stop(self) -> list:
+        """Stop recording; returns the files written."""
+        self._close_writer()
+        return list(self.files)
+
+    def split(self) -> Path:
+        """Close the current file and continue in the next one."""
+        if not self.recording:
+            raise RecordingError('not recording: nothing to split')
+        self._close_writer()
+        if self.error is None:
+            self._open()
+        return self.current_file
+
+    def close(self):
+        self.stop()
+
+    def _fail(self, exc: RecordingWriteError):
+        self.error = exc
+        self._close_writer()                 # only closes the fd: the writer knows it failed
+
+    # -- data --------------------------------------------------------------------------------
+    def write(self, topic: str, msg_type: str, msg, log_time_ns: int = None, publish_time_ns: int = None,
+              sequence: int = None) -> bool:
+        """Record one message (CDR bytes, rosidl message or dict). Returns True if it was written."""
+        if log_time_ns is None:
+            log_time_ns = time.time_ns()
+        if self.snapshot_duration_ns:
+            self._remember(topic, msg_type, msg, log_time_ns, publish_time_ns, sequence)
+        w = self.writer
+        if w is None:
+            if self.error is not None:
+                self.not_recorded_after_error += 1
+            return False
+        try:
+            if w.messages_written and (
+                    (self.split_size_bytes and w.size_estimate >= self.split_size_bytes)
+                    or (self.split_duration_ns
+                        and log_time_ns - w.first_log_time_ns >= self.split_duration_ns)):
+                self.split()
+                w = self.writer
+            w.write_message(topic, msg_type, msg, log_time_ns, publish_time_ns, sequence,
+                            qos=self._qos.get(topic))
+            return True
+        except RecordingWriteError as exc:
+            self._fail(exc)
+            return False
+        except (RecordingError, ValueError):
+            return False                     # counted by the writer (unknown type / encode error)
+
+    def flush(self, fsync: bool = False) -> None:
+        if self.writer is not None:
+            try:
+                self.writer.flush(fsync)
+            except RecordingWriteError as exc:
+                self._fail(exc)
+
+    # -- snapshot ----------------------------------------------------------------------------
+    def _remember(self, topic, msg_type, msg, log_time_ns, publish_time_ns, sequence):
+        buf = self._buffer
+        buf.append((topic, msg_type, msg, log_time_ns, publish_time_ns, sequence))
+        horizon = log_time_ns - self.snapshot_duration_ns
+        while buf and buf[0][3] < horizon:
+            buf.popleft()
+
+    def snapshot(self, path=None) -> Path:
+        """Write the buffered last ``snapshot_duration_s`` seconds to a file of their own."""
+        if not self.snapshot_duration_ns:
+            raise RecordingError('snapshot_duration_s is 0: no snapshot buffer is kept')
+        now = time.time_ns()
+        path = Path(path) if path else self.output_dir / f'snapshot_{_stamp(now)}.mcap'
+        try:
+            path.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise RecordingWriteError(f'cannot create {path.parent}: {exc.strerror}', exc.errno) from None
+        items = list(self._buffer)
+        metadata = dict(self.metadata, snapshot='true',
+                        snapshot_duration_s=str(self.snapshot_duration_ns / 1e9))
+        writer = RecordingWriter(path, metadata, compression=self.compression,
+                                 chunk_size=self.chunk_size, flush_interval_s=0)
+        try:
+            for topic, msg_type, msg, log_ns, pub_ns, seq in items:
+                try:
+                    writer.write_message(topic, msg_type, msg, log_ns, pub_ns, seq,
+                                         qos=self._qos.get(topic))
+                except RecordingWriteError:
+                    raise
+                except (RecordingError, ValueError):
+                    pass                     # counted in the snapshot's close record
+        finally:
+            writer.close()
+        return path

@@ -1,0 +1,314 @@
+"""RecordingWriter: one MCAP file in the ros2 profile, as rosbag2's MCAP storage writes it (ROS-free).
+
+- Schemas: ``ros2msg`` with the full concatenated definition (msgdefs.full_definition); channels:
+  ``cdr`` with ``offered_qos_profiles`` and ``topic_type_hash`` metadata; chunked, zstd/lz4, with
+  message indexes and a summary (mcap's Writer does the format).
+- Crash safety: the file is written unbuffered (each MCAP record reaches the OS in one write), and the
+  chunk in progress is closed at least every ``flush_interval_s`` of log time, so a SIGKILL loses at
+  most that much; ``rubber_rig.recording.recover`` rebuilds the summary of such a file.
+- Loss is never silent: messages that could not be written are counted by reason, sequence gaps of the
+  rig's sample streams are counted (gaps.GapTracker), and both go into a ``rubber_rig.close`` metadata
+  record when the file is closed.
+"""
+import errno as errno_mod
+import json
+import os
+import time
+from datetime import datetime, timezone
+from pathlib import Path
+
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
+from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
+
+from .errors import RecordingError, RecordingWriteError
+from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
+from .msgdefs import MessageDefinitionError, full_definition, normalize_type, type_hash, type_of
+from .qos import offered_qos_yaml
+
+METADATA_NAME = 'rubber_rig'           # self-description record written at the start of every file
+CLOSE_METADATA_NAME = 'rubber_rig.close'  # loss accounting written when a file is closed
+COMPRESSION = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE,
+               '': CompressionType.NONE}
+
+
+def software_version() -> str:
+    try:
+        from importlib.metadata import version
+        return version('rubber_rig')
+    except Exception:  # not installed as a distribution (source tree): say so
+        return '0.1.0+source'
+
+
+def encode_metadata(values: dict) -> dict:
+    """MCAP metadata values are strings: keep strings, JSON-encode the rest and remember which."""
+    out, json_keys = {}, []
+    for key, value in (values or {}).items():
+        if isinstance(value, str):
+            out[str(key)] = value
+        else:
+            out[str(key)] = json.dumps(_plain(value), sort_keys=True)
+            json_keys.append(str(key))
+    if json_keys:
+        out['_json_keys'] = ','.join(json_keys)
+    return out
+
+
+def _plain(value):
+    """numpy arrays/scalars and array.array -> lists/Python numbers (for CDR encoding and JSON)."""
+    if hasattr(value, 'tolist') and not isinstance(value, (bytes, bytearray)):
+        return value.tolist()
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_plain(v) for v in value]
+    return value
+
+
+class _UnbufferedFile:
+    """Write-only file whose every write goes straight to the OS (no Python-side buffer to lose)."""
+
+    def __init__(self, path: Path, overwrite: bool):
+        flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if overwrite else os.O_EXCL)
+        self._fd = os.open(path, flags, 0o644)
+        self._pos = 0
+
+    def write(self, data) -> int:
+        view = memoryview(data)
+        while view:
+            n = os.write(self._fd, view)
+            if n <= 0:
+                raise OSError(errno_mod.ENOSPC, 'no space left on device')
+            self._pos += n
+            view = view[n:]
+        return len(data)
+
+    def tell(self) -> int:
+        return self._pos
+
+    def flush(self):
+        pass
+
+    def fsync(self):
+        os.fsync(self._fd)
+
+    def close(self):
+        if self._fd >= 0:
+            os.close(self._fd)
+            self._fd = -1
+
+
+class RecordingWriter:
+    """Write ROS 2 messages (CDR bytes, rosidl messages or plain dicts) to one MCAP file.
+
+    ``metadata`` becomes the ``rubber_rig`` metadata record (specimen, temperature, model, parameters,
+    test program, rig configuration, ...); software version and start time are added.
+    """
+
+    def __init__(self, path, metadata: dict = None, *, compression: str = 'zstd',
+                 chunk_size: int = 1 << 20, flush_interval_s: float = 1.0, gaps: GapTracker = None,
+                 overwrite: bool = False):
+        self.path = Path(path)
+        if compression not in COMPRESSION:
+            raise RecordingError(f'unknown compression {compression!r}; use zstd, lz4 or none')
+        try:
+            self._file = _UnbufferedFile(self.path, overwrite)
+        except OSError as exc:
+            raise RecordingWriteError(f'cannot create recording {self.path}: {exc.strerror}',
+                                      exc.errno) from None
+        self._mcap = McapWriter(self._file, chunk_size=chunk_size, compression=COMPRESSION[compression])
+        self._chunk_size = chunk_size
+        self._flush_interval_ns = int(flush_interval_s * 1e9) if flush_interval_s else 0
+        self._schemas, self._channels, self._sequences = {}, {}, {}
+        self._encoders, self._decoders = {}, {}
+        self.gaps = gaps if gaps is not None else GapTracker()
+        self._gaps_at_open = (self.gaps.gaps, self.gaps.samples_lost, self.gaps.restarts,
+                              len(self.gaps.events))
+        self.messages_written = 0
+        self.messages_by_topic = {}
+        self.payload_bytes = 0
+        self.dropped = {}                  # reason -> count of messages not written
+        self.first_log_time_ns = None
+        self.last_log_time_ns = None
+        self._last_flush_ns = None
+        self._pending = 0                  # uncompressed bytes in the chunk in progress
+        self.failure = None                # the OSError that stopped this writer, if any
+        self.closed = False
+        self.start_time_ns = time.time_ns()
+        self.metadata = dict(metadata or {})
+        self.metadata.setdefault('software_version', software_version())
+        self.metadata.setdefault('start_time', datetime.fromtimestamp(
+            self.start_time_ns / 1e9, tz=timezone.utc).isoformat())
+        self.metadata.setdefault('start_time_ns', str(self.start_time_ns))
+        self._guard(self._mcap.start, 'ros2', f'rubber_rig {software_version()}')
+        self._guard(self._mcap.add_metadata, METADATA_NAME, encode_metadata(self.metadata))
+
+    # -- state -------------------------------------------------------------------------------
+    @property
+    def bytes_on_disk(self) -> int:
+        return self._file.tell()
+
+    @property
+    def size_estimate(self) -> int:
+        """Bytes on disk plus the (uncompressed) chunk in progress: an upper bound for splitting."""
+        return self._file.tell() + self._pending
+
+    def _guard(self, fn, *args, **kwargs):
+        if self.failure is not None:
+            raise RecordingWriteError(f'recording {self.path} stopped after a write error: '
+                                      f'{self.failure.strerror}', self.failure.errno)
+        try:
+            return fn(*args, **kwargs)
+        except OSError as exc:
+            self.failure = exc
+            what = {errno_mod.ENOSPC: 'disk full', errno_mod.EFBIG: 'file too large',
+                    errno_mod.EDQUOT: 'disk quota exceeded'}.get(exc.errno, exc.strerror)
+            raise RecordingWriteError(f'writing {self.path} failed ({what}); the file is kept up to '
+                                      'its last complete chunk, `rubber-rig recover` makes it readable',
+                                      exc.errno) from None
+
+    def count_dropped(self, reason: str, n: int = 1):
+        self.dropped[reason] = self.dropped.get(reason, 0) + n
+
+    # -- channels ----------------------------------------------------------------------------
+    def add_channel(self, topic: str, msg_type: str, qos=None, topic_type_hash: str = None) -> int:
+        """Register a topic (done implicitly by write_message). ``qos``: offered profiles as a list
+        of dicts (qos.qos_entry keywords) or the rosbag2 YAML string."""
+        msg_type = normalize_type(msg_type)
+        known = self._channels.get(topic)
+        if known is not None:
+            if known[1] != msg_type:
+                raise RecordingError(f'topic {topic} already recorded as {known[1]}, got {msg_type}')
+            return known[0]
+        schema_id = self._schemas.get(msg_type)
+        if schema_id is None:
+            text = full_definition(msg_type)
+            schema_id = self._guard(self._mcap.register_schema, msg_type, 'ros2msg', text.encode())
+            self._schemas[msg_type] = schema_id
+        metadata = {'offered_qos_profiles': offered_qos_yaml(qos or []),
+                    'topic_type_hash': topic_type_hash if topic_type_hash is not None
+                    else type_hash(msg_type)}
+        channel_id = self._guard(self._mcap.register_channel, topic, 'cdr', schema_id, metadata)
+        self._channels[topic] = (channel_id, msg_type)
+        self._sequences[channel_id] = 0
+        return channel_id
+
+    def _codec(self, table, factory, msg_type):
+        fn = table.get(msg_type)
+        if fn is None:
+            fn = factory(msg_type, full_definition(msg_type))[msg_type]
+            table[msg_type] = fn
+        return fn
+
+    # -- messages ----------------------------------------------------------------------------
+    def write_message(self, topic: str, msg_type: str, msg, log_time_ns: int = None,
+                      publish_time_ns: int = None, sequence: int = None, qos=None) -> None:
+        """Write one message. ``msg``: CDR bytes (as rclpy's raw subscriptions give them), a
+        rosidl-generated message or a dict of fields. Times in ns since the epoch (default: now)."""
+        if msg_type is None:
+            msg_type = type_of(msg)
+        try:
+            msg_type = normalize_type(msg_type)
+            channel_id = self.add_channel(topic, msg_type, qos)
+        except MessageDefinitionError:
+            self.count_dropped('unknown_type')
+            raise
+        if isinstance(msg, (bytes, bytearray, memoryview)):
+            data = bytes(msg)
+            decoded = None
+        else:
+            try:
+                data = self._codec(self._encoders, serialize_dynamic, msg_type)(
+                    _plain(msg) if isinstance(msg, dict) else msg)
+            except Exception as exc:  # the encoder raises many types; name the message instead
+                self.count_dropped('encode_error')
+                raise RecordingError(f'cannot encode a {msg_type} for {topic}: {exc}') from None
+            decoded = msg
+        if log_time_ns is None:
+            log_time_ns = time.time_ns()
+        if publish_time_ns is None:
+            publish_time_ns = log_time_ns
+        if sequence is None:
+            sequence = self._sequences[channel_id] + 1
+        self._sequences[channel_id] = sequence
+        try:
+            self._guard(self._mcap.add_message, channel_id, int(log_time_ns), data,
+                        int(publish_time_ns), int(sequence) & 0xFFFFFFFF)
+        except RecordingWriteError:
+            self.count_dropped('write_error')
+            raise
+        self._pending += len(data) + 31
+        self.messages_written += 1
+        self.messages_by_topic[topic] = self.messages_by_topic.get(topic, 0) + 1
+        self.payload_bytes += len(data)
+        if self.first_log_time_ns is None:
+            self.first_log_time_ns = self._last_flush_ns = log_time_ns
+        self.last_log_time_ns = log_time_ns
+        if msg_type in SEQUENCED_TYPES:
+            self._track(topic, msg_type, data, decoded, log_time_ns)
+        if self._pending > self._chunk_size:
+            self._pending = 0              # mcap has just closed the chunk itself
+        if self._flush_interval_ns and log_time_ns - self._last_flush_ns >= self._flush_interval_ns:
+            self.flush()
+
+    write_serialized = write_message
+
+    def _track(self, topic, msg_type, data, decoded, log_time_ns):
+        if decoded is None:
+            try:
+                decoded = self._codec(self._decoders, generate_dynamic, msg_type)(data)
+            except Exception:  # undecodable bytes are recorded anyway; count them
+                self.count_dropped('undecodable_for_gap_check')
+                return
+        span = sequence_span(msg_type, decoded)
+        if span is not None:
+            self.gaps.observe(topic, span[0], span[1], log_time_ns)
+
+    def add_metadata(self, name: str, values: dict) -> None:
+        self._guard(self._mcap.add_metadata, name, encode_metadata(values))
+
+    def flush(self, fsync: bool = False) -> None:
+        """Close the chunk in progress and hand it to the OS (survives SIGKILL; fsync: power loss)."""
+        self._guard(self._mcap.flush)
+        self._pending = 0
+        self._last_flush_ns = self.last_log_time_ns or 0
+        if fsync:
+            self._guard(self._file.fsync)
+
+    def loss_report(self) -> dict:
+        g0, lost0, r0, e0 = self._gaps_at_open
+        return {
+            'messages_written': self.messages_written,
+            'messages_by_topic': dict(self.messages_by_topic),
+            'messages_dropped': sum(self.dropped.values()),
+            'dropped_by_reason': dict(self.dropped),
+            'sequence_gaps': self.gaps.gaps - g0,
+            'samples_lost': self.gaps.samples_lost - lost0,
+            'sequence_restarts': self.gaps.restarts - r0,
+            'gap_events': self.gaps.events[e0:],
+            'total_sequence_gaps': self.gaps.gaps,
+            'total_samples_lost': self.gaps.samples_lost,
+        }
+
+    def close(self, extra: dict = None) -> dict:
+        """Write the loss report and the summary; returns the report. After a write error the file
+        is only closed (it ends at its last complete record; recover rebuilds the summary)."""
+        if self.closed:
+            return self.loss_report()
+        self.closed = True
+        report = self.loss_report()
+        try:
+            if self.failure is None:
+                values = dict(report, end_time_ns=time.time_ns(), clean_close=True, **(extra or {}))
+                self._guard(self._mcap.add_metadata, CLOSE_METADATA_NAME, encode_metadata(values))
+                self._guard(self._mcap.finish)
+                self._guard(self._file.fsync)
+        finally:
+            self._file.close()
+        return report
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
