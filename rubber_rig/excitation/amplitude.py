@@ -1,0 +1,122 @@
+"""Per-cycle amplitude measurement and the amplitude-control outer loop of one block.
+
+A real actuator attenuates and delays the command at higher frequencies. The loop measures every
+full-amplitude cycle of the displacement, estimates the plant gain from the command gain that was in force
+during exactly that cycle (so measurement latency cannot cause over-correction), and sets the command
+amplitude gain and mean offset for the following cycles, like peak-valley / amplitude-phase compensation.
+"""
+import math
+
+import numpy as np
+
+from .waveforms import smoothstep
+
+GAIN_MIN, GAIN_MAX = 0.5, 2.0
+
+
+def fit_cycle(waveform: str, phase: np.ndarray, x: np.ndarray):
+    """Amplitude [m] and mean [m] of one measured cycle.
+
+    Sine-like waveforms: least-squares fit of mean + a sin + b cos at the commanded phases (exact for any
+    samples per cycle, robust to noise); triangle/square: half the peak-valley range."""
+    if waveform in ('triangle', 'square'):
+        return 0.5 * float(x.max() - x.min()), 0.5 * float(x.max() + x.min())
+    w = 2 * math.pi * phase
+    basis = np.column_stack([np.ones_like(w), np.sin(w), np.cos(w)])
+    coef = np.linalg.lstsq(basis, x, rcond=None)[0]
+    return float(math.hypot(coef[1], coef[2])), float(coef[0])
+
+
+class BlockLoop:
+    """Cycle bookkeeping of one run of one periodic block: command gain per cycle, measured cycles.
+
+    Gain changes are blended over one whole cycle with a raised cosine, so the command never steps."""
+
+    def __init__(self, block, sample_rate: float, limits, control: bool):
+        self.block, self.fs, self.limits, self.control = block, sample_rate, limits, control
+        self.gain, self.offset = 1.0, 0.0           # wanted for cycles not yet generated
+        self._committed = {}                        # cycle -> (g0, g1, o0, o1, samples generated)
+        self._pending = {}                          # cycle -> ([phase arrays], [x arrays])
+        self.cycles = []                            # measured steady cycles: (cycle, amplitude, mean, gain)
+        total = block.total_cycles
+        self._steady = (block.taper_cycles, total - block.taper_cycles)
+        # peak velocity per metre of amplitude, to cap the gain under velocity_max
+        f = max(block.frequency, block.frequency_end or 0.0)
+        unit_v = {'sine': 2 * math.pi * f, 'triangle': 4 * f, 'square': 4 * f * block.square_slope}
+        self._unit_v = unit_v.get(block.waveform, 2 * math.pi * f)
+
+    # ---- command side
+    def command(self, phase: np.ndarray):
+        """Gain and mean offset arrays for the samples at `phase` [cycles] about to be generated."""
+        c = np.floor(phase).astype(np.int64)
+        uniq, inv, counts = np.unique(c, return_inverse=True, return_counts=True)
+        g0 = np.empty(uniq.size)
+        g1, o0, o1 = np.empty_like(g0), np.empty_like(g0), np.empty_like(g0)
+        for j, cc in enumerate(uniq):
+            cc = int(cc)
+            if cc not in self._committed:
+                prev = self._committed.get(cc - 1)
+                start_g, start_o = (prev[1], prev[3]) if prev else (self.gain, self.offset)
+                self._committed[cc] = [start_g, self.gain, start_o, self.offset, 0]
+            rec = self._committed[cc]
+            rec[4] += int(counts[j])
+            g0[j], g1[j], o0[j], o1[j] = rec[:4]
+        s = smoothstep(phase - c)
+        return g0[inv] + (g1 - g0)[inv] * s, o0[inv] + (o1 - o0)[inv] * s
+
+    # ---- measurement side
+    def feed(self, phase: np.ndarray, x: np.ndarray):
+        """Add measured displacement x [m] at commanded phases; finish every cycle a later sample shows complete."""
+        c = np.floor(phase).astype(np.int64)
+        for cc in np.unique(c):
+            sel = c == cc
+            lst = self._pending.setdefault(int(cc), ([], []))
+            lst[0].append(phase[sel])
+            lst[1].append(x[sel])
+        last = int(c.max())
+        for cc in sorted(k for k in self._pending if k < last):
+            self._finish(cc)
+
+    def flush(self):
+        """Finish all pending cycles (the block has been fully measured)."""
+        for cc in sorted(self._pending):
+            self._finish(cc)
+
+    def _finish(self, cc: int):
+        ph, xs = self._pending.pop(cc)
+        phase, x = np.concatenate(ph), np.concatenate(xs)
+        rec = self._committed.get(cc)
+        if rec is None or not (self._steady[0] - 1e-9 <= cc and cc + 1 <= self._steady[1] + 1e-9):
+            return
+        if x.size < max(4, 0.8 * rec[4]):   # too many samples lost to judge this cycle
+            return
+        amp, mean = fit_cycle(self.block.waveform, phase, x)
+        g_used = 0.5 * (rec[0] + rec[1])
+        self.cycles.append((cc, amp, mean, g_used))
+        if self.control and rec[0] == rec[1] and rec[2] == rec[3] and amp > 0:
+            plant = amp / (g_used * self.block.amplitude)
+            self.gain = self._cap(1.0 / plant, rec[2] - (mean - self.block.mean))
+            self.offset = rec[2] - (mean - self.block.mean)
+
+    def _cap(self, gain: float, offset: float) -> float:
+        """Keep the corrected command inside the gain range and the displacement and velocity limits."""
+        gain = min(max(gain, GAIN_MIN), GAIN_MAX)
+        if self.limits is not None:
+            a = self.block.amplitude
+            centre = self.block.mean + offset
+            room = min(self.limits.displacement_max - centre, centre - self.limits.displacement_min)
+            gain = min(gain, max(room, 0.0) / a)
+            gain = min(gain, 0.95 * self.limits.velocity_max / (self._unit_v * a))
+        return gain
+
+    # ---- reporting
+    def achieved(self):
+        """(amplitude, mean) [m] averaged over the last half of the measured steady cycles, or (nan, nan)."""
+        if not self.cycles:
+            return math.nan, math.nan
+        tail = self.cycles[len(self.cycles) // 2:]
+        return float(np.mean([c[1] for c in tail])), float(np.mean([c[2] for c in tail]))
+
+    def last_amplitude(self) -> float:
+        """Amplitude [m] of the last measured steady cycle (nan before the first)."""
+        return self.cycles[-1][1] if self.cycles else math.nan

@@ -1,0 +1,223 @@
+"""One program block: its fields (SI), validation with errors naming block and field, and evaluation."""
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import waveforms as wf
+from .units import to_si
+
+
+class ProgramError(ValueError):
+    """A test program is invalid; the message names the block (index and name) and the field."""
+
+
+# field -> dimension of its value (None: plain number / text); the allowed fields per waveform follow
+_FIELDS = {
+    'name': None, 'waveform': None, 'frequency': 'frequency', 'f_start': 'frequency', 'f_end': 'frequency',
+    'amplitude': 'length', 'mean': 'length', 'cycles': None, 'taper_cycles': None, 'duration': 'time',
+    'rate': 'velocity', 'target': 'length',
+}
+_ALLOWED = {
+    'sine': {'frequency', 'amplitude', 'mean', 'cycles', 'taper_cycles'},
+    'triangle': {'frequency', 'rate', 'amplitude', 'mean', 'cycles', 'taper_cycles'},
+    'square': {'frequency', 'rate', 'amplitude', 'mean', 'cycles', 'taper_cycles'},
+    'sweep_lin': {'f_start', 'f_end', 'duration', 'amplitude', 'mean', 'taper_cycles'},
+    'sweep_log': {'f_start', 'f_end', 'duration', 'amplitude', 'mean', 'taper_cycles'},
+    'hold': {'duration'},
+    'ramp': {'target', 'rate', 'duration'},
+}
+DEFAULT_TAPER_CYCLES = 1.0
+
+
+@dataclass
+class Block:
+    """A validated program block. SI units: m, Hz, s, m/s.
+
+    For periodic blocks (sine, triangle, square) `cycles` counts full-amplitude cycles; the taper in and out
+    add `taper_cycles` each. For sweeps, `frequency` is the start and `frequency_end` the end frequency and
+    `duration` the sweep time at full amplitude. `start_level` is where the block starts (previous block's end).
+    """
+    index: int
+    name: str
+    waveform: str
+    frequency: float = 0.0
+    amplitude: float = 0.0
+    mean: float = 0.0
+    cycles: int = 0
+    taper_cycles: float = 0.0
+    frequency_end: float = 0.0
+    duration: float = 0.0
+    rate: float = 0.0
+    target: float = 0.0
+    start_level: float = 0.0
+    square_slope: float = field(default=1.0, repr=False)
+
+    # ---- classification
+    @property
+    def periodic(self) -> bool:
+        """True for blocks with an amplitude and cycles (sine, triangle, square, sweeps)."""
+        return self.waveform in wf.PERIODIC + wf.SWEEPS
+
+    @property
+    def end_level(self) -> float:
+        """Displacement [m] the block ends at."""
+        if self.waveform == 'ramp':
+            return self.target
+        if self.waveform == 'hold':
+            return self.start_level
+        return self.mean
+
+    @property
+    def total_cycles(self) -> float:
+        """Phase [cycles] at the end of a periodic block, taper included."""
+        if self.waveform in wf.SWEEPS:
+            return wf.sweep_phase(np.array(0.0), self.frequency, self.frequency_end, self.taper_cycles,
+                                  self.duration, self.waveform == 'sweep_log')[1]
+        return self.cycles + 2 * self.taper_cycles
+
+    def seconds(self) -> float:
+        """Duration of the block [s]."""
+        if self.waveform in wf.PERIODIC:
+            return self.total_cycles / self.frequency
+        if self.waveform in wf.SWEEPS:
+            return self.taper_cycles / self.frequency + self.duration + self.taper_cycles / self.frequency_end
+        return self.duration
+
+    def n_samples(self, sample_rate: float) -> int:
+        """Number of samples the block takes at sample_rate [Hz] (ramps include their end point)."""
+        n = int(math.ceil(self.seconds() * sample_rate - 1e-9))
+        return max(1, n + 1 if self.waveform == 'ramp' else n)
+
+    # ---- evaluation
+    def phase(self, t):
+        """Phase [cycles] at local times t [s] (periodic blocks)."""
+        if self.waveform in wf.SWEEPS:
+            return wf.sweep_phase(t, self.frequency, self.frequency_end, self.taper_cycles, self.duration,
+                                  self.waveform == 'sweep_log')[0]
+        return self.frequency * t
+
+    def frequency_at(self, t):
+        """Instantaneous frequency [Hz] at local times t [s] (0 for hold and ramp)."""
+        if self.waveform in wf.SWEEPS:
+            return wf.sweep_frequency(t, self.frequency, self.frequency_end, self.taper_cycles, self.duration,
+                                      self.waveform == 'sweep_log')
+        return np.full_like(np.asarray(t, dtype=float), self.frequency if self.periodic else 0.0)
+
+    def unit(self, phase):
+        """Tapered unit waveform (-1..1) at phase [cycles]: envelope x shape."""
+        return (wf.envelope(phase, self.total_cycles, self.taper_cycles)
+                * wf.shape(self.waveform, phase, self.square_slope))
+
+    def evaluate(self, t, gain=1.0, offset=0.0, start_level=None):
+        """Setpoint [m] at local times t [s] (array).
+
+        gain scales the amplitude and offset shifts the mean (amplitude control); start_level overrides
+        where a ramp starts (resume after hold)."""
+        t = np.asarray(t, dtype=float)
+        if self.periodic:
+            return self.mean + offset + gain * self.amplitude * self.unit(self.phase(t))
+        start = self.start_level if start_level is None else start_level
+        if self.waveform == 'hold':
+            return np.full_like(t, start)
+        return start + (self.target - start) * wf.smoothstep(t / self.duration if self.duration > 0 else 1.0)
+
+
+def _err(index, name, fld, msg):
+    label = f"block {index}" + (f" '{name}'" if name else '')
+    return ProgramError(f"{label}: field '{fld}': {msg}" if fld else f'{label}: {msg}')
+
+
+def parse_block(raw, index: int, start_level: float, defaults: dict) -> Block:
+    """Validate one block mapping (after grid expansion) and return a Block starting at start_level [m]."""
+    if not isinstance(raw, dict):
+        raise _err(index, '', None, f'expected a mapping of fields, got {type(raw).__name__}')
+    data = {**defaults, **raw}
+    name = data.get('name')
+    wave = data.get('waveform')
+    if wave is None:
+        raise _err(index, name, 'waveform', f"missing (one of: {', '.join(wf.WAVEFORMS)})")
+    wave = wf.ALIASES.get(wave, wave)
+    if wave not in wf.WAVEFORMS:
+        raise _err(index, name, 'waveform', f"unknown waveform {data['waveform']!r} "
+                                            f"(one of: {', '.join(wf.WAVEFORMS)})")
+    name = str(name) if name is not None else f'{wave}_{index}'
+    for key in raw:
+        if key not in _FIELDS:
+            raise _err(index, name, key, f"unknown field (known: {', '.join(sorted(_FIELDS))})")
+        if key not in ('name', 'waveform') and key not in _ALLOWED[wave]:
+            raise _err(index, name, key, f"not used by waveform '{wave}' "
+                                         f"(allowed: {', '.join(sorted(_ALLOWED[wave]))})")
+    values = {}
+    for key in _ALLOWED[wave]:
+        if key not in data or data[key] is None:
+            continue
+        dim = _FIELDS[key]
+        try:
+            if key == 'cycles':
+                v = data[key]
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v):
+                    raise ValueError(f'expected a whole number of cycles, got {v!r}')
+                values[key] = int(v)
+            elif key == 'taper_cycles':
+                values[key] = to_si(data[key], 'number') if not isinstance(data[key], (int, float)) else float(
+                    data[key])
+            else:
+                values[key] = to_si(data[key], dim)
+        except ValueError as exc:
+            raise _err(index, name, key, str(exc)) from None
+        if not math.isfinite(values[key]):
+            raise _err(index, name, key, 'must be finite')
+
+    def need(key, positive=True):
+        if key not in values:
+            raise _err(index, name, key, f"required for waveform '{wave}'")
+        if positive and values[key] <= 0:
+            raise _err(index, name, key, f'must be > 0, got {data[key]!r}')
+        return values[key]
+
+    blk = Block(index=index, name=name, waveform=wave, start_level=start_level)
+    if blk.periodic:
+        blk.amplitude = need('amplitude')
+        blk.mean = values.get('mean', start_level)
+        if abs(blk.mean - start_level) > 1e-12:
+            raise _err(index, name, 'mean', f'{blk.mean:g} m differs from the level the previous block ends at '
+                                            f'({start_level:g} m): insert a ramp block so nothing steps')
+        blk.taper_cycles = values.get('taper_cycles', DEFAULT_TAPER_CYCLES)
+        if blk.taper_cycles <= 0:
+            raise _err(index, name, 'taper_cycles', 'must be > 0 so the block starts and ends without a '
+                                                    'velocity jump')
+    if wave in wf.PERIODIC:
+        blk.cycles = int(need('cycles'))
+        if wave == 'triangle' and 'rate' in values:
+            if 'frequency' in values:
+                raise _err(index, name, 'rate', "give either 'frequency' or 'rate' for a triangle, not both")
+            blk.rate = need('rate')
+            blk.frequency = blk.rate / (4.0 * blk.amplitude)
+        else:
+            blk.frequency = need('frequency')
+        if wave == 'square':
+            blk.rate = need('rate')
+            slope = blk.rate / (4.0 * blk.amplitude * blk.frequency)
+            if slope < 1.0:
+                raise _err(index, name, 'rate', f'{blk.rate:g} m/s is too slow for a square wave at '
+                                                f'{blk.frequency:g} Hz and {blk.amplitude:g} m (needs >= '
+                                                f'{4 * blk.amplitude * blk.frequency:g} m/s; use a triangle)')
+            blk.square_slope = slope
+    elif wave in wf.SWEEPS:
+        blk.frequency = need('f_start')
+        blk.frequency_end = need('f_end')
+        blk.duration = need('duration')
+    elif wave == 'hold':
+        blk.duration = need('duration')
+    elif wave == 'ramp':
+        blk.target = need('target', positive=False)
+        if ('rate' in values) == ('duration' in values):
+            raise _err(index, name, 'rate', "give exactly one of 'rate' (peak velocity) or 'duration'")
+        if 'rate' in values:
+            # raised-cosine ramp: peak velocity = pi/2 * distance / duration
+            blk.rate = need('rate')
+            blk.duration = max(math.pi / 2 * abs(blk.target - start_level) / blk.rate, 0.0)
+        else:
+            blk.duration = need('duration')
+    return blk

@@ -1,0 +1,139 @@
+"""Test programs: an ordered list of blocks loaded from YAML and validated on load."""
+import itertools
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import List
+
+import numpy as np
+import yaml
+
+from .blocks import Block, ProgramError, parse_block
+from .units import to_si
+
+PROGRAM_DIR = Path(__file__).with_name('programs')
+_TOP_FIELDS = {'name', 'description', 'source', 'initial_position', 'rest_position', 'defaults', 'blocks'}
+
+
+@dataclass
+class Program:
+    """A validated test program. `blocks` are in run order; positions are SI [m]."""
+    name: str
+    blocks: List[Block]
+    description: str = ''
+    initial_position: float = 0.0   # where the actuator is when the program starts [m]
+    rest_position: float = 0.0      # where an abort ramps to [m]
+    source: str = ''
+    _starts: dict = field(default_factory=dict, repr=False)
+
+    @classmethod
+    def from_yaml_text(cls, text: str, name: str = '') -> 'Program':
+        """Parse and validate a program from YAML text. Raises ProgramError naming block and field."""
+        try:
+            data = yaml.safe_load(text)
+        except yaml.YAMLError as exc:
+            raise ProgramError(f'program {name or "<text>"}: not valid YAML: {exc}') from None
+        return cls.from_dict(data, name=name)
+
+    @classmethod
+    def from_dict(cls, data, name: str = '') -> 'Program':
+        """Validate a program given as a mapping {name, description, initial_position, defaults, blocks}."""
+        if not isinstance(data, dict):
+            raise ProgramError(f'program {name or "<text>"}: expected a mapping with a \'blocks\' list')
+        for key in data:
+            if key not in _TOP_FIELDS:
+                raise ProgramError(f"program: field '{key}': unknown (known: {', '.join(sorted(_TOP_FIELDS))})")
+        name = str(data.get('name') or name or 'program')
+        positions = {}
+        for key in ('initial_position', 'rest_position'):
+            try:
+                positions[key] = to_si(data.get(key, 0.0), 'length')
+            except ValueError as exc:
+                raise ProgramError(f"program '{name}': field '{key}': {exc}") from None
+        defaults = data.get('defaults') or {}
+        if not isinstance(defaults, dict):
+            raise ProgramError(f"program '{name}': field 'defaults': expected a mapping")
+        raw_blocks = data.get('blocks')
+        if not isinstance(raw_blocks, list) or not raw_blocks:
+            raise ProgramError(f"program '{name}': field 'blocks': expected a non-empty list of blocks")
+        blocks, level = [], positions['initial_position']
+        for raw in raw_blocks:
+            for expanded in _expand_grid(raw, len(blocks)):
+                blk = parse_block(expanded, len(blocks), level, defaults)
+                blocks.append(blk)
+                level = blk.end_level
+        return cls(name=name, blocks=blocks, description=str(data.get('description', '')),
+                   source=str(data.get('source', '')), **positions)
+
+    # ---- timing
+    def block_starts(self, sample_rate: float) -> np.ndarray:
+        """Program sample index at which each block starts, plus the total as last element (shape n+1)."""
+        key = float(sample_rate)
+        if key not in self._starts:
+            counts = [b.n_samples(sample_rate) for b in self.blocks]
+            self._starts[key] = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+        return self._starts[key]
+
+    def n_samples(self, sample_rate: float) -> int:
+        """Total number of setpoint samples at sample_rate [Hz]."""
+        return int(self.block_starts(sample_rate)[-1])
+
+    def duration(self, sample_rate: float = 1000.0) -> float:
+        """Program duration [s] at sample_rate [Hz] (whole samples)."""
+        return self.n_samples(sample_rate) / sample_rate
+
+    def setpoints(self, sample_rate: float, start: int = 0, stop: int = None) -> np.ndarray:
+        """Open-loop setpoints [m] for program samples start..stop-1 (no amplitude control), shape (n,)."""
+        starts = self.block_starts(sample_rate)
+        stop = int(starts[-1]) if stop is None else min(stop, int(starts[-1]))
+        out = np.empty(max(stop - start, 0))
+        for i, blk in enumerate(self.blocks):
+            lo, hi = max(start, starts[i]), min(stop, starts[i + 1])
+            if lo < hi:
+                out[lo - start:hi - start] = blk.evaluate((np.arange(lo, hi) - starts[i]) / sample_rate)
+        return out
+
+
+def _expand_grid(raw, first_index):
+    """A block whose 'amplitude' and/or 'frequency' is a list stands for the grid of all combinations
+    (amplitude outer, frequency inner), named <name>_<A>mm_<f>Hz."""
+    if not isinstance(raw, dict):
+        return [raw]
+    grid_keys = [k for k in ('amplitude', 'frequency') if isinstance(raw.get(k), list)]
+    if not grid_keys:
+        return [raw]
+    for k in grid_keys:
+        if not raw[k]:
+            raise ProgramError(f"block {first_index} '{raw.get('name', '')}': field '{k}': empty list")
+    out = []
+    base = raw.get('name') or raw.get('waveform', 'block')
+    for combo in itertools.product(*(raw[k] for k in grid_keys)):
+        blk = dict(raw)
+        blk.update(zip(grid_keys, combo))
+        parts = []
+        for k, v in zip(grid_keys, combo):
+            try:
+                si = to_si(v, 'length' if k == 'amplitude' else 'frequency')
+                parts.append(f'{si * 1e3:g}mm' if k == 'amplitude' else f'{si:g}Hz')
+            except ValueError:
+                parts.append(str(v))
+        blk['name'] = '_'.join([str(base)] + parts)
+        out.append(blk)
+    return out
+
+
+def load_program(path_or_name) -> Program:
+    """Load a program from a YAML path, or by name from the shipped programs (e.g. "seed000_grid")."""
+    path = Path(path_or_name)
+    if not path.suffix and not path.exists():
+        path = PROGRAM_DIR / f'{path_or_name}.yaml'
+    if not path.exists():
+        shipped = ', '.join(sorted(p.stem for p in PROGRAM_DIR.glob('*.yaml')))
+        raise FileNotFoundError(f'no program {str(path_or_name)!r} (shipped programs: {shipped})')
+    return Program.from_yaml_text(path.read_text(), name=path.stem)
+
+
+def shipped_programs() -> List[str]:
+    """Names of the programs shipped with the package."""
+    return sorted(p.stem for p in PROGRAM_DIR.glob('*.yaml'))
+
+

@@ -1,0 +1,260 @@
+"""ProgramRunner: turns a program into setpoint chunks from the sample index, with amplitude control,
+limit enforcement on every setpoint, hold/resume and the abort ramp."""
+import bisect
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .amplitude import BlockLoop
+from .limits import LimitError, Limits
+from .ramp import SafeRamp
+
+
+@dataclass
+class Progress:
+    """Where the runner is (generation side) and the latest measured amplitude. SI units."""
+    block_index: int
+    block_name: str
+    block_count: int
+    cycle: int
+    cycles_total: int
+    target_amplitude: float
+    achieved_amplitude: float
+    fraction: float
+    state: str
+
+
+@dataclass
+class BlockSummary:
+    """Result of one executed block (fields as msg_defs/BlockSummary)."""
+    block_index: int
+    name: str
+    waveform: str
+    frequency: float
+    target_amplitude: float
+    achieved_amplitude: float
+    mean: float
+    achieved_mean: float
+    cycles: int
+    cycles_measured: int
+    completed: bool
+    message: str = ''
+
+
+class ProgramRunner:
+    """Generates the setpoints [m] of `program` at `sample_rate` [Hz], chunk by chunk, from the sample index.
+
+    Setpoint sequence numbers start at start_sequence; measurements fed back with the same numbering drive the
+    amplitude loop and the achieved-amplitude report. The program is checked against `limits` on construction
+    (LimitError before anything is generated); every generated chunk is checked again, and a violation turns
+    into an abort ramp instead of a setpoint outside the limits.
+    """
+
+    def __init__(self, program, sample_rate: float, limits: Limits = None, amplitude_control: bool = False,
+                 start_sequence: int = 0, abort_bandwidth: float = 2.0):
+        self.program, self.fs = program, float(sample_rate)
+        self.limits = limits if limits is not None else Limits()
+        self.limits.check_program(program, self.fs)
+        self.amplitude_control = amplitude_control
+        self.abort_bandwidth = abort_bandwidth
+        self._starts = program.block_starts(self.fs)
+        self._total = int(self._starts[-1])
+        self._p = 0                                   # program sample index of the next setpoint
+        self.sequence = int(start_sequence)           # sequence number of the next setpoint
+        self.state = 'running'                        # running | holding | ramping_down | finished
+        self.aborted, self.abort_reason = False, ''
+        self._x = self._x_prev = program.initial_position
+        self._ramp = None
+        self._resume = False
+        self._hold_block = None
+        self._ramp_from = {}                          # ramp block index -> start override after a hold
+        self._loops = {}                              # block index -> BlockLoop of its latest run
+        self._segments = []                           # [seq0, seq1, block, local0, loop]
+        self._seg_starts = []
+        self._completed = set()
+        self._measured_to = start_sequence
+
+    # ---- state
+    @property
+    def finished(self) -> bool:
+        """True when the program (or the abort ramp) has ended; further setpoints hold the last value."""
+        return self.state == 'finished'
+
+    @property
+    def block_index(self) -> int:
+        return min(int(np.searchsorted(self._starts, self._p, side='right')) - 1, len(self.program.blocks) - 1)
+
+    def _velocity(self) -> float:
+        return (self._x - self._x_prev) * self.fs
+
+    # ---- commands
+    def abort(self, reason: str = 'abort', target: float = None):
+        """Stop the program: the following setpoints are a smooth ramp from the current setpoint and velocity to
+        `target` [m] (default: the program's rest_position, normally zero), inside the limits."""
+        if self.state == 'finished' and self.aborted:
+            return
+        target = self.program.rest_position if target is None else target
+        self.aborted, self.abort_reason = True, reason
+        self._start_ramp(self.limits.clamp_position(target))
+        self.state = 'ramping_down'
+
+    def hold(self):
+        """Pause: ramp smoothly to the current block's mean (or stay where a ramp/hold block is) and wait."""
+        if self.state != 'running':
+            return
+        b = self.block_index
+        blk = self.program.blocks[b]
+        self._hold_block = b
+        self._start_ramp(blk.mean if blk.periodic else self._x)
+        self.state, self._resume = 'holding', False
+
+    def resume(self):
+        """Continue after hold(): the held block restarts from its beginning (with its taper) once the hold
+        ramp has settled."""
+        if self.state == 'holding':
+            self._resume = True
+
+    def _start_ramp(self, target):
+        self._ramp = SafeRamp(self._x, self._velocity(), target, self.fs, self.abort_bandwidth,
+                              velocity_max=0.5 * self.limits.velocity_max)
+
+    # ---- generation
+    def next_setpoints(self, n: int) -> np.ndarray:
+        """The next n setpoints [m], shape (n,); their sequence numbers are self.sequence .. + n - 1 (before the
+        call). After the end the last value is held."""
+        out = np.empty(int(n))
+        i = 0
+        while i < n:
+            if self.state == 'running':
+                if self._p >= self._total:
+                    self.state = 'finished'
+                    continue
+                m, x, b = self._program_chunk(n - i)
+                try:
+                    self.limits.check_setpoints(x, self.fs, self._x,
+                                                f"block {b} '{self.program.blocks[b].name}' setpoint")
+                except LimitError as exc:
+                    self._p += m
+                    self.abort(str(exc))
+                    continue
+                out[i:i + m] = x
+                self._record(self.sequence + i, m, b)
+                self._p += m
+                self._set_last(x)
+                i += m
+            elif self.state in ('ramping_down', 'holding'):
+                if self._ramp.done and self.state == 'ramping_down':
+                    self.state = 'finished'
+                    continue
+                if self._ramp.done and self._resume:
+                    self._restart(self._hold_block)
+                    continue
+                k = n - i
+                x = self._ramp.run(k)
+                out[i:] = x
+                self._set_last(x)
+                i = n
+            else:
+                out[i:] = self._x
+                self._x_prev = self._x
+                i = n
+        self.sequence += int(n)
+        return out
+
+    def _set_last(self, x):
+        if x.size >= 2:
+            self._x_prev, self._x = float(x[-2]), float(x[-1])
+        elif x.size == 1:
+            self._x_prev, self._x = self._x, float(x[0])
+
+    def _program_chunk(self, want):
+        b = self.block_index
+        blk = self.program.blocks[b]
+        m = min(want, int(self._starts[b + 1]) - self._p)
+        local = np.arange(self._p - self._starts[b], self._p - self._starts[b] + m)
+        t = local / self.fs
+        if blk.periodic:
+            loop = self._loops.get(b)
+            if loop is None or local[0] == 0:   # first sample of a (re)started block: fresh cycle bookkeeping
+                loop = self._loops[b] = BlockLoop(blk, self.fs, self.limits, self.amplitude_control)
+            gain, offset = loop.command(blk.phase(t))
+            x = blk.evaluate(t, gain, offset)
+        else:
+            x = blk.evaluate(t, start_level=self._ramp_from.get(b))
+        if local[-1] == int(self._starts[b + 1] - self._starts[b]) - 1:
+            self._completed.add(b)
+        return m, x, b
+
+    def _restart(self, b):
+        blk = self.program.blocks[b]
+        if blk.waveform == 'ramp':
+            self._ramp_from[b] = self._x
+        self._loops.pop(b, None)
+        self._p = int(self._starts[b])
+        self.state, self._ramp, self._resume = 'running', None, False
+
+    def _record(self, seq0, m, b):
+        local0 = self._p - int(self._starts[b])
+        loop = self._loops.get(b)
+        last = self._segments[-1] if self._segments else None
+        if last and last[1] == seq0 and last[2] == b and last[4] is loop and last[3] + (last[1] - last[0]) == local0:
+            last[1] += m
+            return
+        self._segments.append([seq0, seq0 + m, b, local0, loop])
+        self._seg_starts.append(seq0)
+
+    # ---- measurement
+    def feed_measurement(self, first_seq: int, displacement) -> None:
+        """Measured displacement [m] for sequences first_seq .. + len - 1 (gaps allowed between calls).
+
+        Drives the amplitude loop and the achieved-amplitude report; samples outside program blocks (ramps
+        after abort) are ignored."""
+        x = np.asarray(displacement, dtype=float)
+        if x.size == 0:
+            return
+        s0, s1 = int(first_seq), int(first_seq) + x.size
+        j = max(bisect.bisect_right(self._seg_starts, s0) - 1, 0)
+        while j < len(self._segments) and self._segments[j][0] < s1:
+            seq0, seq1, b, local0, loop = self._segments[j]
+            lo, hi = max(s0, seq0), min(s1, seq1)
+            if lo < hi and loop is not None:
+                t = (local0 + np.arange(lo - seq0, hi - seq0)) / self.fs
+                loop.feed(self.program.blocks[b].phase(t), x[lo - s0:hi - s0])
+            if loop is not None and s1 >= seq1:
+                loop.flush()
+            j += 1
+        self._measured_to = max(self._measured_to, s1)
+
+    # ---- reporting
+    @property
+    def progress(self) -> Progress:
+        """Progress of generation: block, cycle, target and last measured amplitude [m], fraction 0..1."""
+        b = self.block_index
+        blk = self.program.blocks[b]
+        local = self._p - int(self._starts[b])
+        cycle, total = 0, 0
+        if blk.periodic:
+            total = int(math.floor(blk.total_cycles - 2 * blk.taper_cycles + 1e-9))
+            phase = float(blk.phase(np.array(local / self.fs)))
+            cycle = int(min(max(math.floor(phase - blk.taper_cycles) + 1, 0), total))
+        loop = self._loops.get(b)
+        achieved = loop.last_amplitude() if loop else math.nan
+        frac = 1.0 if self.finished and not self.aborted else min(self._p / max(self._total, 1), 1.0)
+        return Progress(b, blk.name, len(self.program.blocks), cycle, total, blk.amplitude, achieved, frac,
+                        self.state)
+
+    @property
+    def block_summaries(self):
+        """BlockSummary for every block that has started, in program order."""
+        out = []
+        for b, blk in enumerate(self.program.blocks):
+            if self._p <= self._starts[b] and b not in self._completed:
+                continue
+            loop = self._loops.get(b)
+            amp, mean = loop.achieved() if loop else (math.nan, math.nan)
+            done = b in self._completed and not (self.aborted and self._starts[b + 1] > self._p)
+            msg = '' if done else (f'aborted: {self.abort_reason}' if self.aborted else 'running')
+            out.append(BlockSummary(b, blk.name, blk.waveform, blk.frequency, blk.amplitude, amp, blk.mean, mean,
+                                    blk.cycles, len(loop.cycles) if loop else 0, done, msg))
+        return out
