@@ -144,6 +144,10 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
     seen_labels = set()
     counter = 0
     for label, s, e in segments:
+        if label is not None and 0 <= label < len(expected) and \
+                expected[label].get('waveform') not in (None, 'sine'):
+            seen_labels.add(label)
+            continue   # holds, ramps, triangles: no harmonic steady state to measure
         seg_ok = finite[s:e]
         if not seg_ok.all():
             # analyse the longest finite stretch; say what was lost

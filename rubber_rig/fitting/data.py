@@ -1,0 +1,203 @@
+"""Recordings as plain arrays for fitting, from MCAP files (rubber_rig.recording), rig runs or arrays.
+
+Channel problems are reported, not raised, whenever something is still usable:
+- no force channel: the recording cannot be fitted (message, recording skipped);
+- no displacement channel: the setpoint is used instead, with a warning (it lacks the actuator's
+  amplitude and phase error, so stiffness and damping are biased at high frequency);
+- no temperature channel: the temperature from the metadata is used (or none).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass
+class RunData:
+    name: str
+    dt: float
+    displacement: np.ndarray | None
+    force: np.ndarray | None
+    setpoint: np.ndarray | None = None
+    temperature: float | None = None           # specimen temperature [degC] of the run
+    block_index: np.ndarray | None = None
+    program_blocks: list | None = None         # [{'frequency': Hz, 'amplitude': m, ...}] in program order
+    metadata: dict = field(default_factory=dict)
+    messages: list = field(default_factory=list)
+    true_params: dict | None = None            # specimen parameters when the run is simulated
+
+    def usable(self) -> bool:
+        return self.force is not None and self.displacement is not None
+
+
+def _arr(v):
+    if v is None:
+        return None
+    a = np.asarray(v, float)
+    return a if a.size else None
+
+
+def _program_blocks(program):
+    """Blocks of a program (Program object, mapping or YAML text) as dicts in SI, in run order.
+
+    Mappings and text go through `rubber_rig.excitation`'s parser, so grids and unit suffixes
+    expand exactly as the rig ran them.
+    """
+    if program is None:
+        return None
+    if isinstance(program, (str, dict)):
+        try:
+            from rubber_rig.excitation.program import Program
+            program = (Program.from_yaml_text(program) if isinstance(program, str)
+                       else Program.from_dict(program))
+        except Exception:   # noqa: BLE001 - without a readable program the blocks are detected
+            return None
+    blocks = getattr(program, 'blocks', None)
+    if blocks is None and isinstance(program, (list, tuple)):
+        blocks = program
+    if blocks is None:
+        return None
+    out = []
+    for b in blocks:
+        get = b.get if isinstance(b, dict) else (lambda k, d=None, b=b: getattr(b, k, d))
+        out.append({'frequency': _num(get('frequency')), 'amplitude': _num(get('amplitude')),
+                    'waveform': get('waveform', 'sine'), 'cycles': get('cycles'),
+                    'taper_cycles': get('taper_cycles'), 'mean': _num(get('mean')),
+                    'name': get('name', '')})
+    return out
+
+
+def _num(v):
+    if v is None:
+        return None
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return None
+
+
+def _finish(run: RunData) -> RunData:
+    if run.force is None:
+        run.messages.append(f'{run.name}: no force channel; this recording cannot be fitted')
+    if run.displacement is None:
+        if run.setpoint is not None:
+            run.displacement = run.setpoint
+            run.messages.append(f'{run.name}: no measured displacement channel; using the setpoint instead '
+                                '(actuator amplitude/phase errors are not seen, so K_dyn and C_eq are biased '
+                                'at high frequency)')
+        else:
+            run.messages.append(f'{run.name}: no displacement or setpoint channel; this recording cannot be fitted')
+    if run.force is not None and run.displacement is not None:
+        n = min(run.force.size, run.displacement.size)
+        if run.force.size != run.displacement.size:
+            run.messages.append(f'{run.name}: force and displacement differ in length; using the first {n} samples')
+        run.force, run.displacement = run.force[:n], run.displacement[:n]
+        if run.block_index is not None:
+            run.block_index = run.block_index[:n]
+    return run
+
+
+def from_arrays(name, dt, displacement, force, **kw) -> RunData:
+    return _finish(RunData(name=name, dt=float(dt), displacement=_arr(displacement), force=_arr(force), **kw))
+
+
+def from_run_result(result, program=None, name='run', temperature=None, true_params=None) -> RunData:
+    """A `rubber_rig.rig.run_program` result (arrays time, displacement, force, block_index, ...)."""
+    time = np.asarray(result.time, float)
+    dt = float(np.median(np.diff(time)))
+    temp = temperature
+    if temp is None and getattr(result, 'temperature', None) is not None:
+        temp = float(np.nanmedian(np.asarray(result.temperature, float)))
+    bi = getattr(result, 'block_index', None)
+    return _finish(RunData(name=name, dt=dt, displacement=_arr(getattr(result, 'displacement', None)),
+                           force=_arr(getattr(result, 'force', None)),
+                           setpoint=_arr(getattr(result, 'setpoint', None)), temperature=temp,
+                           block_index=None if bi is None else np.asarray(bi),
+                           program_blocks=_program_blocks(program), true_params=true_params))
+
+
+def load_run(path) -> RunData:
+    """Read an MCAP recording with rubber_rig.recording and keep what fitting needs."""
+    from rubber_rig.recording import load_recording
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f'no such recording: {path}')
+    rec = load_recording(str(path))
+    signals = getattr(rec, 'signals', None) or {}
+
+    def sig(name):
+        v = getattr(rec, name, None)
+        if v is None and isinstance(signals, dict):
+            v = signals.get(name)
+        return _arr(v)
+
+    time = sig('time')
+    meta = dict(getattr(rec, 'metadata', {}) or {})
+    dt = None
+    if time is not None and time.size > 1:
+        dt = float(np.median(np.diff(time)))
+    if dt is None:
+        rate = meta.get('sample_rate') or meta.get('rate')
+        if rate:
+            dt = 1.0 / float(rate)
+    if dt is None:
+        raise ValueError(f'{path.name}: no time channel and no sample rate in the metadata')
+    temp_ch = sig('temperature')
+    temperature = _meta_temperature(meta)
+    messages = []
+    if temperature is None and temp_ch is not None and np.isfinite(temp_ch).any():
+        temperature = float(np.nanmedian(temp_ch))
+    elif temp_ch is None:
+        messages.append(f'{path.name}: no temperature channel; using the metadata temperature '
+                        f'({temperature if temperature is not None else "unknown"})')
+    bi = sig('block_index')
+    run = RunData(name=path.name, dt=dt, displacement=sig('displacement'), force=sig('force'),
+                  setpoint=sig('setpoint'), temperature=temperature,
+                  block_index=None if bi is None else bi.astype(int),
+                  program_blocks=_program_blocks(_meta_program(meta)), metadata=meta,
+                  messages=messages, true_params=_meta_true_params(meta))
+    return _finish(run)
+
+
+def _meta_temperature(meta):
+    for key in ('temperature', 'specimen_temperature'):
+        v = meta.get(key)
+        if isinstance(v, dict):
+            v = v.get('value', v.get('temperature'))
+        if v is not None:
+            try:
+                return float(v)
+            except (TypeError, ValueError):
+                pass
+    spec = meta.get('specimen')
+    if isinstance(spec, dict) and spec.get('temperature') is not None:
+        return float(spec['temperature'])
+    return None
+
+
+def _meta_program(meta):
+    return meta.get('program') or meta.get('test_program')
+
+
+def _meta_true_params(meta):
+    spec = meta.get('specimen')
+    if isinstance(spec, str):
+        import yaml
+        try:
+            spec = yaml.safe_load(spec)
+        except yaml.YAMLError:
+            return None
+    if isinstance(spec, dict):
+        p = spec.get('parameters') or spec.get('params')
+        if isinstance(p, dict):
+            return p
+        name = spec.get('parameter_set')
+        if name:
+            try:
+                from rubber_rig.models import load_parameter_set
+                return load_parameter_set(name).as_dict()
+            except Exception:   # noqa: BLE001 - only used to print the truth next to the fit
+                return None
+    return None

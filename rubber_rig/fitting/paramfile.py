@@ -1,0 +1,96 @@
+"""Fitted parameter tables as YAML, in the format of the shipped sets (rubber_rig/models/data/*.yaml).
+
+    source: "..."
+    table1:                      # one row per temperature, SI, like seed 000 Table 1
+      - {temperature: 20.0, k0: ..., k_inf: ..., tau: ..., alpha: ..., x2: ..., f_fmax: ...}
+    sets:                        # loadable sets, {model, values} exactly as the shipped file
+      fit_20C: {model: seed000, values: {k0: ..., ...}}
+    fit:                         # extra section (ignored by the set loader): quality and uncertainty
+      fit_20C: {temperature, method, recordings, objective, relative_sigma, max_error, ...}
+
+A file written here can be copied into rubber_rig/models/data/ and its sets loaded by name with
+`rubber_rig.models.load_parameter_set`; `load_fit_file` reads it back directly.
+"""
+from __future__ import annotations
+
+import datetime as _dt
+from pathlib import Path
+
+import yaml
+
+from .identify import PARAM_NAMES
+
+
+def set_name(temperature, prefix='fit'):
+    if temperature is None:
+        return prefix
+    t = float(temperature)
+    tag = f'{abs(t):g}'.replace('.', 'p')
+    return f'{prefix}_{"m" if t < 0 else ""}{tag}C'
+
+
+def table_dict(fits, prefix='fit', source=None) -> dict:
+    rows, sets, extra = [], {}, {}
+    for f in fits:
+        name = set_name(f.temperature, prefix)
+        values = {k: float(f'{f.params[k]:.6g}') for k in PARAM_NAMES}
+        if f.temperature is not None:
+            rows.append({'temperature': float(f.temperature), **values})
+        sets[name] = {'model': 'seed000', 'values': values}
+        ek, ec = f.max_errors('simulated')
+        ak, ac = f.max_errors('analytic')
+        extra[name] = {
+            'temperature': f.temperature, 'method': f.method, 'recordings': list(f.runs),
+            'blocks': len(f.blocks), 'objective_eq29': float(f'{f.objective:.6g}'),
+            'relative_sigma': {k: float(f'{v:.3g}') for k, v in f.uncertainty.get('relative_sigma', {}).items()},
+            'max_error': {'k_dyn': float(f'{ek:.4g}'), 'c_eq': float(f'{ec:.4g}'),
+                          'k_dyn_analytic': float(f'{ak:.4g}'), 'c_eq_analytic': float(f'{ac:.4g}')},
+        }
+    rows.sort(key=lambda r: -r['temperature'])
+    src = source or f'rubber-rig fit, {_dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}'
+    out = {'source': src}
+    if rows:
+        out['table1'] = rows
+    out['sets'] = sets
+    out['fit'] = extra
+    return out
+
+
+def write_fit_file(path, fits, prefix='fit', source=None) -> Path:
+    path = Path(path)
+    data = table_dict(fits, prefix, source)
+    header = ('# Seed-000 model parameters identified by rubber-rig fit (SI: N/m, s, -, m, N).\n'
+              '# Same layout as rubber_rig/models/data/seed000.yaml; the "fit" section holds fit quality.\n')
+    path.write_text(header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120))
+    return path
+
+
+def load_fit_file(path) -> dict:
+    """{set name: {'model', 'values', 'temperature'}} of a parameter YAML (ours or a shipped one)."""
+    path = Path(path)
+    if not path.exists():
+        raise FileNotFoundError(f'no such parameter file: {path}')
+    data = yaml.safe_load(path.read_text()) or {}
+    sets = data.get('sets')
+    if not isinstance(sets, dict) or not sets:
+        raise ValueError(f'{path}: no "sets" mapping of parameter sets')
+    temps = {}
+    for row in data.get('table1') or []:
+        vals = {k: row.get(k) for k in PARAM_NAMES}
+        temps[tuple(sorted(vals.items()))] = row.get('temperature')
+    out = {}
+    for name, s in sets.items():
+        if not isinstance(s, dict) or s.get('model') != 'seed000':
+            continue
+        vals = s.get('values') or {}
+        missing = [k for k in PARAM_NAMES if k not in vals]
+        if missing:
+            raise ValueError(f'{path}: set {name!r} lacks {missing}')
+        vals = {k: float(vals[k]) for k in PARAM_NAMES}
+        temp = (data.get('fit') or {}).get(name, {}).get('temperature')
+        if temp is None:
+            temp = temps.get(tuple(sorted(vals.items())))
+        out[name] = {'model': 'seed000', 'values': vals, 'temperature': temp}
+    if not out:
+        raise ValueError(f'{path}: no seed000 parameter set')
+    return out

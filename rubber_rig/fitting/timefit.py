@@ -1,0 +1,110 @@
+"""Time-domain identification: force predicted from the measured displacement, fitted to the loops.
+
+K_dyn and C_eq condense each steady loop into two numbers; the loop's shape (the sharp friction
+corners of seed 000 Fig. 5/6) carries more, which separates Berg's x2 from F_fmax and the viscous
+from the frictional damping. Here the model of `rubber_rig.models` runs over the whole recording
+(so its fractional memory and friction reference state see the same history as the specimen did),
+and the residual is the force error in the analysed (steady, post-settling) cycles of every block:
+
+    r = (F_model - F_measured - offset_block) / (F_amplitude_block * sqrt(n_block))
+
+so every block weighs the same whatever its length and force level (like the relative errors of
+Eq. 28), and a per-block force offset (load-cell zero, preload) is removed analytically. Each block
+contributes at most `points_per_block` evenly spaced samples.
+
+The displacement fed to the model is the measured one after a zero-phase low-pass (4th-order
+Butterworth, forward-backward, cut-off 8x the highest block frequency): raw transducer noise
+would make Berg's element see spurious velocity reversals and reset its reference state.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+from scipy.optimize import least_squares
+from scipy.signal import butter, sosfiltfilt
+
+from .identify import PARAM_NAMES, FitResult, _z_bounds, jacobian_uncertainty, params_to_z, z_to_params
+
+
+def simulate(params: dict, x, dt):
+    """Force [N] of the seed-000 model (rubber_rig.models, default scheme) for displacement x [m]."""
+    from rubber_rig.models import Seed000Params, build_model
+    model = build_model(Seed000Params(**{k: float(params[k]) for k in PARAM_NAMES}), dt)
+    out = model.run(np.asarray(x, float))
+    return np.asarray(out[0] if isinstance(out, tuple) else out, float)
+
+
+def smooth_displacement(x, dt, f_max):
+    fs = 1.0 / dt
+    fc = min(8.0 * f_max, 0.4 * fs)
+    if fc <= 0 or fc >= 0.5 * fs or x.size < 30:
+        return np.asarray(x, float)
+    sos = butter(4, fc, fs=fs, output='sos')
+    return sosfiltfilt(sos, np.asarray(x, float))
+
+
+class TimeDomainProblem:
+    """Residuals of the force over the analysed cycles of every block of several runs."""
+
+    def __init__(self, runs_blocks, points_per_block=200):
+        """runs_blocks: list of (RunData, [BlockResult]) sharing one specimen state (temperature)."""
+        self.items = []
+        for run, blocks in runs_blocks:
+            if not blocks:
+                continue
+            end = max(b.stop for b in blocks)
+            f_max = max(b.frequency for b in blocks)
+            x = smooth_displacement(run.displacement[:end], run.dt, f_max)
+            windows = []
+            for b in blocks:
+                n = b.stop - b.start
+                step = max(1, n // points_per_block)
+                idx = np.arange(b.start, b.stop, step)
+                scale = 1.0 / (b.k_dyn * b.amplitude * np.sqrt(idx.size))
+                windows.append((idx, scale))
+            self.items.append((run, x, run.force[:end], windows))
+
+    def predict(self, params):
+        return [simulate(params, x, run.dt) for run, x, _, _ in self.items]
+
+    def residuals_from(self, predictions):
+        out = []
+        for (run, x, force, windows), pred in zip(self.items, predictions):
+            for idx, scale in windows:
+                e = pred[idx] - force[idx]
+                out.append((e - e.mean()) * scale)
+        return np.concatenate(out)
+
+    def residuals(self, params):
+        return self.residuals_from(self.predict(params))
+
+
+def fit_time_domain(problem: TimeDomainProblem, start: dict, bounds: dict, max_nfev=60,
+                    progress=None) -> FitResult:
+    """Least squares on the time-domain residuals from `start` (the harmonic fit), within `bounds`."""
+    lo, hi = _z_bounds(bounds)
+    z0 = np.clip(params_to_z(start), lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
+    count = {'n': 0}
+
+    def fun(z):
+        count['n'] += 1
+        if progress is not None:
+            progress(min(count['n'] / (max_nfev * 7.0), 0.99), 'time-domain fit')
+        p = {k: float(v) for k, v in z_to_params(z).items()}
+        return problem.residuals(p)
+
+    t0 = time.perf_counter()
+    ls = least_squares(fun, z0, bounds=(lo, hi), method='trf', x_scale='jac', diff_step=1e-4,
+                       xtol=1e-10, ftol=1e-10, gtol=1e-10, max_nfev=max_nfev)
+    t1 = time.perf_counter()
+    p = {k: float(v) for k, v in z_to_params(ls.x).items()}
+    unc = jacobian_uncertainty(problem.residuals, p, eps=1e-3)
+    t2 = time.perf_counter()
+    res = FitResult(params=p, method='time', objective=float(np.sum(ls.fun ** 2)), bounds=bounds,
+                    uncertainty=unc, timings={'time_fit_s': t1 - t0, 'uncertainty_s': t2 - t1},
+                    stages={'time': dict(p)})
+    res.timings['model_runs'] = count['n']
+    if ls.status == 0:
+        res.messages.append(f'time-domain fit stopped after {max_nfev} evaluations (not converged)')
+    return res
