@@ -12,3 +12,4 @@ from .qos import offered_qos_yaml, qos_entry
 from .writer import CLOSE_METADATA_NAME, METADATA_NAME, RecordingWriter
 from .reader import SIGNALS, Recording, load_recording
 from .session import Recorder
+from .recover import RecoverResult, recover

@@ -1,0 +1,67 @@
+"""Show what a recording holds: topics, message counts, duration, metadata, sample gaps and losses."""
+import json
+
+from rubber_rig.recording import load_recording
+from rubber_rig.recording.qos import parse_offered_qos
+
+LONG = 200   # metadata values longer than this (program YAML, ...) are shortened unless --full
+
+
+def add_arguments(parser):
+    parser.add_argument('file', help='MCAP file, or directory of split files')
+    parser.add_argument('--full', action='store_true', help='print long metadata values in full')
+    parser.add_argument('--json', action='store_true', help='machine-readable output')
+
+
+def _short(value, full):
+    text = value if isinstance(value, str) else json.dumps(value)
+    if not full and len(text) > LONG:
+        return text[:LONG].replace('\n', ' ') + f'... ({len(text)} chars)'
+    return text
+
+
+def run(args) -> int:
+    rec = load_recording(args.file, allow_truncated=True)
+    info = {
+        'files': rec.files, 'complete': rec.complete, 'duration_s': rec.duration,
+        'start_ns': rec.start_ns, 'end_ns': rec.end_ns,
+        'topics': {t: {'type': v['type'], 'count': v['count'],
+                       'qos': [{k: q.get(k) for k in ('history', 'depth', 'reliability', 'durability')}
+                               for q in parse_offered_qos(v['qos'])]}
+                   for t, v in sorted(rec.topics.items())},
+        'samples': len(rec.sequence), 'sample_period_s': rec.sample_period,
+        'sequence_gaps': len(rec.gaps), 'samples_lost': rec.samples_lost, 'gaps': rec.gaps[:20],
+        'metadata': rec.metadata, 'closing': rec.closing, 'other_metadata': rec.other_metadata,
+    }
+    if args.json:
+        print(json.dumps(info, indent=2, default=str))
+        return 0
+    print(f'files:      {", ".join(rec.files)}')
+    if not rec.complete:
+        print('WARNING:    truncated (writer killed?): showing what is readable; '
+              'run `rubber-rig recover FILE`')
+    print(f'duration:   {rec.duration:.3f} s')
+    print(f'messages:   {sum(v["count"] for v in rec.topics.values())}')
+    print('topics:')
+    for topic, v in info['topics'].items():
+        qos = v['qos'][0] if v['qos'] else {}
+        qos_text = f'  [{qos.get("reliability")}, {qos.get("durability")}, depth {qos.get("depth")}]' \
+            if qos else ''
+        print(f'  {topic:<28} {v["type"]:<36} {v["count"]:>8} msgs{qos_text}')
+    if len(rec.sequence):
+        print(f'samples:    {len(rec.sequence)} at {1 / rec.sample_period:.1f} Hz, '
+              f'sequence {int(rec.sequence[0])}..{int(rec.sequence[-1])}')
+    print(f'gaps:       {len(rec.gaps)} sequence gaps, {rec.samples_lost} samples lost')
+    for gap in rec.gaps[:20]:
+        print(f'  expected {gap["expected"]}, got {gap["received"]} ({gap["lost"]} lost)')
+    if rec.metadata:
+        print('metadata:')
+        for key, value in rec.metadata.items():
+            print(f'  {key}: {_short(value, args.full)}')
+    for i, closing in enumerate(rec.closing):
+        print(f'closing report of file {i}: written {closing.get("messages_written")}, '
+              f'dropped {closing.get("messages_dropped")} {closing.get("dropped_by_reason") or ""}, '
+              f'gaps {closing.get("sequence_gaps")} ({closing.get("samples_lost")} samples lost)')
+    for name, values in rec.other_metadata.items():
+        print(f'metadata record {name}: {_short(values, args.full)}')
+    return 0

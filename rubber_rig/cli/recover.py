@@ -1,0 +1,21 @@
+"""Rebuild the summary of an MCAP recording whose recorder was killed (SIGKILL, power cut, full disk)."""
+from rubber_rig.recording import recover
+
+
+def add_arguments(parser):
+    parser.add_argument('file', help='MCAP file to recover')
+    parser.add_argument('-o', '--output', help='output file (default: <name>.recovered.mcap)')
+    parser.add_argument('--in-place', action='store_true',
+                        help='replace FILE by the recovered file (the original is kept as FILE.bak)')
+    parser.add_argument('--no-backup', action='store_true', help='with --in-place: keep no .bak')
+
+
+def run(args) -> int:
+    result = recover(args.file, args.output, in_place=args.in_place, backup=not args.no_backup)
+    state = 'was already complete' if result.was_complete else 'was truncated'
+    print(f'{result.source} {state}; wrote {result.output}: {result.messages} messages on '
+          f'{result.channels} topics, {result.metadata_records} metadata records')
+    if result.sequence_gaps:
+        print(f'sequence gaps in the recovered data: {result.sequence_gaps} '
+              f'({result.samples_lost} samples lost)')
+    return 0

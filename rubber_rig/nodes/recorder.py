@@ -1,0 +1,241 @@
+"""recorder node: records the suite's topics to MCAP (rosbag2 MCAP layout) through the ROS-free core.
+
+Thin by design: topic discovery, QoS matching, the control service and diagnostics live here; writing,
+splitting, snapshots and loss accounting are rubber_rig.recording.Recorder's.
+
+- Subscriptions are raw (the CDR bytes DDS delivered are written as they are: no re-encoding), with
+  the reliability/durability the publishers offer (all reliable -> reliable, all transient-local ->
+  transient-local, as rosbag2 adapts its requests), and a deep history.
+- Topics: the ``topics`` parameter (relative names resolve in the node's namespace), or, if empty,
+  every topic under the node's namespace; discovery repeats every ``discovery_period`` seconds.
+- ``~/control`` (msg_defs/srv/RecorderControl): START [path], STOP, SPLIT, SNAPSHOT [path].
+- ``/diagnostics``: messages written/dropped, sequence gaps and lost samples, the current file and any
+  write error (ERROR level: the recording stopped cleanly; the file stays readable).
+"""
+import importlib
+import os
+
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rcl_interfaces.msg import ParameterDescriptor
+from rclpy.exceptions import ParameterUninitializedException
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+
+from msg_defs.srv import RecorderControl
+from rubber_rig.nodes import topics
+from rubber_rig.nodes.params import declare
+from rubber_rig.recording import Recorder, RecordingError
+from rubber_rig.recording.qos import qos_entry
+
+IGNORED_TOPICS = ('/rosout', '/parameter_events')
+METADATA_FIELDS = {  # parameter metadata.<name> -> description (all strings; YAML/JSON where structured)
+    'specimen': 'specimen id / description',
+    'temperature': 'specimen temperature [degC] as text (e.g. "23.0")',
+    'model': 'element model name (e.g. seed000)',
+    'model_parameters': 'model parameters (YAML or JSON, SI units)',
+    'test_program': 'test program (YAML)',
+    'rig_configuration': 'rig configuration (YAML or JSON)',
+    'operator': 'who ran the test',
+    'notes': 'free text',
+}
+
+
+def message_class(type_name: str):
+    """'pkg/msg/Type' -> the rosidl-generated class (needed to create a raw subscription)."""
+    pkg, sub, name = type_name.split('/')
+    return getattr(importlib.import_module(f'{pkg}.{sub}'), name)
+
+
+def _ns(duration) -> int:
+    return int(getattr(duration, 'nanoseconds', 0))
+
+
+def offered_qos(info) -> dict:
+    """rclpy TopicEndpointInfo -> the rosbag2 offered_qos_profiles entry."""
+    q = info.qos_profile
+    return qos_entry(history=q.history, depth=q.depth, reliability=q.reliability, durability=q.durability,
+                     deadline_ns=_ns(q.deadline), lifespan_ns=_ns(q.lifespan), liveliness=q.liveliness,
+                     liveliness_lease_duration_ns=_ns(q.liveliness_lease_duration),
+                     avoid_ros_namespace_conventions=q.avoid_ros_namespace_conventions)
+
+
+def type_hash_string(info) -> str:
+    h = info.topic_type_hash
+    return f'RIHS{h.version:02d}_{h.value.hex()}' if getattr(h, 'version', -1) > 0 else ''
+
+
+class RecorderNode(Node):
+    def __init__(self, **kwargs):
+        super().__init__('recorder', **kwargs)
+        self.output_dir = declare(self, 'output_dir', 'recordings', 'directory for recordings')
+        self.declare_parameter('topics', Parameter.Type.STRING_ARRAY, ParameterDescriptor(
+            description='topics to record (relative names resolve in the namespace); '
+                        'not set or empty: every topic under the node namespace'))
+        autostart = declare(self, 'autostart', True, 'start recording at once')
+        split_size = declare(self, 'split_size', 0.0, 'start a new file at this size (0: never)',
+                             range=(0.0, 1e6), units='MB')
+        split_duration = declare(self, 'split_duration', 0.0, 'start a new file after this long (0: never)',
+                                 range=(0.0, 1e7), units='s')
+        compression = declare(self, 'compression', 'zstd', 'chunk compression',
+                              choices=('zstd', 'lz4', 'none'))
+        snapshot_duration = declare(self, 'snapshot_duration', 0.0,
+                                    'keep the last N seconds in memory for SNAPSHOT (0: off)',
+                                    range=(0.0, 3600.0), units='s')
+        chunk_size = declare(self, 'chunk_size', 1024, 'MCAP chunk size', range=(16, 65536), units='KiB')
+        flush_period = declare(self, 'flush_period', 1.0,
+                               'close the chunk in progress at least this often (data at risk on a crash)',
+                               range=(0.05, 60.0), units='s')
+        discovery_period = declare(self, 'discovery_period', 1.0, 'look for new topics this often',
+                                   range=(0.05, 60.0), units='s')
+        diagnostics_period = declare(self, 'diagnostics_period', 1.0, 'publish /diagnostics this often',
+                                     range=(0.1, 60.0), units='s')
+        self.history_depth = declare(self, 'history_depth', 1000, 'subscription history depth',
+                                     range=(1, 100000))
+        metadata = {name: declare(self, f'metadata.{name}', '', text) for name, text in METADATA_FIELDS.items()}
+        metadata = {k: v for k, v in metadata.items() if v}
+        metadata.update(node=self.get_fully_qualified_name(), namespace=self.get_namespace())
+        self.core = Recorder(self.output_dir, metadata=metadata, compression=compression,
+                             split_size_bytes=int(split_size * 1e6), split_duration_s=split_duration,
+                             chunk_size=chunk_size * 1024, flush_interval_s=flush_period,
+                             snapshot_duration_s=snapshot_duration)
+        self._subs = {}                       # topic -> (subscription, type)
+        self._unrecordable = {}               # topic -> reason
+        self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        self.create_service(RecorderControl, '~/control', self._on_control)
+        self.create_timer(discovery_period, self.discover)
+        self.create_timer(flush_period, self.core.flush)
+        self.create_timer(diagnostics_period, self.publish_diagnostics)
+        self._reported_error = None
+        if autostart:
+            self.core.start()
+            self.get_logger().info(f'recording to {self.core.current_file}')
+        self.discover()
+
+    # -- topics ------------------------------------------------------------------------------
+    def wanted_topics(self, graph):
+        try:
+            configured = self.get_parameter('topics').value or []
+        except ParameterUninitializedException:   # declared without a value: record everything
+            configured = []
+        if configured:
+            names = {self.resolve_topic_name(t) for t in configured if t}
+            return [(n, t) for n, t in graph if n in names]
+        ns = self.get_namespace().rstrip('/') + '/'
+        own = {self.resolve_topic_name(n) for n in ('~/control',)}
+        return [(n, t) for n, t in graph
+                if n.startswith(ns) and n not in IGNORED_TOPICS and n not in own]
+
+    def discover(self):
+        for name, types in self.wanted_topics(self.get_topic_names_and_types()):
+            if name in self._subs or name in self._unrecordable:
+                continue
+            publishers = [p for p in self.get_publishers_info_by_topic(name)
+                          if p.node_name != self.get_name() or p.node_namespace != self.get_namespace()]
+            if not publishers:
+                continue                      # QoS is matched to publishers: wait for one
+            type_name = types[0]
+            try:
+                cls = message_class(type_name)
+            except (ImportError, AttributeError, ValueError) as exc:
+                self._unrecordable[name] = f'type {type_name} not importable: {exc}'
+                self.get_logger().error(f'cannot record {name}: {self._unrecordable[name]}')
+                continue
+            reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
+            latched = all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers)
+            depth = max([self.history_depth] + [p.qos_profile.depth for p in publishers])
+            qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
+                             reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
+                             durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
+            self.core.set_qos(name, [offered_qos(p) for p in publishers])
+            sub = self.create_subscription(cls, name, self._callback(name, type_name), qos, raw=True)
+            self._subs[name] = (sub, type_name)
+            self.get_logger().info(f'recording {name} [{type_name}] '
+                                   f'({"reliable" if reliable else "best effort"}'
+                                   f'{", transient local" if latched else ""})')
+
+    def _callback(self, topic, type_name):
+        write, clock = self.core.write, self.get_clock()
+
+        def on_message(data, info):
+            log_ns = info.get('received_timestamp') or clock.now().nanoseconds
+            write(topic, type_name, data, log_ns, info.get('source_timestamp') or log_ns,
+                  info.get('publication_sequence_number'))
+        return on_message
+
+    # -- control -----------------------------------------------------------------------------
+    def _on_control(self, request, response):
+        cmd = request.command
+        try:
+            if cmd == RecorderControl.Request.START:
+                response.file = str(self.core.start(request.path or None))
+                response.message = 'recording'
+            elif cmd == RecorderControl.Request.STOP:
+                files = self.core.stop()
+                response.file = str(files[-1]) if files else ''
+                response.message = f'stopped; {len(files)} file(s)'
+            elif cmd == RecorderControl.Request.SPLIT:
+                response.file = str(self.core.split())
+                response.message = 'split'
+            elif cmd == RecorderControl.Request.SNAPSHOT:
+                response.file = str(self.core.snapshot(request.path or None))
+                response.message = 'snapshot written'
+            else:
+                raise RecordingError(f'unknown command {cmd} (START=0, STOP=1, SPLIT=2, SNAPSHOT=3)')
+            response.success = True
+        except (RecordingError, OSError) as exc:
+            response.success, response.message = False, str(exc)
+        self.get_logger().info(f'control {cmd}: {response.message}')
+        return response
+
+    # -- diagnostics -------------------------------------------------------------------------
+    def publish_diagnostics(self):
+        stats = self.core.stats()
+        stats['topics'] = len(self._subs)
+        stats['unrecordable_topics'] = ', '.join(sorted(self._unrecordable))
+        d = DiagnosticStatus(name=f'{self.get_name()}: recording', hardware_id=self.output_dir)
+        if stats['error']:
+            d.level, d.message = DiagnosticStatus.ERROR, 'stopped: ' + stats['error']
+            if self._reported_error != stats['error']:
+                self._reported_error = stats['error']
+                self.get_logger().error(stats['error'])
+        elif stats['messages_dropped'] or stats['samples_lost'] or self._unrecordable:
+            d.level = DiagnosticStatus.WARN
+            d.message = (f'{stats["messages_dropped"]} messages not recorded, '
+                         f'{stats["samples_lost"]} samples lost in {stats["sequence_gaps"]} gaps')
+        else:
+            d.level = DiagnosticStatus.OK
+            d.message = 'recording' if stats['recording'] else 'idle'
+        d.values = [KeyValue(key=k, value=str(v)) for k, v in stats.items()]
+        arr = DiagnosticArray(status=[d])
+        arr.header.stamp = self.get_clock().now().to_msg()
+        self._diag_pub.publish(arr)
+
+    def destroy_node(self):
+        was_recording = self.core.recording
+        files = self.core.stop()
+        if was_recording and files:
+            self.get_logger().info(f'closed {len(files)} file(s), last {files[-1]}')
+        return super().destroy_node()
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = RecorderNode()
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

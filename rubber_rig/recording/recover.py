@@ -1,0 +1,114 @@
+"""Rebuild an MCAP file whose writer was killed (SIGKILL, power cut, full disk).
+
+Such a file has a header and complete chunks, maybe a partial last record, but no summary or footer.
+Everything readable is copied into a new, complete file (schemas, channels with their metadata, every
+message with its times and sequence, metadata records, attachments); the loss accounting that the
+writer could not write is recomputed from the data (sequence gaps) and stored in a
+``rubber_rig.recovered`` metadata record. Like ``mcap recover`` of the Go CLI, but in Python.
+"""
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
+from mcap.writer import CompressionType
+from mcap.writer import Writer as McapWriter
+
+from .errors import RecordingError
+from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
+from .mcapio import Decoders, check_file, iter_records
+from .writer import encode_metadata
+
+RECOVERED_METADATA_NAME = 'rubber_rig.recovered'
+
+
+@dataclass
+class RecoverResult:
+    source: str
+    output: str
+    was_complete: bool
+    messages: int
+    channels: int
+    metadata_records: int
+    bytes_in: int
+    samples_lost: int
+    sequence_gaps: int
+
+
+def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
+            chunk_size: int = 1 << 20) -> RecoverResult:
+    """Copy every readable record of ``path`` into a complete MCAP file.
+
+    ``output`` defaults to ``<name>.recovered.mcap``; with ``in_place`` the original is replaced
+    (kept as ``<name>.mcap.bak`` if ``backup``)."""
+    path = Path(path)
+    was_complete = check_file(path)           # raises RecordingError if not an MCAP file at all
+    if in_place:
+        target = path.with_name(path.name + '.recovering')
+    else:
+        target = Path(output) if output else path.with_name(path.stem + '.recovered.mcap')
+    if target.resolve() == path.resolve():
+        raise RecordingError(f'{path}: output must differ from the input (use --in-place)')
+    counts = {'messages': 0, 'metadata': 0}
+    gaps = GapTracker()
+    decoders = Decoders(path)
+    header_seen = False
+    try:
+        with open(target, 'wb') as out:
+            writer = McapWriter(out, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+            schemas, channels = {}, {}        # ids in the source -> ids in the output
+            schema_records, channel_types = {}, {}
+            for record in iter_records(path, allow_truncated=True):
+                if isinstance(record, Header):
+                    writer.start(record.profile, record.library)
+                    header_seen = True
+                elif isinstance(record, Schema) and record.id not in schemas:
+                    schemas[record.id] = writer.register_schema(record.name, record.encoding,
+                                                                record.data)
+                    schema_records[record.id] = record
+                elif isinstance(record, Channel) and record.id not in channels:
+                    channels[record.id] = writer.register_channel(
+                        record.topic, record.message_encoding, schemas.get(record.schema_id, 0),
+                        dict(record.metadata))
+                    channel_types[record.id] = (record.topic, schema_records.get(record.schema_id))
+                elif isinstance(record, Message) and record.channel_id in channels:
+                    writer.add_message(channels[record.channel_id], record.log_time, record.data,
+                                       record.publish_time, record.sequence)
+                    counts['messages'] += 1
+                    topic, schema = channel_types[record.channel_id]
+                    if schema is not None and schema.name in SEQUENCED_TYPES:
+                        try:
+                            span = sequence_span(schema.name, decoders.decode(schema, record.data, topic))
+                        except RecordingError:
+                            span = None
+                        if span:
+                            gaps.observe(topic, span[0], span[1], record.log_time)
+                elif isinstance(record, Metadata):
+                    writer.add_metadata(record.name, dict(record.metadata))
+                    counts['metadata'] += 1
+                elif isinstance(record, Attachment):
+                    writer.add_attachment(record.create_time, record.log_time, record.name,
+                                          record.media_type, record.data)
+            if not header_seen:
+                raise RecordingError(f'{path}: no MCAP header record: nothing to recover')
+            report = dict(gaps.summary(), source=str(path), was_complete=was_complete,
+                          messages_recovered=counts['messages'],
+                          gap_events=gaps.events)
+            writer.add_metadata(RECOVERED_METADATA_NAME, encode_metadata(report))
+            writer.finish()
+            out.flush()
+            os.fsync(out.fileno())
+    except OSError as exc:
+        target.unlink(missing_ok=True)
+        raise RecordingError(f'cannot write {target}: {exc.strerror}') from None
+    except BaseException:
+        target.unlink(missing_ok=True)
+        raise
+    if in_place:
+        if backup:
+            os.replace(path, path.with_name(path.name + '.bak'))
+        os.replace(target, path)
+        target = path
+    return RecoverResult(str(path), str(target), was_complete, counts['messages'], len(channels),
+                         counts['metadata'], path.stat().st_size if path.exists() else 0,
+                         gaps.samples_lost, gaps.gaps)
