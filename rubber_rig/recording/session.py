@@ -71,6 +71,7 @@ class Recorder:
             'messages_written': self.messages_written + (w.messages_written if w else 0),
             'messages_dropped': self.dropped + (sum(w.dropped.values()) if w else 0)
             + self.not_recorded_after_error,
+            'messages_flushed_current_file': w.messages_flushed if w else 0,
             'not_recorded_after_error': self.not_recorded_after_error,
             'bytes_current_file': w.size_estimate if w else 0,
             'error': str(self.error) if self.error else '',

@@ -55,8 +55,22 @@ def encode_metadata(values: dict) -> dict:
 
 
 def _plain(value):
-    """numpy arrays/scalars and array.array -> lists/Python numbers (for CDR encoding and JSON)."""
-    if hasattr(value, 'tolist') and not isinstance(value, (bytes, bytearray)):
+    """rosidl messages, numpy arrays and array.array -> dicts, lists and Python numbers, the forms the
+    dynamic CDR encoder (and JSON) accept; rosidl's byte fields (bytes objects) become ints/bytes."""
+    fields = getattr(value, 'get_fields_and_field_types', None)
+    if fields is not None:
+        out = {}
+        for name, ftype in fields().items():
+            v = getattr(value, name)
+            if ftype == 'octet' and isinstance(v, (bytes, bytearray)):
+                v = v[0] if v else 0
+            elif ftype.startswith(('sequence<octet', 'octet[')) and isinstance(v, (list, tuple)):
+                v = b''.join(v)
+            out[name] = _plain(v)
+        return out
+    if isinstance(value, (bytes, bytearray)):
+        return bytes(value)
+    if hasattr(value, 'tolist'):
         return value.tolist()
     if isinstance(value, dict):
         return {k: _plain(v) for k, v in value.items()}
@@ -125,6 +139,7 @@ class RecordingWriter:
         self._gaps_at_open = (self.gaps.gaps, self.gaps.samples_lost, self.gaps.restarts,
                               len(self.gaps.events))
         self.messages_written = 0
+        self.messages_flushed = 0          # messages in complete chunks handed to the OS
         self.messages_by_topic = {}
         self.payload_bytes = 0
         self.dropped = {}                  # reason -> count of messages not written
@@ -218,8 +233,7 @@ class RecordingWriter:
             decoded = None
         else:
             try:
-                data = self._codec(self._encoders, serialize_dynamic, msg_type)(
-                    _plain(msg) if isinstance(msg, dict) else msg)
+                data = self._codec(self._encoders, serialize_dynamic, msg_type)(_plain(msg))
             except Exception as exc:  # the encoder raises many types; name the message instead
                 self.count_dropped('encode_error')
                 raise RecordingError(f'cannot encode a {msg_type} for {topic}: {exc}') from None
@@ -248,6 +262,7 @@ class RecordingWriter:
             self._track(topic, msg_type, data, decoded, log_time_ns)
         if self._pending > self._chunk_size:
             self._pending = 0              # mcap has just closed the chunk itself
+            self.messages_flushed = self.messages_written
         if self._flush_interval_ns and log_time_ns - self._last_flush_ns >= self._flush_interval_ns:
             self.flush()
 
@@ -271,6 +286,7 @@ class RecordingWriter:
         """Close the chunk in progress and hand it to the OS (survives SIGKILL; fsync: power loss)."""
         self._guard(self._mcap.flush)
         self._pending = 0
+        self.messages_flushed = self.messages_written
         self._last_flush_ns = self.last_log_time_ns or 0
         if fsync:
             self._guard(self._file.fsync)
