@@ -1,0 +1,29 @@
+"""Rubber-element models (pure numpy/scipy; never imports rclpy).
+
+* :func:`build_model` -> a :class:`ParallelModel` with ``step`` (streaming), ``run`` (batch), state
+  save/restore and per-branch forces; ready models 'seed000' (fractional Zener + Berg, 6 parameters),
+  'seed001' (tangent spring + 2 Maxwell + Berg), 'kelvin_voigt', or any parallel composition.
+* :func:`steady_state_properties`: analytic K_dyn, loss angle, D, C_eq, E, R_K, R_E (seed 000 Eq. 11-30).
+* Parameter sets: :func:`load_parameter_set`, :func:`list_parameter_sets`, :func:`parameters_at_temperature`.
+
+The fractional operator's default scheme and its error bound are documented in :mod:`.fractional`.
+"""
+from .composite import ParallelModel, build_model, resolve_params, seed000_model, seed001_model
+from .elements import (Dashpot, FractionalZener, FractionalZenerGL, LinearSpring, Maxwell, PolynomialSpring,
+                       TangentSpring, TwoOrderFractional, Zener)
+from .fractional import (gl_complex_stiffness, two_order_complex_stiffness, zener_complex_stiffness,
+                         zener_storage_loss)
+from .friction import BergFriction, SmoothCoulomb, berg_force, berg_steady_state
+from .params import (KelvinVoigtParams, Seed000Params, Seed001Params, list_parameter_sets, load_parameter_set,
+                     parameters_at_temperature)
+from .steady_state import steady_state_properties
+
+__all__ = [
+    'ParallelModel', 'build_model', 'resolve_params', 'seed000_model', 'seed001_model',
+    'Dashpot', 'FractionalZener', 'FractionalZenerGL', 'LinearSpring', 'Maxwell', 'PolynomialSpring',
+    'TangentSpring', 'TwoOrderFractional', 'Zener', 'BergFriction', 'SmoothCoulomb',
+    'gl_complex_stiffness', 'two_order_complex_stiffness', 'zener_complex_stiffness', 'zener_storage_loss',
+    'berg_force', 'berg_steady_state',
+    'KelvinVoigtParams', 'Seed000Params', 'Seed001Params', 'list_parameter_sets', 'load_parameter_set',
+    'parameters_at_temperature', 'steady_state_properties',
+]

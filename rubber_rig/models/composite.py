@@ -1,0 +1,193 @@
+"""Parallel composition of elements (seed 000 Eq. 1: F = sum of branch forces) and ``build_model``."""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+
+from . import elements as el
+from .friction import BergFriction, SmoothCoulomb
+from .params import (KelvinVoigtParams, Seed000Params, Seed001Params, load_parameter_set,
+                     parameters_at_temperature, PARAM_CLASSES)
+
+
+class ParallelModel:
+    """Elements in parallel at sample period ``dt`` [s]; the total force is the sum of the branch forces.
+
+    ``branch_names`` (tuple of str) and ``branch_kinds`` ('elastic' | 'viscous' | 'friction') follow
+    the element order. ``step(x)`` -> total force [N] (branch forces in ``last_branches``);
+    ``run(x, return_branches=False)`` continues from the current state and leaves it as the same
+    number of ``step`` calls would (to round-off).
+    """
+
+    def __init__(self, elements, dt: float, name: str = 'parallel', params=None):
+        if not elements:
+            raise ValueError('a model needs at least one element')
+        self.elements = list(elements)
+        self.dt = float(dt)
+        self.name, self.params = name, params
+        names, kinds = [], []
+        for e in self.elements:
+            names += list(e.branch_names)
+            kinds += list(e.kinds)
+        # unique branch names: repeated kinds get a _1, _2 ... suffix
+        self.branch_names = tuple(
+            f'{n}_{names[:i + 1].count(n)}' if names.count(n) > 1 else n for i, n in enumerate(names))
+        self.branch_kinds = tuple(kinds)
+        self.last_branches = np.zeros(len(names))
+
+    def step(self, x: float) -> float:
+        x = float(x)
+        out, i = self.last_branches, 0
+        for e in self.elements:
+            for f in e.step(x):
+                out[i] = f
+                i += 1
+        return float(out.sum())
+
+    def run(self, x, return_branches: bool = False):
+        """Total force [N], shape (n,); with ``return_branches`` also branch forces, shape (n_branch, n)."""
+        x = np.ascontiguousarray(x, dtype=float)
+        if x.ndim != 1:
+            raise ValueError(f'x must be a 1-D array of displacements [m], got shape {x.shape}')
+        branches = np.vstack([e.run(x) for e in self.elements])
+        if x.size:
+            self.last_branches = branches[:, -1].copy()
+        total = branches.sum(axis=0)
+        return (total, branches) if return_branches else total
+
+    def reset(self, x0: float = 0.0):
+        """Back to the relaxed (virgin) state at displacement x0 [m]."""
+        for e in self.elements:
+            e.reset(float(x0))
+        self.last_branches = np.zeros(len(self.branch_names))
+
+    def get_state(self):
+        return copy.deepcopy(([e.get_state() for e in self.elements], self.last_branches))
+
+    def set_state(self, state):
+        states, last = copy.deepcopy(state)
+        for e, s in zip(self.elements, states):
+            e.set_state(s)
+        self.last_branches = np.array(last, dtype=float)
+
+    def complex_stiffness(self, frequency, amplitude):
+        """Exact continuous (equivalent) complex stiffness per branch [N/m], shape (n_branch, ...)."""
+        return np.concatenate([e.complex_stiffness(frequency, amplitude) for e in self.elements])
+
+
+def _fractional_element(p: Seed000Params, dt, scheme):
+    if isinstance(scheme, dict):
+        opts = dict(scheme)
+        name = opts.pop('name', 'default')
+    else:
+        name, opts = scheme, {}
+    if name == 'default':
+        return el.FractionalZener(p.k0, p.k_inf, p.tau, p.alpha, dt, **opts)
+    if name in ('gl', 'paper'):
+        if name == 'paper':   # seed 000 Eq. 15: N_t = 200, h = 1 ms
+            opts = {'n_terms': 200, 'h': 1e-3, **opts}
+        return el.FractionalZenerGL(p.k0, p.k_inf, p.tau, p.alpha, dt, **opts)
+    raise ValueError(f"unknown fractional scheme {name!r}: use 'default', 'gl' or 'paper'")
+
+
+def seed000_model(params: Seed000Params, dt: float, scheme='default') -> ParallelModel:
+    """Seed 000 nonlinear rubber spring: fractional Zener + Berg; branches ('elastic', 'viscous', 'friction')."""
+    params.validate()
+    return ParallelModel([_fractional_element(params, dt, scheme), BergFriction(params.f_fmax, params.x2, dt)],
+                         dt, 'seed000', params)
+
+
+def seed001_model(params: Seed001Params, dt: float) -> ParallelModel:
+    """Seed 001 combined model: tangent spring + 2 Maxwell + Berg; branches ('elastic', 'viscous_1', 'viscous_2', 'friction')."""
+    params.validate()
+    return ParallelModel([el.TangentSpring(params.k_t, params.d_t), el.Maxwell(params.k1, params.c1, dt),
+                          el.Maxwell(params.k2, params.c2, dt), BergFriction(params.f_fmax, params.x2, dt)],
+                         dt, 'seed001', params)
+
+
+def kelvin_voigt_model(params: KelvinVoigtParams, dt: float) -> ParallelModel:
+    params.validate()
+    return ParallelModel([el.LinearSpring(params.k), el.Dashpot(params.c, dt)], dt, 'kelvin_voigt', params)
+
+
+# element specs for {"model": "parallel", "elements": [{"type": ..., ...}, ...]}
+ELEMENT_TYPES = {
+    'linear_spring': lambda dt, k: el.LinearSpring(k),
+    'polynomial_spring': lambda dt, coefficients: el.PolynomialSpring(coefficients),
+    'odd_polynomial_spring': lambda dt, k_odd: el.PolynomialSpring.odd(k_odd),
+    'tangent_spring': lambda dt, k_t, d_t: el.TangentSpring(k_t, d_t),
+    'dashpot': lambda dt, c: el.Dashpot(c, dt),
+    'maxwell': lambda dt, k, c: el.Maxwell(k, c, dt),
+    'zener': lambda dt, k0, k_inf, tau: el.Zener(k0, k_inf, tau, dt),
+    'fractional_zener': lambda dt, scheme='default', **p: _fractional_element(
+        Seed000Params(x2=1.0, f_fmax=1.0, **p).validate(), dt, scheme),
+    'two_order_fractional': lambda dt, **p: el.TwoOrderFractional(dt=dt, **p),
+    'berg': lambda dt, f_fmax, x2: BergFriction(f_fmax, x2, dt),
+    'smooth_coulomb': lambda dt, f_c, a: SmoothCoulomb(f_c, a, dt),
+}
+
+
+def _from_params(params, dt, scheme):
+    if isinstance(params, Seed000Params):
+        return seed000_model(params, dt, scheme)
+    if isinstance(params, Seed001Params):
+        return seed001_model(params, dt)
+    if isinstance(params, KelvinVoigtParams):
+        return kelvin_voigt_model(params, dt)
+    raise ValueError(f'cannot build a model from {type(params).__name__}')
+
+
+def resolve_params(spec):
+    """Parameters of a spec: a params dataclass, a parameter-set name or a dict spec (see ``build_model``)."""
+    if isinstance(spec, (Seed000Params, Seed001Params, KelvinVoigtParams)):
+        return spec
+    if isinstance(spec, str):
+        return load_parameter_set(spec)
+    if not isinstance(spec, dict):
+        raise ValueError(f'model spec must be parameters, a parameter-set name or a dict, got {type(spec).__name__}')
+    model = spec.get('model', 'seed000')
+    sources = [k for k in ('parameter_set', 'temperature', 'values') if k in spec]
+    if len(sources) != 1:
+        raise ValueError(f"model spec needs exactly one of 'parameter_set', 'temperature', 'values', got {sources}")
+    if 'parameter_set' in spec:
+        p = load_parameter_set(spec['parameter_set'])
+    elif 'temperature' in spec:
+        if model != 'seed000':
+            raise ValueError(f"'temperature' is only available for model 'seed000', not {model!r}")
+        p = parameters_at_temperature(spec['temperature'])
+    else:
+        if model not in PARAM_CLASSES:
+            raise ValueError(f'unknown model {model!r}; known: {sorted(PARAM_CLASSES)} or parallel')
+        p = PARAM_CLASSES[model].from_dict(spec['values'])
+    return p
+
+
+def build_model(params_or_spec, dt: float, scheme='default') -> ParallelModel:
+    """Model object at sample period ``dt`` [s].
+
+    ``params_or_spec``: a :class:`Seed000Params` / :class:`Seed001Params` / :class:`KelvinVoigtParams`;
+    a parameter-set name; or a dict ``{"model": "seed000", "parameter_set": "seed000_20C"}``,
+    ``{"model": "seed000", "temperature": -10}``, ``{"model": "seed000", "values": {...}}``,
+    ``{"model": "parallel", "elements": [{"type": "berg", "f_fmax": 4570, "x2": 1.41e-3}, ...]}``.
+    ``scheme`` (fractional operator): 'default' (sum of exponentials), 'paper' (GL, N_t = 200,
+    h = 1 ms) or 'gl' / ``{"name": "gl", "n_terms": N_t, "h": h}``. A dict spec may carry its own
+    ``"scheme"``.
+    """
+    if not (isinstance(dt, (int, float, np.floating)) and np.isfinite(dt) and dt > 0):
+        raise ValueError(f'sample period dt must be a finite number > 0, got {dt!r}')
+    if isinstance(params_or_spec, dict):
+        scheme = params_or_spec.get('scheme', scheme)
+        if params_or_spec.get('model') == 'parallel':
+            elems = []
+            for e in params_or_spec.get('elements', []):
+                e = dict(e)
+                kind = e.pop('type', None)
+                if kind not in ELEMENT_TYPES:
+                    raise ValueError(f'unknown element type {kind!r}; known: {sorted(ELEMENT_TYPES)}')
+                try:
+                    elems.append(ELEMENT_TYPES[kind](float(dt), **e))
+                except TypeError as exc:
+                    raise ValueError(f'bad parameters for element {kind!r}: {exc}') from None
+            return ParallelModel(elems, dt, 'parallel')
+    return _from_params(resolve_params(params_or_spec), float(dt), scheme)

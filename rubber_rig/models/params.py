@@ -1,0 +1,216 @@
+"""Parameter sets of the rubber-element models, in SI, with validation and temperature interpolation.
+
+Seed 000 Table 1 (20, 0, -20, -40 degC) and Table 2 (cases 1-9) ship as YAML in ``data/seed000.yaml``.
+
+Temperature interpolation (:func:`parameters_at_temperature`): shape-preserving monotone cubic
+Hermite interpolation (PCHIP, Fritsch-Carlson) of each parameter over the four table temperatures,
+on transformed coordinates that keep every interpolant physically valid:
+
+* K0, alpha: PCHIP of the value;
+* K_inf: PCHIP of log(K_inf - K0), added to the interpolated K0, so K_inf > K0 always and K_inf is
+  monotone wherever both K0 and K_inf - K0 are;
+* tau, x2, F_fmax: PCHIP of the logarithm (tau follows an Arrhenius/WLF-like shift, and all three
+  stay positive).
+
+PCHIP is C1, reproduces the table exactly at the table temperatures, never overshoots (between two
+table temperatures each parameter stays between its two table values, so alpha stays in (0, 1])
+and is monotone on every interval where the data are. Outside [-40, 20] degC it refuses to
+extrapolate (ValueError).
+"""
+from __future__ import annotations
+
+import dataclasses
+import math
+from functools import lru_cache
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+DATA_DIR = Path(__file__).resolve().parent / 'data'
+
+
+def _check_finite(name: str, value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f'parameter {name} must be a number, got {value!r}') from None
+    if not math.isfinite(v):
+        raise ValueError(f'parameter {name} must be finite, got {v}')
+    return v
+
+
+def _check_positive(name: str, value) -> float:
+    v = _check_finite(name, value)
+    if v <= 0.0:
+        raise ValueError(f'parameter {name} must be > 0, got {v}')
+    return v
+
+
+def _check_order(name: str, value) -> float:
+    v = _check_finite(name, value)
+    if not 0.0 < v <= 1.0:
+        raise ValueError(f'parameter {name} (fractional order) must be in (0, 1], got {v}')
+    return v
+
+
+class _Params:
+    """Shared behaviour of the frozen parameter dataclasses."""
+
+    @classmethod
+    def names(cls) -> tuple:
+        return tuple(f.name for f in dataclasses.fields(cls))
+
+    def as_dict(self) -> dict:
+        return {n: float(getattr(self, n)) for n in self.names()}
+
+    @classmethod
+    def from_dict(cls, values: dict):
+        unknown = set(values) - set(cls.names())
+        missing = set(cls.names()) - set(values)
+        if unknown:
+            raise ValueError(f'unknown parameter(s) for {cls.__name__}: {sorted(unknown)}')
+        if missing:
+            raise ValueError(f'missing parameter(s) for {cls.__name__}: {sorted(missing)}')
+        p = cls(**{k: float(v) for k, v in values.items()})
+        p.validate()
+        return p
+
+
+@dataclasses.dataclass(frozen=True)
+class Seed000Params(_Params):
+    """Seed 000 nonlinear rubber spring: fractional Zener (Eq. 4) + Berg friction (Eq. 16).
+
+    k0 [N/m] static stiffness, k_inf [N/m] high-frequency storage stiffness, tau [s] relaxation
+    time, alpha [-] fractional order in (0, 1], x2 [m] displacement to reach F_fmax/2 from the
+    virgin state, f_fmax [N] maximum friction force.
+    """
+    k0: float
+    k_inf: float
+    tau: float
+    alpha: float
+    x2: float
+    f_fmax: float
+
+    def validate(self) -> 'Seed000Params':
+        for n in ('k0', 'k_inf', 'tau', 'x2', 'f_fmax'):
+            _check_positive(n, getattr(self, n))
+        _check_order('alpha', self.alpha)
+        if self.k_inf < self.k0:
+            raise ValueError(f'parameter k_inf ({self.k_inf:g} N/m) must be >= k0 ({self.k0:g} N/m)')
+        return self
+
+
+@dataclasses.dataclass(frozen=True)
+class KelvinVoigtParams(_Params):
+    """Kelvin-Voigt element: k [N/m] spring parallel to c [N s/m] dashpot (seed 000 Table 2 case 1)."""
+    k: float
+    c: float
+
+    def validate(self) -> 'KelvinVoigtParams':
+        _check_positive('k', self.k)
+        v = _check_finite('c', self.c)
+        if v < 0:
+            raise ValueError(f'parameter c must be >= 0, got {v}')
+        return self
+
+
+@dataclasses.dataclass(frozen=True)
+class Seed001Params(_Params):
+    """Seed 001 combined ("novel") model: Dzierzek tangent spring + two Maxwell branches + Berg friction.
+
+    k_t [N/m] tangent stiffness at x = 0, d_t [m] characteristic thickness (asymptote of the
+    elastic curve), k1, k2 [N/m] and c1, c2 [N s/m] the two Maxwell branches, f_fmax [N], x2 [m]
+    Berg friction. (The paper's 10 parameters count the p, q, r sub-parameters of an
+    amplitude-dependent k_t fitted to static tests; the time-domain model uses k_t itself.)
+    """
+    k_t: float
+    d_t: float
+    k1: float
+    c1: float
+    k2: float
+    c2: float
+    f_fmax: float
+    x2: float
+
+    def validate(self) -> 'Seed001Params':
+        for n in self.names():
+            _check_positive(n, getattr(self, n))
+        return self
+
+
+PARAM_CLASSES = {'seed000': Seed000Params, 'kelvin_voigt': KelvinVoigtParams, 'seed001': Seed001Params}
+
+
+@lru_cache(maxsize=None)
+def _load_yaml(name: str) -> dict:
+    with open(DATA_DIR / name, encoding='utf-8') as fh:
+        return yaml.safe_load(fh)
+
+
+def _all_sets() -> dict:
+    sets = {}
+    for path in sorted(DATA_DIR.glob('*.yaml')):
+        sets.update(_load_yaml(path.name).get('sets', {}))
+    return sets
+
+
+def list_parameter_sets() -> list:
+    """Names of the shipped parameter sets, e.g. ``['seed000_0C', 'seed000_20C', ...]``."""
+    return sorted(_all_sets())
+
+
+def parameter_set_model(name: str) -> str:
+    """Model name ('seed000', 'kelvin_voigt', ...) a named parameter set belongs to."""
+    sets = _all_sets()
+    if name not in sets:
+        raise ValueError(f'unknown parameter set {name!r}; known: {", ".join(sorted(sets))}')
+    return sets[name]['model']
+
+
+def load_parameter_set(name: str):
+    """Parameter set by name, as a validated frozen dataclass in SI units.
+
+    ``seed000_20C``, ``seed000_0C``, ``seed000_m20C``, ``seed000_m40C`` (Table 1) and
+    ``seed000_case2`` .. ``seed000_case9`` give :class:`Seed000Params`; ``seed000_case1`` (the
+    paper's Kelvin-Voigt reference) gives :class:`KelvinVoigtParams`.
+    """
+    model = parameter_set_model(name)
+    return PARAM_CLASSES[model].from_dict(_all_sets()[name]['values'])
+
+
+TABLE1_TEMPERATURES = (-40.0, -20.0, 0.0, 20.0)
+
+
+@lru_cache(maxsize=None)
+def _temperature_interpolants():
+    from scipy.interpolate import PchipInterpolator
+    rows = sorted(_load_yaml('seed000.yaml')['table1'], key=lambda r: r['temperature'])
+    t = np.array([r['temperature'] for r in rows])
+    col = {k: np.array([float(r[k]) for r in rows]) for k in Seed000Params.names()}
+    return t, {
+        'k0': PchipInterpolator(t, col['k0']),
+        'log_dk': PchipInterpolator(t, np.log(col['k_inf'] - col['k0'])),
+        'log_tau': PchipInterpolator(t, np.log(col['tau'])),
+        'alpha': PchipInterpolator(t, col['alpha']),
+        'log_x2': PchipInterpolator(t, np.log(col['x2'])),
+        'log_f_fmax': PchipInterpolator(t, np.log(col['f_fmax'])),
+    }
+
+
+def parameters_at_temperature(t_degC: float) -> Seed000Params:
+    """Seed 000 parameters at temperature ``t_degC`` [degC], interpolated from Table 1.
+
+    Exact at 20, 0, -20, -40 degC; monotone PCHIP in between (see the module docstring).
+    Raises ValueError outside [-40, 20] degC.
+    """
+    t = _check_finite('temperature', t_degC)
+    temps, f = _temperature_interpolants()
+    if not temps[0] <= t <= temps[-1]:
+        raise ValueError(f'temperature {t:g} degC is outside the identified range '
+                         f'[{temps[0]:g}, {temps[-1]:g}] degC of seed 000 Table 1')
+    k0 = float(f['k0'](t))
+    p = Seed000Params(k0=k0, k_inf=k0 + float(np.exp(f['log_dk'](t))), tau=float(np.exp(f['log_tau'](t))),
+                      alpha=float(f['alpha'](t)), x2=float(np.exp(f['log_x2'](t))),
+                      f_fmax=float(np.exp(f['log_f_fmax'](t))))
+    return p.validate()
