@@ -1,0 +1,37 @@
+"""Simulated rig: rig_driver (backend sim, paced to the wall clock), excitation, element_model and recorder.
+
+    ros2 launch rubber_rig rig_sim.launch.py
+    ros2 launch rubber_rig rig_sim.launch.py namespace:=rig1 program:=seed000_grid
+
+Same node classes and the same parameter file (config/rig_sim.yaml) as ``rubber-rig bench``, which starts
+them in one process when there is no ROS install. The rig_driver is a lifecycle node; with ``autostart: true``
+(the default in the config) it configures and activates itself, otherwise use ``ros2 lifecycle set``.
+For the live view, start foxglove_bridge alongside and import config/foxglove_layout.json in Foxglove.
+"""
+import os
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+
+
+def generate_launch_description():
+    config = os.path.join(get_package_share_directory('rubber_rig'), 'config', 'rig_sim.yaml')
+    namespace = LaunchConfiguration('namespace')
+    program = LaunchConfiguration('program')
+    return LaunchDescription([
+        DeclareLaunchArgument('namespace', default_value='', description='namespace of this rig'),
+        DeclareLaunchArgument('program', default_value='seed000_grid',
+                              description='test program (shipped name or YAML path) the excitation runs at start; '
+                                          'empty: wait for a RunProgram goal'),
+        Node(package='rubber_rig', executable='rig_driver', name='rig_driver', namespace=namespace,
+             parameters=[config], output='screen'),
+        Node(package='rubber_rig', executable='excitation', name='excitation', namespace=namespace,
+             parameters=[config, {'program': program}], output='screen'),
+        Node(package='rubber_rig', executable='element_model', name='element_model', namespace=namespace,
+             parameters=[config], output='screen'),
+        Node(package='rubber_rig', executable='recorder', name='recorder', namespace=namespace,
+             parameters=[config], output='screen'),
+    ])

@@ -1,0 +1,49 @@
+"""Per-cycle metrics of measurement and model side by side (ROS-free glue of the element_model node).
+
+Both streams share the measured displacement, so two CycleDetectors fed with the same x cut exactly the same
+cycles; the pairer only matches them by index and maps detector sample indices back to rig sequence numbers.
+Noise on x cannot make them disagree: the cut depends on x alone.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from rubber_rig.analysis import CycleDetector
+
+
+@dataclass
+class PairedCycle:
+    index: int
+    start_sequence: int
+    end_sequence: int          # exclusive
+    measured: dict             # HarmonicProperties fields (k_dyn, loss_angle, damping, c_eq, energy_*, ...)
+    model: dict
+
+
+class CyclePairer:
+    """Feeds measured and predicted force through two CycleDetectors and pairs their cycles."""
+
+    def __init__(self, hysteresis: float = 0.2):
+        self.hysteresis = hysteresis
+        self._measured = self._model = None
+        self._dt = None
+        self._origin = None        # sequence number of the detectors' sample index 0
+        self._next = None
+
+    def reset(self) -> None:
+        self._measured = self._model = None
+
+    def feed(self, first_sequence: int, dt: float, x: np.ndarray, measured: np.ndarray,
+             predicted: np.ndarray) -> list[PairedCycle]:
+        if self._measured is None or dt != self._dt or first_sequence != self._next:
+            # first batch, new rate, or a sequence gap: a cycle across a gap would be wrong -> restart
+            self._measured = CycleDetector(dt, self.hysteresis)
+            self._model = CycleDetector(dt, self.hysteresis)
+            self._dt, self._origin = dt, first_sequence
+        self._next = first_sequence + len(x)
+        out = []
+        for m, p in zip(self._measured.update(x, measured), self._model.update(x, predicted)):
+            out.append(PairedCycle(m['index'], self._origin + m['start'], self._origin + m['end'], m, p))
+        return out

@@ -1,0 +1,174 @@
+"""element_model: predicts the element force online from the measured displacement.
+
+Subscribes:  samples (msg_defs/RigSampleBatch), setpoints (msg_defs/SetpointBatch, only for block indices)
+Publishes:   prediction (msg_defs/ModelPrediction: prediction, residual, branch forces per batch)
+             cycle_metrics (msg_defs/CycleMetrics: measured and model K_dyn, loss angle, D, C_eq, energy)
+             model_parameters (msg_defs/ModelParameters, latched)
+QoS: see rubber_rig/nodes/topics.py.
+
+The model is chosen by parameters (``source``): a named parameter set, a temperature, the rig's temperature
+channel (re-evaluated when it moves by ``temperature_hysteresis``), or explicit values. All of them can be
+changed at run time; the on-set-parameters callback validates the new choice and refuses it with a reason
+naming the parameter, so a running model is never replaced by an invalid one.
+"""
+from __future__ import annotations
+
+import re
+
+import rclpy
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.executors import ExternalShutdownException
+from rclpy.node import Node
+
+from msg_defs.msg import CycleMetrics, ModelParameters, ModelPrediction, RigSampleBatch, SetpointBatch
+from rubber_rig.models import load_parameter_set
+from rubber_rig.nodes import conversions as conv
+from rubber_rig.nodes import topics
+from rubber_rig.nodes.cycles import CyclePairer
+from rubber_rig.nodes.params import ParameterError, declare
+from rubber_rig.nodes.predictor import SOURCES, BlockIndex, ModelChoice, OnlinePredictor
+
+VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
+VALUE_UNITS = {'k0': 'N/m', 'k_inf': 'N/m', 'tau': 's', 'alpha': '-', 'x2': 'm', 'f_fmax': 'N'}
+CHOICE_PARAMS = ('source', 'parameter_set', 'temperature') + tuple('values.' + n for n in VALUE_NAMES)
+
+
+class ElementModelNode(Node):
+
+    def __init__(self, node_name: str = 'element_model', **kwargs):
+        super().__init__(node_name, **kwargs)
+        defaults = load_parameter_set('seed000_20C').as_dict()
+        declare(self, 'model', 'seed000', 'element model (seed000: fractional Zener + Berg friction)',
+                choices=('seed000',), read_only=True)
+        declare(self, 'source', 'parameter_set', 'where the model parameters come from', choices=SOURCES)
+        declare(self, 'parameter_set', 'seed000_20C', 'named parameter set (source parameter_set)')
+        declare(self, 'temperature', 20.0, 'specimen temperature (source temperature; start value of '
+                'rig_temperature)', range=(-40.0, 20.0), units='degC')
+        for name in VALUE_NAMES:
+            declare(self, 'values.' + name, defaults[name], f'explicit model parameter {name} (source values)',
+                    units=VALUE_UNITS[name])
+        declare(self, 'temperature_hysteresis', 0.5, 'rig temperature change that re-evaluates the parameters',
+                range=(0.01, 20.0), units='K')
+        declare(self, 'warmup_time', 5.0, 'displacement history run through a rebuilt model before it '
+                'predicts', range=(0.0, 60.0), units='s')
+        self.publish_branches = declare(self, 'publish_branches', True, 'publish per-branch forces')
+        self.cycle_metrics = declare(self, 'cycle_metrics', True, 'publish per-cycle metrics')
+
+        try:  # validate the whole choice once at start: the error names the offending parameter
+            self._validate(self._choice(), CHOICE_PARAMS)
+            self.predictor = OnlinePredictor(self._choice(), self.get_parameter('warmup_time').value,
+                                             self.get_parameter('temperature_hysteresis').value)
+        except ValueError as exc:
+            raise ParameterError(self.get_name(), self._blame(str(exc)), str(exc)) from None
+        self.add_on_set_parameters_callback(self._on_set_parameters)
+        self.add_post_set_parameters_callback(self._after_set_parameters)
+
+        self.blocks = BlockIndex()
+        self.cycles = CyclePairer()
+        self.pub_prediction = self.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
+        self.pub_metrics = self.create_publisher(CycleMetrics, topics.CYCLE_METRICS, topics.EVENT_QOS)
+        self.pub_params = self.create_publisher(ModelParameters, topics.MODEL_PARAMETERS, topics.LATCHED_QOS)
+        self.create_subscription(RigSampleBatch, topics.SAMPLES, self.on_samples, topics.STREAM_QOS)
+        self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints, topics.STREAM_QOS)
+        self._published_params = None
+        self.publish_parameters()
+        self.get_logger().info(f'model seed000 from {self.predictor.choice.source}: {self.predictor.params}')
+
+    # -- data path --------------------------------------------------------------------------------------------
+    def on_setpoints(self, msg: SetpointBatch) -> None:
+        self.blocks.add(msg.first_sequence, len(msg.displacement), msg.block_index)
+
+    def on_samples(self, msg: RigSampleBatch) -> None:
+        x, f, _ = conv.batch_arrays(msg)
+        if len(x) == 0:
+            return
+        predicted, branches = self.predictor.process(msg.first_sequence, msg.sample_period, x, msg.temperature)
+        if self.predictor.params is not self._published_params:
+            self.publish_parameters()
+        self.pub_prediction.publish(conv.prediction_msg(
+            msg, predicted, self.predictor.branch_names, branches if self.publish_branches else None))
+        if self.cycle_metrics:
+            t0 = conv.to_seconds(msg.header.stamp)
+            for c in self.cycles.feed(msg.first_sequence, msg.sample_period, x, f, predicted):
+                block = self.blocks.lookup(c.end_sequence - 1)
+                self.pub_metrics.publish(conv.cycle_metrics_msg(
+                    c.measured, c.model, block, c.index, t0 + (c.end_sequence - msg.first_sequence) * msg.sample_period))
+
+    def publish_parameters(self) -> None:
+        p = self.predictor
+        self.pub_params.publish(conv.model_parameters_msg('seed000', p.parameter_set, p.temperature,
+                                                          p.params.as_dict(), self.get_clock().now().nanoseconds * 1e-9))
+        self._published_params = p.params
+
+    # -- run-time parameter changes -------------------------------------------------------------------------------
+    def _choice(self, changed: dict | None = None) -> ModelChoice:
+        def value(name):
+            return (changed or {}).get(name, self.get_parameter(name).value)
+        return ModelChoice(source=value('source'), parameter_set=value('parameter_set'),
+                           temperature=value('temperature'),
+                           values={n: value('values.' + n) for n in VALUE_NAMES})
+
+    @staticmethod
+    def _blame(message: str) -> str:
+        """Which node parameter an error of the model library is about ("parameter alpha must be ...")."""
+        m = re.search(r'parameter (\w+)', message)
+        if m and m.group(1) in VALUE_NAMES:
+            return 'values.' + m.group(1)
+        if 'parameter set' in message:
+            return 'parameter_set'
+        if 'temperature' in message:
+            return 'temperature'
+        return 'source'
+
+    @staticmethod
+    def _validate(choice: ModelChoice, changed) -> None:
+        """Check every model parameter that changed, used by the current source or not (a later switch of
+        ``source`` must never meet an invalid value), then the resulting choice. Raises ValueError."""
+        if choice.source not in SOURCES:
+            raise ValueError(f"source '{choice.source}' is not one of {', '.join(SOURCES)}")
+        if any(name.startswith('values.') for name in changed):
+            ModelChoice(source='values', values=choice.values).resolve()
+        if 'parameter_set' in changed:
+            ModelChoice(source='parameter_set', parameter_set=choice.parameter_set).resolve()
+        if 'temperature' in changed:
+            ModelChoice(source='temperature', temperature=choice.temperature).resolve()
+        choice.resolve()
+
+    def _on_set_parameters(self, params) -> SetParametersResult:
+        changed = {p.name: p.value for p in params}
+        if not set(changed) & set(CHOICE_PARAMS):
+            return SetParametersResult(successful=True)
+        try:
+            self._validate(self._choice(changed), changed)
+        except ValueError as exc:
+            return SetParametersResult(successful=False, reason=f'{self._blame(str(exc))}: {exc}')
+        return SetParametersResult(successful=True)
+
+    def _after_set_parameters(self, params) -> None:
+        names = {p.name for p in params}
+        if names & set(CHOICE_PARAMS):
+            self.predictor.set_choice(self._choice())   # rebuilt (and warmed up) on the next batch
+            self.publish_parameters()
+            self.get_logger().info(f'model parameters changed ({", ".join(sorted(names))}): {self.predictor.params}')
+        if 'publish_branches' in names:
+            self.publish_branches = self.get_parameter('publish_branches').value
+        if 'cycle_metrics' in names:
+            self.cycle_metrics = self.get_parameter('cycle_metrics').value
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = ElementModelNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,146 @@
+"""ROS-free glue behind the element_model node: run a core element model on streamed sample batches.
+
+Why a history buffer: a rebuilt model (new parameters, or a new temperature when the model follows the rig's
+temperature channel) starts from rest, but the specimen does not. Running the new model over the last few
+seconds of measured displacement (``warmup_time``) before it predicts again removes the start-up transient
+of the fractional (long-memory) branch and the friction reference state; a batch run over 5 s at 5 kHz costs
+a few milliseconds.
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from rubber_rig.models import build_model, load_parameter_set, parameters_at_temperature, Seed000Params
+
+SOURCES = ('parameter_set', 'temperature', 'rig_temperature', 'values')
+
+
+@dataclass(frozen=True)
+class ModelChoice:
+    """Which parameters the model runs with (what the element_model node's parameters select)."""
+    source: str = 'parameter_set'                 # one of SOURCES
+    parameter_set: str = 'seed000_20C'
+    temperature: float = 20.0                     # [degC] for source 'temperature' (start value for 'rig_temperature')
+    values: dict = field(default_factory=dict)    # k0, k_inf, tau, alpha, x2, f_fmax [SI] for source 'values'
+    model: str = 'seed000'
+
+    def resolve(self, temperature: float | None = None) -> tuple[Seed000Params, str, float]:
+        """(validated parameters, parameter-set name or '', temperature [degC] or NaN). Raises ValueError."""
+        if self.model != 'seed000':
+            raise ValueError(f"model {self.model!r} is not available online (only 'seed000')")
+        if self.source == 'parameter_set':
+            p = load_parameter_set(self.parameter_set)
+            if not isinstance(p, Seed000Params):
+                raise ValueError(f'parameter set {self.parameter_set!r} is not a seed000 parameter set')
+            t = _set_temperature(self.parameter_set)
+            return p, self.parameter_set, t
+        if self.source in ('temperature', 'rig_temperature'):
+            t = self.temperature if temperature is None else float(temperature)
+            return parameters_at_temperature(t), '', t
+        if self.source == 'values':
+            return Seed000Params.from_dict(dict(self.values)), '', math.nan
+        raise ValueError(f'source {self.source!r} is not one of {", ".join(SOURCES)}')
+
+
+def _set_temperature(name: str) -> float:
+    """Temperature of a Table 1 set from its name (seed000_20C -> 20, seed000_m40C -> -40), else NaN."""
+    tail = name.rsplit('_', 1)[-1]
+    if tail.endswith('C'):
+        try:
+            return float(tail[:-1].replace('m', '-'))
+        except ValueError:
+            pass
+    return math.nan
+
+
+class OnlinePredictor:
+    """Predicts the force of each incoming batch; rebuilds the model when the choice or the temperature changes."""
+
+    def __init__(self, choice: ModelChoice, warmup_time: float = 5.0, temperature_hysteresis: float = 0.5):
+        self.choice = choice
+        self.warmup_time = warmup_time
+        self.temperature_hysteresis = temperature_hysteresis
+        self.params, self.parameter_set, self.temperature = choice.resolve()
+        self.model = None
+        self.dt = None
+        self.next_sequence = None
+        self.samples = 0
+        self.gaps = 0
+        self.samples_missing = 0
+        self.rebuilds = 0
+        self._history: deque[np.ndarray] = deque()
+        self._history_len = 0
+        self._dirty = True
+
+    def set_choice(self, choice: ModelChoice) -> None:
+        """Validate (raises ValueError) and switch; the model is rebuilt and warmed up on the next batch."""
+        resolved = choice.resolve()
+        self.choice = choice
+        self.params, self.parameter_set, self.temperature = resolved
+        self._dirty = True
+
+    @property
+    def branch_names(self) -> list[str]:
+        return list(self.model.branch_names) if self.model is not None else []
+
+    def process(self, first_sequence: int, dt: float, x: np.ndarray,
+                temperature: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Predicted force and branch forces [n_branch, n] for one batch of measured displacement."""
+        if self.next_sequence is not None and first_sequence != self.next_sequence:
+            self.gaps += 1
+            self.samples_missing += max(0, first_sequence - self.next_sequence)
+        self.next_sequence = first_sequence + len(x)
+        if self.choice.source == 'rig_temperature' and temperature is not None and math.isfinite(temperature):
+            if not math.isfinite(self.temperature) or abs(temperature - self.temperature) >= self.temperature_hysteresis:
+                try:
+                    self.params, self.parameter_set, self.temperature = self.choice.resolve(temperature)
+                    self._dirty = True
+                except ValueError:
+                    pass  # outside the identified range: keep the last valid parameters
+        if self._dirty or self.dt is None or not math.isclose(dt, self.dt, rel_tol=1e-9):
+            self._rebuild(dt)
+        total, branches = self.model.run(np.asarray(x, dtype=np.float64), return_branches=True)
+        self._remember(x)
+        self.samples += len(x)
+        return np.asarray(total), np.asarray(branches)
+
+    # -- internals --------------------------------------------------------------------------------------
+    def _rebuild(self, dt: float) -> None:
+        self.model = build_model({'model': 'seed000', 'values': self.params.as_dict()}, dt)
+        if self.dt is not None and math.isclose(dt, self.dt, rel_tol=1e-9) and self._history:
+            self.model.run(np.concatenate(list(self._history)), return_branches=False)  # warm up (see module doc)
+        else:
+            self._history.clear()
+            self._history_len = 0
+        self.dt = dt
+        self._dirty = False
+        self.rebuilds += 1
+
+    def _remember(self, x: np.ndarray) -> None:
+        keep = int(self.warmup_time / self.dt) if self.dt else 0
+        if keep <= 0:
+            return
+        self._history.append(np.array(x, dtype=np.float64))
+        self._history_len += len(x)
+        while self._history and self._history_len - len(self._history[0]) >= keep:
+            self._history_len -= len(self._history.popleft())
+
+
+class BlockIndex:
+    """Maps sample sequences to the program block they belong to, from the streamed setpoint batches."""
+
+    def __init__(self, keep: int = 4096):
+        self._ranges: deque[tuple[int, int, int]] = deque(maxlen=keep)
+
+    def add(self, first_sequence: int, n: int, block_index: int) -> None:
+        self._ranges.append((first_sequence, first_sequence + n, block_index))
+
+    def lookup(self, sequence: int) -> int:
+        for first, end, block in reversed(self._ranges):
+            if first <= sequence < end:
+                return block
+        return -1
