@@ -31,7 +31,10 @@ def sequence_span(msg_type: str, msg):
     first = _get(msg, seq_field)
     if first is None:
         return None
-    count = 1 if array_field is None else len(_get(msg, array_field) or ())
+    if array_field is None:
+        return int(first), 1
+    samples = _get(msg, array_field)
+    count = 0 if samples is None else len(samples)
     return int(first), count
 
 

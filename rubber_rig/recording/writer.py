@@ -131,7 +131,6 @@ class RecordingWriter:
             raise RecordingWriteError(f'cannot create recording {self.path}: {exc.strerror}',
                                       exc.errno) from None
         self._mcap = McapWriter(self._file, chunk_size=chunk_size, compression=COMPRESSION[compression])
-        self._chunk_size = chunk_size
         self._flush_interval_ns = int(flush_interval_s * 1e9) if flush_interval_s else 0
         self._schemas, self._channels, self._sequences = {}, {}, {}
         self._encoders, self._decoders = {}, {}
@@ -176,6 +175,9 @@ class RecordingWriter:
             return fn(*args, **kwargs)
         except OSError as exc:
             self.failure = exc
+            # messages of the chunk that could not be written are lost too: say how many
+            if self.messages_written > self.messages_flushed:
+                self.count_dropped('lost_in_unwritten_chunk', self.messages_written - self.messages_flushed)
             what = {errno_mod.ENOSPC: 'disk full', errno_mod.EFBIG: 'file too large',
                     errno_mod.EDQUOT: 'disk quota exceeded'}.get(exc.errno, exc.strerror)
             raise RecordingWriteError(f'writing {self.path} failed ({what}); the file is kept up to '
@@ -245,6 +247,7 @@ class RecordingWriter:
         if sequence is None:
             sequence = self._sequences[channel_id] + 1
         self._sequences[channel_id] = sequence
+        before = self._file.tell()
         try:
             self._guard(self._mcap.add_message, channel_id, int(log_time_ns), data,
                         int(publish_time_ns), int(sequence) & 0xFFFFFFFF)
@@ -260,8 +263,8 @@ class RecordingWriter:
         self.last_log_time_ns = log_time_ns
         if msg_type in SEQUENCED_TYPES:
             self._track(topic, msg_type, data, decoded, log_time_ns)
-        if self._pending > self._chunk_size:
-            self._pending = 0              # mcap has just closed the chunk itself
+        if self._file.tell() != before:    # mcap closed a full chunk (with this message) just now
+            self._pending = 0
             self.messages_flushed = self.messages_written
         if self._flush_interval_ns and log_time_ns - self._last_flush_ns >= self._flush_interval_ns:
             self.flush()
