@@ -133,7 +133,7 @@ class Dashpot:
 
     def complex_stiffness(self, frequency, amplitude):
         w = 2 * np.pi * np.asarray(frequency, dtype=float) + 0 * np.asarray(amplitude, dtype=float)
-        return (1j * w * self.c)[None]
+        return np.asarray(1j * w * self.c)[None]
 
 
 class _ModeElement:
@@ -187,7 +187,7 @@ class Maxwell(_ModeElement):
 
     def complex_stiffness(self, frequency, amplitude):
         s = 2j * np.pi * np.asarray(frequency, dtype=float) * (self.c / self.k)
-        return (self.k * s / (1 + s) + 0 * np.asarray(amplitude, dtype=float))[None]
+        return np.asarray(self.k * s / (1 + s) + 0 * np.asarray(amplitude, dtype=float))[None]
 
 
 class FractionalZener(_ModeElement):

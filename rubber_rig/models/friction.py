@@ -129,8 +129,7 @@ class BergFriction:
     def complex_stiffness(self, frequency, amplitude):
         """Equivalent complex stiffness K_fs + j K_fl [N/m] (seed 000 Eq. 21-22), shape (1, ...)."""
         ss = berg_steady_state(amplitude, self.f_fmax, self.x2)
-        k = ss['k_fs'] + 1j * ss['k_fl'] + 0 * np.asarray(frequency)
-        return k[None]
+        return np.asarray(ss['k_fs'] + 1j * ss['k_fl'] + 0 * np.asarray(frequency, dtype=float))[None]
 
 
 class SmoothCoulomb:
@@ -177,4 +176,4 @@ class SmoothCoulomb:
         th = (np.arange(n_quad) + 0.5) * 2 * np.pi / n_quad
         vel = 2 * np.pi * f[..., None] * x0[..., None] * np.cos(th)
         k_l = (self.f_c * np.tanh(self.a * vel) * np.cos(th)).mean(-1) * 2 / x0
-        return (1j * k_l)[None]
+        return np.asarray(1j * k_l)[None]
