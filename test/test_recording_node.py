@@ -1,5 +1,10 @@
 """The recorder node with real rclpy + Fast DDS: RigSampleBatch published in-process, file read back."""
+import os
+import signal
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -13,11 +18,13 @@ from rosbags.typesys import Stores, get_typestore
 from diagnostic_msgs.msg import DiagnosticArray
 from msg_defs.msg import RigSampleBatch, RigStatus
 from msg_defs.srv import RecorderControl
+from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.recorder import RecorderNode
 from rubber_rig.recording import load_recording
 from rubber_rig.recording.qos import parse_offered_qos
 
+REPO = Path(__file__).resolve().parents[1]
 BATCH = 20
 PERIOD = 1e-3
 
@@ -127,3 +134,54 @@ def test_recorder_node_records_published_batches(context, tmp_path):
         conn = [c for c in reader.connections if c.topic == f'{ns}/samples']
         forces = [reader.deserialize(raw, c.msgtype).force for c, _, raw in reader.messages(connections=conn)]
     np.testing.assert_array_equal(np.concatenate(forces), expected)
+
+
+def run_recorder_process(ns, out_dir):
+    env = dict(os.environ, RMW_IMPLEMENTATION='rmw_fastrtps_cpp', ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
+    return subprocess.Popen(
+        [sys.executable, '-m', 'rubber_rig.nodes.recorder', '--ros-args', '-r', f'__ns:={ns}',
+         '-p', f'output_dir:={out_dir}', '-p', 'flush_period:=0.1', '-p', 'diagnostics_period:=0.1',
+         '-p', 'discovery_period:=0.1', '-p', 'metadata.specimen:=killed'],
+        env=env, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+
+
+@pytest.mark.parametrize('how', ['sigkill', 'sigint'])
+def test_recorder_process_killed_or_interrupted(context, tmp_path, how):
+    """SIGKILL: every flushed batch is recovered; SIGINT: clean shutdown, complete file."""
+    ns = f'/proc_{how}'
+    proc = run_recorder_process(ns, tmp_path)
+    node = Node('fake_rig', namespace=ns, context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    stats = {}
+
+    def on_diag(msg):
+        for s in msg.status:
+            if s.hardware_id == str(tmp_path):
+                stats.update({kv.key: kv.value for kv in s.values})
+    try:
+        node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diag, 10)
+        pub = node.create_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
+        assert spin_until(executor, lambda: stats.get('topics') == '1' and pub.get_subscription_count() == 1)
+        for k in range(50):
+            pub.publish(batch(k))
+            executor.spin_once(timeout_sec=0)
+        # the recorder says all 50 are written and flushed to the OS
+        assert spin_until(executor, lambda: stats.get('messages_flushed_current_file') == '50'), stats
+        proc.send_signal(signal.SIGKILL if how == 'sigkill' else signal.SIGINT)
+        assert proc.wait(timeout=30) == (-signal.SIGKILL if how == 'sigkill' else 0), proc.stderr.read()
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+        executor.remove_node(node)
+        node.destroy_node()
+        executor.shutdown()
+    [path] = tmp_path.glob('rubber_rig_*/*_0.mcap')
+    if how == 'sigkill':
+        assert cli(['recover', '--in-place', str(path)]) == 0
+    r = load_recording(path)
+    assert r.topics[f'{ns}/samples']['count'] == 50 and len(r) == 50 * BATCH and r.samples_lost == 0
+    np.testing.assert_array_equal(r.force, np.concatenate([np.asarray(batch(k).force) for k in range(50)]))
+    assert r.metadata['specimen'] == 'killed'
+    assert bool(r.closing) == (how == 'sigint')          # the closing report needs a clean stop
