@@ -74,6 +74,7 @@ class ProgramRunner:
         self._seg_starts = []
         self._completed = set()
         self._measured_to = start_sequence
+        self.last_block_index = np.empty(0, dtype=np.int32)
 
     # ---- state
     @property
@@ -124,6 +125,7 @@ class ProgramRunner:
         """The next n setpoints [m], shape (n,); their sequence numbers are self.sequence .. + n - 1 (before the
         call). After the end the last value is held."""
         out = np.empty(int(n))
+        blocks = np.full(int(n), -1, dtype=np.int32)
         i = 0
         while i < n:
             if self.state == 'running':
@@ -139,6 +141,7 @@ class ProgramRunner:
                     self.abort(str(exc))
                     continue
                 out[i:i + m] = x
+                blocks[i:i + m] = b
                 self._record(self.sequence + i, m, b)
                 self._p += m
                 self._set_last(x)
@@ -160,6 +163,7 @@ class ProgramRunner:
                 self._x_prev = self._x
                 i = n
         self.sequence += int(n)
+        self.last_block_index = blocks   # program block of each returned setpoint (-1: hold/abort ramp, end)
         return out
 
     def _set_last(self, x):
@@ -221,10 +225,14 @@ class ProgramRunner:
             if lo < hi and loop is not None:
                 t = (local0 + np.arange(lo - seq0, hi - seq0)) / self.fs
                 loop.feed(self.program.blocks[b].phase(t), x[lo - s0:hi - s0])
-            if loop is not None and s1 >= seq1:
-                loop.flush()
+            if loop is not None and s1 >= seq1 and self._generated_all(b, loop):
+                loop.flush()   # the block's last cycle is complete only once generation has left the block
             j += 1
         self._measured_to = max(self._measured_to, s1)
+
+    def _generated_all(self, b, loop):
+        return b in self._completed and (self._loops.get(b) is not loop or self.block_index != b
+                                         or self._p >= self._starts[b + 1])
 
     # ---- reporting
     @property

@@ -1,0 +1,33 @@
+"""Opening the python-can Bus chosen by configuration (one abstract Bus, interchangeable interfaces)."""
+import importlib
+import itertools
+import os
+
+import can
+
+_counter = itertools.count()
+
+
+def sim_channel_name() -> str:
+    """A fresh in-process virtual channel, so two rigs in one process never share a bus by accident."""
+    return f'rubber_rig_sim_{os.getpid()}_{next(_counter)}'
+
+
+def open_bus(config, channel=None) -> can.BusABC:
+    """python-can Bus for RigConfig `config`: the virtual interface for the in-process "sim" backend,
+    otherwise config.backend with channel, bitrates, fd and bus_options."""
+    if config.backend == 'sim':
+        return can.Bus(interface='virtual', channel=channel or sim_channel_name(), receive_own_messages=False)
+    kwargs = dict(config.bus_options)
+    if config.backend == 'virtual':
+        return can.Bus(interface='virtual', channel=channel or config.channel or 'rubber_rig', **kwargs)
+    if config.backend == 'udp_multicast':
+        udp = importlib.import_module('can.interfaces.udp_multicast')   # needs msgpack
+        kwargs.setdefault('fd', config.fd)
+        return can.Bus(interface='udp_multicast', channel=channel or config.channel or
+                       udp.UdpMulticastBus.DEFAULT_GROUP_IPv4, **kwargs)
+    kwargs.setdefault('bitrate', config.bitrate)
+    if config.fd:
+        kwargs.setdefault('fd', True)
+        kwargs.setdefault('data_bitrate', config.data_bitrate)
+    return can.Bus(interface=config.backend, channel=channel or config.channel, **kwargs)

@@ -1,0 +1,110 @@
+"""The rig's CAN protocol: the DBC shipped with the package, encode/decode with cantools, CRC-8 and
+sequence-number unwrapping. Both ends (driver and simulated controller) use this module."""
+from pathlib import Path
+
+import can
+import cantools
+
+DBC_PATH = Path(__file__).with_name('rubber_rig.dbc')
+
+# RigStatus FAULT_* bits (msg_defs/msg/RigStatus.msg)
+FAULT_NONE = 0
+FAULT_WATCHDOG = 1
+FAULT_DISPLACEMENT_LIMIT = 2
+FAULT_VELOCITY_LIMIT = 4
+FAULT_FORCE_LIMIT = 8
+FAULT_CONTROLLER = 16
+FAULT_SENSOR = 32
+FAULT_BUS = 64
+FAULT_NAMES = {FAULT_WATCHDOG: 'watchdog', FAULT_DISPLACEMENT_LIMIT: 'displacement_limit',
+               FAULT_VELOCITY_LIMIT: 'velocity_limit', FAULT_FORCE_LIMIT: 'force_limit',
+               FAULT_CONTROLLER: 'controller', FAULT_SENSOR: 'sensor', FAULT_BUS: 'bus'}
+
+# RigStatus STATE_* (index = value)
+STATES = ('unconfigured', 'idle', 'running', 'holding', 'ramping_down', 'fault')
+STATE_CODE = {name: i for i, name in enumerate(STATES)}
+
+# HostCommand codes
+CMD_NOP, CMD_ENABLE, CMD_ABORT, CMD_RESET, CMD_DISABLE = 0, 1, 2, 3, 4
+
+SEQ_MOD = 1 << 16
+
+
+def fault_names(mask: int):
+    """Names of the fault bits set in mask."""
+    return [name for bit, name in FAULT_NAMES.items() if mask & bit]
+
+
+def _crc8_table():
+    table = []
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+        table.append(crc)
+    return bytes(table)
+
+
+_CRC_TABLE = _crc8_table()
+
+
+def crc8(frame_id: int, payload: bytes) -> int:
+    """CRC-8 SAE J1850 (poly 0x1D, init/xor 0xFF) over the identifier (2 bytes LE) and payload."""
+    crc = 0xFF
+    for b in (frame_id & 0xFF, (frame_id >> 8) & 0xFF):
+        crc = _CRC_TABLE[crc ^ b]
+    for b in payload:
+        crc = _CRC_TABLE[crc ^ b]
+    return crc ^ 0xFF
+
+
+def unwrap_sequence(seq16: int, reference: int) -> int:
+    """Full sample index for a 16-bit sequence number, taking the value nearest to `reference`."""
+    delta = (seq16 - reference) % SEQ_MOD
+    if delta >= SEQ_MOD // 2:
+        delta -= SEQ_MOD
+    return reference + delta
+
+
+class MalformedFrame(ValueError):
+    """A frame with a known identifier whose length or CRC is wrong."""
+
+
+class Protocol:
+    """Encoder/decoder for the frames of rubber_rig.dbc (cantools does the signal packing).
+
+    Every message ends with an 8-bit CRC signal (checked when the DBC is loaded) that this class fills in and
+    verifies."""
+
+    def __init__(self, dbc_path=DBC_PATH):
+        self.db = cantools.database.load_file(str(dbc_path))
+        self.by_name = {m.name: m for m in self.db.messages}
+        self.by_id = {m.frame_id: m for m in self.db.messages}
+        for m in self.db.messages:
+            crc = m.signals[-1]
+            if not (crc.name.endswith('_Crc') and crc.start == 8 * (m.length - 1) and crc.length == 8):
+                raise ValueError(f'{dbc_path}: message {m.name}: last signal must be an 8-bit CRC in the last byte')
+        self._crc_name = {m.name: m.signals[-1].name for m in self.db.messages}
+        self.ids = {name: m.frame_id for name, m in self.by_name.items()}
+
+    def encode(self, name: str, signals: dict) -> can.Message:
+        """A python-can Message for DBC message `name` with physical signal values (SI, as in the DBC)."""
+        m = self.by_name[name]
+        signals[self._crc_name[name]] = 0
+        data = bytearray(m.encode(signals, scaling=True, strict=False))
+        data[-1] = crc8(m.frame_id, data[:-1])
+        return can.Message(arbitration_id=m.frame_id, data=data, is_extended_id=False, is_fd=m.is_fd,
+                           bitrate_switch=m.is_fd, check=False)
+
+    def decode(self, msg: can.Message):
+        """(name, signals) for a known frame; None for an unknown identifier; MalformedFrame if the length or
+        CRC is wrong (corrupted frame)."""
+        m = self.by_id.get(msg.arbitration_id)
+        if m is None or msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame:
+            return None
+        data = bytes(msg.data)
+        if len(data) != m.length:
+            raise MalformedFrame(f'{m.name}: {len(data)} bytes instead of {m.length}')
+        if crc8(m.frame_id, data[:-1]) != data[-1]:
+            raise MalformedFrame(f'{m.name}: CRC mismatch')
+        return m.name, m.decode(data, decode_choices=False, scaling=True)

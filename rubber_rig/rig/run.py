@@ -1,0 +1,146 @@
+"""run_program: a ROS-free runner of a test program on a rig (simulated or real), returning numpy arrays."""
+import time
+from dataclasses import dataclass, field
+from typing import Callable, List, Optional
+
+import numpy as np
+
+from ..excitation.program import Program, load_program
+from ..excitation.runner import BlockSummary, ProgramRunner
+from .can.driver import RigStatus
+from .config import RigConfig
+from .session import open_rig
+
+
+@dataclass
+class RunResult:
+    """Everything measured in a run, one entry per received sample (SI units).
+
+    time = sequence / sample_rate [s]; setpoint is the command the controller applied; block_index is the
+    program block that generated the sample (-1 for the abort or hold ramps); status is the controller fault
+    mask. `blocks` are the runner's block summaries; `completed` is False after an abort or fault."""
+    program: str
+    sample_rate: float
+    sequence: np.ndarray
+    time: np.ndarray
+    setpoint: np.ndarray
+    displacement: np.ndarray
+    force: np.ndarray
+    temperature: np.ndarray
+    status: np.ndarray
+    block_index: np.ndarray
+    blocks: List[BlockSummary]
+    completed: bool
+    message: str
+    final_status: RigStatus
+    wall_time: float
+    frames_lost: int = 0
+    extra: dict = field(default_factory=dict)
+
+
+def run_program(program, config, on_progress: Optional[Callable] = None, amplitude_control: bool = False,
+                lookahead: float = None, rig=None, progress_period: float = 0.1,
+                abort_after: float = None) -> RunResult:
+    """Run `program` (Program, YAML path or shipped name) on the rig of `config` (RigConfig or mapping).
+
+    The program is validated against the limits before the rig is opened, so nothing is sent on error.
+    Setpoints are streamed `lookahead` seconds ahead of the measurement (default 0.1 s paced, 0.05 s fast).
+    on_progress(Progress) is called every progress_period seconds of samples. abort_after [s of samples]:
+    abort the program there (tests of the abort path). An open `rig` may be passed in (not closed here)."""
+    cfg = RigConfig.from_dict(config)
+    if not isinstance(program, Program):
+        program = load_program(program)
+    fs = cfg.sample_rate
+    runner = ProgramRunner(program, fs, cfg.limits, amplitude_control=amplitude_control)   # checks limits
+    own = rig is None
+    rig = open_rig(cfg) if own else rig
+    t_wall = time.monotonic()
+    try:
+        if not rig.wait_ready(10.0):
+            raise RuntimeError('the rig controller did not announce itself within 10 s')
+        return _loop(program, cfg, rig.driver, runner, on_progress, lookahead, progress_period, abort_after,
+                     t_wall)
+    finally:
+        if own:
+            rig.close()
+
+
+def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, abort_after, t_wall):
+    fs = cfg.sample_rate
+    if lookahead is None:
+        lookahead = 0.1 if cfg.paced else 0.05
+    ahead = max(2, int(round(lookahead * fs)))
+    chunk = max(1, min(ahead // 2, int(round(0.01 * fs))))
+    first = drv.next_sequence
+    runner.sequence = first
+    queued = first
+    block_of = []                      # program block per queued setpoint
+    got = []                           # SampleBlocks
+    received = first
+    next_progress = first
+    abort_seq = None if abort_after is None else first + int(round(abort_after * fs))
+    stopped, message, quiet_since = False, '', None
+    while True:
+        # stream ahead of the measurement; in fast mode this is what lets the simulated rig advance
+        while not stopped and not runner.finished and queued - received < ahead:
+            if abort_seq is not None and queued >= abort_seq and not runner.aborted:
+                runner.abort('abort_after')
+            x = runner.next_setpoints(chunk)
+            if not drv.queue_setpoints(queued, x):
+                stopped = True
+                break
+            block_of.append(runner.last_block_index)
+            queued += chunk
+        progressed = False
+        blk = drv.poll()
+        while blk is not None:
+            got.append(blk)
+            runner.feed_measurement(blk.first_sequence, blk.displacement)
+            received = blk.first_sequence + len(blk)
+            progressed = True
+            blk = drv.poll()
+        if on_progress is not None and received >= next_progress:
+            on_progress(runner.progress)
+            next_progress = received + max(1, int(progress_period * fs))
+        st = drv.status
+        if st.faults and not stopped:
+            stopped = True
+        if stopped and not message:
+            message = '; '.join(st.fault_messages) or 'stopped'
+            runner.abort(message)
+        if stopped:
+            # wait for the controller's safe ramp to finish and its samples to arrive
+            if st.controller_state in ('idle', 'fault') and not progressed:
+                quiet_since = quiet_since or time.monotonic()
+                if time.monotonic() - quiet_since > 0.2:
+                    break
+            else:
+                quiet_since = None
+        elif runner.finished and received >= queued:
+            break
+        elif runner.finished and not progressed and st.controller_sequence >= queued - 1:
+            quiet_since = quiet_since or time.monotonic()
+            if time.monotonic() - quiet_since > 0.5:   # the last samples were lost on the bus
+                break
+        if not progressed:
+            time.sleep(0.0005 if cfg.paced else 0.0)
+    return _result(program, cfg, drv, runner, got, block_of, first, message, t_wall)
+
+
+def _result(program, cfg, drv, runner, got, block_of, first, message, t_wall):
+    fs = cfg.sample_rate
+    cat = (lambda name: np.concatenate([getattr(b, name) for b in got])) if got else (lambda name: np.empty(0))
+    seq = np.concatenate([b.sequence for b in got]) if got else np.empty(0, dtype=np.int64)
+    rep = lambda attr, dtype: (np.concatenate([np.full(len(b), getattr(b, attr), dtype=dtype) for b in got])  # noqa
+                               if got else np.empty(0, dtype=dtype))
+    blocks_all = np.concatenate(block_of) if block_of else np.empty(0, dtype=np.int32)
+    idx = seq - first
+    inside = (idx >= 0) & (idx < blocks_all.size)
+    block_index = np.full(seq.size, -1, dtype=np.int32)
+    block_index[inside] = blocks_all[idx[inside]]
+    st = drv.status
+    completed = runner.finished and not runner.aborted and not st.faults
+    return RunResult(program.name, fs, seq, seq / fs, cat('setpoint'), cat('displacement'), cat('force'),
+                     rep('temperature', float), rep('status_flags', np.uint32), block_index,
+                     runner.block_summaries, completed, message or ('completed' if completed else runner.abort_reason),
+                     st, time.monotonic() - t_wall, st.frames_lost)

@@ -1,0 +1,85 @@
+"""open_rig: the driver on the configured bus, plus the simulated rig behind it when asked for."""
+import json
+import subprocess
+import sys
+import time
+
+from .can.bus import open_bus, sim_channel_name
+from .can.driver import RigDriver
+from .can.protocol import Protocol
+from .config import ConfigError, RigConfig
+from .sim.controller import SimController
+
+
+class Rig:
+    """An open rig: `driver` (RigDriver) plus, for the "sim" backend, the in-process simulated controller
+    (`sim`) on the other end of the same virtual bus, or a spawned simulator process (`process`)."""
+
+    def __init__(self, config: RigConfig, driver: RigDriver, sim=None, sim_bus=None, process=None):
+        self.config, self.driver, self.sim, self._sim_bus, self.process = config, driver, sim, sim_bus, process
+
+    def wait_ready(self, timeout: float = 10.0) -> bool:
+        """Poll until the controller has announced itself (state no longer 'unconfigured'); wall timeout [s]."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            self.driver.poll()
+            if self.driver.controller_state != 'unconfigured':
+                return True
+            time.sleep(0.002)
+        return False
+
+    def close(self):
+        """Stop the simulator (thread or process) and shut both bus ends down."""
+        if self.sim is not None:
+            self.sim.stop()
+        if self.process is not None:
+            self.process.terminate()
+            try:
+                self.process.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self.process.kill()
+        self.driver.close()
+        if self._sim_bus is not None:
+            self._sim_bus.shutdown()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+
+def open_rig(config) -> Rig:
+    """Open the rig described by `config` (RigConfig or mapping; validated first, nothing is opened on error).
+
+    backend "sim": simulated controller in a thread on a fresh python-can virtual channel. Any other backend:
+    the driver on that python-can interface; with spawn_sim, the simulated rig is started as a separate process
+    (python -m rubber_rig.rig.sim) on the same bus and the call waits until it answers."""
+    cfg = RigConfig.from_dict(config)
+    proto = Protocol()
+    if cfg.backend == 'sim':
+        channel = sim_channel_name()
+        bus = open_bus(cfg, channel)
+        sim_bus = open_bus(cfg, channel)
+        try:
+            sim = SimController(sim_bus, cfg.sample_rate, cfg.sim, cfg.paced, proto)   # may raise ConfigError
+        except Exception:
+            bus.shutdown()
+            sim_bus.shutdown()
+            raise
+        driver = RigDriver(bus, cfg, proto)
+        sim.start()
+        rig = Rig(cfg, driver, sim=sim, sim_bus=sim_bus)
+    else:
+        process = None
+        if cfg.spawn_sim:
+            process = subprocess.Popen([sys.executable, '-m', 'rubber_rig.rig.sim', '--config-json',
+                                        json.dumps(cfg.to_dict())],
+                                       stdout=subprocess.DEVNULL)
+        bus = open_bus(cfg)
+        rig = Rig(cfg, RigDriver(bus, cfg, proto), process=process)
+        if process is not None and not rig.wait_ready(20.0):
+            rig.close()
+            raise ConfigError('rig config: field \'spawn_sim\': the simulated rig process did not answer on '
+                              f'{cfg.backend} {cfg.channel or ""} within 20 s')
+    return rig

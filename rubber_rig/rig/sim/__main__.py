@@ -1,0 +1,44 @@
+"""Run the simulated rig as a separate process on a process-crossing bus.
+
+    python -m rubber_rig.rig.sim --config rig.json      (RigConfig as JSON; backend e.g. udp_multicast)
+    python -m rubber_rig.rig.sim --config-json '{"backend": "udp_multicast", "paced": false}'
+Stops on SIGTERM/SIGINT."""
+import argparse
+import json
+import signal
+import sys
+
+from ..can.bus import open_bus
+from ..config import ConfigError, RigConfig
+from .controller import SimController
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(prog='python -m rubber_rig.rig.sim', description=__doc__.splitlines()[0])
+    parser.add_argument('--config', help='RigConfig JSON file')
+    parser.add_argument('--config-json', help='RigConfig as a JSON string')
+    args = parser.parse_args(argv)
+    try:
+        data = json.loads(args.config_json) if args.config_json else (
+            json.load(open(args.config)) if args.config else {})
+        cfg = RigConfig.from_dict(data)
+        if cfg.backend == 'sim':
+            raise ConfigError("rig config: field 'backend': a separate-process rig needs a process-crossing "
+                              "python-can interface (udp_multicast, socketcan vcan0, ...), not 'sim'")
+    except (ValueError, OSError) as exc:
+        print(f'rubber_rig.rig.sim: error: {exc}', file=sys.stderr)
+        return 2
+    bus = open_bus(cfg)
+    sim = SimController(bus, cfg.sample_rate, cfg.sim, cfg.paced)
+    signal.signal(signal.SIGTERM, lambda *_: sim._stop.set())
+    signal.signal(signal.SIGINT, lambda *_: sim._stop.set())
+    print('rubber_rig.rig.sim: serving', cfg.backend, cfg.channel or '', flush=True)
+    try:
+        sim.run_forever()
+    finally:
+        bus.shutdown()
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,230 @@
+"""The simulated actuator controller: the other end of the rig bus, speaking the same DBC as a real one.
+
+Consumes one setpoint per sample tick, drives the actuator and specimen, sends measured samples, status,
+temperature and heartbeat frames, ramps smoothly to rest on ABORT or when the host heartbeat goes silent.
+Paced: ticks at wall-clock deadlines t0 + k / fs (no drift). Fast: ticks as soon as the setpoint for the next
+tick is there, so it advances only as far as setpoints are queued; waveform and physics are identical."""
+import threading
+import time
+
+import numpy as np
+
+from ...excitation.ramp import SafeRamp
+from ..can.protocol import (CMD_ABORT, CMD_DISABLE, CMD_RESET, FAULT_WATCHDOG, SEQ_MOD, STATE_CODE,
+                            MalformedFrame, Protocol, unwrap_sequence)
+from .faults import FaultInjector
+from .plant import Actuator, Sensor
+from .specimen import build_specimen
+
+STREAMING = ('running', 'holding', 'ramping_down')
+
+
+class SimController:
+    """Simulated rig on python-can `bus` (any interface) at sample_rate [Hz] with SimOptions `options`."""
+
+    RAMP_VELOCITY_MAX = 0.05   # [m/s] controller-side abort ramp (it does not know the host's limits)
+
+    def __init__(self, bus, sample_rate: float, options, paced: bool, protocol: Protocol = None):
+        self.bus, self.fs, self.opt, self.paced = bus, float(sample_rate), options, paced
+        self.proto = protocol or Protocol()
+        rng = np.random.default_rng(options.seed)
+        self.actuator = Actuator(options.actuator_frequency, options.actuator_damping,
+                                 options.actuator_velocity_max, self.fs)
+        self.specimen = build_specimen(options.specimen, 1.0 / self.fs)
+        self.disp_sensor = Sensor(options.displacement_noise, options.displacement_offset,
+                                  options.displacement_resolution, rng)
+        self.force_sensor = Sensor(options.force_noise, options.force_offset, options.force_resolution, rng)
+        self.temp_rng = rng
+        self.faults = FaultInjector(options.faults, self.fs, options.seed)
+        self.state, self.fault_bits = 'idle', 0
+        self.next_seq = 0                 # full sequence of the next tick
+        self.ticks = 0                    # ticks since start = rig time * fs
+        self.buffer = {}                  # seq -> setpoint [m]
+        self.u = self.u_prev = 0.0        # applied command [m]
+        self.ramp = None
+        self.last_host_hb = 0
+        self.counters = {'underruns': 0, 'setpoints_late': 0, 'frames_bad': 0, 'overruns': 0}
+        self._held = []                   # (release_tick, message) for delayed frames
+        self._hb = self._st = self._tc = 0
+        per = lambda s: max(1, round(s * self.fs))  # noqa: E731
+        self._hb_every, self._st_every, self._tc_every = per(0.05), per(0.01), per(0.1)
+        self._stop = threading.Event()
+        self._thread = None
+        base = options.specimen.get('temperature', options.temperature)
+        self.temperature = float(base if isinstance(base, (int, float)) else options.temperature)
+
+    # ---- lifecycle
+    def start(self):
+        """Run in a background thread (in-process rig)."""
+        self._thread = threading.Thread(target=self.run_forever, name='sim-rig', daemon=True)
+        self._thread.start()
+
+    def stop(self):
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=5.0)
+
+    def run_forever(self):
+        """Serve the bus until stop(): announce, then receive frames and tick."""
+        self._housekeeping(force=True)
+        next_idle_hk = time.monotonic()
+        deadline = None
+        while not self._stop.is_set():
+            if self.paced:
+                now = time.monotonic()
+                if self.state in STREAMING:
+                    if deadline is None:
+                        deadline = now
+                    # catch up on every tick that is due (deadline based: no drift from late wake-ups)
+                    n = 0
+                    while now >= deadline and self.state in STREAMING:
+                        self._tick()
+                        deadline += 1.0 / self.fs
+                        n += 1
+                    if n > 1:
+                        self.counters['overruns'] += n - 1
+                    timeout = max(0.0, min(deadline - time.monotonic(), 0.01)) if self.state in STREAMING \
+                        else 0.0
+                else:
+                    deadline = None
+                    if now >= next_idle_hk:
+                        self._housekeeping(force=True)
+                        next_idle_hk = now + 0.05
+                    timeout = min(0.01, max(0.0, next_idle_hk - now))
+                msg = self.bus.recv(timeout)
+                while msg is not None:
+                    self._handle(msg)
+                    msg = self.bus.recv(0)
+            else:
+                msg = self.bus.recv(0.02)
+                if msg is not None:
+                    self._handle(msg)
+                # ticks only as far as setpoints are queued (or while ramping down)
+                while self._can_tick():
+                    self._tick()
+
+    def _can_tick(self):
+        if self.state == 'ramping_down':
+            return True
+        return self.state in ('running', 'holding') and self.next_seq in self.buffer
+
+    # ---- receive
+    def _handle(self, msg):
+        try:
+            decoded = self.proto.decode(msg)
+        except MalformedFrame:
+            self.counters['frames_bad'] += 1
+            return
+        if decoded is None:
+            return
+        name, sig = decoded
+        if name == 'Setpoint':
+            seq = unwrap_sequence(int(sig['SP_Sequence']), self.next_seq)
+            if self.state in ('ramping_down', 'fault'):
+                return
+            if self.state == 'idle':
+                self.buffer.clear()
+                self.next_seq = seq
+                self.state = 'running'
+                self.last_host_hb = self.ticks
+                self._housekeeping(force=True)
+            if seq < self.next_seq:
+                self.counters['setpoints_late'] += 1
+            elif len(self.buffer) < SEQ_MOD // 2:
+                self.buffer[seq] = float(sig['SP_Displacement'])
+        elif name == 'HostHeartbeat':
+            self.last_host_hb = self.ticks
+        elif name == 'HostCommand':
+            code = int(sig['CMD_Code'])
+            if code in (CMD_ABORT, CMD_DISABLE):
+                arg = int(sig['CMD_Argument'])
+                target = (arg - (1 << 32) if arg >= 1 << 31 else arg) * 1e-7
+                self.abort(target, 0)
+            elif code == CMD_RESET and self.state in ('fault', 'idle'):
+                self.fault_bits = 0
+                self.state = 'idle'
+                self._housekeeping(force=True)
+
+    def abort(self, target: float = 0.0, fault_bits: int = 0):
+        """Flush queued setpoints and ramp from the current command and velocity to target [m]."""
+        self.fault_bits |= fault_bits
+        self.buffer.clear()
+        if self.state in ('running', 'holding', 'ramping_down'):
+            v = (self.u - self.u_prev) * self.fs
+            self.ramp = SafeRamp(self.u, v, target, self.fs, velocity_max=self.RAMP_VELOCITY_MAX)
+            self.state = 'ramping_down'
+        elif self.fault_bits:
+            self.state = 'fault'
+        self._housekeeping(force=True)
+
+    # ---- one sample
+    def _tick(self):
+        t = self.ticks / self.fs
+        self._release_held()
+        if self.state == 'ramping_down':
+            u = self.ramp.step()
+        else:
+            u = self.buffer.pop(self.next_seq, None)
+            if u is None:
+                u = self.u
+                self.counters['underruns'] += 1
+                self.state = 'holding'
+            else:
+                self.state = 'running'
+            if self.ticks - self.last_host_hb > self.opt.host_timeout * self.fs:
+                self.abort(0.0, FAULT_WATCHDOG)   # host gone: the controller brings the rig to rest itself
+        self.u_prev, self.u = self.u, u
+        x = self.actuator.step(u)
+        force = self.specimen.step(x)
+        stuck = self.faults.stuck(t)
+        for name, sensor in (('displacement', self.disp_sensor), ('force', self.force_sensor)):
+            if name in stuck and sensor.stuck_value is None:
+                sensor.stuck_value = sensor.read(x if name == 'displacement' else force)
+            elif name not in stuck:
+                sensor.stuck_value = None
+        self._send('Feedback', {'FB_Sequence': self.next_seq % SEQ_MOD,
+                                'FB_Displacement': self.disp_sensor.read(x),
+                                'FB_Force': self.force_sensor.read(force), 'FB_Setpoint': u})
+        self.next_seq += 1
+        self.ticks += 1
+        if self.state == 'ramping_down' and self.ramp.done:
+            self.state = 'fault' if self.fault_bits else 'idle'
+            self.buffer.clear()
+            self._housekeeping(force=True)
+        else:
+            self._housekeeping()
+
+    def _housekeeping(self, force=False):
+        """Status every 10 ms, heartbeat every 50 ms, temperature every 100 ms of rig time (or now if force)."""
+        code = STATE_CODE[self.state]
+        if force or self.ticks % self._st_every == 0:
+            self._st = (self._st + 1) % 16
+            self._send('ControllerStatus', {'ST_State': code, 'ST_Counter': self._st, 'ST_Faults': self.fault_bits,
+                                            'ST_LastSequence': (self.next_seq - 1) % SEQ_MOD,
+                                            'ST_BufferLevel': min(len(self.buffer), 65535)})
+        if force or self.ticks % self._hb_every == 0:
+            self._hb = (self._hb + 1) % 256
+            self._send('ControllerHeartbeat', {'HB_Counter': self._hb, 'HB_State': code})
+        if force or self.ticks % self._tc_every == 0:
+            self._tc = (self._tc + 1) % 256
+            temp = self.temperature + self.opt.temperature_noise * float(self.temp_rng.standard_normal())
+            self._send('Temperature', {'TEMP_Specimen': temp, 'TEMP_Counter': self._tc})
+
+
+    def _send(self, name, signals):
+        msg = self.proto.encode(name, signals)
+        for delay, m in self.faults.transmit(name, msg, self.ticks / self.fs):
+            if delay:
+                self._held.append((self.ticks + delay, m))
+            else:
+                self.bus.send(m)
+
+    def _release_held(self):
+        if self._held:
+            due = [m for r, m in self._held if r <= self.ticks]
+            if due:
+                self._held = [(r, m) for r, m in self._held if r > self.ticks]
+                for m in due:
+                    self.bus.send(m)
+
+

@@ -1,0 +1,47 @@
+"""Fault injection on the simulated controller's transmit path and sensors (seeded, so runs repeat)."""
+import numpy as np
+
+
+class FaultInjector:
+    """Applies the configured FaultSpecs to each outgoing frame at rig time t [s].
+
+    transmit() returns the list of (extra_delay_ticks, message) to put on the bus: [] for a dropped frame,
+    two entries for a duplicated one, a bit-flipped payload for a corrupted one (its CRC no longer matches)."""
+
+    def __init__(self, faults, sample_rate: float, seed: int):
+        self.faults = list(faults)
+        self.fs = sample_rate
+        self.rng = np.random.default_rng(seed + 7919)
+        self.injected = {k: 0 for k in ('drop', 'delay', 'duplicate', 'corrupt', 'silent')}
+
+    def silent(self, t: float) -> bool:
+        """True while a silent-controller fault suppresses heartbeat and status."""
+        return any(f.type == 'silent_controller' and f.active(t) for f in self.faults)
+
+    def stuck(self, t: float):
+        """Names of the sensors stuck at time t."""
+        return {f.sensor for f in self.faults if f.type == 'stuck_sensor' and f.active(t)}
+
+    def transmit(self, name: str, msg, t: float):
+        out = [(0, msg)]
+        if name in ('ControllerHeartbeat', 'ControllerStatus') and self.silent(t):
+            self.injected['silent'] += 1
+            return []
+        for f in self.faults:
+            if f.type in ('stuck_sensor', 'silent_controller') or name not in f.frames or not f.active(t):
+                continue
+            if f.probability < 1.0 and self.rng.random() >= f.probability:
+                continue
+            self.injected[f.type] += 1
+            if f.type == 'drop':
+                return []
+            if f.type == 'duplicate':
+                out = out + [(d, m) for d, m in out]
+            elif f.type == 'delay':
+                out = [(d + max(1, round(f.delay * self.fs)), m) for d, m in out]
+            elif f.type == 'corrupt':
+                data = bytearray(msg.data)
+                bit = int(self.rng.integers(0, 8 * (len(data) - 1)))
+                data[bit // 8] ^= 1 << (bit % 8)
+                msg.data = data
+        return out

@@ -1,0 +1,53 @@
+"""Physics of the simulated rig: servo-hydraulic actuator position loop and sensors."""
+import math
+
+import numpy as np
+from scipy.linalg import expm
+
+
+class Actuator:
+    """Second-order position loop x'' = wn^2 (u - x) - 2 zeta wn x' with a velocity limit, discretised exactly
+    (zero-order hold) at the sample period. frequency [Hz], velocity_max [m/s]; u and x in m.
+
+    Finite bandwidth makes amplitude and phase errors appear at high frequency as on a real rig."""
+
+    def __init__(self, frequency: float, damping: float, velocity_max: float, sample_rate: float,
+                 x0: float = 0.0):
+        wn = 2 * math.pi * frequency
+        a = np.array([[0.0, 1.0, 0.0], [-wn * wn, -2 * damping * wn, wn * wn], [0.0, 0.0, 0.0]])
+        phi = expm(a / sample_rate)
+        (self.a11, self.a12, self.b1), (self.a21, self.a22, self.b2) = phi[0], phi[1]
+        self.v_max = velocity_max
+        self.x, self.v = float(x0), 0.0
+
+    def step(self, u: float) -> float:
+        """Apply command u [m] for one sample; return the actuator position [m]."""
+        x = self.a11 * self.x + self.a12 * self.v + self.b1 * u
+        v = self.a21 * self.x + self.a22 * self.v + self.b2 * u
+        if v > self.v_max:
+            v = self.v_max
+        elif v < -self.v_max:
+            v = -self.v_max
+        self.x, self.v = x, v
+        return x
+
+
+class Sensor:
+    """Transducer with Gaussian noise (std), offset and resolution (quantisation step), all in its unit.
+    Noise is drawn in blocks from a seeded generator so runs are reproducible."""
+
+    def __init__(self, noise: float, offset: float, resolution: float, rng: np.random.Generator, block=4096):
+        self.noise, self.offset, self.res = noise, offset, resolution
+        self._rng, self._block = rng, block
+        self._buf, self._i = np.empty(0), 0
+        self.stuck_value = None
+
+    def read(self, true_value: float) -> float:
+        """Measured value for the true value (or the frozen value while stuck)."""
+        if self.stuck_value is not None:
+            return self.stuck_value
+        if self._i >= self._buf.size:
+            self._buf, self._i = self._rng.standard_normal(self._block) * self.noise, 0
+        n = self._buf[self._i]
+        self._i += 1
+        return round((true_value + self.offset + n) / self.res) * self.res

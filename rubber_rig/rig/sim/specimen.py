@@ -1,0 +1,46 @@
+"""The specimen of the simulated rig: an element model from rubber_rig.models (default seed 000 at 20 degC),
+or a plain linear spring + dashpot for quick checks."""
+from ..config import ConfigError
+
+
+class LinearSpecimen:
+    """Kelvin-Voigt element F = k x + c dx/dt (stiffness [N/m], damping [N s/m]) at time step dt [s].
+    Same streaming interface as the element models: step(x) -> F, run(x_array) -> forces, reset()."""
+
+    def __init__(self, stiffness: float, damping: float, dt: float):
+        self.k, self.c, self.dt = float(stiffness), float(damping), float(dt)
+        self._x = None
+
+    def step(self, x: float) -> float:
+        v = 0.0 if self._x is None else (x - self._x) / self.dt
+        self._x = x
+        return self.k * x + self.c * v
+
+    def run(self, x):
+        return [self.step(float(v)) for v in x]
+
+    def reset(self):
+        self._x = None
+
+
+def build_specimen(spec: dict, dt: float):
+    """Streaming specimen model for `spec` at time step dt [s].
+
+    {"model": "linear", "stiffness": N/m, "damping": N s/m} builds LinearSpecimen; anything else goes to
+    rubber_rig.models.build_model (e.g. {"model": "seed000", "temperature": 20.0})."""
+    spec = dict(spec)
+    if spec.get('model') == 'linear':
+        unknown = set(spec) - {'model', 'stiffness', 'damping'}
+        if unknown:
+            raise ConfigError(f"rig config: field 'sim.specimen.{sorted(unknown)[0]}': unknown for the linear "
+                              "specimen (stiffness, damping)")
+        return LinearSpecimen(spec.get('stiffness', 1.3e7), spec.get('damping', 2.0e4), dt)
+    try:
+        from rubber_rig.models import build_model
+    except ImportError as exc:
+        raise ConfigError(f"rig config: field 'sim.specimen': rubber_rig.models is not available ({exc}); "
+                          "use {model: linear, stiffness: ..., damping: ...}") from None
+    try:
+        return build_model(spec, dt)
+    except (KeyError, ValueError) as exc:
+        raise ConfigError(f"rig config: field 'sim.specimen': {exc}") from None
