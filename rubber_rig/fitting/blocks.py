@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .metrics import harmonic_properties
+from .metrics import window_properties
 
 
 @dataclass
@@ -183,7 +183,7 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
             a1 = s + crossings[c1 + 1]
             ncyc = n_steady - settle_cycles
             freq = ncyc / ((a1 - a0) * dt)
-            props = harmonic_properties(x[a0:a1], f[a0:a1], dt, frequency=freq)
+            props = window_properties(x, f, dt, a0, a1, freq)
             report.blocks.append(BlockResult(
                 index=int(lab), start=int(a0), stop=int(a1), cycles=int(ncyc),
                 skipped_cycles=int(settle_cycles), frequency=float(props['frequency']),

@@ -110,12 +110,20 @@ def jacobian_uncertainty(residual_fn, p: dict, eps=1e-4):
     r0 = residual_fn(dict(p))
     cols = []
     for i, n in enumerate(names):
+        up = base[i] * np.exp(eps)
+        if n == 'alpha':
+            up = min(up, 1.0)          # fractional order stays in (0, 1]: one-sided at the bound
+        if n == 'k0':
+            up = min(up, p['k_inf'])   # K0 <= K_inf
+        down = base[i] * np.exp(-eps)
+        if n == 'k_inf':
+            down = max(down, p['k0'])
         step = base.copy()
-        step[i] *= np.exp(eps)
+        step[i] = up
         rp = residual_fn(dict(zip(names, step)))
-        step[i] = base[i] * np.exp(-eps)
+        step[i] = down
         rm = residual_fn(dict(zip(names, step)))
-        cols.append((rp - rm) / (2 * eps))
+        cols.append((rp - rm) / np.log(up / down))
     jac = np.column_stack(cols)
     m, n = jac.shape
     dof = max(m - n, 1)

@@ -18,7 +18,7 @@ import numpy as np
 
 from .blocks import split_blocks
 from .identify import PARAM_NAMES, Targets, fit_harmonic
-from .metrics import harmonic_properties
+from .metrics import window_properties
 from .properties import measured_style_properties
 
 METHODS = ('harmonic', 'time')
@@ -88,14 +88,13 @@ def block_quality(params, blocks, runs_by_name, simulate_blocks=True):
             by_run.setdefault(b.recording, []).append(i)
         for name, idxs in by_run.items():
             run = runs_by_name[name]
-            end = max(blocks[i].stop for i in idxs)
+            end = min(max(blocks[i].stop for i in idxs) + 1, run.displacement.size)
             f_max = max(blocks[i].frequency for i in idxs)
             x = smooth_displacement(run.displacement[:end], run.dt, f_max)
             force = simulate(params, x, run.dt)
             for i in idxs:
                 b = blocks[i]
-                hp = harmonic_properties(run.displacement[b.start:b.stop], force[b.start:b.stop], run.dt,
-                                         frequency=b.frequency)
+                hp = window_properties(run.displacement, force, run.dt, b.start, b.stop, b.frequency)
                 rows[i]['simulated'] = {'k_dyn': hp['k_dyn'], 'c_eq': hp['c_eq'],
                                         'e_k': hp['k_dyn'] / b.k_dyn - 1, 'e_c': hp['c_eq'] / b.c_eq - 1}
     return rows
