@@ -1,0 +1,146 @@
+"""Parameter sets, validation and temperature interpolation (seed 000 Table 1/2)."""
+import math
+
+import numpy as np
+import pytest
+
+from rubber_rig.models import (KelvinVoigtParams, Seed000Params, build_model, list_parameter_sets,
+                               load_parameter_set, parameters_at_temperature)
+
+TABLE1 = {  # paper units: kN/mm, kN/mm, s, -, mm, kN
+    'seed000_20C': (20, 12.29, 14.01, 0.043, 0.659, 1.41, 4.57),
+    'seed000_0C': (0, 12.31, 14.08, 0.031, 0.796, 1.58, 7.77),
+    'seed000_m20C': (-20, 12.82, 17.98, 0.018, 0.864, 1.09, 6.18),
+    'seed000_m40C': (-40, 15.06, 27.09, 0.015, 0.861, 0.463, 6.86),
+}
+
+
+def _si(row):
+    _, k0, ki, tau, a, x2, ff = row
+    return Seed000Params(k0 * 1e6, ki * 1e6, tau, a, x2 * 1e-3, ff * 1e3)
+
+
+def test_table1_loaded_in_si():
+    for name, row in TABLE1.items():
+        p = load_parameter_set(name)
+        assert isinstance(p, Seed000Params)
+        np.testing.assert_allclose(list(p.as_dict().values()), list(_si(row).as_dict().values()), rtol=1e-12)
+
+
+def test_table2_cases():
+    names = list_parameter_sets()
+    for i in range(1, 10):
+        assert f'seed000_case{i}' in names
+    kv = load_parameter_set('seed000_case1')
+    assert isinstance(kv, KelvinVoigtParams) and kv.k == 14e6 and kv.c == 243e3
+    assert load_parameter_set('seed000_case2') == load_parameter_set('seed000_20C')
+    assert load_parameter_set('seed000_case9') == load_parameter_set('seed000_m40C')
+    c4 = load_parameter_set('seed000_case4')
+    assert (c4.k0, c4.k_inf) == (5.5e6, 20e6)
+    c6 = load_parameter_set('seed000_case6')
+    assert (c6.x2, c6.f_fmax) == (0.705e-3, 8000.0)
+
+
+def test_unknown_set_named_in_error():
+    with pytest.raises(ValueError, match='seed000_99C'):
+        load_parameter_set('seed000_99C')
+
+
+def test_names_and_dict():
+    assert Seed000Params.names() == ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
+    p = load_parameter_set('seed000_20C')
+    assert Seed000Params(**p.as_dict()) == p
+    with pytest.raises(Exception):
+        p.k0 = 1.0  # frozen
+
+
+BAD = [('alpha', 0.0), ('alpha', 1.2), ('alpha', -0.5), ('k0', 0.0), ('k0', -1e6), ('tau', 0.0),
+       ('tau', -1.0), ('x2', 0.0), ('x2', -1e-3), ('f_fmax', 0.0), ('f_fmax', -5.0),
+       ('k0', float('nan')), ('tau', float('inf')), ('alpha', float('nan')), ('k_inf', float('inf')),
+       ('x2', float('nan'))]
+
+
+@pytest.mark.parametrize('field,value', BAD)
+def test_bad_parameters_rejected_naming_the_field(field, value):
+    d = load_parameter_set('seed000_20C').as_dict()
+    d[field] = value
+    with pytest.raises(ValueError, match=field):
+        Seed000Params(**d).validate()
+    with pytest.raises(ValueError, match=field):
+        build_model({'model': 'seed000', 'values': d}, dt=1e-3)
+
+
+def test_k_inf_below_k0_rejected():
+    d = load_parameter_set('seed000_20C').as_dict()
+    d['k_inf'] = d['k0'] * 0.9
+    with pytest.raises(ValueError, match='k_inf'):
+        Seed000Params(**d).validate()
+
+
+def test_alpha_one_is_valid():
+    d = load_parameter_set('seed000_20C').as_dict()
+    d['alpha'] = 1.0
+    Seed000Params(**d).validate()
+
+
+def test_temperature_exact_at_table_points():
+    for name, row in TABLE1.items():
+        p = parameters_at_temperature(row[0])
+        np.testing.assert_allclose(list(p.as_dict().values()), list(load_parameter_set(name).as_dict().values()),
+                                   rtol=1e-12)
+
+
+def test_temperature_interpolation_monotone_smooth_and_valid():
+    temps = np.array([-40.0, -20.0, 0.0, 20.0])
+    nodes = [parameters_at_temperature(t).as_dict() for t in temps]
+    grid = [np.linspace(temps[i], temps[i + 1], 201) for i in range(3)]
+    for field in Seed000Params.names():
+        for i, tg in enumerate(grid):
+            vals = np.array([getattr(parameters_at_temperature(t), field) for t in tg])
+            lo, hi = sorted((nodes[i][field], nodes[i + 1][field]))
+            # PCHIP: no overshoot between table points, monotone in the direction of the table
+            assert vals.min() >= lo * (1 - 1e-12) and vals.max() <= hi * (1 + 1e-12), field
+            d = np.diff(vals) * np.sign(nodes[i + 1][field] - nodes[i][field])
+            assert np.all(d >= -1e-9 * abs(hi)), (field, i)
+    # C1: one-sided slopes agree across the interior table temperatures (10 mK steps)
+    for t in (-20.0, 0.0):
+        for field in ('k0', 'k_inf', 'tau', 'alpha'):
+            f = lambda tt: getattr(parameters_at_temperature(tt), field)
+            left, right = (f(t) - f(t - 0.01)) / 0.01, (f(t + 0.01) - f(t)) / 0.01
+            scale = abs(f(t + 10) - f(t - 10)) / 20 + 1e-300
+            assert abs(left - right) <= 0.02 * scale + 1e-12 * abs(f(t)), (field, t)
+    for t in np.linspace(-40, 20, 61):
+        p = parameters_at_temperature(t)
+        assert p.k_inf > p.k0 and 0 < p.alpha <= 1
+
+
+@pytest.mark.parametrize('t', [-40.1, 20.5, float('nan')])
+def test_temperature_outside_table_rejected(t):
+    with pytest.raises(ValueError, match='temperature'):
+        parameters_at_temperature(t)
+
+
+def test_build_model_specs_agree():
+    p = load_parameter_set('seed000_m20C')
+    x = 1e-3 * np.sin(2 * np.pi * 3 * np.arange(500) * 1e-3)
+    ref = build_model(p, 1e-3).run(x)
+    for spec in ({'model': 'seed000', 'parameter_set': 'seed000_m20C'}, {'model': 'seed000', 'temperature': -20},
+                 {'model': 'seed000', 'values': p.as_dict()}, 'seed000_m20C'):
+        m = build_model(spec, 1e-3)
+        assert m.branch_names == ('elastic', 'viscous', 'friction')
+        np.testing.assert_allclose(m.run(x), ref, rtol=1e-9, atol=1e-9 * np.abs(ref).max())
+
+
+@pytest.mark.parametrize('spec,match', [({'model': 'seed000'}, 'exactly one'),
+                                        ({'model': 'nope', 'values': {}}, 'nope'),
+                                        ({'model': 'seed000', 'values': {'k0': 1}}, 'missing'),
+                                        ({'model': 'parallel', 'elements': [{'type': 'warp'}]}, 'warp')])
+def test_bad_specs(spec, match):
+    with pytest.raises(ValueError, match=match):
+        build_model(spec, 1e-3)
+
+
+def test_bad_dt():
+    for dt in (0, -1e-3, float('nan')):
+        with pytest.raises(ValueError, match='dt'):
+            build_model('seed000_20C', dt)
