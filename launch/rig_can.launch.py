@@ -22,7 +22,7 @@ def generate_launch_description():
     config = os.path.join(get_package_share_directory('rubber_rig'), 'config', 'rig_can.yaml')
     namespace = LaunchConfiguration('namespace')
     driver_overrides = {
-        'can.interface': LaunchConfiguration('can_interface'),
+        'backend': LaunchConfiguration('can_interface'),
         'can.channel': LaunchConfiguration('can_channel'),
         'can.bitrate': ParameterValue(LaunchConfiguration('can_bitrate'), value_type=int),
     }

@@ -25,8 +25,9 @@ class PairedCycle:
 class CyclePairer:
     """Feeds measured and predicted force through two CycleDetectors and pairs their cycles."""
 
-    def __init__(self, hysteresis: float = 0.2):
+    def __init__(self, hysteresis: float = 0.2, min_amplitude: float = 0.0):
         self.hysteresis = hysteresis
+        self.min_amplitude = min_amplitude   # [m] smaller "cycles" are noise (rig holding, taper ends)
         self._measured = self._model = None
         self._dt = None
         self._origin = None        # sequence number of the detectors' sample index 0
@@ -45,5 +46,7 @@ class CyclePairer:
         self._next = first_sequence + len(x)
         out = []
         for m, p in zip(self._measured.update(x, measured), self._model.update(x, predicted)):
+            if m['amplitude'] < self.min_amplitude:
+                continue
             out.append(PairedCycle(m['index'], self._origin + m['start'], self._origin + m['end'], m, p))
         return out

@@ -53,6 +53,8 @@ class ElementModelNode(Node):
                 'predicts', range=(0.0, 60.0), units='s')
         self.publish_branches = declare(self, 'publish_branches', True, 'publish per-branch forces')
         self.cycle_metrics = declare(self, 'cycle_metrics', True, 'publish per-cycle metrics')
+        min_amplitude = declare(self, 'min_cycle_amplitude', 5e-6, 'cycles with a smaller displacement amplitude '
+                                'are noise (rig holding still) and are not reported', range=(0.0, 1e-2), units='m')
 
         try:  # validate the whole choice once at start: the error names the offending parameter
             self._validate(self._choice(), CHOICE_PARAMS)
@@ -64,7 +66,7 @@ class ElementModelNode(Node):
         self.add_post_set_parameters_callback(self._after_set_parameters)
 
         self.blocks = BlockIndex()
-        self.cycles = CyclePairer()
+        self.cycles = CyclePairer(min_amplitude=min_amplitude)
         self.pub_prediction = self.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
         self.pub_metrics = self.create_publisher(CycleMetrics, topics.CYCLE_METRICS, topics.EVENT_QOS)
         self.pub_params = self.create_publisher(ModelParameters, topics.MODEL_PARAMETERS, topics.LATCHED_QOS)

@@ -34,7 +34,7 @@ from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import declare
 
-READY_STATES = (RigStatus.STATE_IDLE, RigStatus.STATE_RUNNING)
+READY_STATES = (RigStatus.STATE_IDLE, RigStatus.STATE_RUNNING, RigStatus.STATE_HOLDING)
 
 
 def read_program(path: str = '', yaml_text: str = '') -> tuple[Program, str]:
@@ -122,8 +122,6 @@ class ExcitationNode(Node):
             return "no rig status received on 'status' yet (is rig_driver active?)"
         if self.status.state not in READY_STATES:
             return f'rig is {self.status.state_name}'
-        if self.next_sample is None:
-            return "no samples received on 'samples' yet"
         if self.runner is not None:
             return 'a program is already running'
         return ''
@@ -134,8 +132,11 @@ class ExcitationNode(Node):
         limits = Limits(displacement_min=lim.displacement_min, displacement_max=lim.displacement_max,
                         velocity_max=lim.velocity_max, force_max=lim.force_max)
         lead = int(math.ceil(self.lead_time * self.status.sample_rate))
+        # An idle rig streams nothing and starts at the sequence of the first setpoint it gets; a streaming
+        # (holding) rig gets the program lead_time ahead of its latest sample.
+        start = 0 if self.next_sample is None else self.next_sample + lead
         self.runner = ProgramRunner(program, self.status.sample_rate, limits, amplitude_control,
-                                    start_sequence=self.next_sample + lead)
+                                    start_sequence=start)
         self.start_sequence = self.runner.sequence
         self.end_sequence = None
         self.result = None
@@ -153,7 +154,8 @@ class ExcitationNode(Node):
                 self.start(program, text, self.amplitude_control)
             return
         r = self.runner
-        target = self.next_sample + int(math.ceil(self.lead_time * self.status.sample_rate))
+        measured = self.start_sequence if self.next_sample is None else max(self.next_sample, self.start_sequence)
+        target = measured + int(math.ceil(self.lead_time * self.status.sample_rate))
         while not r.finished and r.sequence < target:
             first, block = r.sequence, (r.block_index if r.state == 'running' else -1)
             x = r.next_setpoints(self.batch_size)
@@ -164,7 +166,7 @@ class ExcitationNode(Node):
         if self.goal_handle is not None and now - self._last_feedback >= self.feedback_period:
             self._last_feedback = now
             self.goal_handle.publish_feedback(self.feedback())
-        if self.end_sequence is not None and self.next_sample >= self.end_sequence:
+        if self.end_sequence is not None and self.next_sample is not None and self.next_sample >= self.end_sequence:
             self._finish(success=not r.aborted)   # measured to the end: the summaries are complete
 
     def feedback(self) -> RunProgram.Feedback:

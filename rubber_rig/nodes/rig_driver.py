@@ -1,0 +1,334 @@
+"""rig_driver: lifecycle (managed) node between the CAN bus of the rig and the ROS graph.
+
+Lifecycle: configure = validate parameters and open the bus chosen by them (``backend: sim`` = the simulated
+rig on python-can's virtual bus, or any python-can interface/channel/bitrate); activate = stream samples and
+accept setpoints; deactivate = safe ramp to rest, stop streaming; cleanup = close the bus. With ``autostart``
+the node configures and activates itself (what ``ros2 launch`` users expect from a simulated rig).
+
+Subscribes:  setpoints (msg_defs/SetpointBatch)
+Publishes:   samples (msg_defs/RigSampleBatch, ``batch_size`` samples per message)
+             status (msg_defs/RigStatus, latched, on change and every ``status_period``)
+             /diagnostics (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period``)
+Services:    ~/abort (std_srvs/Trigger): safe ramp to rest now
+             ~/reset (std_srvs/Trigger): clear faults after an abort or fault so a new program can run
+QoS: see rubber_rig/nodes/topics.py.
+
+Watchdog, limits, fault detection and the safe ramp are the core driver's (rubber_rig.rig); this node only
+moves data between it and ROS.
+"""
+from __future__ import annotations
+
+import numpy as np
+import rclpy
+import yaml
+from rclpy.executors import ExternalShutdownException
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+
+from diagnostic_msgs.msg import DiagnosticArray
+from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
+from std_srvs.srv import Trigger
+
+from rubber_rig.nodes import conversions as conv
+from rubber_rig.nodes import topics
+from rubber_rig.nodes.params import ParameterError, check, declare
+from rubber_rig.rig.config import RigConfig
+from rubber_rig.rig.session import open_rig
+
+SIM_FLOATS = {  # sim.<name>: (default, description, range)
+    'actuator_frequency': (80.0, 'natural frequency of the actuator position loop [Hz]', (1.0, 2000.0)),
+    'actuator_damping': (0.8, 'damping ratio of the actuator position loop [-]', (0.05, 5.0)),
+    'actuator_velocity_max': (0.5, 'velocity limit of the actuator [m/s]', (1e-4, 10.0)),
+    'displacement_noise': (0.2e-6, 'displacement transducer noise, standard deviation [m]', (0.0, 1e-3)),
+    'displacement_offset': (0.0, 'displacement transducer offset [m]', (-1e-2, 1e-2)),
+    'displacement_resolution': (1e-7, 'displacement transducer resolution [m]', (1e-12, 1e-3)),
+    'force_noise': (2.0, 'load cell noise, standard deviation [N]', (0.0, 1e4)),
+    'force_offset': (0.0, 'load cell offset [N]', (-1e5, 1e5)),
+    'force_resolution': (0.01, 'load cell resolution [N]', (1e-9, 100.0)),
+    'temperature': (20.0, 'specimen temperature reported on the temperature channel [degC]', (-60.0, 150.0)),
+    'temperature_noise': (0.02, 'temperature channel noise [K]', (0.0, 10.0)),
+    'host_timeout': (0.5, 'host heartbeat silence after which the controller ramps to rest [s]', (0.01, 60.0)),
+}
+
+
+class RigDriverNode(LifecycleNode):
+
+    def __init__(self, node_name: str = 'rig_driver', **kwargs):
+        super().__init__(node_name, **kwargs)
+        self.autostart = declare(self, 'autostart', True, 'configure and activate at start')
+        declare(self, 'backend', 'sim', "'sim' (simulated rig on python-can's virtual bus) or a python-can "
+                'interface name (socketcan, pcan, vector, kvaser, virtual, udp_multicast, ...)')
+        declare(self, 'can.channel', '', 'python-can channel (e.g. can0, PCAN_USBBUS1); empty: interface default')
+        declare(self, 'can.bitrate', 1_000_000, 'CAN (arbitration) bitrate', range=(10_000, 1_000_000), units='bit/s')
+        declare(self, 'can.data_bitrate', 5_000_000, 'CAN FD data bitrate', range=(10_000, 12_000_000), units='bit/s')
+        declare(self, 'can.fd', True, 'use CAN FD frames')
+        declare(self, 'can.bus_options', '{}', 'extra keyword arguments for can.Bus (YAML/JSON mapping)')
+        declare(self, 'spawn_sim', False, 'with a python-can interface: also run the simulated rig as a '
+                'separate process on that bus')
+        declare(self, 'sample_rate', 1000.0, 'rig sample rate', range=(10.0, 20000.0), units='Hz')
+        self.batch_size = declare(self, 'batch_size', 50, 'samples per RigSampleBatch message', range=(1, 10000))
+        declare(self, 'poll_period', 0.005, 'how often the bus is read', range=(0.0005, 0.5), units='s')
+        declare(self, 'watchdog_timeout', 0.1, 'feedback/heartbeat silence that faults the rig',
+                range=(0.005, 10.0), units='s')
+        declare(self, 'heartbeat_period', 0.05, 'host heartbeat period', range=(0.001, 5.0), units='s')
+        declare(self, 'bus_error_max', 20, 'bad frames per second of samples that fault the bus', range=(0, 100000))
+        declare(self, 'lost_burst_max', 0.02, 'longest run of lost samples tolerated', range=(1e-4, 10.0), units='s')
+        declare(self, 'paced', True, 'simulated rig runs in real time (false: as fast as setpoints arrive)')
+        declare(self, 'limits.displacement_min', -5e-3, 'lowest allowed displacement', range=(-1.0, 1.0), units='m')
+        declare(self, 'limits.displacement_max', 5e-3, 'highest allowed displacement', range=(-1.0, 1.0), units='m')
+        declare(self, 'limits.velocity_max', 0.2, 'highest allowed velocity', range=(1e-6, 100.0), units='m/s')
+        declare(self, 'limits.force_max', 60e3, 'highest allowed absolute force', range=(1.0, 1e7), units='N')
+        declare(self, 'sim.specimen.parameter_set', '', 'simulated specimen: seed000 parameter set '
+                '(empty: use sim.specimen.temperature)')
+        declare(self, 'sim.specimen.temperature', 20.0, 'simulated specimen: seed000 parameters at this '
+                'temperature', range=(-40.0, 20.0), units='degC')
+        for name, (default, text, rng) in SIM_FLOATS.items():
+            declare(self, f'sim.{name}', default, text, range=rng)
+        declare(self, 'sim.seed', 0, 'random seed of the simulated sensors', range=(0, 2**31 - 1))
+        declare(self, 'sim.faults', '[]', 'injected faults of the simulated rig (YAML list, e.g. '
+                "[{type: silent_controller, start: 2.0}]; types: drop, delay, duplicate, corrupt, "
+                'stuck_sensor, silent_controller)')
+        self.status_period = declare(self, 'status_period', 0.1, 'status publishing period', range=(0.01, 10.0),
+                                     units='s')
+        self.diagnostics_period = declare(self, 'diagnostics_period', 1.0, 'diagnostics period',
+                                          range=(0.1, 60.0), units='s')
+        self.config = self.rig_config()   # validated now: a bad value fails at start, naming the parameter
+
+        self.rig = None
+        self.pub_samples = None
+        self._buffer: list = []
+        self._buffered = 0
+        self._last_status = None
+        self._refused_logged = False
+        self._queued_end = None            # sequence after the last setpoint queued on the bus
+        self._last_setpoint = 0.0
+        self.pub_status = self.create_publisher(RigStatus, topics.STATUS, topics.LATCHED_QOS)
+        self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        self.create_service(Trigger, '~/abort', self.on_abort)
+        self.create_service(Trigger, '~/reset', self.on_reset)
+        self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints, topics.STREAM_QOS)
+        self._poll_timer = None
+        self.create_timer(self.status_period, self.publish_status)
+        self.create_timer(self.diagnostics_period, self.publish_diagnostics)
+        self.publish_status()
+        if self.autostart and self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
+            self.trigger_activate()
+
+    @property
+    def lifecycle_state(self) -> str:
+        """'unconfigured', 'inactive', 'active' or 'finalized'."""
+        return self._state_machine.current_state[1]
+
+    # -- parameters -> core configuration ---------------------------------------------------------------
+    def rig_config(self) -> RigConfig:
+        p = {name: self.get_parameter(name).value for name in self.list_parameters([], 0).names}
+        for name in ('can.bus_options', 'sim.faults'):
+            try:
+                p[name] = yaml.safe_load(p[name])
+            except yaml.YAMLError as exc:
+                raise ParameterError(self.get_name(), name, f'not valid YAML: {exc}') from None
+        check(self, isinstance(p['can.bus_options'], dict), 'can.bus_options', 'expected a mapping')
+        check(self, isinstance(p['sim.faults'], list), 'sim.faults', 'expected a list of faults')
+        check(self, p['limits.displacement_min'] < p['limits.displacement_max'], 'limits.displacement_min',
+              f"{p['limits.displacement_min']} m must be below limits.displacement_max "
+              f"({p['limits.displacement_max']} m)")
+        specimen = ({'model': 'seed000', 'parameter_set': p['sim.specimen.parameter_set']}
+                    if p['sim.specimen.parameter_set'] else
+                    {'model': 'seed000', 'temperature': p['sim.specimen.temperature']})
+        data = {
+            'backend': p['backend'], 'channel': p['can.channel'] or None, 'bitrate': p['can.bitrate'],
+            'data_bitrate': p['can.data_bitrate'], 'fd': p['can.fd'], 'bus_options': p['can.bus_options'],
+            'sample_rate': p['sample_rate'], 'watchdog_timeout': p['watchdog_timeout'],
+            'heartbeat_period': p['heartbeat_period'], 'bus_error_max': p['bus_error_max'],
+            'lost_burst_max': p['lost_burst_max'], 'paced': p['paced'], 'spawn_sim': p['spawn_sim'],
+            'limits': {k: p['limits.' + k] for k in ('displacement_min', 'displacement_max', 'velocity_max',
+                                                       'force_max')},
+            'sim': dict({k: p['sim.' + k] for k in SIM_FLOATS}, specimen=specimen, seed=p['sim.seed'],
+                        faults=p['sim.faults']),
+        }
+        try:
+            return RigConfig.from_dict(data)
+        except ValueError as exc:   # ConfigError names the field: map it back to the parameter
+            raise ParameterError(self.get_name(), _parameter_of(str(exc)), str(exc)) from None
+
+    # -- lifecycle ----------------------------------------------------------------------------------------------
+    def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
+        try:
+            self.config = self.rig_config()
+            self.rig = open_rig(self.config)
+        except Exception as exc:  # bus not available, bad parameter: stay unconfigured, say why
+            self.get_logger().error(f'configure failed: {exc}')
+            return TransitionCallbackReturn.FAILURE
+        self.pub_samples = self.create_lifecycle_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
+        self.get_logger().info(f'rig open: backend {self.config.backend}, {self.config.sample_rate:g} Hz, '
+                               f'{self.batch_size} samples per batch')
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self._poll_timer = self.create_timer(self.get_parameter('poll_period').value, self.poll)
+        return super().on_activate(state)
+
+    def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        if self.rig is not None:
+            self.rig.driver.abort('deactivated')
+        self._stop_polling()
+        return super().on_deactivate(state)
+
+    def on_cleanup(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.close()
+        return TransitionCallbackReturn.SUCCESS
+
+    def on_shutdown(self, state: LifecycleState) -> TransitionCallbackReturn:
+        self.close()
+        return TransitionCallbackReturn.SUCCESS
+
+    def close(self) -> None:
+        """Ramp to rest and close the bus (also called by the in-process launcher at shutdown)."""
+        self._stop_polling()
+        if self.rig is not None:
+            rig, self.rig = self.rig, None
+            rig.close()
+        if self.pub_samples is not None:
+            self.destroy_lifecycle_publisher(self.pub_samples)
+            self.pub_samples = None
+
+    def _stop_polling(self) -> None:
+        if self._poll_timer is not None:
+            self.destroy_timer(self._poll_timer)
+            self._poll_timer = None
+
+    # -- data path ------------------------------------------------------------------------------------------------
+    def on_setpoints(self, msg: SetpointBatch) -> None:
+        """Queue setpoints on the bus. The core wants one contiguous stream, but a new program starts a little
+        ahead of the rig (excitation ``lead_time``): a short gap is bridged by holding the last setpoint, a
+        long one (the rig has been holding since the last program) starts a new stream, and a batch that
+        overlaps what is already queued is trimmed. All three happen only between programs."""
+        if self.rig is None:
+            return
+        driver = self.rig.driver
+        x = conv.as_array(msg.displacement)
+        first = msg.first_sequence
+        if self._queued_end is not None and first != self._queued_end:
+            if first < self._queued_end:
+                x, first = x[self._queued_end - first:], self._queued_end
+                if x.size == 0:
+                    return
+            elif first - self._queued_end <= self.config.sample_rate:
+                x = np.concatenate([np.full(first - self._queued_end, self._last_setpoint), x])
+                first = self._queued_end
+            elif not driver.faults and not driver.fault_messages:   # healthy and no abort pending
+                driver.reset()
+        if driver.queue_setpoints(first, x):
+            self._queued_end, self._last_setpoint = first + x.size, float(x[-1])
+        elif not self._refused_logged:
+            self._refused_logged = True
+            self.get_logger().warning(f'setpoints refused by the rig ({driver.status.state}): '
+                                      + '; '.join(driver.fault_messages[-2:]))
+
+    def poll(self) -> None:
+        """Move every sample the bus delivered into fixed-size batches (sequence numbers are the driver's)."""
+        driver = self.rig.driver if self.rig is not None else None
+        while driver is not None:
+            block = driver.poll()
+            if block is None:
+                break
+            self._buffer.append(block)
+            self._buffered += len(block.displacement)
+            while self._buffered >= self.batch_size:
+                self._publish_batch(self.batch_size)
+        status = driver.status if driver is not None else None
+        if status is not None and conv.state_code(status.state) != getattr(self._last_status, 'state', None):
+            self.publish_status()   # state changes are published at once, not at the next status tick
+
+    def _publish_batch(self, n: int) -> None:
+        blocks, self._buffer = self._buffer, []
+        first = blocks[0].first_sequence
+        cat = {k: np.concatenate([getattr(b, k) for b in blocks]) for k in ('displacement', 'force', 'setpoint')}
+        last = blocks[-1]
+        lost = sum(int(b.frames_lost) for b in blocks)
+        msg = conv.sample_batch_msg(first, blocks[0].t0, blocks[0].sample_period, cat['displacement'][:n],
+                                    cat['force'][:n], cat['setpoint'][:n], last.temperature, last.status_flags,
+                                    lost)
+        self.pub_samples.publish(msg)
+        rest = len(cat['displacement']) - n
+        self._buffered = rest
+        if rest:   # keep the remainder as one block
+            self._buffer = [_Rest(first + n, blocks[0].t0 + n * blocks[0].sample_period, blocks[0].sample_period,
+                                  cat['displacement'][n:], cat['force'][n:], cat['setpoint'][n:],
+                                  last.temperature, last.status_flags, 0)]
+
+    # -- status --------------------------------------------------------------------------------------------------
+    def status_message(self) -> RigStatus:
+        now = self.get_clock().now().nanoseconds * 1e-9
+        if self.rig is None:
+            snapshot = {'state': RigStatus.STATE_UNCONFIGURED}
+        else:
+            snapshot = self.rig.driver.status
+        return conv.status_msg(snapshot, self.config.limits, self.config.sample_rate, now)
+
+    def publish_status(self) -> None:
+        self._last_status = self.status_message()
+        self.pub_status.publish(self._last_status)
+
+    def publish_diagnostics(self) -> None:
+        status = self._last_status or self.status_message()
+        hw = f'{self.config.backend}:{self.config.channel or ""}'
+        self.pub_diag.publish(conv.diagnostics_msg(status, hw, name=self.get_fully_qualified_name()))
+
+    def on_reset(self, request, response):
+        if self.rig is None:
+            response.success, response.message = False, 'rig not configured'
+        else:
+            self.rig.driver.reset()
+            self._refused_logged, self._queued_end = False, None
+            response.success, response.message = True, 'faults cleared'
+        return response
+
+    def on_abort(self, request, response):
+        if self.rig is None:
+            response.success, response.message = False, 'rig not configured'
+        else:
+            self.rig.driver.abort('operator abort (~/abort)')
+            response.success, response.message = True, 'safe ramp to rest'
+        return response
+
+
+class _Rest:
+    """The remainder of a batch split, shaped like the core's SampleBlock."""
+
+    def __init__(self, first_sequence, t0, sample_period, displacement, force, setpoint, temperature,
+                 status_flags, frames_lost):
+        self.first_sequence, self.t0, self.sample_period = first_sequence, t0, sample_period
+        self.displacement, self.force, self.setpoint = displacement, force, setpoint
+        self.temperature, self.status_flags, self.frames_lost = temperature, status_flags, frames_lost
+
+
+def _parameter_of(message: str) -> str:
+    """Node parameter for a core ConfigError ("rig config: field 'sim.faults[0].type': ...")."""
+    import re
+    m = re.search(r"field '([\w.\[\]]+)'", message)
+    if not m:
+        return 'backend'
+    field = re.sub(r'\[\d+\].*$', '', m.group(1))
+    renames = {'channel': 'can.channel', 'bitrate': 'can.bitrate', 'data_bitrate': 'can.data_bitrate',
+               'fd': 'can.fd', 'bus_options': 'can.bus_options', 'limits': 'limits.displacement_min',
+               'sim.specimen': 'sim.specimen.parameter_set'}
+    return renames.get(field, field)
+
+
+def main(args=None):
+    rclpy.init(args=args)
+    node = None
+    try:
+        node = RigDriverNode()
+        rclpy.spin(node)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.close()
+            node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()

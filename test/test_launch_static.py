@@ -1,0 +1,180 @@
+"""Static checks of the launch files (launch/launch_ros are not on PyPI, so they cannot run here).
+
+For every launch file: it compiles; every Node action names an executable that setup.py installs; every
+parameter file it passes exists, is installed by setup.py, and only sets parameters the node declares (the
+nodes are instantiated with real rclpy to list what they declare); every inline parameter override is
+declared too; every LaunchConfiguration is declared with DeclareLaunchArgument.
+"""
+import ast
+import importlib
+import inspect
+from pathlib import Path
+
+import pytest
+import yaml
+
+import rclpy
+from rclpy.node import Node
+
+ROOT = Path(__file__).resolve().parents[1]
+LAUNCH_FILES = sorted((ROOT / 'launch').glob('*.launch.py'))
+
+
+def console_scripts() -> dict:
+    tree = ast.parse((ROOT / 'setup.py').read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Dict):
+            for key, value in zip(node.keys, node.values):
+                if isinstance(key, ast.Constant) and key.value == 'console_scripts':
+                    specs = [ast.literal_eval(e) for e in value.elts]
+                    return {s.split('=')[0].strip(): s.split('=')[1].strip() for s in specs}
+    raise AssertionError('no console_scripts in setup.py')
+
+
+def _kw(call: ast.Call, name: str):
+    for k in call.keywords:
+        if k.arg == name:
+            return k.value
+    return None
+
+
+def _call_name(call: ast.Call) -> str:
+    f = call.func
+    return f.id if isinstance(f, ast.Name) else getattr(f, 'attr', '')
+
+
+class LaunchFile:
+    """What a launch file references, read from its syntax tree."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.source = path.read_text()
+        self.tree = ast.parse(self.source, filename=str(path))
+        self.assignments = {t.id: n.value for n in ast.walk(self.tree) if isinstance(n, ast.Assign)
+                            for t in n.targets if isinstance(t, ast.Name)}
+        calls = [n for n in ast.walk(self.tree) if isinstance(n, ast.Call)]
+        self.nodes = [c for c in calls if _call_name(c) == 'Node']
+        self.declared_args = {c.args[0].value for c in calls if _call_name(c) == 'DeclareLaunchArgument'}
+        self.used_args = {c.args[0].value for c in calls if _call_name(c) == 'LaunchConfiguration'}
+
+    def resolve(self, expr):
+        return self.assignments.get(expr.id, expr) if isinstance(expr, ast.Name) else expr
+
+    def config_file(self, expr) -> str:
+        """os.path.join(<share>, 'config', 'x.yaml') -> 'config/x.yaml'."""
+        expr = self.resolve(expr)
+        assert isinstance(expr, ast.Call) and _call_name(expr) == 'join', ast.dump(expr)
+        parts = [a.value for a in expr.args if isinstance(a, ast.Constant)]
+        return '/'.join(parts)
+
+
+def flatten(d: dict, prefix: str = '') -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(flatten(v, f'{prefix}{k}.'))
+        else:
+            out[f'{prefix}{k}'] = v
+    return out
+
+
+@pytest.fixture(scope='module')
+def declared(tmp_path_factory):
+    """executable -> {parameter name: descriptor}, from instantiating each node class with real rclpy."""
+    out = {}
+    context = rclpy.context.Context()
+    rclpy.init(context=context)
+    safe = {  # keep the instantiation side-effect free: no bus opened, no file written
+        'rig_driver': {'autostart': False},
+        'recorder': {'autostart': False, 'output_dir': str(tmp_path_factory.mktemp('rec'))},
+    }
+    try:
+        for exe, target in console_scripts().items():
+            module_name = target.split(':')[0]
+            if not module_name.startswith('rubber_rig.nodes.'):
+                continue
+            module = importlib.import_module(module_name)
+            classes = [c for _, c in inspect.getmembers(module, inspect.isclass)
+                       if issubclass(c, Node) and c.__module__ == module.__name__]
+            assert len(classes) == 1, f'{module_name}: expected one node class, found {classes}'
+            overrides = [rclpy.parameter.Parameter(k, value=v) for k, v in safe.get(exe, {}).items()]
+            node = classes[0](context=context, parameter_overrides=overrides)
+            try:
+                names = node.list_parameters([], 0).names
+                out[exe] = {n: node.describe_parameter(n) for n in names}
+            finally:
+                node.destroy_node()
+    finally:
+        rclpy.shutdown(context=context)
+    return out
+
+
+def test_there_are_launch_files_for_sim_and_can():
+    assert {p.name for p in LAUNCH_FILES} == {'rig_sim.launch.py', 'rig_can.launch.py'}
+
+
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_launch_file_compiles_and_defines_generate_launch_description(path):
+    lf = LaunchFile(path)
+    compile(lf.source, str(path), 'exec')
+    funcs = [n.name for n in lf.tree.body if isinstance(n, ast.FunctionDef)]
+    assert 'generate_launch_description' in funcs
+    assert lf.used_args <= lf.declared_args, f'undeclared launch arguments: {lf.used_args - lf.declared_args}'
+
+
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_launch_file_references_exist_and_are_declared(path, declared):
+    lf = LaunchFile(path)
+    scripts = console_scripts()
+    setup_text = (ROOT / 'setup.py').read_text()
+    assert "glob('config/*.yaml')" in setup_text, 'config files must be installed to share/rubber_rig/config'
+    executables = set()
+    for call in lf.nodes:
+        assert _kw(call, 'package').value == 'rubber_rig'
+        exe = _kw(call, 'executable').value
+        executables.add(exe)
+        assert exe in scripts, f'{path.name}: executable {exe!r} is not a console_script of setup.py'
+        name = _kw(call, 'name').value
+        params = _kw(call, 'parameters')
+        assert isinstance(params, ast.List) and params.elts, f'{exe}: no parameters'
+        for item in params.elts:
+            item = lf.resolve(item)
+            if isinstance(item, ast.Dict):   # inline overrides
+                keys = [k.value for k in item.keys]
+                missing = set(keys) - set(declared[exe])
+                assert not missing, f'{path.name}: {exe} does not declare {missing}'
+                continue
+            rel = lf.config_file(item)
+            cfg = ROOT / rel
+            assert cfg.is_file(), f'{path.name}: parameter file {rel} does not exist'
+            data = yaml.safe_load(cfg.read_text())
+            section = data.get(f'/**/{name}') or data.get(name)
+            assert section and 'ros__parameters' in section, f'{rel}: no section for node {name}'
+            missing = set(flatten(section['ros__parameters'])) - set(declared[exe])
+            assert not missing, f'{rel}: node {name} ({exe}) does not declare {sorted(missing)}'
+    assert executables == {'rig_driver', 'excitation', 'element_model', 'recorder'}
+
+
+def test_every_node_parameter_has_a_description(declared):
+    for exe, params in declared.items():
+        for name, d in params.items():
+            if name == 'use_sim_time':
+                continue
+            assert d.description.strip(), f'{exe}: parameter {name} has no description'
+            if d.type in (2, 3):   # INTEGER, DOUBLE: ranges on every number except free offsets
+                assert d.integer_range or d.floating_point_range or name.startswith('values.'), \
+                    f'{exe}: numeric parameter {name} has no range'
+
+
+def test_config_values_have_the_declared_types(declared):
+    """A config value of the wrong type would fail at node start; catch it here (ints allowed for doubles)."""
+    type_ok = {1: (bool,), 2: (int,), 3: (int, float), 4: (str,)}
+    for cfg in sorted((ROOT / 'config').glob('rig_*.yaml')):
+        data = yaml.safe_load(cfg.read_text())
+        for key, section in data.items():
+            exe = key.split('/')[-1]
+            for name, value in flatten(section['ros__parameters']).items():
+                d = declared[exe][name]
+                if d.type in type_ok:
+                    assert isinstance(value, type_ok[d.type]) and not (d.type != 1 and isinstance(value, bool)), \
+                        f'{cfg.name}: {exe}.{name} = {value!r} has the wrong type'
