@@ -318,3 +318,28 @@ def test_info_command_shows_topics_counts_metadata_and_gaps(tmp_path, capsys):
     assert cli(['info', '--json', str(path)]) == 0
     info = json.loads(capsys.readouterr().out)
     assert info['metadata']['model_parameters'] == {'k0': 1e6} and info['samples'] == 60
+
+
+def test_split_recording_is_one_rosbag2_bag_for_rosbags(tmp_path):
+    """metadata.yaml (rosbag2 v9) lets rosbags' rosbag2 reader open the directory of split files."""
+    from rosbags.highlevel import AnyReader
+    from rosbags.rosbag2 import Reader as Rosbag2Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    _, files = record(tmp_path, 'bag', split_size_bytes=40_000)
+    bag = files[0].parent
+    assert (bag / 'metadata.yaml').exists() and len(files) >= 3
+    reference = raw_messages(files)
+    with Rosbag2Reader(bag) as reader:
+        assert reader.message_count == len(reference) == 306
+        assert {c.topic: c.msgcount for c in reader.connections} == {'/rig/samples': 300, '/rig/status': 6}
+        got = [(c.topic, t, bytes(d)) for c, t, d in reader.messages()]
+    assert sorted(got) == sorted(reference)                    # same messages, same bytes
+    with AnyReader([bag], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
+        conn = [c for c in reader.connections if c.topic == '/rig/samples']
+        seqs = [reader.deserialize(d, c.msgtype).first_sequence for c, _, d in reader.messages(connections=conn)]
+    assert seqs == [k * N for k in range(300)]
+    # every closed file carries rosbag2's own metadata record
+    with open(files[0], 'rb') as f:
+        names = [m.name for m in make_reader(f).iter_metadata()]
+    assert names == ['rubber_rig', 'rubber_rig.close', 'rosbag2']

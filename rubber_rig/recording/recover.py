@@ -14,6 +14,7 @@ from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
+from .bagmeta import METADATA_FILE, write_bag_metadata
 from .errors import RecordingError
 from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
 from .mcapio import Decoders, check_file, iter_records
@@ -109,6 +110,8 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
             os.replace(path, path.with_name(path.name + '.bak'))
         os.replace(target, path)
         target = path
+        if (path.parent / METADATA_FILE).exists():   # part of a bag: index the recovered file too
+            write_bag_metadata(path.parent)
     return RecoverResult(str(path), str(target), was_complete, counts['messages'], len(channels),
                          counts['metadata'], path.stat().st_size if path.exists() else 0,
                          gaps.samples_lost, gaps.gaps)

@@ -15,6 +15,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 
 from .errors import RecordingError, RecordingWriteError
+from .bagmeta import write_bag_metadata
 from .gaps import GapTracker
 from .writer import RecordingWriter
 
@@ -45,6 +46,7 @@ class Recorder:
         self.reports = []                    # loss report of each closed file
         self.error = None                    # RecordingWriteError that stopped the recording
         self.not_recorded_after_error = 0
+        self.warnings = []
         self.messages_written = 0
         self.dropped = 0
         self._base = None
@@ -75,6 +77,7 @@ class Recorder:
             'not_recorded_after_error': self.not_recorded_after_error,
             'bytes_current_file': w.size_estimate if w else 0,
             'error': str(self.error) if self.error else '',
+            'warnings': '; '.join(self.warnings),
             **self.gaps.summary(),
         }
 
@@ -120,6 +123,10 @@ class Recorder:
             self.error = self.error or exc
         self.messages_written += w.messages_written
         self.dropped += sum(w.dropped.values())
+        try:                                 # the bag so far, for rosbag2 / rosbags readers
+            write_bag_metadata(self._base, self.files)
+        except (OSError, RecordingError) as exc:   # the MCAP files are complete; only the index is missing
+            self.warnings.append(f'metadata.yaml of {self._base} not written: {exc}')
 
     def stop(self) -> list:
         """Stop recording; returns the files written."""

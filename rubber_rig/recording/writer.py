@@ -21,6 +21,7 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 
+from . import bagmeta
 from .errors import RecordingError, RecordingWriteError
 from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
 from .msgdefs import MessageDefinitionError, full_definition, normalize_type, type_hash, type_of
@@ -133,6 +134,7 @@ class RecordingWriter:
         self._mcap = McapWriter(self._file, chunk_size=chunk_size, compression=COMPRESSION[compression])
         self._flush_interval_ns = int(flush_interval_s * 1e9) if flush_interval_s else 0
         self._schemas, self._channels, self._sequences = {}, {}, {}
+        self._channel_qos, self._channel_hash = {}, {}
         self._encoders, self._decoders = {}, {}
         self.gaps = gaps if gaps is not None else GapTracker()
         self._gaps_at_open = (self.gaps.gaps, self.gaps.samples_lost, self.gaps.restarts,
@@ -205,6 +207,8 @@ class RecordingWriter:
         metadata = {'offered_qos_profiles': offered_qos_yaml(qos or []),
                     'topic_type_hash': topic_type_hash if topic_type_hash is not None
                     else type_hash(msg_type)}
+        self._channel_qos[topic] = metadata['offered_qos_profiles']
+        self._channel_hash[topic] = metadata['topic_type_hash']
         channel_id = self._guard(self._mcap.register_channel, topic, 'cdr', schema_id, metadata)
         self._channels[topic] = (channel_id, msg_type)
         self._sequences[channel_id] = 0
@@ -309,6 +313,16 @@ class RecordingWriter:
             'total_samples_lost': self.gaps.samples_lost,
         }
 
+    def bag_info(self) -> dict:
+        """rosbag2's bag metadata of this file alone."""
+        first = self.first_log_time_ns or 0
+        files = [{'path': self.path.name, 'start_ns': first, 'end_ns': self.last_log_time_ns or first,
+                  'count': self.messages_written}]
+        topics = [{'name': topic, 'type': msg_type, 'qos': self._channel_qos.get(topic, ''),
+                   'hash': self._channel_hash.get(topic, ''), 'count': self.messages_by_topic.get(topic, 0)}
+                  for topic, (_, msg_type) in self._channels.items()]
+        return bagmeta.make_bag_info(files, topics)
+
     def close(self, extra: dict = None) -> dict:
         """Write the loss report and the summary; returns the report. After a write error the file
         is only closed (it ends at its last complete record; recover rebuilds the summary)."""
@@ -320,6 +334,8 @@ class RecordingWriter:
             if self.failure is None:
                 values = dict(report, end_time_ns=time.time_ns(), clean_close=True, **(extra or {}))
                 self._guard(self._mcap.add_metadata, CLOSE_METADATA_NAME, encode_metadata(values))
+                self._guard(self._mcap.add_metadata, 'rosbag2',
+                            {'serialized_metadata': bagmeta.dump(self.bag_info())})
                 self._guard(self._mcap.finish)
                 self._guard(self._file.fsync)
         finally:
