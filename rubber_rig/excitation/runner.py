@@ -146,6 +146,8 @@ class ProgramRunner:
                 self._p += m
                 self._set_last(x)
                 i += m
+                if self._p >= self._total:
+                    self.state = 'finished'
             elif self.state in ('ramping_down', 'holding'):
                 if self._ramp.done and self.state == 'ramping_down':
                     self.state = 'finished'
@@ -158,6 +160,8 @@ class ProgramRunner:
                 out[i:] = x
                 self._set_last(x)
                 i = n
+                if self._ramp.done and self.state == 'ramping_down':
+                    self.state = 'finished'
             else:
                 out[i:] = self._x
                 self._x_prev = self._x
