@@ -37,7 +37,7 @@ def add_arguments(parser):
     parser.add_argument('--rate', default='1kHz', help='sample rate of --method time (default 1kHz)')
     parser.add_argument('--scheme', default='default', choices=('default', 'paper', 'gl'),
                         help='fractional scheme of --method time (default: sum of exponentials)')
-    parser.add_argument('--cycles', type=int, default=8, help='cycles simulated by --method time (last 2 analysed)')
+    parser.add_argument('--cycles', type=int, default=30, help='cycles simulated by --method time (last 2 analysed)')
     parser.add_argument('--json', action='store_true', help='print a JSON list of objects instead of a table')
 
 

@@ -20,19 +20,19 @@ def berg_force(x, x_s, f_s, f_fmax: float, x2: float):
     """
     d = np.subtract(x, x_s)
     mu = np.divide(f_s, f_fmax)
-    up = f_s + d / (x2 * (1.0 - mu) + d) * (f_fmax - f_s)
-    down = f_s + d / (x2 * (1.0 + mu) - d) * (f_fmax + f_s)
-    return np.where(d > 0, up, np.where(d < 0, down, f_s))
+    up = d > 0
+    # Eq. 16 both branches at once: F = F_fs + d A / (B + |d|), no division by zero at d = 0
+    a = np.where(up, f_fmax - f_s, f_fmax + f_s)
+    b = np.where(up, x2 * (1.0 - mu), x2 * (1.0 + mu))
+    return f_s + d * a / (b + np.abs(d))
 
 
 def _berg_scalar(x, x_s, f_s, f_fmax, x2):
     d = x - x_s
     mu = f_s / f_fmax
     if d > 0:
-        return f_s + d / (x2 * (1.0 - mu) + d) * (f_fmax - f_s)
-    if d < 0:
-        return f_s + d / (x2 * (1.0 + mu) - d) * (f_fmax + f_s)
-    return f_s
+        return f_s + d * (f_fmax - f_s) / (x2 * (1.0 - mu) + d)
+    return f_s + d * (f_fmax + f_s) / (x2 * (1.0 + mu) - d)
 
 
 def berg_steady_state(amplitude, f_fmax: float, x2: float):

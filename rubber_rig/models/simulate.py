@@ -11,12 +11,13 @@ def sine_displacement(frequency: float, amplitude: float, dt: float, cycles: flo
     return offset + amplitude * np.sin(2 * np.pi * frequency * t)
 
 
-def time_domain_properties(model, frequency: float, amplitude: float, cycles: int = 8,
+def time_domain_properties(model, frequency: float, amplitude: float, cycles: int = 30,
                            analysed_cycles: int = 2, offset: float = 0.0) -> dict:
     """Steady-state properties of ``model`` (from ``build_model``, reset first) from a sine run.
 
     Runs ``cycles`` cycles of x = offset + amplitude sin(2 pi f t) [m] at the model's dt and
-    analyses the last ``analysed_cycles`` with :func:`rubber_rig.analysis.harmonic_properties`
+    analyses the last ``analysed_cycles`` (Berg's loop needs ~20 cycles from the virgin state to
+    settle within 1e-5, the slow fractional modes a few) with :func:`rubber_rig.analysis.harmonic_properties`
     (k_dyn from the first harmonic, energy per cycle pi x1 F1 sin(delta), D = E/(pi x1^2 K_dyn)
     (Eq. 26), C_eq (Eq. 27)). Per-branch energies give R_E, per-branch peak force amplitudes
     give R_K (seed 000 Eq. 30; the friction amplitude is the peak force of Eq. 17/19).
