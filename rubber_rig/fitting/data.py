@@ -136,7 +136,10 @@ def load_run(path) -> RunData:
     time = sig('time')
     meta = dict(getattr(rec, 'metadata', {}) or {})
     dt = None
-    if time is not None and time.size > 1:
+    period = getattr(rec, 'sample_period', None)
+    if period is not None and np.isfinite(period) and period > 0:
+        dt = float(period)
+    elif time is not None and time.size > 1:
         dt = float(np.median(np.diff(time)))
     if dt is None:
         rate = meta.get('sample_rate') or meta.get('rate')

@@ -1,0 +1,95 @@
+"""Simulated-rig recordings for fitting: run a program on the simulated rig and record it to MCAP.
+
+Used by the fitting tests and benchmark (and handy for trying `rubber-rig fit` without a rig): the
+program runs on `rubber_rig.rig`'s simulated servo-hydraulic rig through the real CAN path, and the
+samples are written by `rubber_rig.recording.RecordingWriter` exactly as the recorder node writes
+them (RigSampleBatch on `samples`, SetpointBatch with the block index on `setpoints`, and the
+`rubber_rig` metadata record: specimen, temperature, program, rig configuration).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+SAMPLES_TOPIC = '/rubber_rig/samples'
+SETPOINTS_TOPIC = '/rubber_rig/setpoints'
+
+
+def _program_text(program) -> str:
+    """YAML text of a program given as a shipped name, a path, YAML text or a mapping."""
+    if isinstance(program, dict):
+        return yaml.safe_dump(program, sort_keys=False)
+    if isinstance(program, str) and '\n' in program:
+        return program
+    from rubber_rig.excitation.program import PROGRAM_DIR
+    path = Path(program)
+    if not path.exists():
+        path = PROGRAM_DIR / f'{program}.yaml'
+    return path.read_text()
+
+
+def run_simulated(program, specimen: dict, temperature: float, *, force_noise=10.0, displacement_noise=0.2e-6,
+                  sample_rate=1000.0, seed=0, sim_options: dict = None):
+    """Run `program` (name, path, YAML text or mapping) on the simulated rig, unpaced.
+
+    Returns (RunResult, program YAML text, rig configuration dict)."""
+    from rubber_rig.excitation.program import Program
+    from rubber_rig.rig import run_program
+    text = _program_text(program)
+    prog = Program.from_yaml_text(text, name='program')
+    sim = {'specimen': dict(specimen), 'force_noise': float(force_noise),
+           'displacement_noise': float(displacement_noise), 'temperature': float(temperature), 'seed': int(seed)}
+    sim.update(sim_options or {})
+    config = {'backend': 'sim', 'paced': False, 'sample_rate': float(sample_rate), 'sim': sim}
+    return run_program(prog, config), text, config
+
+
+def write_recording(path, result, program_text: str, specimen: dict, temperature: float, config: dict = None,
+                    batch: int = 100, channels=('displacement', 'force', 'setpoint')):
+    """Write a RunResult as an MCAP recording. `channels` chooses which sample arrays are real; a
+    left-out channel is written as NaN (how a missing transducer shows up), for fault tests."""
+    from rubber_rig.recording import RecordingWriter
+    path = Path(path)
+    meta = {'specimen': dict(specimen), 'temperature': float(temperature), 'program': program_text,
+            'rig_config': config or {}, 'source': 'rubber_rig.fitting.simulate'}
+    fs = float(result.sample_rate)
+    period = 1.0 / fs
+    n = len(result.time)
+    t0_ns = 1_700_000_000_000_000_000
+    seq0 = int(result.sequence[0]) if n else 0
+    bi = np.asarray(result.block_index, int)
+    arrays = {k: np.asarray(getattr(result, k), float) for k in ('displacement', 'force', 'setpoint')}
+    for k in arrays:
+        if k not in channels:
+            arrays[k] = np.full(n, np.nan)
+    # batches never straddle a block change, so each SetpointBatch carries one block index
+    change = np.flatnonzero(np.diff(bi) != 0) + 1
+    bounds = sorted(set(np.concatenate([[0], change, np.arange(0, n, batch), [n]]).tolist()))
+    with RecordingWriter(path, meta, overwrite=True) as w:
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            stamp_ns = t0_ns + int(round(a * period * 1e9))
+            header = {'stamp': {'sec': stamp_ns // 1_000_000_000, 'nanosec': stamp_ns % 1_000_000_000},
+                      'frame_id': 'rig'}
+            seq = seq0 + a
+            w.write_message(SETPOINTS_TOPIC, 'msg_defs/msg/SetpointBatch', {
+                'header': header, 'first_sequence': seq, 'sample_period': period,
+                'displacement': arrays['setpoint'][a:b].tolist(), 'block_index': int(bi[a])},
+                log_time_ns=stamp_ns)
+            w.write_message(SAMPLES_TOPIC, 'msg_defs/msg/RigSampleBatch', {
+                'header': header, 'first_sequence': seq, 'sample_period': period,
+                'displacement': arrays['displacement'][a:b].tolist(), 'force': arrays['force'][a:b].tolist(),
+                'setpoint': arrays['setpoint'][a:b].tolist(), 'temperature': float(result.temperature[b - 1]),
+                'status_flags': int(result.status[b - 1]), 'frames_lost': 0},
+                log_time_ns=stamp_ns + int(round((b - a - 1) * period * 1e9)))
+    return path
+
+
+def simulated_recording(path, program, parameter_set: str, temperature: float, **kw):
+    """Run `program` on the simulated rig with the specimen `parameter_set` and record it to `path`."""
+    specimen = {'model': 'seed000', 'parameter_set': parameter_set}
+    result, text, config = run_simulated(program, specimen, temperature, **kw)
+    if not result.completed:
+        raise RuntimeError(f'simulated run did not complete: {result.message}')
+    return write_recording(path, result, text, specimen, temperature, config)
