@@ -10,6 +10,7 @@ from mcap.records import Channel, Footer, Header, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap_ros2._dynamic import generate_dynamic
 
+from .cdr import make_decoder
 from .errors import RecordingError
 
 MAGIC = b'\x89MCAP0\r\n'
@@ -146,23 +147,30 @@ class Decoders:
 
     def get(self, schema: Schema):
         key = (schema.name, schema.data)
-        fn = self._cache.get(key)
-        if fn is None:
+        fns = self._cache.get(key)
+        if fns is None:
             if schema.encoding != 'ros2msg':
                 raise RecordingError(f'{self.path}: schema {schema.name} has encoding '
                                      f'{schema.encoding!r}; only ros2msg is supported')
             try:
-                fn = generate_dynamic(schema.name, schema.data.decode())[schema.name]
+                text = schema.data.decode()
+                slow = generate_dynamic(schema.name, text)[schema.name]
             except Exception as exc:  # noqa: BLE001
                 raise RecordingError(f'{self.path}: cannot parse the schema of {schema.name}: '
                                      f'{exc}') from None
-            self._cache[key] = fn
-        return fn
+            fns = (make_decoder(schema.name, text), slow)
+            self._cache[key] = fns
+        return fns
 
     def decode(self, schema: Schema, data: bytes, topic: str):
-        fn = self.get(schema)
+        fast, slow = self.get(schema)
+        if fast is not None:
+            try:
+                return fast(data)
+            except Exception:  # noqa: BLE001 - big-endian or damaged: the reference decoder decides
+                pass
         try:
-            return fn(data)
+            return slow(data)
         except Exception as exc:  # noqa: BLE001
             raise RecordingError(f'{self.path}: a {schema.name} message on {topic} does not decode '
                                  f'({type(exc).__name__}: {exc})') from None

@@ -22,6 +22,7 @@ from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
 
 from . import bagmeta
+from .cdr import make_decoder
 from .errors import RecordingError, RecordingWriteError
 from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
 from .msgdefs import MessageDefinitionError, full_definition, normalize_type, type_hash, type_of
@@ -78,6 +79,23 @@ def _plain(value):
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]
     return value
+
+
+def _decoder_factory(msg_type, text):
+    """numpy CDR decoder (fast; gap tracking at 10 kHz), else mcap_ros2's."""
+    fast = make_decoder(msg_type, text)
+    if fast is None:
+        return generate_dynamic(msg_type, text)
+    slow = {}
+
+    def decode(data):
+        try:
+            return fast(data)
+        except Exception:  # noqa: BLE001 - e.g. big-endian CDR: the reference decoder
+            if not slow:
+                slow.update(generate_dynamic(msg_type, text))
+            return slow[msg_type](data)
+    return {msg_type: decode}
 
 
 class _UnbufferedFile:
@@ -278,7 +296,7 @@ class RecordingWriter:
     def _track(self, topic, msg_type, data, decoded, log_time_ns):
         if decoded is None:
             try:
-                decoded = self._codec(self._decoders, generate_dynamic, msg_type)(data)
+                decoded = self._codec(self._decoders, _decoder_factory, msg_type)(data)
             except Exception:  # undecodable bytes are recorded anyway; count them
                 self.count_dropped('undecodable_for_gap_check')
                 return
