@@ -41,7 +41,7 @@ def table_dict(fits, prefix='fit', source=None) -> dict:
         ak, ac = f.max_errors('analytic')
         extra[name] = {
             'temperature': f.temperature, 'method': f.method, 'recordings': list(f.runs),
-            'blocks': len(f.blocks), 'objective_eq29': float(f'{f.objective:.6g}'),
+            'blocks': len(f.blocks), 'objective_eq29': float(f'{f.eq29:.6g}'),
             'relative_sigma': {k: float(f'{v:.3g}') for k, v in f.uncertainty.get('relative_sigma', {}).items()},
             'max_error': {'k_dyn': float(f'{ek:.4g}'), 'c_eq': float(f'{ec:.4g}'),
                           'k_dyn_analytic': float(f'{ak:.4g}'), 'c_eq_analytic': float(f'{ac:.4g}')},

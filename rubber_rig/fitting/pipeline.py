@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .blocks import split_blocks
-from .identify import PARAM_NAMES, Targets, fit_harmonic
+from .identify import PARAM_NAMES, Targets, fit_harmonic, objective, params_to_z
 from .metrics import window_properties
 from .properties import measured_style_properties
 
@@ -39,6 +39,7 @@ class TemperatureFit:
     timings: dict = field(default_factory=dict)
     messages: list = field(default_factory=list)
     true_params: dict | None = None
+    eq29: float = float('nan')            # seed 000 Eq. 29 at the final parameters
 
     def max_errors(self, kind='simulated'):
         ek = [abs(q[kind]['e_k']) for q in self.quality if kind in q]
@@ -50,7 +51,7 @@ class TemperatureFit:
         sk, sc = self.max_errors('simulated')
         out = {
             'temperature': self.temperature, 'recordings': self.runs, 'method': self.method,
-            'params': self.params, 'objective': self.objective, 'uncertainty': self.uncertainty,
+            'params': self.params, 'objective': self.objective, 'eq29': self.eq29, 'uncertainty': self.uncertainty,
             'stages': self.stages,
             'bounds': {k: list(v) for k, v in self.bounds.items()},
             'max_error': {'analytic': {'k_dyn': ek, 'c_eq': ec}, 'simulated': {'k_dyn': sk, 'c_eq': sc}},
@@ -153,7 +154,7 @@ def fit_runs(runs, method='time', w_k=100.0, w_c=1.0, settle_cycles=3, min_cycle
             temperature=temp, runs=[run.name for run in group], blocks=blocks, params=result.params,
             method=method, objective=result.objective, uncertainty=result.uncertainty, stages=stages,
             bounds=h.bounds, quality=quality, timings=timings, messages=list(result.messages),
-            true_params=truth))
+            true_params=truth, eq29=float(objective(params_to_z(result.params), targets, w_k, w_c))))
     if progress is not None:
         progress(1.0, 'done')
     return fits, messages
