@@ -1,0 +1,408 @@
+"""Run a test program on the simulated rig through the real ROS 2 nodes, with recording and a live table.
+
+Starts rig_driver, excitation, element_model and recorder (and, with --foxglove, the Foxglove live view) in
+this process, one SingleThreadedExecutor thread per node, with the same node classes and parameter file as
+``ros2 launch rubber_rig rig_sim.launch.py``. The program is sent to the excitation as a RunProgram goal;
+progress comes from the action feedback, the table from the element_model's cycle_metrics. At the end the
+recorder is stopped and a summary (JSON and markdown) is written next to the MCAP file.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import shutil
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+CONFIG_DIR = Path(__file__).resolve().parents[2] / 'config'
+PERIODIC = ('sine', 'triangle', 'square')
+
+
+def find_config(name: str) -> Path:
+    """A shipped config file: the checkout's config/ (editable install) or the ROS package share directory."""
+    path = Path(name)
+    if path.exists():
+        return path
+    if (CONFIG_DIR / name).exists():
+        return CONFIG_DIR / name
+    try:
+        from ament_index_python.packages import get_package_share_directory
+        share = Path(get_package_share_directory('rubber_rig')) / 'config' / name
+        if share.exists():
+            return share
+    except Exception:
+        pass
+    raise FileNotFoundError(f'config file {name!r} not found (looked in {CONFIG_DIR})')
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument('--program', default='seed000_grid',
+                        help='shipped program name or YAML file (default: seed000_grid, sine 0.5-14 Hz x 0.5 and '
+                             '1 mm at 20 degC)')
+    parser.add_argument('--config', default='rig_sim.yaml', help='ROS parameter file of the nodes '
+                        '(default: the shipped config/rig_sim.yaml, as used by rig_sim.launch.py)')
+    parser.add_argument('--rate', type=float, help='rig sample rate [Hz] (default: from the config, 1000)')
+    parser.add_argument('--batch-size', type=int, help='samples per RigSampleBatch (default: from the config)')
+    parser.add_argument('--cycles', type=int, help='full-amplitude cycles per periodic block (overrides the '
+                        'program, which asks for 8)')
+    parser.add_argument('--duration-scale', type=float, help='scale every block: cycles (at least 1), sweep and '
+                        'hold durations (e.g. 0.25 for a quick run)')
+    parser.add_argument('--blocks', help="run only these blocks, e.g. '0-3,12' (indices after grid expansion)")
+    parser.add_argument('--taper-cycles', type=float, help='taper cycles in and out of periodic blocks')
+    parser.add_argument('--fast', action='store_true', help='run the simulated rig as fast as possible instead of '
+                        'paced to the wall clock (same waveform and physics)')
+    parser.add_argument('--output-dir', default='recordings', help='directory for the MCAP file and summary')
+    parser.add_argument('--namespace', default='', help='ROS namespace of the rig')
+    parser.add_argument('--no-amplitude-control', action='store_true', help='open-loop command amplitude')
+    parser.add_argument('--foxglove', action='store_true', help='serve the live topics to Foxglove over WebSocket '
+                        '(layout: config/foxglove_layout.json)')
+    parser.add_argument('--foxglove-port', type=int, default=8765)
+    parser.add_argument('--quiet', action='store_true', help='no progress line, only the table and the result')
+
+
+# -- the program ------------------------------------------------------------------------------------------------
+def _block_dict(b) -> dict:
+    d = {'name': b.name, 'waveform': b.waveform}
+    if b.waveform in PERIODIC:
+        d.update(frequency=b.frequency, amplitude=b.amplitude, mean=b.mean, cycles=int(b.cycles),
+                 taper_cycles=b.taper_cycles)
+        if b.waveform == 'square':
+            d['rate'] = b.rate
+    elif b.waveform in ('sweep_lin', 'sweep_log'):
+        d.update(f_start=b.frequency, f_end=b.frequency_end, duration=b.duration, amplitude=b.amplitude,
+                 mean=b.mean, taper_cycles=b.taper_cycles)
+    elif b.waveform == 'hold':
+        d['duration'] = b.duration
+    elif b.waveform == 'ramp':
+        d.update(target=b.target, duration=b.duration)
+    return d
+
+
+def _parse_blocks(spec: str, n: int) -> list[int]:
+    out = []
+    for part in spec.split(','):
+        part = part.strip()
+        if not part:
+            continue
+        lo, _, hi = part.partition('-')
+        try:
+            a, b = int(lo), int(hi) if hi else int(lo)
+        except ValueError:
+            raise ValueError(f"--blocks: {part!r} is not an index or a range like 0-3") from None
+        if not (0 <= a <= b < n):
+            raise ValueError(f'--blocks: {part!r} outside the program\'s blocks 0-{n - 1}')
+        out.extend(range(a, b + 1))
+    return out
+
+
+def build_program(args) -> tuple:
+    """(Program, YAML text) after the command-line overrides; validated like any program."""
+    from rubber_rig.excitation import Program, load_program
+    program = load_program(args.program)
+    if not (args.cycles or args.duration_scale or args.blocks or args.taper_cycles):
+        from rubber_rig.nodes.excitation import read_program
+        return read_program(args.program)
+    if args.cycles is not None and args.cycles < 1:
+        raise ValueError('--cycles must be >= 1')
+    if args.duration_scale is not None and not args.duration_scale > 0:
+        raise ValueError('--duration-scale must be > 0')
+    blocks = [_block_dict(b) for b in program.blocks]
+    if args.blocks:
+        blocks = [blocks[i] for i in _parse_blocks(args.blocks, len(blocks))]
+    for d in blocks:
+        if 'cycles' in d:
+            if args.cycles:
+                d['cycles'] = args.cycles
+            if args.duration_scale:
+                d['cycles'] = max(1, int(round(d['cycles'] * args.duration_scale)))
+        elif 'duration' in d and args.duration_scale and d['waveform'] != 'ramp':
+            d['duration'] *= args.duration_scale
+        if 'taper_cycles' in d and args.taper_cycles:
+            d['taper_cycles'] = args.taper_cycles
+    data = {'name': program.name, 'description': program.description + ' (rubber-rig bench overrides)',
+            'initial_position': program.initial_position, 'rest_position': program.rest_position, 'blocks': blocks}
+    text = yaml.safe_dump(data, sort_keys=False)
+    return Program.from_yaml_text(text, name=program.name), text
+
+
+# -- per-block table ----------------------------------------------------------------------------------------------
+class BlockTable:
+    """Per-block averages of the steady cycles (full amplitude, second half of them) of cycle_metrics."""
+
+    COLUMNS = (' blk  block                      f [Hz]  A [mm]  A meas  K_dyn meas  K_dyn model  dK [%]'
+               '  C_eq meas  C_eq model  dC [%]',
+               '                                                [mm]    [kN/mm]     [kN/mm]              '
+               '[kN s/m]   [kN s/m]')
+
+    def __init__(self, program):
+        self.blocks = program.blocks
+        self.cycles: dict[int, list] = {}
+        self.printed: set[int] = set()
+        self.rows: dict[int, dict] = {}
+
+    def add(self, msg) -> list[int]:
+        """Add one CycleMetrics; returns the blocks now known complete (a later block has started)."""
+        if msg.block_index < 0:
+            return []
+        self.cycles.setdefault(msg.block_index, []).append(msg)
+        return [b for b in sorted(self.cycles) if b < msg.block_index and b not in self.printed]
+
+    def row(self, b: int) -> dict:
+        blk = self.blocks[b]
+        cyc = [c for c in self.cycles.get(b, []) if blk.waveform in PERIODIC
+               and c.amplitude >= 0.9 * blk.amplitude and abs(c.frequency - blk.frequency) <= 0.1 * blk.frequency]
+        steady = cyc[len(cyc) // 2:] if len(cyc) > 1 else cyc
+
+        def mean(side, name):
+            return float(np.mean([getattr(getattr(c, side), name) for c in steady])) if steady else math.nan
+        r = {'block_index': b, 'name': blk.name, 'waveform': blk.waveform, 'frequency': blk.frequency,
+             'target_amplitude': blk.amplitude,
+             'achieved_amplitude': float(np.mean([c.amplitude for c in steady])) if steady else math.nan,
+             'cycles_used': len(steady)}
+        for side in ('measured', 'model'):
+            r[side] = {n: mean(side, n) for n in ('k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy_harmonic',
+                                                  'energy_loop')}
+        r['deviation_k_dyn_pct'] = 100 * (r['model']['k_dyn'] / r['measured']['k_dyn'] - 1)
+        r['deviation_c_eq_pct'] = 100 * (r['model']['c_eq'] / r['measured']['c_eq'] - 1)
+        self.rows[b] = r
+        return r
+
+    def format(self, b: int) -> str:
+        self.printed.add(b)
+        r = self.row(b)
+        return (f"{b:4d}  {r['name'][:24]:<24}  {r['frequency']:6.2f}  {r['target_amplitude'] * 1e3:6.3f}  "
+                f"{r['achieved_amplitude'] * 1e3:6.3f}  {r['measured']['k_dyn'] * 1e-6:10.3f}  "
+                f"{r['model']['k_dyn'] * 1e-6:11.3f}  {r['deviation_k_dyn_pct']:+6.2f}  "
+                f"{r['measured']['c_eq'] * 1e-3:9.2f}  {r['model']['c_eq'] * 1e-3:10.2f}  "
+                f"{r['deviation_c_eq_pct']:+6.2f}")
+
+
+class Terminal:
+    """Table rows scroll; the progress line is rewritten in place on a terminal (printed every few s otherwise)."""
+
+    def __init__(self, quiet: bool):
+        self.tty = sys.stdout.isatty() and not quiet
+        self.quiet = quiet
+        self._last_plain = 0.0
+        self._status = ''
+
+    def line(self, text: str) -> None:
+        if self.tty and self._status:
+            sys.stdout.write('\r' + ' ' * min(len(self._status), shutil.get_terminal_size().columns - 1) + '\r')
+        print(text, flush=True)
+        if self.tty and self._status:
+            sys.stdout.write(self._status)
+            sys.stdout.flush()
+
+    def status(self, text: str) -> None:
+        if self.quiet:
+            return
+        width = shutil.get_terminal_size().columns - 1
+        if self.tty:
+            self._status = text[:width]
+            sys.stdout.write('\r' + self._status.ljust(width)[:width] + '\r' + self._status)
+            sys.stdout.flush()
+        elif time.monotonic() - self._last_plain >= 5.0:
+            self._last_plain = time.monotonic()
+            print(text, flush=True)
+
+    def end_status(self) -> None:
+        if self.tty and self._status:
+            sys.stdout.write('\n')
+            self._status = ''
+
+
+def progress_text(fb, stats, t_start) -> str:
+    achieved = '--' if math.isnan(fb.achieved_amplitude) else f'{fb.achieved_amplitude * 1e3:.3f}'
+    return (f'[{fb.progress * 100:5.1f}%] block {fb.block_index + 1}/{fb.block_count} {fb.block_name}  '
+            f'cycle {fb.cycle}/{fb.cycles_total}  A {fb.target_amplitude * 1e3:.3f} mm -> {achieved} mm  '
+            f'| {stats.samples} samples, {stats.gaps} gaps | {time.monotonic() - t_start:5.1f} s')
+
+
+# -- summary --------------------------------------------------------------------------------------------------------
+def write_summary(mcap: Path, summary: dict) -> tuple[Path, Path]:
+    base = mcap.with_suffix('')
+    jpath, mpath = Path(f'{base}.summary.json'), Path(f'{base}.summary.md')
+    jpath.write_text(json.dumps(summary, indent=2, default=float) + '\n')
+    lines = [f"# rubber-rig bench: {summary['program']}", '',
+             f"- recording: `{summary['recording']}`",
+             f"- rig: {summary['rig']['backend']}, {summary['rig']['sample_rate']:g} Hz, "
+             f"{'paced' if summary['rig']['paced'] else 'fast'}; specimen {summary['rig']['specimen']}",
+             f"- model: {summary['model']['parameter_set'] or summary['model']['source']} "
+             f"({', '.join(f'{k}={v:.4g}' for k, v in summary['model']['values'].items())})",
+             f"- result: {summary['result']['message']} in {summary['wall_time_s']:.1f} s wall time",
+             f"- samples: {summary['loss']['live']['samples']['samples']} published, "
+             f"{summary['loss']['live']['samples']['gaps']} gaps; predictions "
+             f"{summary['loss']['live']['prediction']['samples']}, {summary['loss']['live']['prediction']['gaps']} gaps;"
+             f" recording: {summary['loss']['recording'].get('samples_lost', 'n/a')} samples lost",
+             ]
+    lat = summary.get('latency', {}).get('last_sample')
+    if lat:
+        lines.append(f"- latency sample -> prediction: median {lat['median_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms")
+    lines += ['', '| block | name | f [Hz] | A [mm] | A meas [mm] | K_dyn meas [kN/mm] | K_dyn model [kN/mm] | '
+              'dK [%] | C_eq meas [kN s/m] | C_eq model [kN s/m] | dC [%] | loss angle meas/model [deg] |',
+              '|---|---|---|---|---|---|---|---|---|---|---|---|']
+    for r in summary['blocks']:
+        lines.append(f"| {r['block_index']} | {r['name']} | {r['frequency']:.2f} | {r['target_amplitude'] * 1e3:.3f} | "
+                     f"{r['achieved_amplitude'] * 1e3:.3f} | {r['measured']['k_dyn'] * 1e-6:.3f} | "
+                     f"{r['model']['k_dyn'] * 1e-6:.3f} | {r['deviation_k_dyn_pct']:+.2f} | "
+                     f"{r['measured']['c_eq'] * 1e-3:.2f} | {r['model']['c_eq'] * 1e-3:.2f} | "
+                     f"{r['deviation_c_eq_pct']:+.2f} | {math.degrees(r['measured']['loss_angle']):.2f} / "
+                     f"{math.degrees(r['model']['loss_angle']):.2f} |")
+    mpath.write_text('\n'.join(lines) + '\n')
+    return jpath, mpath
+
+
+def _wait(launcher, future, timeout: float, what: str):
+    if not launcher.wait_for(future.done, timeout):
+        raise RuntimeError(f'timed out after {timeout:.0f} s waiting for {what}')
+    return future.result()
+
+
+# -- the job -----------------------------------------------------------------------------------------------------------
+def run(args) -> int:
+    os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+    from msg_defs.srv import RecorderControl
+    from rubber_rig.nodes.element_model import ElementModelNode
+    from rubber_rig.nodes.excitation import ExcitationNode
+    from rubber_rig.nodes.launcher import InProcessLauncher
+    from rubber_rig.nodes.monitor import SuiteMonitor
+    from rubber_rig.nodes.recorder import RecorderNode
+    from rubber_rig.nodes.rig_driver import RigDriverNode
+
+    config = find_config(args.config)
+    program, program_yaml = build_program(args)
+    out_dir = Path(args.output_dir).resolve()
+    out_dir.mkdir(parents=True, exist_ok=True)
+    driver_overrides = {'autostart': True}
+    if args.rate:
+        driver_overrides['sample_rate'] = float(args.rate)
+    if args.batch_size:
+        driver_overrides['batch_size'] = int(args.batch_size)
+    if args.fast:
+        driver_overrides['paced'] = False
+    term = Terminal(args.quiet)
+
+    with InProcessLauncher([config], namespace=args.namespace) as launcher:
+        recorder = launcher.start(RecorderNode, {
+            'output_dir': str(out_dir), 'metadata.test_program': program_yaml,
+            'metadata.notes': f'rubber-rig bench --program {args.program}'})
+        model = launcher.start(ElementModelNode)
+        excitation = launcher.start(ExcitationNode, {'program': ''})
+        driver = launcher.start(RigDriverNode, driver_overrides)
+        if driver.lifecycle_state != 'active':
+            raise RuntimeError(f'rig_driver did not come up (lifecycle state {driver.lifecycle_state}); see the log')
+        if args.foxglove:
+            from rubber_rig.nodes.foxglove_view import LAYOUT_FILE, FoxgloveViewNode
+            launcher.start(FoxgloveViewNode, {'port': args.foxglove_port})
+        monitor = launcher.spin(SuiteMonitor(context=launcher.context, namespace=args.namespace))
+
+        cfg = driver.config
+        rate = cfg.sample_rate
+        specimen = cfg.sim.specimen
+        p = model.predictor
+        term.line(f"rubber-rig bench: program '{program.name}' ({len(program.blocks)} blocks, "
+                  f'{program.duration(rate):.1f} s of excitation at {rate:g} Hz, '
+                  f"{'paced' if cfg.paced else 'as fast as possible'})")
+        term.line(f"rig: {cfg.backend}, specimen {specimen}; model seed000 from "
+                  f"{p.parameter_set or p.choice.source}")
+        term.line('nodes: rig_driver, excitation, element_model, recorder'
+                  + (', foxglove_view' if args.foxglove else '') + ' (one SingleThreadedExecutor thread each)')
+        if args.foxglove:
+            term.line(f'Foxglove: connect to ws://127.0.0.1:{args.foxglove_port}, import layout {LAYOUT_FILE}')
+
+        ready = launcher.wait_for(lambda: monitor.status is not None and monitor.action.server_is_ready()
+                                  and excitation.status is not None
+                                  and monitor.recorder_subscribed('samples', 'prediction', 'setpoints',
+                                                                  'cycle_metrics', 'status'), 30.0)
+        if not ready:
+            raise RuntimeError('the nodes did not connect within 30 s (status, run_program, recorder topics)')
+        term.line(f'recording to {recorder.core.current_file}')
+        table = BlockTable(program)
+        term.line(BlockTable.COLUMNS[0])
+        term.line(BlockTable.COLUMNS[1])
+
+        t_start = time.monotonic()
+        goal_handle = _wait(launcher, monitor.send_program(program_yaml, amplitude_control=not
+                                                           args.no_amplitude_control), 30.0, 'the goal to be accepted')
+        if not goal_handle.accepted:
+            raise RuntimeError('the excitation refused the program (another one is running?)')
+        result_future = goal_handle.get_result_async()
+        n_fb = n_cm = 0
+        interrupted = False
+        try:
+            while not result_future.done():
+                launcher.check()
+                fb = monitor.feedback[n_fb:]
+                n_fb += len(fb)
+                if fb:
+                    term.status(progress_text(fb[-1], monitor.stats['samples'], t_start))
+                cms = monitor.cycle_metrics[n_cm:]
+                n_cm += len(cms)
+                for c in cms:
+                    for b in table.add(c):
+                        term.line(table.format(b))
+                time.sleep(0.1)
+        except KeyboardInterrupt:
+            interrupted = True
+            term.end_status()
+            term.line('interrupted: aborting the program (smooth ramp to rest) ...')
+            goal_handle.cancel_goal_async()
+            launcher.wait_for(result_future.done, 15.0)
+        term.end_status()
+        wall = time.monotonic() - t_start
+        launcher.wait_for(lambda: False, 0.5)   # let the last cycle metrics arrive
+        for c in monitor.cycle_metrics[n_cm:]:
+            table.add(c)
+        for b in sorted(table.cycles):
+            if b not in table.printed:
+                term.line(table.format(b))
+        result = result_future.result().result if result_future.done() else None
+
+        stop = _wait(launcher, monitor.recorder(RecorderControl.Request.STOP), 30.0, 'the recorder to stop')
+        mcap = Path(stop.file)
+        rec_loss = {}
+        try:
+            from rubber_rig.recording import load_recording
+            rec = load_recording(mcap)
+            rec_loss = {'samples': int(len(rec)), 'samples_lost': int(rec.samples_lost), 'gaps': len(rec.gaps),
+                        'complete': bool(rec.complete), 'topics': {t: v.get('count') for t, v in rec.topics.items()}}
+        except Exception as exc:   # the summary still says where the file is
+            rec_loss = {'error': str(exc)}
+        summary = {
+            'program': program.name, 'recording': str(mcap), 'wall_time_s': wall, 'interrupted': interrupted,
+            'rig': {'backend': cfg.backend, 'sample_rate': rate, 'paced': cfg.paced, 'specimen': specimen,
+                    'batch_size': driver.batch_size},
+            'model': {'source': p.choice.source, 'parameter_set': p.parameter_set, 'temperature': p.temperature,
+                      'values': p.params.as_dict()},
+            'result': {'success': bool(result.success) if result else False,
+                       'message': result.message if result else 'no result (interrupted)',
+                       'blocks': [{'block_index': b.block_index, 'name': b.name, 'target_amplitude': b.target_amplitude,
+                                   'achieved_amplitude': b.achieved_amplitude, 'completed': b.completed,
+                                   'message': b.message} for b in (result.blocks if result else [])]},
+            'loss': {'live': {k: v.as_dict() for k, v in monitor.stats.items()}, 'recording': rec_loss},
+            'latency': monitor.latency_summary(),
+            'blocks': [table.rows[b] for b in sorted(table.rows)],
+        }
+        jpath, mpath = write_summary(mcap, summary)
+
+    live = summary['loss']['live']
+    print(f"\nprogram: {summary['result']['message']} ({wall:.1f} s)")
+    print(f"samples: {live['samples']['samples']} published, {live['samples']['gaps']} gaps; "
+          f"predictions: {live['prediction']['samples']}, {live['prediction']['gaps']} gaps; "
+          f"recording: {rec_loss.get('samples_lost', 'n/a')} samples lost")
+    lat = summary['latency'].get('last_sample')
+    if lat:
+        print(f"latency sample -> prediction: median {lat['median_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms")
+    print(f'MCAP recording: {mcap}')
+    print(f'summary:        {jpath}')
+    print(f'                {mpath}')
+    if interrupted:
+        return 130
+    return 0 if summary['result']['success'] else 1

@@ -1,0 +1,143 @@
+"""SuiteMonitor: a client node that watches the suite (used by ``rubber-rig bench``, the tests and the benchmark).
+
+It subscribes to every stream with the suite's QoS, counts sequence gaps per stream (the loss accounting of
+the benchmark), measures the latency from a sample being taken (its stamp) to the prediction for it arriving
+here, and wraps the two clients the main job needs: the excitation's ``run_program`` action and the recorder's
+``~/control`` service. Callbacks only append to lists/counters; readers in other threads take snapshots.
+"""
+from __future__ import annotations
+
+import time
+from collections import defaultdict
+
+import numpy as np
+from rclpy.action import ActionClient
+from rclpy.node import Node
+
+from msg_defs.action import RunProgram
+from msg_defs.msg import CycleMetrics, ModelParameters, ModelPrediction, RigSampleBatch, RigStatus, SetpointBatch
+from msg_defs.srv import RecorderControl
+from std_msgs.msg import String
+from std_srvs.srv import SetBool, Trigger
+
+from rubber_rig.nodes import conversions as conv
+from rubber_rig.nodes import topics
+
+
+class StreamStats:
+    """Continuity of one batched stream: messages, samples, gaps and missing samples."""
+
+    def __init__(self):
+        self.messages = self.samples = self.gaps = self.missing = 0
+        self.first = self.next = None
+
+    def observe(self, first: int, n: int) -> None:
+        if self.next is not None and first != self.next:
+            self.gaps += 1
+            self.missing += max(0, first - self.next)
+        if self.first is None:
+            self.first = first
+        self.next = first + n
+        self.messages += 1
+        self.samples += n
+
+    def as_dict(self) -> dict:
+        return {'messages': self.messages, 'samples': self.samples, 'gaps': self.gaps, 'missing': self.missing,
+                'first_sequence': self.first, 'next_sequence': self.next}
+
+
+class SuiteMonitor(Node):
+
+    def __init__(self, node_name: str = 'suite_monitor', keep_messages: bool = False, recorder: str = 'recorder',
+                 excitation: str = 'excitation', **kwargs):
+        super().__init__(node_name, **kwargs)
+        self.keep = keep_messages
+        self.messages: dict[str, list] = defaultdict(list)
+        self.stats = {name: StreamStats() for name in ('samples', 'prediction', 'setpoints')}
+        self.latency_last: list[float] = []     # [s] last sample of a batch taken -> its prediction here
+        self.latency_first: list[float] = []    # [s] first sample of a batch taken -> its prediction here
+        self.cycle_metrics: list[CycleMetrics] = []
+        self.feedback: list = []
+        self.status: RigStatus | None = None
+        self.model_parameters: ModelParameters | None = None
+        self.program_yaml = ''
+        self.temperature = float('nan')
+        sub = self.create_subscription
+        sub(RigSampleBatch, topics.SAMPLES, self._on_samples, topics.STREAM_QOS)
+        sub(ModelPrediction, topics.PREDICTION, self._on_prediction, topics.STREAM_QOS)
+        sub(SetpointBatch, topics.SETPOINTS, self._on_setpoints, topics.STREAM_QOS)
+        sub(CycleMetrics, topics.CYCLE_METRICS, self._on_cycle, topics.EVENT_QOS)
+        sub(RigStatus, topics.STATUS, self._on_status, topics.LATCHED_QOS)
+        sub(ModelParameters, topics.MODEL_PARAMETERS, self._on_parameters, topics.LATCHED_QOS)
+        sub(String, topics.PROGRAM, self._on_program, topics.LATCHED_QOS)
+        self.action = ActionClient(self, RunProgram, 'run_program')
+        self.recorder_control = self.create_client(RecorderControl, f'{recorder}/control')
+        self.excitation_abort = self.create_client(Trigger, f'{excitation}/abort')
+        self.excitation_hold = self.create_client(SetBool, f'{excitation}/hold')
+
+    # -- callbacks (executor thread) -------------------------------------------------------------------------
+    def _on_samples(self, msg: RigSampleBatch) -> None:
+        self.stats['samples'].observe(msg.first_sequence, len(msg.displacement))
+        self.temperature = msg.temperature
+        if self.keep:
+            self.messages['samples'].append(msg)
+
+    def _on_prediction(self, msg: ModelPrediction) -> None:
+        now = time.time()
+        n = len(msg.displacement)
+        self.stats['prediction'].observe(msg.first_sequence, n)
+        t0 = conv.to_seconds(msg.header.stamp)
+        self.latency_first.append(now - t0)
+        self.latency_last.append(now - (t0 + (n - 1) * msg.sample_period))
+        if self.keep:
+            self.messages['prediction'].append(msg)
+
+    def _on_setpoints(self, msg: SetpointBatch) -> None:
+        self.stats['setpoints'].observe(msg.first_sequence, len(msg.displacement))
+        if self.keep:
+            self.messages['setpoints'].append(msg)
+
+    def _on_cycle(self, msg: CycleMetrics) -> None:
+        self.cycle_metrics.append(msg)
+
+    def _on_status(self, msg: RigStatus) -> None:
+        self.status = msg
+        if self.keep:
+            self.messages['status'].append(msg)
+
+    def _on_parameters(self, msg: ModelParameters) -> None:
+        self.model_parameters = msg
+        if self.keep:
+            self.messages['model_parameters'].append(msg)
+
+    def _on_program(self, msg: String) -> None:
+        self.program_yaml = msg.data
+
+    # -- clients --------------------------------------------------------------------------------------------------
+    def send_program(self, program_yaml: str = '', program_path: str = '', amplitude_control: bool = True):
+        """Send a RunProgram goal; returns the goal-handle future (feedback lands in ``self.feedback``)."""
+        goal = RunProgram.Goal(program_path=program_path, program_yaml=program_yaml,
+                               amplitude_control=amplitude_control)
+        return self.action.send_goal_async(goal, feedback_callback=lambda m: self.feedback.append(m.feedback))
+
+    def recorder(self, command: int, path: str = ''):
+        """Call the recorder's ~/control (RecorderControl.Request.START/STOP/SPLIT/SNAPSHOT); returns a future."""
+        return self.recorder_control.call_async(RecorderControl.Request(command=command, path=path))
+
+    def recorder_subscribed(self, *names: str) -> bool:
+        """True when the recorder node subscribes to every one of the given topics."""
+        for name in names:
+            infos = self.get_subscriptions_info_by_topic(self.resolve_topic_name(name))
+            if not any(i.node_name == 'recorder' for i in infos):
+                return False
+        return True
+
+    # -- reporting --------------------------------------------------------------------------------------------------
+    def latency_summary(self) -> dict:
+        out = {}
+        for key, values in (('last_sample', self.latency_last), ('first_sample', self.latency_first)):
+            v = np.asarray(values[:])
+            if v.size:
+                out[key] = {'median_ms': float(np.median(v) * 1e3), 'p99_ms': float(np.percentile(v, 99) * 1e3),
+                            'max_ms': float(v.max() * 1e3), 'count': int(v.size)}
+        return out
