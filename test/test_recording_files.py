@@ -277,7 +277,12 @@ def test_reader_on_a_plain_ros2_profile_file(tmp_path):
         w = Ros2Writer(f)
         schemas = {t: w.register_msgdef(t, full_definition(t).replace('MSG: std_msgs/Header',
                                                                       'MSG: std_msgs/msg/Header'))
-                   for t in (BATCH_T, 'msg_defs/msg/ModelPrediction', 'msg_defs/msg/SetpointBatch')}
+                   for t in (BATCH_T, 'msg_defs/msg/ModelPrediction', 'msg_defs/msg/SetpointBatch',
+                             'std_msgs/msg/String', 'msg_defs/msg/ModelParameters')}
+        w.write_message('/program', schemas['std_msgs/msg/String'], {'data': 'blocks: []'}, 10**9)
+        w.write_message('/model_parameters', schemas['msg_defs/msg/ModelParameters'], {
+            'model_name': 'seed000', 'parameter_set': 'seed000_20C', 'temperature': 20.0,
+            'names': ['k0', 'alpha'], 'values': [1e6, 0.4]}, 10**9)
         for k in range(10):
             t = 10**9 + k * 20_000_000
             b = batch(k)
@@ -294,7 +299,10 @@ def test_reader_on_a_plain_ros2_profile_file(tmp_path):
         w.add_metadata('rosbag2', {'serialized_metadata': 'version: 9'})
         w.finish()
     r = load_recording(path)
-    assert r.metadata == {} and r.closing == [] and r.other_metadata['rosbag2']
+    assert r.closing == [] and r.other_metadata['rosbag2']
+    # no rubber_rig record: what fitting needs comes from the latched topics
+    assert r.metadata == {'test_program': 'blocks: []', 'model': 'seed000', 'parameter_set': 'seed000_20C',
+                          'model_temperature': 20.0, 'model_parameters': {'k0': 1e6, 'alpha': 0.4}}
     assert len(r) == 200 and r.samples_lost == 0
     force = np.concatenate([batch(k)['force'] for k in range(10)])
     np.testing.assert_array_equal(r.force, force)

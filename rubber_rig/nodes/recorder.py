@@ -30,6 +30,7 @@ from rubber_rig.nodes.params import declare
 from rubber_rig.recording import Recorder, RecordingError
 from rubber_rig.recording.qos import qos_entry
 
+UNSUPPORTED_SEQUENCE = 2**63   # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED is UINT64_MAX
 IGNORED_TOPICS = ('/rosout', '/parameter_events')
 METADATA_FIELDS = {  # parameter metadata.<name> -> description (all strings; YAML/JSON where structured)
     'specimen': 'specimen id / description',
@@ -161,8 +162,10 @@ class RecorderNode(Node):
 
         def on_message(data, info):
             log_ns = info.get('received_timestamp') or clock.now().nanoseconds
-            write(topic, type_name, data, log_ns, info.get('source_timestamp') or log_ns,
-                  info.get('publication_sequence_number'))
+            seq = info.get('publication_sequence_number')
+            if seq is None or seq >= UNSUPPORTED_SEQUENCE:   # rmw without sequence numbers
+                seq = None                                    # -> the core counts per channel
+            write(topic, type_name, data, log_ns, info.get('source_timestamp') or log_ns, seq)
         return on_message
 
     # -- control -----------------------------------------------------------------------------

@@ -135,7 +135,25 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
             rec.messages.setdefault(topic, []).append((log_time, dec.decode(schema, data, topic)))
     _fill_samples(rec, samples, sample_topic)
     _join(rec, predictions, setpoints)
+    _metadata_from_topics(rec)
     return rec
+
+
+def _metadata_from_topics(rec: Recording):
+    """Fill what the metadata record lacks (e.g. `ros2 bag record` files) from latched topics: the
+    program YAML (std_msgs/String on ``program``) and the model parameters (ModelParameters)."""
+    for topic, msgs in rec.messages.items():
+        info = rec.topics[topic]
+        last = msgs[-1][1] if msgs else None
+        if last is None:
+            continue
+        if info['type'] == 'std_msgs/msg/String' and topic.rstrip('/').split('/')[-1] == 'program':
+            rec.metadata.setdefault('test_program', last.data)
+        elif info['type'] == 'msg_defs/msg/ModelParameters':
+            rec.metadata.setdefault('model', last.model_name)
+            rec.metadata.setdefault('parameter_set', last.parameter_set)
+            rec.metadata.setdefault('model_temperature', float(last.temperature))
+            rec.metadata.setdefault('model_parameters', dict(zip(last.names, map(float, last.values))))
 
 
 def _stamp_ns(msg) -> int:

@@ -24,6 +24,15 @@ def _stamp(ns: int) -> str:
     return datetime.fromtimestamp(ns / 1e9, tz=timezone.utc).strftime('%Y%m%d-%H%M%S')
 
 
+def _unique(base: Path, suffix: str = '') -> Path:
+    """base+suffix, or base-1+suffix, base-2+suffix, ... whichever does not exist yet."""
+    candidate, i = base.with_name(base.name + suffix), 0
+    while candidate.exists():
+        i += 1
+        candidate = base.with_name(f'{base.name}-{i}{suffix}')
+    return candidate
+
+
 class Recorder:
     def __init__(self, output_dir, *, metadata: dict = None, compression: str = 'zstd',
                  split_size_bytes: int = 0, split_duration_s: float = 0.0, chunk_size: int = 1 << 20,
@@ -88,7 +97,7 @@ class Recorder:
         if self.recording:
             return self.writer.path
         now = time.time_ns()
-        base = Path(path) if path else self.output_dir / f'rubber_rig_{_stamp(now)}'
+        base = Path(path) if path else _unique(self.output_dir / f'rubber_rig_{_stamp(now)}')
         if base.suffix == '.mcap':
             base = base.with_suffix('')
         try:
@@ -198,7 +207,7 @@ class Recorder:
         if not self.snapshot_duration_ns:
             raise RecordingError('snapshot_duration_s is 0: no snapshot buffer is kept')
         now = time.time_ns()
-        path = Path(path) if path else self.output_dir / f'snapshot_{_stamp(now)}.mcap'
+        path = Path(path) if path else _unique(self.output_dir / f'snapshot_{_stamp(now)}', '.mcap')
         try:
             path.parent.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
