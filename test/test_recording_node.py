@@ -129,6 +129,13 @@ def test_recorder_node_records_published_batches(context, tmp_path):
     # history and depth are not announced by DDS discovery: like rosbag2, only what the graph reports
     qos = parse_offered_qos(r.topics[f'{ns}/samples']['qos'])
     assert qos[0]['reliability'] == 'reliable' and qos[0]['durability'] == 'volatile'
+    # log time = reception, publish time = source timestamp, sequence = DDS publication sequence number
+    from mcap.reader import make_reader
+    with open(files[0], 'rb') as f:
+        raw = [(m.log_time, m.publish_time, m.sequence) for _, ch, m in make_reader(f).iter_messages()
+               if ch.topic == f'{ns}/samples']
+    assert all(0 < pub <= log < time.time_ns() for log, pub, _ in raw)
+    assert [s for _, _, s in raw] == list(range(raw[0][2], raw[0][2] + 100))
     # an independent reader (rosbags, types from the file) sees the same values
     with AnyReader([files[0]], default_typestore=get_typestore(Stores.ROS2_JAZZY)) as reader:
         conn = [c for c in reader.connections if c.topic == f'{ns}/samples']
@@ -136,20 +143,21 @@ def test_recorder_node_records_published_batches(context, tmp_path):
     np.testing.assert_array_equal(np.concatenate(forces), expected)
 
 
-def run_recorder_process(ns, out_dir):
+def run_recorder_process(ns, out_dir, extra=()):
     env = dict(os.environ, RMW_IMPLEMENTATION='rmw_fastrtps_cpp', ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     return subprocess.Popen(
         [sys.executable, '-m', 'rubber_rig.nodes.recorder', '--ros-args', '-r', f'__ns:={ns}',
          '-p', f'output_dir:={out_dir}', '-p', 'flush_period:=0.1', '-p', 'diagnostics_period:=0.1',
-         '-p', 'discovery_period:=0.1', '-p', 'metadata.specimen:=killed'],
+         '-p', 'discovery_period:=0.1', '-p', 'metadata.specimen:=killed', *extra],
         env=env, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
 
 
-@pytest.mark.parametrize('how', ['sigkill', 'sigint'])
+@pytest.mark.parametrize('how', ['sigkill', 'sigint', 'sigterm'])
 def test_recorder_process_killed_or_interrupted(context, tmp_path, how):
-    """SIGKILL: every flushed batch is recovered; SIGINT: clean shutdown, complete file."""
+    """SIGKILL: every flushed batch is recovered; SIGINT/SIGTERM: clean shutdown, complete file."""
     ns = f'/proc_{how}'
-    proc = run_recorder_process(ns, tmp_path)
+    # all topics of the namespace, or an explicit list (relative names resolve in the namespace)
+    proc = run_recorder_process(ns, tmp_path, () if how == 'sigkill' else ('-p', 'topics:=[samples]'))
     node = Node('fake_rig', namespace=ns, context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
@@ -168,7 +176,8 @@ def test_recorder_process_killed_or_interrupted(context, tmp_path, how):
             executor.spin_once(timeout_sec=0)
         # the recorder says all 50 are written and flushed to the OS
         assert spin_until(executor, lambda: stats.get('messages_flushed_current_file') == '50'), stats
-        proc.send_signal(signal.SIGKILL if how == 'sigkill' else signal.SIGINT)
+        sig = {'sigkill': signal.SIGKILL, 'sigint': signal.SIGINT, 'sigterm': signal.SIGTERM}[how]
+        proc.send_signal(sig)
         assert proc.wait(timeout=30) == (-signal.SIGKILL if how == 'sigkill' else 0), proc.stderr.read()
     finally:
         if proc.poll() is None:
@@ -184,4 +193,4 @@ def test_recorder_process_killed_or_interrupted(context, tmp_path, how):
     assert r.topics[f'{ns}/samples']['count'] == 50 and len(r) == 50 * BATCH and r.samples_lost == 0
     np.testing.assert_array_equal(r.force, np.concatenate([np.asarray(batch(k).force) for k in range(50)]))
     assert r.metadata['specimen'] == 'killed'
-    assert bool(r.closing) == (how == 'sigint')          # the closing report needs a clean stop
+    assert bool(r.closing) == (how != 'sigkill')         # the closing report needs a clean stop
