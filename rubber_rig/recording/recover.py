@@ -55,7 +55,7 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
     decoders = Decoders(path)
     header_seen = False
     try:
-        with open(target, 'wb') as out:
+        with open(target, 'wb' if in_place else 'xb') as out:
             writer = McapWriter(out, chunk_size=chunk_size, compression=CompressionType.ZSTD)
             schemas, channels = {}, {}        # ids in the source -> ids in the output
             schema_records, channel_types = {}, {}
@@ -99,6 +99,8 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
             writer.finish()
             out.flush()
             os.fsync(out.fileno())
+    except FileExistsError:
+        raise RecordingError(f'{target} exists already; choose another output with -o') from None
     except OSError as exc:
         target.unlink(missing_ok=True)
         raise RecordingError(f'cannot write {target}: {exc.strerror}') from None

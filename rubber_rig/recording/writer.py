@@ -174,8 +174,13 @@ class RecordingWriter:
         self.metadata.setdefault('start_time', datetime.fromtimestamp(
             self.start_time_ns / 1e9, tz=timezone.utc).isoformat())
         self.metadata.setdefault('start_time_ns', str(self.start_time_ns))
-        self._guard(self._mcap.start, 'ros2', f'rubber_rig {software_version()}')
-        self._guard(self._mcap.add_metadata, METADATA_NAME, encode_metadata(self.metadata))
+        try:
+            self._guard(self._mcap.start, 'ros2', f'rubber_rig {software_version()}')
+            self._guard(self._mcap.add_metadata, METADATA_NAME, encode_metadata(self.metadata))
+        except RecordingWriteError:
+            self._file.close()
+            self.closed = True
+            raise
 
     # -- state -------------------------------------------------------------------------------
     @property
@@ -251,6 +256,12 @@ class RecordingWriter:
             channel_id = self.add_channel(topic, msg_type, qos)
         except MessageDefinitionError:
             self.count_dropped('unknown_type')
+            raise
+        except RecordingWriteError:
+            self.count_dropped('write_error')
+            raise
+        except RecordingError:
+            self.count_dropped('type_conflict')
             raise
         if isinstance(msg, (bytes, bytearray, memoryview)):
             data = bytes(msg)
