@@ -61,7 +61,7 @@ def test_cycle_detector_counts_and_metrics_with_noise_and_any_chunking(noise, to
     x, force = kv_signal(f, x0, dt, n, mean=0.3e-3, noise=noise, seed=1, phase=-np.pi / 2)
     results = []
     for chunking in (list(range(1, 400, 37)), [n]):
-        det = CycleDetector(dt)
+        det = CycleDetector(dt, min_amplitude=0.2e-3)    # noise floor well above the noise
         out, i = [], 0
         sizes = iter(chunking * 100)
         while i < n:
@@ -71,9 +71,11 @@ def test_cycle_detector_counts_and_metrics_with_noise_and_any_chunking(noise, to
         results.append(out)
     a, b = results
     assert len(a) == len(b)
-    # starting at a trough, upward crossings at 250, 750, ... 9750: 19 complete cycles, none false
-    # (a noise-made boundary would also show up as a short or long period below)
-    assert len(a) == 19
+    # upward crossings at 125, 625, ... 9625; the detector arms on its first down-swing, so the
+    # crossing at 625 opens cycle 0: 18 complete cycles, none false (a noise-made boundary would
+    # also show up as a short or long period below)
+    assert len(a) == 18
+    assert a[0]['start'] == pytest.approx(625, abs=10)
     assert [r['start'] for r in a] == [r['start'] for r in b]
     for r in a:
         # displacement noise jitters the crossing sample (5 % noise: sigma ~ 4 samples at 500 per
@@ -85,6 +87,8 @@ def test_cycle_detector_counts_and_metrics_with_noise_and_any_chunking(noise, to
 def test_cycle_detector_ignores_noise_without_excitation():
     rng = np.random.default_rng(4)
     det = CycleDetector(1e-3)
-    x = np.concatenate([1e-3 * np.sin(2 * np.pi * np.arange(2000) * 1e-3), rng.normal(size=5000) * 1e-6])
+    x = np.concatenate([1e-3 * np.sin(2 * np.pi * np.arange(3000) * 1e-3), rng.normal(size=5000) * 1e-6])
     out = det.update(x, x * K)
-    assert len(out) == 1      # two sine cycles -> one complete; the tiny noise afterwards never re-arms
+    # crossings at 1000 and 2000 bound one cycle; the crossing at 3000 is never confirmed by noise
+    # (sin(2 pi n) rounds to just below zero: the first sample at or above the mean is n + 1)
+    assert [(r['start'], r['end']) for r in out] == [(1001, 2001)]

@@ -9,44 +9,40 @@ from .harmonic import harmonic_properties
 class CycleDetector:
     """Splits a stream into cycles at upward crossings of the running mean of x, with hysteresis.
 
-    A crossing counts only after x has been below ``mean - hysteresis * half_range`` since the last
-    one, so noise around the mean (smaller than that band) cannot create false cycles. The mean and
-    half range are those of the last complete cycle (before the first cycle: of all data so far).
+    Schmitt trigger around the mean m with half band h = hysteresis * half_range: x must first go
+    below m - h (arm), the boundary is the first sample at or above m after that, and it is only
+    confirmed once x reaches m + h without falling back below m. Noise smaller than the band cannot
+    create cycles. m and half_range are those of the last complete cycle (before the first one: of
+    all data so far); nothing arms and no cycle is reported while the half range is below
+    ``min_amplitude`` [m] - set it above the displacement noise, or noise at start-up (when the
+    levels come from little data) can open false cycles.
+
     ``update(x, force)`` takes chunks of any length and returns a list of dicts, one per completed
     cycle: the :class:`HarmonicProperties` fields plus ``index`` (cycle count), ``start`` and
-    ``end`` (absolute sample indices, end exclusive) and ``period`` [s].
-
-    dt [s]; hysteresis [-] fraction of the half range; min_cycle_samples, max_cycle_samples bound
-    a cycle's length (longer stretches are dropped and detection restarts).
+    ``end`` (absolute sample indices, end exclusive) and ``period`` [s]. Chunking does not change
+    the result.
     """
 
-    def __init__(self, dt: float, hysteresis: float = 0.2, min_cycle_samples: int = 8,
-                 max_cycle_samples: int = 2_000_000):
+    def __init__(self, dt: float, hysteresis: float = 0.2, min_amplitude: float = 0.0,
+                 min_cycle_samples: int = 8, max_cycle_samples: int = 2_000_000):
         if not dt > 0:
             raise ValueError(f'dt must be > 0 s, got {dt}')
         if not 0 < hysteresis < 1:
             raise ValueError(f'hysteresis must be in (0, 1), got {hysteresis}')
-        self.dt, self.hysteresis = float(dt), float(hysteresis)
+        self.dt, self.hysteresis, self.min_amplitude = float(dt), float(hysteresis), float(min_amplitude)
         self.min_cycle_samples, self.max_cycle_samples = int(min_cycle_samples), int(max_cycle_samples)
         self.reset()
 
     def reset(self):
-        self._n = 0                     # samples consumed
-        self._start = None              # absolute index of the current cycle's first sample
-        self._bx, self._bf = [], []     # current cycle's samples (chunks)
+        self._n = 0                      # samples consumed
+        self._start = None               # absolute index of the buffer's first sample
+        self._first = True               # no cycle started yet
+        self._bx, self._bf = [], []      # samples since _start
         self._armed = False
-        self._mean = None
-        self._half = None
-        self._lo, self._hi, self._sum, self._cnt = np.inf, -np.inf, 0.0, 0
+        self._candidate = None           # absolute index of the pending upward mean crossing
+        self._mean = self._half = None   # levels of the last complete cycle
+        self._lo, self._hi = np.inf, -np.inf
         self._index = 0
-        self._prev = None               # last sample (x, f) before the current chunk
-
-    def _levels(self):
-        if self._mean is not None:
-            return self._mean, self._half
-        if self._cnt == 0 or self._hi <= self._lo:
-            return None, None
-        return 0.5 * (self._hi + self._lo), 0.5 * (self._hi - self._lo)
 
     def update(self, x, force) -> list:
         x = np.asarray(x, dtype=float).ravel()
@@ -54,49 +50,56 @@ class CycleDetector:
         if x.shape != force.shape:
             raise ValueError(f'x and force chunks must have equal length, got {x.size} and {force.size}')
         out = []
-        for i in range(x.size):    # per-sample state machine; the arithmetic per cycle is vectorised
-            xi = float(x[i])
+        for i in range(x.size):     # per-sample state machine; the per-cycle arithmetic is vectorised
+            xi, idx = float(x[i]), self._n + i
+            if self._start is None and self._candidate is None:
+                self._start, self._bx, self._bf = idx, [], []   # nothing before a crossing is kept
+                self._first = True
+            self._bx.append(xi)
+            self._bf.append(float(force[i]))
+            if len(self._bx) > self.max_cycle_samples:          # lost the excitation: start over
+                self._start, self._bx, self._bf, self._first = idx + 1, [], [], True
             if self._mean is None:
                 self._lo, self._hi = min(self._lo, xi), max(self._hi, xi)
-                self._sum += xi
-                self._cnt += 1
-            mean, half = self._levels()
-            if mean is not None:
-                if xi < mean - self.hysteresis * half:
-                    self._armed = True
-                elif self._armed and xi >= mean:
-                    self._armed = False
-                    out.extend(self._boundary(self._n + i))
-            if self._start is not None:
-                self._bx.append(xi)
-                self._bf.append(float(force[i]))
-                if len(self._bx) > self.max_cycle_samples:
-                    self._start, self._bx, self._bf = None, [], []
+                m, half = 0.5 * (self._hi + self._lo), 0.5 * (self._hi - self._lo)
+            else:
+                m, half = self._mean, self._half
+            if not half > 0 or half < self.min_amplitude:
+                continue
+            band = self.hysteresis * half
+            if xi < m - band:
+                self._armed, self._candidate = True, None
+            elif self._armed:
+                if xi < m:
+                    self._candidate = None
+                elif self._candidate is None:
+                    self._candidate = idx
+                if self._candidate is not None and xi >= m + band:
+                    out.extend(self._boundary(self._candidate))
+                    self._armed, self._candidate = False, None
         self._n += x.size
         return out
 
-    def _boundary(self, index):
-        """Upward crossing at absolute sample ``index``: close the running cycle, start the next."""
+    def _boundary(self, at):
+        """Confirmed upward crossing at absolute sample ``at``: close the running cycle, start the next."""
         results = []
-        if self._start is not None and len(self._bx) >= self.min_cycle_samples:
-            cx = np.array(self._bx)
-            cf = np.array(self._bf)
-            n = cx.size
-            # close the loop with the crossing sample itself (it starts the next cycle)
-            results.append(self._metrics(cx, cf, n))
-            self._mean = float(cx.mean())
-            self._half = 0.5 * float(cx.max() - cx.min())
-        self._start = index
-        self._bx, self._bf = [], []
+        k = at - self._start
+        if self._first:              # the first crossing only starts the first cycle
+            self._bx, self._bf, self._start, self._first = self._bx[k:], self._bf[k:], at, False
+            return results
+        cx, cf = np.array(self._bx[:k]), np.array(self._bf[:k])
+        self._bx, self._bf = self._bx[k:], self._bf[k:]
+        start, self._start = self._start, at
+        if k >= self.min_cycle_samples:
+            half = 0.5 * float(cx.max() - cx.min())
+            if half >= self.min_amplitude:
+                # close the loop on the next cycle's first sample
+                xs = np.append(cx, self._bx[0])
+                fs = np.append(cf, self._bf[0])
+                props = harmonic_properties(xs, fs, self.dt, frequency=1.0 / (k * self.dt))
+                d = props.as_dict()
+                d.update(index=self._index, start=start, end=at, period=k * self.dt)
+                self._index += 1
+                results.append(d)
+                self._mean, self._half = float(cx.mean()), half
         return results
-
-    def _metrics(self, cx, cf, n):
-        # the cycle is samples [start, index); fold in the first sample of the next cycle when it
-        # arrives is not possible here, so evaluate over n samples with the loop closed on its start
-        xs = np.append(cx, cx[0])
-        fs = np.append(cf, cf[0])
-        props = harmonic_properties(xs, fs, self.dt, frequency=1.0 / (n * self.dt))
-        d = props.as_dict()
-        d.update(index=self._index, start=self._start, end=self._start + n, period=n * self.dt)
-        self._index += 1
-        return d
