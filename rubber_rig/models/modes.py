@@ -89,12 +89,34 @@ class ModeBank:
         self.h = float(h)
         self.a, self.b0, self.b1 = foh_coefficients(self.u, self.h)
         self.g_sum = float(self.g.sum())
+        m = self.g.size
+        # streaming: one mat-vec per sample on s = [z_1..z_M, x[n], x[n-1]] (fewer numpy calls)
+        self._mat = np.zeros((m, m + 2))
+        self._mat[:, :m] = np.diag(self.a)
+        self._mat[:, m] = self.b0
+        self._mat[:, m + 1] = self.b1
+        self._s = np.zeros(m + 2)
         self.reset()
+
+    @property
+    def z(self) -> np.ndarray:
+        return self._s[:self.g.size]
+
+    @z.setter
+    def z(self, value):
+        self._s[:self.g.size] = value
+
+    @property
+    def x_prev(self) -> float:
+        return float(self._s[-1])
+
+    @x_prev.setter
+    def x_prev(self, value):
+        self._s[-1] = value
 
     def reset(self, x0: float = 0.0):
         """Relaxed state at displacement x0 [m] (all modes in equilibrium)."""
-        self.z = np.full(self.g.shape, float(x0))
-        self.x_prev = float(x0)
+        self._s[:] = float(x0)
 
     def get_state(self):
         return (self.z.copy(), self.x_prev)
@@ -104,12 +126,12 @@ class ModeBank:
         self.x_prev = float(state[1])
 
     def step(self, x: float) -> float:
-        z = self.a * self.z
-        z += self.b0 * x
-        z += self.b1 * self.x_prev
-        self.z = z
-        self.x_prev = x
-        return self.g_sum * x - float(self.g @ z)
+        s = self._s
+        s[-2] = x
+        z = self._mat @ s
+        s[:-2] = z
+        s[-1] = x
+        return self.g_sum * x - float(self.g.dot(z))
 
     def run(self, x: np.ndarray) -> np.ndarray:
         """Viscous force [N] for displacements ``x`` [m] (shape (n,)), continuing from the current state."""
@@ -117,7 +139,7 @@ class ModeBank:
         if x.size == 0:
             return np.zeros(0)
         acc = np.zeros_like(x)
-        z_last = np.empty_like(self.z)
+        z_last = np.empty(self.g.size)
         for i in range(self.g.size):
             g, a, b0, b1 = self.g[i], self.a[i], self.b0[i], self.b1[i]
             # filter g*z directly (saves a multiply per sample); zi is the transposed-direct-form-II

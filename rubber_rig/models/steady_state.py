@@ -15,8 +15,9 @@ def _model_for(params):
     from .composite import ParallelModel, build_model
     if isinstance(params, ParallelModel):
         return params
-    # dt only matters for the time-domain schemes; the analytic forms are continuous
-    return build_model(params, dt=1e-3)
+    # the analytic forms are the continuous ones whatever the scheme: pick the cheapest to build
+    # (no sum-of-exponentials fit), since fitting code calls this in its inner loop
+    return build_model(params, dt=1e-3, scheme={'name': 'gl', 'n_terms': 1})
 
 
 def steady_state_properties(params, frequency, amplitude) -> dict:
