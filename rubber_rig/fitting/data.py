@@ -36,7 +36,9 @@ def _arr(v):
     if v is None:
         return None
     a = np.asarray(v, float)
-    return a if a.size else None
+    if not a.size or not np.isfinite(a).any():
+        return None          # an absent transducer: no samples, or only NaN
+    return a
 
 
 def _program_blocks(program):
