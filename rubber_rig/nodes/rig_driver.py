@@ -18,6 +18,8 @@ moves data between it and ROS.
 """
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import rclpy
 import yaml
@@ -66,6 +68,9 @@ class RigDriverNode(LifecycleNode):
                 'separate process on that bus')
         declare(self, 'sample_rate', 1000.0, 'rig sample rate', range=(10.0, 20000.0), units='Hz')
         self.batch_size = declare(self, 'batch_size', 50, 'samples per RigSampleBatch message', range=(1, 10000))
+        self.max_batch_delay = declare(self, 'max_batch_delay', 0.1, 'a partial batch is published when its '
+                                       'first sample has waited this long (the stream paused or ended)',
+                                       range=(0.001, 10.0), units='s')
         declare(self, 'poll_period', 0.005, 'how often the bus is read', range=(0.0005, 0.5), units='s')
         declare(self, 'watchdog_timeout', 0.1, 'feedback/heartbeat silence that faults the rig',
                 range=(0.005, 10.0), units='s')
@@ -97,6 +102,7 @@ class RigDriverNode(LifecycleNode):
         self.pub_samples = None
         self._buffer: list = []
         self._buffered = 0
+        self._buffer_since = 0.0
         self._last_status = None
         self._refused_logged = False
         self._queued_end = None            # sequence after the last setpoint queued on the bus
@@ -231,10 +237,14 @@ class RigDriverNode(LifecycleNode):
             block = driver.poll()
             if block is None:
                 break
+            if not self._buffer:
+                self._buffer_since = time.monotonic()
             self._buffer.append(block)
             self._buffered += len(block.displacement)
             while self._buffered >= self.batch_size:
                 self._publish_batch(self.batch_size)
+        if self._buffered and time.monotonic() - self._buffer_since > self.max_batch_delay:
+            self._publish_batch(self._buffered)   # the stream paused (program end, abort ramp done)
         status = driver.status if driver is not None else None
         if status is not None and conv.state_code(status.state) != getattr(self._last_status, 'state', None):
             self.publish_status()   # state changes are published at once, not at the next status tick
@@ -251,6 +261,7 @@ class RigDriverNode(LifecycleNode):
         self.pub_samples.publish(msg)
         rest = len(cat['displacement']) - n
         self._buffered = rest
+        self._buffer_since = time.monotonic()
         if rest:   # keep the remainder as one block
             self._buffer = [_Rest(first + n, blocks[0].t0 + n * blocks[0].sample_period, blocks[0].sample_period,
                                   cat['displacement'][n:], cat['force'][n:], cat['setpoint'][n:],

@@ -1,0 +1,109 @@
+"""Faults, bad input and the lifecycle of the node suite (real rclpy in-process, simulated rig)."""
+import math
+
+import numpy as np
+import pytest
+
+from msg_defs.msg import RigStatus
+from rclpy.parameter import Parameter
+
+from rubber_rig.nodes.element_model import ElementModelNode
+from rubber_rig.nodes.excitation import ExcitationNode
+from rubber_rig.nodes.launcher import InProcessLauncher
+from rubber_rig.nodes.params import ParameterError
+from rubber_rig.nodes.rig_driver import RigDriverNode
+from test_nodes import CONFIG, RATE, by_sequence, domain_id, run_program, start_suite
+
+LONG_SINE = """
+name: long_sine
+blocks:
+  - {name: s, waveform: sine, frequency: 5 Hz, amplitude: 1 mm, cycles: 30, taper_cycles: 1}
+"""
+
+
+def test_injected_fault_drives_the_driver_to_fault_with_the_safe_ramp(tmp_path):
+    # the displacement transducer freezes 1.5 s into the run (rig time) while the command keeps moving
+    faults = "[{type: stuck_sensor, sensor: displacement, start: 1.5}]"
+    launcher, nodes = start_suite(tmp_path, driver={'sim.faults': faults}, recorder=False)
+    with launcher:
+        mon = nodes['monitor']
+        result = run_program(launcher, mon, LONG_SINE)
+        assert not result.success
+        assert 'fault' in result.message and 'sensor' in result.message, result.message
+        assert launcher.wait_for(lambda: mon.status.state == RigStatus.STATE_FAULT, 30.0), mon.status.state_name
+        assert mon.status.faults & RigStatus.FAULT_SENSOR
+        assert any('stuck' in m for m in mon.status.fault_messages)
+        # the controller ramps from wherever the sine was to rest: no step, velocity bounded, ends at zero
+        assert launcher.wait_for(lambda: mon.stats['samples'].samples and abs(
+            mon.messages['samples'][-1].setpoint[-1]) < 1e-7, 30.0), 'no ramp to rest'
+        seq, u = by_sequence(mon.messages['samples'], 'setpoint')
+        fault_at = int(1.5 * RATE)
+        assert seq[-1] > fault_at + 50
+        du = np.abs(np.diff(u))
+        sine_step = 2 * math.pi * 5.0 * 1e-3 / RATE          # largest per-sample step of the 5 Hz, 1 mm sine
+        assert du.max() <= 1.05 * sine_step + 1e-7, 'the command stepped'
+        ramp = u[seq > fault_at]
+        assert abs(ramp[-1]) < 1e-7
+        # after the fault no further program setpoints are applied: the end is the ramp's, not the sine's
+        assert np.all(np.abs(u[-100:]) < 1e-6)
+        # and nothing is moved by a new program until the fault is reset
+        refused = run_program(launcher, mon, LONG_SINE)
+        assert not refused.success and 'fault' in refused.message
+
+
+def test_bad_parameters_are_refused_with_errors_naming_them():
+    with InProcessLauncher([CONFIG], domain_id=domain_id()) as launcher:
+        model = launcher.start(ElementModelNode)
+        result = model.set_parameters([Parameter('values.alpha', value=1.5)])[0]
+        assert not result.successful
+        assert result.reason.startswith('values.alpha:') and '(0, 1]' in result.reason
+        result = model.set_parameters([Parameter('parameter_set', value='seed000_99C')])[0]
+        assert not result.successful and result.reason.startswith('parameter_set:') and 'seed000_20C' in result.reason
+        result = model.set_parameters([Parameter('temperature', value=35.0)])[0]
+        assert not result.successful and 'temperature' in result.reason
+        assert model.get_parameter('values.alpha').value == pytest.approx(0.659)   # unchanged
+        assert model.predictor.params.alpha == pytest.approx(0.659)
+
+        with pytest.raises(ParameterError, match="'limits.displacement_min'"):
+            launcher.start(RigDriverNode, {'autostart': False, 'limits.displacement_min': 0.01})
+        with pytest.raises(ParameterError, match="'sample_rate'.*out of range"):
+            launcher.start(RigDriverNode, {'autostart': False, 'sample_rate': 50000.0})
+        with pytest.raises(ParameterError, match="'sim.faults'"):
+            launcher.start(RigDriverNode, {'autostart': False, 'sim.faults': '[{type: meteor}]'})
+        with pytest.raises(ParameterError, match="'program'.*no_such_program"):
+            launcher.start(ExcitationNode, {'program': 'no_such_program'})
+        with pytest.raises(ParameterError, match="'values.k_inf'"):
+            launcher.start(ElementModelNode, {'source': 'values', 'values.k_inf': 1.0e6})
+
+
+def test_bad_programs_are_refused_before_anything_moves(tmp_path):
+    launcher, nodes = start_suite(tmp_path, recorder=False)
+    with launcher:
+        mon = nodes['monitor']
+        bad_field = "blocks:\n  - {name: x, waveform: sine, frequency: 5 Hz, amplitude: 1 mm, cycles: 2.5}\n"
+        result = run_program(launcher, mon, bad_field)
+        assert not result.success and "block 0 'x'" in result.message and "'cycles'" in result.message
+        too_big = "blocks:\n  - {name: big, waveform: sine, frequency: 1 Hz, amplitude: 8 mm, cycles: 2}\n"
+        result = run_program(launcher, mon, too_big)
+        assert not result.success and 'limits' in result.message
+        launcher.wait_for(lambda: False, 0.3)
+        assert mon.stats['setpoints'].messages == 0 and mon.stats['samples'].samples == 0
+
+
+def test_rig_driver_lifecycle(tmp_path):
+    with InProcessLauncher([CONFIG], domain_id=domain_id()) as launcher:
+        driver = launcher.start(RigDriverNode, {'autostart': False, 'paced': False})
+        assert driver.lifecycle_state == 'unconfigured' and driver.rig is None
+        driver.trigger_configure()
+        assert driver.lifecycle_state == 'inactive' and driver.rig is not None
+        driver.trigger_activate()
+        assert driver.lifecycle_state == 'active'
+        driver.trigger_deactivate()
+        assert driver.lifecycle_state == 'inactive'
+        driver.trigger_cleanup()
+        assert driver.lifecycle_state == 'unconfigured' and driver.rig is None
+        # a bus that cannot be opened: configure fails and the node stays unconfigured
+        bad = launcher.start(RigDriverNode, {'autostart': False, 'backend': 'socketcan', 'can.channel': 'nocan7'},
+                             node_name='rig_driver_bad')
+        bad.trigger_configure()
+        assert bad.lifecycle_state == 'unconfigured' and bad.rig is None
