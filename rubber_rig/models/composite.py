@@ -59,19 +59,23 @@ class ParallelModel:
         if x.ndim != 1:
             raise ValueError(f'x must be a 1-D array of displacements [m], got shape {x.shape}')
         n = x.size
-        branches = np.empty((len(self._last), n))
+        nb = len(self._last)
+        total = np.empty(n)
         # blocks small enough for the per-mode temporaries to stay in cache (about 2x faster on
-        # long records); every element continues its own state across blocks
+        # long records); every element continues its own state across blocks. Without
+        # return_branches only a block-sized scratch array is needed.
+        branches = np.empty((nb, n)) if return_branches else np.empty((nb, min(n, _BLOCK)))
         for s in range(0, n, _BLOCK):
             xb = x[s:s + _BLOCK]
+            cols = slice(s, s + xb.size) if return_branches else slice(0, xb.size)
             i = 0
             for e in self.elements:
                 r = e.run(xb)
-                branches[i:i + r.shape[0], s:s + xb.size] = r
+                branches[i:i + r.shape[0], cols] = r
                 i += r.shape[0]
-        if n:
-            self._last = branches[:, -1].tolist()
-        total = branches.sum(axis=0)
+            branches[:, cols].sum(axis=0, out=total[s:s + xb.size])
+            if s + xb.size == n:
+                self._last = branches[:, cols][:, -1].tolist()
         return (total, branches) if return_branches else total
 
     def reset(self, x0: float = 0.0):
