@@ -82,7 +82,10 @@ def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, ab
     stopped, message, quiet_since = False, '', None
     while True:
         # stream ahead of the measurement; in fast mode this is what lets the simulated rig advance
-        while not stopped and not runner.finished and queued - received < ahead:
+        # the controller's own last consumed sequence also counts: a burst of lost feedback frames must not
+        # starve a fast-mode rig of setpoints (it would never send the frame that reveals the gap)
+        done = max(received, drv.controller_sequence + 1)
+        while not stopped and not runner.finished and queued - done < ahead:
             if abort_seq is not None and queued >= abort_seq and not runner.aborted:
                 runner.abort('abort_after')
             x = runner.next_setpoints(chunk)
@@ -109,10 +112,12 @@ def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, ab
             message = '; '.join(st.fault_messages) or 'stopped'
             runner.abort(message)
         if stopped:
-            # wait for the controller's safe ramp to finish and its samples to arrive
-            if st.controller_state in ('idle', 'fault') and not progressed:
+            # wait for the controller's safe ramp to finish and its samples to arrive (a silent controller
+            # never reports idle: then a second without samples ends the wait)
+            if not progressed:
                 quiet_since = quiet_since or time.monotonic()
-                if time.monotonic() - quiet_since > 0.2:
+                quiet = time.monotonic() - quiet_since
+                if quiet > 1.0 or quiet > 0.2 and st.controller_state in ('idle', 'fault'):
                     break
             else:
                 quiet_since = None

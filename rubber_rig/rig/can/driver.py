@@ -289,6 +289,11 @@ class RigDriver:
         if streaming and not self._aborting and now - self._last_fb_wall > self._wd_wall:
             self._fault(FAULT_WATCHDOG, f'no feedback for {now - self._last_fb_wall:.3f} s with setpoints queued')
             return
+        if self._expected is not None and not self._aborting:
+            lag = (self.controller_sequence + 1 - self._expected) / self.fs
+            if lag > cfg.watchdog_timeout:
+                self._fault(FAULT_WATCHDOG, f'feedback {lag:.3f} s behind the controller (stalled or delayed)')
+                return
         if self._hb_sample is not None and self._expected is not None:
             silent = (self._expected - self._hb_sample) / self.fs
             if silent > cfg.watchdog_timeout:

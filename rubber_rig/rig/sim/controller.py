@@ -27,14 +27,16 @@ class SimController:
     def __init__(self, bus, sample_rate: float, options, paced: bool, protocol: Protocol = None):
         self.bus, self.fs, self.opt, self.paced = bus, float(sample_rate), options, paced
         self.proto = protocol or Protocol()
-        rng = np.random.default_rng(options.seed)
+        # one stream per noise source, so idle-time draws (temperature) never shift the sensor noise and paced
+        # and fast runs stay identical
+        rng_x, rng_f, rng_t = (np.random.default_rng([options.seed, k]) for k in range(3))
         self.actuator = Actuator(options.actuator_frequency, options.actuator_damping,
                                  options.actuator_velocity_max, self.fs)
         self.specimen = build_specimen(options.specimen, 1.0 / self.fs)
         self.disp_sensor = Sensor(options.displacement_noise, options.displacement_offset,
-                                  options.displacement_resolution, rng)
-        self.force_sensor = Sensor(options.force_noise, options.force_offset, options.force_resolution, rng)
-        self.temp_rng = rng
+                                  options.displacement_resolution, rng_x)
+        self.force_sensor = Sensor(options.force_noise, options.force_offset, options.force_resolution, rng_f)
+        self.temp_rng = rng_t
         self.faults = FaultInjector(options.faults, self.fs, options.seed)
         self.state, self.fault_bits = 'idle', 0
         self.next_seq = 0                 # full sequence of the next tick
@@ -190,6 +192,9 @@ class SimController:
         if self.state == 'ramping_down' and self.ramp.done:
             self.state = 'fault' if self.fault_bits else 'idle'
             self.buffer.clear()
+            for _, m in self._held:   # delayed frames still go out once the rig stops ticking
+                self.bus.send(m)
+            self._held = []
             self._housekeeping(force=True)
         else:
             self._housekeeping()

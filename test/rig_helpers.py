@@ -1,0 +1,25 @@
+"""Shared helpers of the rig tests (not a test module)."""
+import numpy as np
+
+from rubber_rig.rig.config import SimOptions
+from rubber_rig.rig.sim.plant import Actuator
+from rubber_rig.rig.sim.specimen import build_specimen
+
+FAST = {'paced': False}
+
+
+def expected_plant(result, options: SimOptions = None):
+    """Noise-free actuator position [m] and specimen force [N] for the applied commands of a RunResult
+    (the run must have no lost samples)."""
+    opt = options or SimOptions()
+    act = Actuator(opt.actuator_frequency, opt.actuator_damping, opt.actuator_velocity_max, result.sample_rate)
+    x = np.array([act.step(u) for u in result.setpoint])
+    model = build_specimen(opt.specimen, 1.0 / result.sample_rate)
+    f = np.array([model.step(float(v)) for v in x])
+    return x, f
+
+
+def contiguous_diffs(seq, values):
+    """np.diff of values only between consecutive sequence numbers (gaps from lost frames skipped)."""
+    ok = np.diff(seq) == 1
+    return np.diff(values)[ok]
