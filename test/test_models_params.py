@@ -57,15 +57,16 @@ def test_names_and_dict():
 BAD = [('alpha', 0.0), ('alpha', 1.2), ('alpha', -0.5), ('k0', 0.0), ('k0', -1e6), ('tau', 0.0),
        ('tau', -1.0), ('x2', 0.0), ('x2', -1e-3), ('f_fmax', 0.0), ('f_fmax', -5.0),
        ('k0', float('nan')), ('tau', float('inf')), ('alpha', float('nan')), ('k_inf', float('inf')),
-       ('x2', float('nan'))]
+       ('x2', float('nan')), ('tau', 'abc')]
 
 
 @pytest.mark.parametrize('field,value', BAD)
 def test_bad_parameters_rejected_naming_the_field(field, value):
     d = load_parameter_set('seed000_20C').as_dict()
     d[field] = value
-    with pytest.raises(ValueError, match=field):
-        Seed000Params(**d).validate()
+    if not isinstance(value, str):
+        with pytest.raises(ValueError, match=field):
+            Seed000Params(**d).validate()
     with pytest.raises(ValueError, match=field):
         build_model({'model': 'seed000', 'values': d}, dt=1e-3)
 

@@ -72,7 +72,7 @@ class _Params:
             raise ValueError(f'unknown parameter(s) for {cls.__name__}: {sorted(unknown)}')
         if missing:
             raise ValueError(f'missing parameter(s) for {cls.__name__}: {sorted(missing)}')
-        p = cls(**{k: float(v) for k, v in values.items()})
+        p = cls(**{k: _check_finite(k, v) for k, v in values.items()})
         p.validate()
         return p
 
