@@ -159,7 +159,10 @@ class _ModeElement:
 
     def run(self, x):
         x = np.asarray(x, dtype=float)
-        return np.vstack([self.k_static * x, self.bank.run(x)])
+        out = np.empty((2, x.size))
+        np.multiply(x, self.k_static, out=out[0])
+        self.bank.run(x, out=out[1])
+        return out
 
     def discrete_complex_stiffness(self, frequency):
         """Exact steady-state complex stiffness [N/m] of the discrete-time scheme at ``frequency`` [Hz]."""

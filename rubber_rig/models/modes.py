@@ -133,21 +133,27 @@ class ModeBank:
         s[-1] = x
         return self.g_sum * x - float(self.g.dot(z))
 
-    def run(self, x: np.ndarray) -> np.ndarray:
-        """Viscous force [N] for displacements ``x`` [m] (shape (n,)), continuing from the current state."""
+    def run(self, x: np.ndarray, out: np.ndarray = None) -> np.ndarray:
+        """Viscous force [N] for displacements ``x`` [m] (shape (n,)), continuing from the current state.
+
+        ``out``: optional array of shape (n,) to write the result into.
+        """
         x = np.asarray(x, dtype=float)
+        if out is None:
+            out = np.empty_like(x)
         if x.size == 0:
-            return np.zeros(0)
-        acc = np.zeros_like(x)
+            return out
+        np.multiply(x, self.g_sum, out=out)
         z_last = np.empty(self.g.size)
+        x_prev = self.x_prev
         for i in range(self.g.size):
             g, a, b0, b1 = self.g[i], self.a[i], self.b0[i], self.b1[i]
             # filter g*z directly (saves a multiply per sample); zi is the transposed-direct-form-II
             # state that reproduces z[n-1] and x[n-1] of the recursion
-            zi = [g * (a * self.z[i] + b1 * self.x_prev)]
+            zi = [g * (a * self.z[i] + b1 * x_prev)]
             gz, _ = lfilter([g * b0, g * b1], [1.0, -a], x, zi=zi)
-            acc += gz
+            out -= gz
             z_last[i] = gz[-1] / g
         self.z = z_last
         self.x_prev = float(x[-1])
-        return self.g_sum * x - acc
+        return out
