@@ -9,7 +9,7 @@ from rubber_rig.excitation import Program, load_program
 from rubber_rig.rig import RigConfig, open_rig, run_program
 from rubber_rig.rig.config import SimOptions
 
-from rig_helpers import FAST, expected_plant
+from test_rig_support import FAST, expected_plant
 
 WAVES = {
     'sine': '{waveform: sine, frequency: 8 Hz, amplitude: 0.5 mm, cycles: 4}',

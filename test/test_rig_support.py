@@ -23,3 +23,10 @@ def contiguous_diffs(seq, values):
     """np.diff of values only between consecutive sequence numbers (gaps from lost frames skipped)."""
     ok = np.diff(seq) == 1
     return np.diff(values)[ok]
+
+
+def contiguous_second_diffs(seq, values):
+    """Second differences of values only over three consecutive sequence numbers."""
+    seq = np.asarray(seq)
+    ok = (seq[2:] - seq[:-2]) == 2
+    return (values[2:] - 2 * values[1:-1] + values[:-2])[ok]

@@ -1,0 +1,112 @@
+"""Fault injection on the simulated rig: each fault is detected by the driver and ends in the safe ramp
+(the controller's applied command moves smoothly back to rest). Limits and bad frames too."""
+import numpy as np
+import pytest
+
+from rubber_rig.excitation import Program
+from rubber_rig.rig import (FAULT_BUS, FAULT_DISPLACEMENT_LIMIT, FAULT_FORCE_LIMIT, FAULT_SENSOR,
+                            FAULT_VELOCITY_LIMIT, FAULT_WATCHDOG, open_rig, run_program)
+
+from test_rig_support import FAST, contiguous_diffs, contiguous_second_diffs
+
+PROG = Program.from_yaml_text('name: f\nblocks:\n  - {waveform: sine, frequency: 5 Hz, amplitude: 1 mm, '
+                              'cycles: 10}\n')
+RAMP_V = 0.05          # [m/s] controller-side abort ramp velocity limit
+PROGRAM_V = 2 * np.pi * 5 * 1e-3
+
+
+def assert_safe_ramp(r, t_fault):
+    """After the fault the applied command decelerates without a step and settles at rest (0 m)."""
+    du = contiguous_diffs(r.sequence, r.setpoint) * r.sample_rate
+    assert np.max(np.abs(du)) <= PROGRAM_V * 1.001                      # never faster than the program
+    ddu = contiguous_second_diffs(r.sequence, r.setpoint) * r.sample_rate ** 2
+    assert np.max(np.abs(ddu)) < 1.05 * max(20.0, (2 * np.pi * 5) ** 2 * 1e-3)   # no velocity jump
+    after = r.time > t_fault + 0.05
+    assert np.any(after)
+    assert r.setpoint[-1] == 0.0 and abs(r.displacement[-1]) < 5e-6
+    assert np.all(r.block_index[-50:] == -1) or not r.completed
+
+
+FAULTS = {
+    # name: (fault specs, expected driver fault bit, message fragment)
+    'drop_burst': ([{'type': 'drop', 'start': 0.5, 'duration': 0.05}], FAULT_BUS, 'bad frames'),
+    'corrupt': ([{'type': 'corrupt', 'start': 0.5, 'duration': 0.1}], FAULT_BUS, 'bad frames'),
+    'duplicate': ([{'type': 'duplicate', 'start': 0.5, 'duration': 0.1}], FAULT_BUS, 'bad frames'),
+    'delay': ([{'type': 'delay', 'start': 0.5, 'delay': 0.3}], FAULT_WATCHDOG, 'behind the controller'),
+    'stuck_displacement': ([{'type': 'stuck_sensor', 'start': 0.5, 'sensor': 'displacement'}], FAULT_SENSOR,
+                           'displacement sensor stuck'),
+    'stuck_force': ([{'type': 'stuck_sensor', 'start': 0.5, 'sensor': 'force'}], FAULT_SENSOR,
+                    'force sensor stuck'),
+    'silent_controller': ([{'type': 'silent_controller', 'start': 0.5}], FAULT_WATCHDOG, 'heartbeat silent'),
+}
+
+
+@pytest.mark.parametrize('name', sorted(FAULTS))
+def test_fault_is_detected_and_ends_in_safe_ramp(name):
+    faults, bit, text = FAULTS[name]
+    r = run_program(PROG, dict(FAST, sim={'faults': faults}))
+    st = r.final_status
+    assert not r.completed
+    assert st.faults & bit, (name, st.faults, st.fault_messages)
+    assert any(text in m for m in st.fault_messages), st.fault_messages
+    assert st.state == 'fault'
+    assert r.blocks[0].completed is False
+    # detected promptly: the ramp starts within 0.2 s of rig time after the fault
+    ramp = np.nonzero((r.block_index == -1) & (r.time > 0.5))[0]
+    assert ramp.size and r.time[ramp[0]] < 0.5 + 0.2
+    if name == 'stuck_displacement':   # the stuck transducer cannot show the ramp; the applied command does
+        assert r.setpoint[-1] == 0.0
+        return
+    assert_safe_ramp(r, 0.5)
+
+
+def test_counters_for_occasional_bad_frames_without_fault():
+    faults = [{'type': 'drop', 'probability': 0.005, 'frames': ['Feedback']},
+              {'type': 'corrupt', 'probability': 0.002, 'frames': ['Feedback', 'Temperature']},
+              {'type': 'duplicate', 'probability': 0.003}]
+    r = run_program(PROG, dict(FAST, sim={'faults': faults}))
+    st = r.final_status
+    assert r.completed, r.message
+    assert st.frames_lost > 0 and st.frames_malformed > 0 and st.frames_late > 0
+    # every missing sample is accounted for as lost (a corrupted feedback frame is also a lost sample)
+    n = PROG.n_samples(1000.0)
+    assert st.frames_lost == n - np.count_nonzero(r.sequence < n)
+    assert r.blocks[0].achieved_amplitude == pytest.approx(1e-3, rel=0.01)
+
+
+def test_force_limit_trips_and_ramps():
+    r = run_program(PROG, dict(FAST, limits={'force_max': 8e3}))
+    st = r.final_status
+    assert st.faults & FAULT_FORCE_LIMIT and 'force' in st.fault_messages[0]
+    assert_safe_ramp(r, 0.0)
+
+
+def test_host_silence_makes_the_controller_ramp_on_its_own():
+    with open_rig({'paced': False, 'sim': {'host_timeout': 0.2}}) as rig:
+        assert rig.wait_ready(5.0)
+        drv, sim = rig.driver, rig.sim
+        t = np.arange(1500) / 1000.0
+        x = 1e-3 * np.sin(2 * np.pi * 5 * t) * np.minimum(t / 0.2, 1.0) ** 2
+        # stream setpoints without the driver's heartbeats: a dead host, as the controller sees it
+        for i, v in enumerate(x):
+            drv.bus.send(drv.proto.encode('Setpoint', {'SP_Sequence': i, 'SP_Displacement': float(v)}))
+        for _ in range(200000):
+            drv.poll()
+            if drv.controller_state == 'fault':
+                break
+        assert sim.fault_bits & FAULT_WATCHDOG and drv.status.state == 'fault'
+        assert abs(sim.u) == 0.0 and sim.ramp.done
+
+
+def test_setpoints_outside_limits_are_refused_before_sending():
+    with open_rig({'paced': False, 'limits': {'displacement_max': 1e-3, 'velocity_max': 0.1}}) as rig:
+        assert rig.wait_ready(5.0)
+        drv = rig.driver
+        assert not drv.queue_setpoints(0, np.array([0.0, 0.5e-3, 1.5e-3]))
+        st = drv.status
+        assert st.faults & FAULT_DISPLACEMENT_LIMIT and st.setpoints_sent == 0
+        assert not drv.queue_setpoints(0, np.zeros(3))          # refused while faulted
+        drv.reset()
+        assert drv.status.faults == 0
+        assert not drv.queue_setpoints(0, np.array([0.0, 0.2e-3]))   # 0.2 m/s step
+        assert drv.status.faults & FAULT_VELOCITY_LIMIT and drv.status.setpoints_sent == 0

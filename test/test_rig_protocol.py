@@ -1,0 +1,129 @@
+"""The DBC protocol (cantools both ways), CRC and sequence unwrapping, the driver's frame accounting on a real
+python-can virtual bus, and configuration errors that name the field with nothing sent."""
+import can
+import cantools
+import numpy as np
+import pytest
+
+from rubber_rig.excitation import LimitError, Program, ProgramError
+from rubber_rig.rig import ConfigError, RigConfig, open_rig, run_program
+from rubber_rig.rig.can.driver import RigDriver
+from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, Protocol, crc8, unwrap_sequence
+
+
+def test_dbc_defines_the_rig_frames_with_units_and_counters():
+    db = cantools.database.load_file(str(DBC_PATH))
+    names = {m.name for m in db.messages}
+    assert names == {'HostCommand', 'Setpoint', 'Feedback', 'ControllerStatus', 'Temperature',
+                     'ControllerHeartbeat', 'HostHeartbeat'}
+    fb = db.get_message_by_name('Feedback')
+    units = {s.name: s.unit for s in fb.signals}
+    assert units['FB_Displacement'] == 'm' and units['FB_Force'] == 'N' and fb.is_fd and fb.length == 12
+    assert db.get_message_by_name('Temperature').get_signal_by_name('TEMP_Specimen').unit == 'degC'
+    assert db.get_message_by_name('Setpoint').get_signal_by_name('SP_Sequence').length == 16
+    assert db.get_message_by_name('ControllerStatus').get_signal_by_name('ST_Faults').length == 16
+
+
+def test_encode_decode_round_trip_and_resolution():
+    p = Protocol()
+    msg = p.encode('Feedback', {'FB_Sequence': 65535, 'FB_Displacement': -1.23456789e-3,
+                                'FB_Force': 20123.456, 'FB_Setpoint': 0.5e-3})
+    assert msg.is_fd and len(msg.data) == 12 and msg.arbitration_id == 0x180
+    name, sig = p.decode(msg)
+    assert name == 'Feedback' and sig['FB_Sequence'] == 65535
+    assert sig['FB_Displacement'] == pytest.approx(-1.23456789e-3, abs=0.5e-7)
+    assert sig['FB_Force'] == pytest.approx(20123.456, abs=0.005)
+    assert p.decode(can.Message(arbitration_id=0x555, data=b'\0' * 8, is_extended_id=False)) is None
+
+
+def test_crc_and_length_catch_corruption():
+    p = Protocol()
+    msg = p.encode('Setpoint', {'SP_Sequence': 7, 'SP_Displacement': 1e-3})
+    data = bytearray(msg.data)
+    assert data[-1] == crc8(0x100, bytes(data[:-1]))
+    for bit in range(8 * 7):
+        bad = bytearray(data)
+        bad[bit // 8] ^= 1 << (bit % 8)
+        with pytest.raises(MalformedFrame, match='CRC'):
+            p.decode(can.Message(arbitration_id=0x100, data=bad, is_extended_id=False))
+    with pytest.raises(MalformedFrame, match='bytes'):
+        p.decode(can.Message(arbitration_id=0x100, data=data[:6], is_extended_id=False))
+
+
+def test_sequence_unwrap():
+    assert unwrap_sequence(3, 65534) == 65539
+    assert unwrap_sequence(65533, 65538) == 65533
+    assert unwrap_sequence(10, 200000) == 196618          # 3 * 65536 + 10, nearest to the reference
+
+
+def test_driver_counts_unknown_and_malformed_frames_without_crashing():
+    cfg = RigConfig.from_dict({'backend': 'virtual', 'channel': 'rr_test_counts', 'paced': False})
+    host = can.Bus(interface='virtual', channel='rr_test_counts')
+    other = can.Bus(interface='virtual', channel='rr_test_counts')
+    try:
+        drv = RigDriver(host, cfg)
+        p = Protocol()
+        other.send(can.Message(arbitration_id=0x7FF, data=b'\x01\x02', is_extended_id=False))   # unknown id
+        other.send(can.Message(arbitration_id=0x12345, data=b'', is_extended_id=True))          # unknown id
+        other.send(can.Message(arbitration_id=0x180, data=b'\0' * 3, is_extended_id=False))     # short
+        good = p.encode('Feedback', {'FB_Sequence': 0, 'FB_Displacement': 1e-4, 'FB_Force': 1e3,
+                                     'FB_Setpoint': 1e-4})
+        bad = bytearray(good.data)
+        bad[2] ^= 0x10
+        other.send(can.Message(arbitration_id=0x180, data=bad, is_fd=True, is_extended_id=False))  # CRC
+        other.send(good)
+        other.send(good)                                                                        # duplicate
+        other.send(p.encode('Feedback', {'FB_Sequence': 3, 'FB_Displacement': 0.0, 'FB_Force': 0.0,
+                                         'FB_Setpoint': 0.0}))                                  # 1, 2 lost
+        blocks = [drv.poll(), drv.poll(), drv.poll()]
+        st = drv.status
+        assert (st.frames_unknown, st.frames_malformed, st.frames_late, st.frames_lost) == (2, 2, 1, 2)
+        assert blocks[0].first_sequence == 0 and blocks[0].force[0] == pytest.approx(1e3)
+        assert blocks[1].first_sequence == 3 and blocks[1].frames_lost == 2 and blocks[2] is None
+    finally:
+        host.shutdown()
+        other.shutdown()
+
+
+@pytest.mark.parametrize('cfg, fld', [
+    ({'backend': 'nosuchcan'}, 'backend'),
+    ({'sample_rate': 0}, 'sample_rate'),
+    ({'sample_rate': '1 kHz'}, 'sample_rate'),
+    ({'watchdog_timeout': 0.01, 'heartbeat_period': 0.05}, 'heartbeat_period'),
+    ({'limits': {'velocity_max': -1}}, 'velocity_max'),
+    ({'limits': {'force_limit': 1}}, 'force_limit'),
+    ({'sim': {'actuator_frequency': 0}}, 'sim.actuator_frequency'),
+    ({'sim': {'faults': [{'type': 'drop', 'frames': ['Setpoints']}]}}, 'sim.faults[0].frames[0]'),
+    ({'sim': {'faults': [{'type': 'drop', 'probability': 2}]}}, 'sim.faults[0].probability'),
+    ({'sim': {'specimen': {'model': 'linear', 'stiffnes': 1e7}}}, 'sim.specimen.stiffnes'),
+    ({'paced': 1}, 'paced'),
+])
+def test_bad_configuration_names_the_field_and_opens_nothing(cfg, fld):
+    before = set(can.interfaces.virtual.channels)
+    with pytest.raises(ConfigError) as exc:
+        open_rig(cfg)
+    assert fld in str(exc.value), str(exc.value)
+    assert set(can.interfaces.virtual.channels) == before      # no bus was left open, nothing was sent
+
+
+def test_bad_program_or_limits_send_nothing():
+    before = set(can.interfaces.virtual.channels)
+    with pytest.raises(ProgramError, match="block 0 'x': field 'amplitude'"):
+        run_program(Program.from_yaml_text('blocks:\n  - {name: x, waveform: sine, frequency: 1 Hz, '
+                                           'amplitude: -1 mm, cycles: 1}\n'), {'paced': False})
+    prog = Program.from_yaml_text('blocks:\n  - {name: big, waveform: sine, frequency: 1 Hz, amplitude: 8 mm, '
+                                  'cycles: 1}\n')
+    with pytest.raises(LimitError, match="block 0 'big'.*displacement"):
+        run_program(prog, {'paced': False})
+    with pytest.raises(ConfigError, match='sample_rate'):
+        run_program(prog, {'paced': False, 'sample_rate': -1})
+    assert set(can.interfaces.virtual.channels) == before
+
+
+def test_5khz_short_run_no_loss():
+    prog = Program.from_yaml_text('blocks:\n  - {waveform: sine, frequency: 20 Hz, amplitude: 0.5 mm, '
+                                  'cycles: 5}\n')
+    r = run_program(prog, {'paced': False, 'sample_rate': 5000.0})
+    assert r.completed and r.final_status.frames_lost == 0
+    assert r.sequence.size >= prog.n_samples(5000.0)
+    assert np.all(np.diff(r.sequence) == 1)
