@@ -42,12 +42,14 @@ def estimate_frequency(x, dt: float) -> float:
     return float(k / (n * dt))
 
 
-def harmonic_properties(x, force, dt: float, frequency: float = None) -> HarmonicProperties:
+def harmonic_properties(x, force, dt: float, frequency: float = None, detrend: bool = True) -> HarmonicProperties:
     """First-harmonic and loop properties over the last whole number of cycles of (x [m], force [N]).
 
     x, force: 1-D arrays sampled every ``dt`` [s]. ``frequency`` [Hz] of the excitation; estimated
     from ``x`` when None. Uses the last floor(n dt f) cycles (the end of a record is the most
-    settled); needs at least one full cycle.
+    settled); needs at least one full cycle. ``detrend`` adds a linear-drift column to the
+    first-harmonic fit: it keeps drift (thermal, or a decaying transient) out of F1, at the price of
+    a small leak of a non-sinusoidal force's odd harmonics into F1 (~0.6 % / cycles for a Berg loop).
     """
     x = np.asarray(x, dtype=float)
     force = np.asarray(force, dtype=float)
@@ -67,7 +69,8 @@ def harmonic_properties(x, force, dt: float, frequency: float = None) -> Harmoni
     t = np.arange(m) * dt
     w = 2 * np.pi * f
     # a linear trend column keeps slow drift (thermal, or a decaying simulation transient) out of F1
-    basis = np.column_stack([np.ones(m), np.cos(w * t), np.sin(w * t), t - t.mean()])
+    cols = [np.ones(m), np.cos(w * t), np.sin(w * t)] + ([t - t.mean()] if detrend else [])
+    basis = np.column_stack(cols)
     cx, *_ = np.linalg.lstsq(basis, xs[:-1], rcond=None)
     cf, *_ = np.linalg.lstsq(basis, fs[:-1], rcond=None)
     x1 = cx[1] - 1j * cx[2]                      # phasor of a cos + b sin = Re(X e^{jwt})
