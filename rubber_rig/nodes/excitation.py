@@ -64,7 +64,7 @@ class ExcitationNode(Node):
         self.lead_time = declare(self, 'lead_time', 0.25, 'how far ahead of the latest measured sample '
                                  'setpoints are streamed', range=(0.02, 5.0), units='s')
         self.batch_size = declare(self, 'batch_size', 50, 'setpoints per SetpointBatch', range=(1, 5000))
-        self.stream_period = declare(self, 'stream_period', 0.01, 'period of the streaming timer',
+        self.stream_period = declare(self, 'stream_period', 0.02, 'period of the streaming timer',
                                      range=(0.001, 0.5), units='s')
         self.feedback_period = declare(self, 'feedback_period', 0.2, 'period of action feedback',
                                        range=(0.01, 10.0), units='s')

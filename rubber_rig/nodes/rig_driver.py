@@ -71,7 +71,7 @@ class RigDriverNode(LifecycleNode):
         self.max_batch_delay = declare(self, 'max_batch_delay', 0.1, 'a partial batch is published when its '
                                        'first sample has waited this long (the stream paused or ended)',
                                        range=(0.001, 10.0), units='s')
-        declare(self, 'poll_period', 0.005, 'how often the bus is read', range=(0.0005, 0.5), units='s')
+        declare(self, 'poll_period', 0.01, 'how often the bus is read', range=(0.0005, 0.5), units='s')
         declare(self, 'watchdog_timeout', 0.1, 'feedback/heartbeat silence that faults the rig',
                 range=(0.005, 10.0), units='s')
         declare(self, 'heartbeat_period', 0.05, 'host heartbeat period', range=(0.001, 5.0), units='s')

@@ -1,0 +1,191 @@
+"""Rates, loss and latency of the whole node suite on the simulated rig, paced to the wall clock.
+
+    .venv/bin/python benchmarks/bench_suite.py --rate 1000 --duration 600          # the 10-minute 1 kHz run
+    .venv/bin/python benchmarks/bench_suite.py --rate 1000,2000,5000 --duration 60  # highest zero-loss rate
+    .venv/bin/python benchmarks/bench_suite.py --processes ...                      # one process per node
+
+rig_driver (simulated rig over python-can's virtual bus), excitation (a 5 Hz, 1 mm sine, open loop),
+element_model and recorder run as the main job runs them (one process, one SingleThreadedExecutor thread per
+node) or, with --processes, as separate processes started from the installed executables like ros2 launch
+does. A monitor node subscribes like any client.
+
+Loss is counted three ways: sequence gaps seen live by the monitor (samples, predictions, setpoints); gaps and
+lost samples in the MCAP recording read back from disk; and "starved" samples, where the command the rig
+applied differs from the program's setpoint (the driver ran out of setpoints). Latency: from a sample being
+taken (bus timestamp) to the prediction for it arriving at the monitor, for the last sample of each batch
+(pure pipeline delay) and the first (plus the batching wait).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+CONFIG = ROOT / 'config' / 'rig_sim.yaml'
+FREQUENCY, AMPLITUDE = 5.0, 1e-3
+
+
+def program_text(duration: float) -> str:
+    cycles = max(1, int(round(duration * FREQUENCY)) - 2)
+    return (f'name: bench_suite\nblocks:\n  - {{name: sine, waveform: sine, frequency: {FREQUENCY}, '
+            f'amplitude: {AMPLITUDE}, cycles: {cycles}, taper_cycles: 1}}\n')
+
+
+def cpu_seconds(children: bool = False) -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN if children else resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
+def start_processes(args, rate, batch, out_dir, domain):
+    """Each node in its own process from the installed console scripts (what ros2 launch does)."""
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), RMW_IMPLEMENTATION='rmw_fastrtps_cpp')
+    bindir = Path(sys.executable).parent
+    common = ['--ros-args', '--params-file', str(CONFIG), '--log-level', 'warn']
+    specs = [
+        ('recorder', ['-p', f'output_dir:={out_dir}', '-p', 'discovery_period:=0.2']),
+        ('element_model', []),
+        ('excitation', ['-p', f'batch_size:={batch}']),
+        ('rig_driver', ['-p', f'sample_rate:={rate}', '-p', f'batch_size:={batch}']),
+    ]
+    return [subprocess.Popen([str(bindir / exe)] + common + extra, env=env) for exe, extra in specs]
+
+
+def run_once(args, rate: float, out_dir: Path) -> dict:
+    from msg_defs.srv import RecorderControl
+    from rubber_rig.excitation import Program
+    from rubber_rig.nodes.launcher import InProcessLauncher
+    from rubber_rig.nodes.monitor import SuiteMonitor
+    from rubber_rig.recording import load_recording
+
+    batch = args.batch_size or max(20, int(round(rate / 20)))   # ~20 messages/s per stream
+    domain = args.domain_id if args.domain_id is not None else 150 + os.getpid() % 50
+    text = program_text(args.duration)
+    program = Program.from_yaml_text(text)
+    procs, driver = [], None
+    launcher = InProcessLauncher([CONFIG], domain_id=domain)
+    try:
+        if args.processes:
+            procs = start_processes(args, rate, batch, out_dir, domain)
+        else:
+            from rubber_rig.nodes.element_model import ElementModelNode
+            from rubber_rig.nodes.excitation import ExcitationNode
+            from rubber_rig.nodes.recorder import RecorderNode
+            from rubber_rig.nodes.rig_driver import RigDriverNode
+            launcher.start(RecorderNode, {'output_dir': str(out_dir), 'discovery_period': 0.2})
+            launcher.start(ElementModelNode)
+            launcher.start(ExcitationNode, {'batch_size': batch})
+            driver = launcher.start(RigDriverNode, {'sample_rate': float(rate), 'batch_size': batch})
+        mon = launcher.spin(SuiteMonitor(context=launcher.context))
+        if not launcher.wait_for(lambda: mon.status is not None and mon.action.server_is_ready() and
+                                 mon.recorder_subscribed('samples', 'prediction', 'setpoints'), 60.0):
+            raise RuntimeError('suite did not come up within 60 s')
+        cpu0, cpu0c, t0 = cpu_seconds(), cpu_seconds(True), time.monotonic()
+        goal = mon.send_program(text, amplitude_control=False)
+        if not launcher.wait_for(goal.done, 30.0) or not goal.result().accepted:
+            raise RuntimeError('program not accepted')
+        result = goal.result().get_result_async()
+        launcher.wait_for(result.done, args.duration * 3 + 60.0)
+        wall = time.monotonic() - t0
+        launcher.wait_for(lambda: False, 1.0)   # last batches
+        cpu = cpu_seconds() - cpu0
+        stop = mon.recorder(RecorderControl.Request.STOP)
+        launcher.wait_for(stop.done, 60.0)
+        mcap = Path(stop.result().file)
+        live = {k: v.as_dict() for k, v in mon.stats.items()}
+        latency = mon.latency_summary()
+        sim = dict(driver.rig.sim.counters) if driver is not None and driver.rig and driver.rig.sim else {}
+        status = mon.status
+        message = result.result().result.message if result.done() else 'did not finish'
+    finally:
+        launcher.shutdown()
+        for p in procs:
+            p.terminate()
+        for p in procs:
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+    if procs:
+        cpu = cpu + cpu_seconds(True) - cpu0c
+    rec = load_recording(mcap)
+    expected = program.setpoints(rate)
+    inside = rec.sequence < len(expected)
+    starved = int(np.sum(np.abs(rec.setpoint[inside] - expected[rec.sequence[inside]]) > 1e-7))
+    missing_in_program = len(expected) - int(inside.sum())
+    pred_gaps = [g for g in rec.gaps if 'prediction' in str(g.get('topic', ''))] if rec.gaps else []
+    return {
+        'rate': rate, 'batch_size': batch, 'mode': 'processes' if args.processes else 'one process',
+        'duration_s': wall, 'program': message,
+        'samples_expected': len(expected), 'samples_recorded': int(len(rec)),
+        'recording_samples_lost': int(rec.samples_lost), 'recording_gaps': len(rec.gaps),
+        'recording_prediction_gaps': len(pred_gaps), 'program_samples_missing': missing_in_program,
+        'starved_samples': starved, 'predictions_recorded': int(np.sum(np.isfinite(rec.prediction))),
+        'live': live, 'frames_lost': int(status.frames_lost), 'frames_late': int(status.frames_late),
+        'latency': latency, 'cpu_cores': cpu / wall, 'sim_counters': sim, 'recording': str(mcap),
+        'zero_loss': (rec.samples_lost == 0 and not rec.gaps and starved == 0 and missing_in_program == 0
+                      and all(v['gaps'] == 0 for v in live.values()) and status.frames_lost == 0
+                      and int(np.sum(np.isfinite(rec.prediction))) == len(rec)),
+    }
+
+
+def main(argv=None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument('--rate', default='1000', help='rig rate(s) [Hz], comma separated (default 1000)')
+    parser.add_argument('--duration', type=float, default=60.0, help='seconds of excitation per rate (600 = the '
+                        '10-minute run)')
+    parser.add_argument('--batch-size', type=int, help='samples per batch (default: rate/20, at least 20)')
+    parser.add_argument('--processes', action='store_true', help='one process per node instead of one thread each')
+    parser.add_argument('--output-dir', help='keep the recordings here (default: a temporary directory)')
+    parser.add_argument('--domain-id', type=int, help='ROS domain (default: a private one)')
+    parser.add_argument('--json', help='also write the results to this JSON file')
+    args = parser.parse_args(argv)
+    os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+    rates = [float(r) for r in args.rate.split(',')]
+    results = []
+    with tempfile.TemporaryDirectory(prefix='bench_suite_') as tmp:
+        out = Path(args.output_dir or tmp)
+        out.mkdir(parents=True, exist_ok=True)
+        for rate in rates:
+            print(f'--- {rate:g} Hz, {args.duration:g} s, {"processes" if args.processes else "one process"} ...',
+                  flush=True)
+            r = run_once(args, rate, out)
+            results.append(r)
+            lat = r['latency'].get('last_sample', {})
+            lat1 = r['latency'].get('first_sample', {})
+            print(f"    {r['program']}; {r['samples_recorded']} samples recorded of {r['samples_expected']} "
+                  f"in the program; lost: recording {r['recording_samples_lost']} ({r['recording_gaps']} gaps), "
+                  f"live gaps samples/prediction/setpoints {r['live']['samples']['gaps']}/"
+                  f"{r['live']['prediction']['gaps']}/{r['live']['setpoints']['gaps']}, starved {r['starved_samples']}, "
+                  f"bus frames lost {r['frames_lost']}", flush=True)
+            print(f"    latency sample->prediction: last sample of batch median {lat.get('median_ms', float('nan')):.1f}"
+                  f" ms, p99 {lat.get('p99_ms', float('nan')):.1f} ms; first sample median "
+                  f"{lat1.get('median_ms', float('nan')):.1f} ms, p99 {lat1.get('p99_ms', float('nan')):.1f} ms; "
+                  f"CPU {r['cpu_cores']:.2f} cores; {'ZERO LOSS' if r['zero_loss'] else 'LOSS'}", flush=True)
+    print('\n| rate [Hz] | batch | mode | duration [s] | samples | lost (rec) | gaps (live) | starved | '
+          'latency median / p99 [ms] | CPU [cores] | zero loss |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|')
+    for r in results:
+        lat = r['latency'].get('last_sample', {})
+        gaps = sum(v['gaps'] for v in r['live'].values())
+        print(f"| {r['rate']:g} | {r['batch_size']} | {r['mode']} | {r['duration_s']:.0f} | {r['samples_recorded']} | "
+              f"{r['recording_samples_lost']} | {gaps} | {r['starved_samples']} | "
+              f"{lat.get('median_ms', float('nan')):.1f} / {lat.get('p99_ms', float('nan')):.1f} | "
+              f"{r['cpu_cores']:.2f} | {'yes' if r['zero_loss'] else 'NO'} |")
+    ok = [r['rate'] for r in results if r['zero_loss']]
+    print(f"\nhighest zero-loss rate in this run: {max(ok):g} Hz" if ok else '\nno rate ran without loss')
+    if args.json:
+        Path(args.json).write_text(json.dumps(results, indent=2, default=float))
+    return 0 if len(ok) == len(results) else 1
+
+
+if __name__ == '__main__':
+    sys.exit(main())
