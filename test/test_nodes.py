@@ -151,7 +151,9 @@ def test_prediction_agrees_with_measurement_within_the_noise(suite):
     expected_rms = math.hypot(FORCE_NOISE, k * DISP_NOISE)
     rms = float(np.sqrt(np.mean(residual[steady] ** 2)))
     assert rms < 1.5 * expected_rms, f'residual RMS {rms:.2f} N vs noise {expected_rms:.2f} N'
-    assert abs(float(np.mean(residual[steady]))) < 0.5
+    # no bias beyond the noise: Berg friction driven by a noisy displacement sees extra velocity reversals near
+    # the turning points, which shifts the friction force by a fraction of the noise level
+    assert abs(float(np.mean(residual[steady]))) < 0.5 * expected_rms
     assert np.max(np.abs(measured[steady])) > 6e3     # the signal is kN, the residual a few N
     # branch forces add up to the prediction
     m = preds[len(preds) // 2]
