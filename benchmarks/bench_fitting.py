@@ -32,6 +32,7 @@ def main(argv=None) -> int:
     ap.add_argument('--force-noise', type=float, default=20.0, help='load-cell noise std [N] (default 20)')
     ap.add_argument('--dir', default='/tmp/rubber_rig_bench_fitting', help='where the recordings go (reused)')
     ap.add_argument('--program', default='seed000_grid')
+    ap.add_argument('--fresh', action='store_true', help='regenerate the recordings even if cached')
     ap.add_argument('--json', action='store_true')
     args = ap.parse_args(argv)
 
@@ -47,7 +48,7 @@ def main(argv=None) -> int:
     for temp, set_name in SETS:
         path = out_dir / f'{args.program}_{set_name}_n{args.force_noise:g}.mcap'
         t0 = time.perf_counter()
-        if not path.exists():
+        if args.fresh or not path.exists():
             simulated_recording(path, args.program, set_name, temp, force_noise=args.force_noise)
             gen_s = time.perf_counter() - t0
         else:
@@ -80,7 +81,9 @@ def _print_row(r):
     scale = {'k0': (1e-6, 'kN/mm'), 'k_inf': (1e-6, 'kN/mm'), 'tau': (1, 's'), 'alpha': (1, '-'),
              'x2': (1e3, 'mm'), 'f_fmax': (1e-3, 'kN')}
     print(f"\n{r['temperature']:+.0f} degC ({r['set']}), method {r['method']}: {r['blocks']} blocks, "
-          f"{r['samples']} samples; fit {r['fit_s']:.1f} s (recording generated in {r['recording_s']:.1f} s)")
+          f"{r['samples']} samples; fit {r['fit_s']:.1f} s " +
+          (f"(recording generated in {r['recording_s']:.1f} s)" if r['recording_s'] == r['recording_s']
+           else '(cached recording)'))
     print(f"  {'param':>8} {'true':>10} {'fitted':>10} {'error':>8} {'1-sigma':>8}")
     for k in NAMES:
         s, u = scale[k]

@@ -136,6 +136,18 @@ def test_blocks_detected_without_metadata_match_the_indexed_ones():
         assert d.c_eq == pytest.approx(i.c_eq, rel=2e-2)
 
 
+def test_recording_without_block_index_is_split_by_detection():
+    blocks = [(0.5, 1e-3, None), (2.0, 1e-3, None), (6.0, 0.5e-3, None), (14.0, 0.5e-3, None)]
+    x, force, _, p = model_run('seed000_0C', blocks, noise_f=5.0, noise_x=0.2e-6)
+    run = from_arrays('no_index', 1e-3, x, force, block_index=np.full(x.size, -1), temperature=0.0)
+    assert run.block_index is None and any('detected' in m for m in run.messages)
+    fits, messages = fit_runs([run], method='harmonic', simulate_quality=False)
+    f = fits[0]
+    assert [round(b.frequency, 2) for b in f.blocks] == [0.5, 2.0, 6.0, 14.0]
+    assert [round(b.amplitude * 1e3, 2) for b in f.blocks] == [1.0, 1.0, 0.5, 0.5]
+    assert all(b.cycles == 5 for b in f.blocks)
+
+
 def test_block_with_too_few_cycles_is_reported_and_the_rest_is_fitted():
     blocks = [(f, a, None) for a in (0.5e-3, 1e-3) for f in (0.5, 2.0, 6.0, 14.0)] + [(5.0, 1e-3, 4)]
     x, force, bi, p = model_run('seed000_20C', blocks, noise_f=5.0)

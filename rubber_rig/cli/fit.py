@@ -74,8 +74,9 @@ def load_runs(paths, temperature=None):
     return runs, messages
 
 
-def print_table(fits, out=sys.stdout):
+def print_table(fits, out=None):
     from rubber_rig.fitting.identify import PARAM_NAMES
+    out = out or sys.stdout
     head = ' '.join(f'{n + " [" + PAPER_UNITS[n][1] + "]":>16}' for n in PARAM_NAMES)
     print(f'{"T [degC]":>9} {head}', file=out)
     for f in fits:

@@ -80,6 +80,17 @@ def _cycles(x):
     return np.asarray(crossings, int)
 
 
+def _frac_crossing(x, j):
+    """Sub-sample position of the upward crossing just before sample j (linear interpolation)."""
+    if j < 1:
+        return float(j)
+    med = np.median(x)
+    xc0, xc1 = x[j - 1] - med, x[j] - med
+    if xc1 == xc0:
+        return float(j)
+    return (j - 1) + float(np.clip(-xc0 / (xc1 - xc0), 0.0, 1.0))
+
+
 def _steady_runs(x, crossings, tolerance):
     """Runs of consecutive cycles with the same period and amplitude: list of (c_first, c_last)."""
     n = len(crossings) - 1
@@ -182,7 +193,10 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
             a0 = s + crossings[c0 + settle_cycles]
             a1 = s + crossings[c1 + 1]
             ncyc = n_steady - settle_cycles
-            freq = ncyc / ((a1 - a0) * dt)
+            freq = ncyc / ((_frac_crossing(xs, crossings[c1 + 1]) - _frac_crossing(xs, crossings[c0 + settle_cycles]))
+                           * dt)
+            if nf and abs(freq / nf - 1) < 0.005:
+                freq = nf      # the program's frequency is exact (setpoints come from the sample index)
             props = window_properties(x, f, dt, a0, a1, freq)
             report.blocks.append(BlockResult(
                 index=int(lab), start=int(a0), stop=int(a1), cycles=int(ncyc),

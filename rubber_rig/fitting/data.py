@@ -91,6 +91,10 @@ def _finish(run: RunData) -> RunData:
                                 'at high frequency)')
         else:
             run.messages.append(f'{run.name}: no displacement or setpoint channel; this recording cannot be fitted')
+    if run.block_index is not None and not (np.asarray(run.block_index) >= 0).any():
+        run.block_index = None   # e.g. `ros2 bag record` without the setpoint topic: all -1
+        run.messages.append(f'{run.name}: no block index recorded; blocks are detected as steady '
+                            'periodic segments')
     if run.force is not None and run.displacement is not None:
         n = min(run.force.size, run.displacement.size)
         if run.force.size != run.displacement.size:
