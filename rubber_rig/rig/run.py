@@ -128,7 +128,7 @@ def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, ab
             if time.monotonic() - quiet_since > 0.5:   # the last samples were lost on the bus
                 break
         if not progressed:
-            time.sleep(0.0005 if cfg.paced else 0.0)
+            time.sleep(0.0005 if cfg.paced else 0.0001)   # (a simulator in another thread or process runs)
     return _result(program, cfg, drv, runner, got, block_of, first, message, t_wall)
 
 

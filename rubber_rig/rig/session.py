@@ -13,7 +13,8 @@ from .sim.controller import SimController
 
 class Rig:
     """An open rig: `driver` (RigDriver) plus, for the "sim" backend, the in-process simulated controller
-    (`sim`) on the other end of the same virtual bus, or a spawned simulator process (`process`)."""
+    (`sim`) on the other end of the same virtual bus, or a spawned simulator process (`process`).
+    A paced in-process simulator runs in a thread; an unpaced one is advanced by driver.poll()."""
 
     def __init__(self, config: RigConfig, driver: RigDriver, sim=None, sim_bus=None, process=None):
         self.config, self.driver, self.sim, self._sim_bus, self.process = config, driver, sim, sim_bus, process
@@ -68,7 +69,10 @@ def open_rig(config) -> Rig:
             sim_bus.shutdown()
             raise
         driver = RigDriver(bus, cfg, proto)
-        sim.start()
+        if cfg.paced:
+            sim.start()              # real time: the simulator keeps its own clock in a thread
+        else:
+            driver.pump = sim.pump   # as fast as possible: the driver's poll() lets the simulator catch up
         rig = Rig(cfg, driver, sim=sim, sim_bus=sim_bus)
     else:
         process = None

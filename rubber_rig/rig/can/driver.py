@@ -80,6 +80,7 @@ class RigDriver:
         # stream bookkeeping
         self._queued_end = None          # sequence after the last queued setpoint
         self._last_queued = None         # last queued setpoint [m]
+        self._last_applied = None        # last command the controller reported applying [m]
         self._expected = None            # next feedback sequence expected
         self._pend = ([], [], [], [])    # x, f, u, t0 of the contiguous samples not yet returned
         self._pend_first, self._pend_lost = None, 0
@@ -100,6 +101,7 @@ class RigDriver:
         self._hb_every = max(1, round(config.heartbeat_period * self.fs))
         self._next_hb_seq = None
         self._wd_wall = config.watchdog_timeout if config.paced else max(config.watchdog_timeout, 2.0)
+        self.pump = None                 # callable run at the start of poll() (in-process fast simulator)
         self._send_host_heartbeat()
 
     # ---- host -> controller
@@ -122,7 +124,9 @@ class RigDriver:
             self._fault(FAULT_DISPLACEMENT_LIMIT, f'setpoints {lo:.6g}..{hi:.6g} m outside the displacement '
                                                   f'limits {lim.displacement_min:g}..{lim.displacement_max:g} m')
             return False
-        prev = x[0] if self._last_queued is None else self._last_queued
+        # a new stream continues from where the controller is (its last applied command), never with a step
+        prev = self._last_queued if self._queued_end is not None else (
+            self._last_applied if self._last_applied is not None else x[0])
         v = float(np.max(np.abs(np.diff(np.concatenate([[prev], x]))))) * self.fs
         if v > lim.velocity_max * (1 + 1e-9):
             self._fault(FAULT_VELOCITY_LIMIT, f'setpoint velocity {v:.6g} m/s above {lim.velocity_max:g} m/s')
@@ -171,6 +175,8 @@ class RigDriver:
     def poll(self):
         """Drain received frames (non-blocking), run the watchdog and checks; return the next SampleBlock of
         contiguous samples, or None if there is none."""
+        if self.pump is not None:
+            self.pump()
         recv = self.bus.recv
         msg = recv(0)
         while msg is not None:
@@ -224,6 +230,7 @@ class RigDriver:
         pu.append(u)
         pt.append(msg.timestamp)
         self._recent.append((u, x, f))
+        self._last_applied = u
         self._expected = seq + 1
         self.counters['samples_received'] += 1
         self._last_fb_wall = self._clock()

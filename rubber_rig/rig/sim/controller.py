@@ -51,6 +51,7 @@ class SimController:
         per = lambda s: max(1, round(s * self.fs))  # noqa: E731
         self._hb_every, self._st_every, self._tc_every = per(0.05), per(0.01), per(0.1)
         self._stop = threading.Event()
+        self._announced = False
         self._thread = None
         base = options.specimen.get('temperature', options.temperature)
         self.temperature = float(base if isinstance(base, (int, float)) else options.temperature)
@@ -104,6 +105,22 @@ class SimController:
                 # ticks only as far as setpoints are queued (or while ramping down)
                 while self._can_tick():
                     self._tick()
+
+    def pump(self):
+        """Fast mode without a thread: handle every frame waiting on the bus and tick as far as the queued
+        setpoints allow, then return. The in-process fast rig is driven this way from the driver's poll(), so
+        the host and the simulator never fight over the GIL; frames still cross the bus both ways."""
+        if not self._announced:
+            self._housekeeping(force=True)
+            self._announced = True
+        msg = self.bus.recv(0)
+        while msg is not None:
+            self._handle(msg)
+            while self._can_tick():
+                self._tick()
+            msg = self.bus.recv(0)
+        while self._can_tick():
+            self._tick()
 
     def _can_tick(self):
         if self.state == 'ramping_down':
