@@ -164,6 +164,7 @@ def test_sigkilled_writer_leaves_a_recoverable_file(tmp_path):
     np.testing.assert_array_equal(
         r.force, np.concatenate([m[2]['force'] for m in msgs if m[0] == '/rig/samples']))
     assert r.metadata['recording'] == 'killed' and r.other_metadata['rubber_rig.recovered']
+    assert load_recording(path.parent).files == [str(fixed)]   # the recovered file stands in
     with pytest.raises(RecordingError, match='exists already'):
         recover(path)                                  # never overwrites an earlier recovery
     # in place, keeping a backup

@@ -24,9 +24,11 @@ def recording_files(path) -> list:
     path = Path(path)
     if path.is_dir():
         def index(p):
-            m = re.search(r'_(\d+)$', p.stem)
+            m = re.search(r'_(\d+)$', p.stem.removesuffix('.recovered'))
             return (int(m.group(1)) if m else -1, p.name)
         files = sorted(path.glob('*.mcap'), key=index)
+        # a file recovered next to its truncated original replaces it
+        files = [f for f in files if not f.with_name(f.stem + '.recovered.mcap').exists()]
         if not files:
             raise RecordingError(f'{path}: directory holds no .mcap file')
         return files
