@@ -129,11 +129,12 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         'recording_samples_lost': int(rec.samples_lost), 'recording_gaps': len(rec.gaps),
         'recording_prediction_gaps': len(pred_gaps), 'program_samples_missing': missing_in_program,
         'starved_samples': starved, 'predictions_recorded': int(np.sum(np.isfinite(rec.prediction))),
+        'program_samples_without_prediction': int(np.sum(~np.isfinite(rec.prediction[inside]))),
         'live': live, 'frames_lost': int(status.frames_lost), 'frames_late': int(status.frames_late),
         'latency': latency, 'cpu_cores': cpu / wall, 'sim_counters': sim, 'recording': str(mcap),
         'zero_loss': (rec.samples_lost == 0 and not rec.gaps and starved == 0 and missing_in_program == 0
                       and all(v['gaps'] == 0 for v in live.values()) and status.frames_lost == 0
-                      and int(np.sum(np.isfinite(rec.prediction))) == len(rec)),
+                      and not np.any(~np.isfinite(rec.prediction[inside]))),
     }
 
 

@@ -89,9 +89,10 @@ def declared(tmp_path_factory):
         'recorder': {'autostart': False, 'output_dir': str(tmp_path_factory.mktemp('rec'))},
     }
     try:
+        used = {_kw(c, 'executable').value for f in LAUNCH_FILES for c in LaunchFile(f).nodes}
         for exe, target in console_scripts().items():
             module_name = target.split(':')[0]
-            if not module_name.startswith('rubber_rig.nodes.'):
+            if exe not in used:
                 continue
             module = importlib.import_module(module_name)
             classes = [c for _, c in inspect.getmembers(module, inspect.isclass)

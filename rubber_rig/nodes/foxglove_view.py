@@ -137,7 +137,9 @@ class FoxgloveViewNode(Node):
                             'frames_lost': msg.frames_lost, 'temperature_degC': msg.temperature})
 
     def close(self) -> None:
-        self.server.stop()
+        if self.server is not None:
+            self.server.stop()
+            self.server = None
 
 
 def build_layout() -> str:

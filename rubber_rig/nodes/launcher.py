@@ -20,6 +20,7 @@ from rclpy.context import Context
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from rclpy.signals import SignalHandlerOptions
 
 
 def _as_parameters(overrides: dict | None) -> list[Parameter]:
@@ -33,7 +34,9 @@ class InProcessLauncher:
         self.params_files = [str(p) for p in params_files]
         self.namespace = namespace
         self.context = Context()
-        init_kwargs = {'context': self.context}
+        # No rclpy signal handlers: Ctrl-C must reach the caller as KeyboardInterrupt (the main job then aborts
+        # the program with the smooth ramp and closes the recording) instead of silently stopping every executor.
+        init_kwargs = {'context': self.context, 'signal_handler_options': SignalHandlerOptions.NO}
         if domain_id is not None:
             init_kwargs['domain_id'] = domain_id
         rclpy.init(args=[], **init_kwargs)
