@@ -354,3 +354,21 @@ def test_split_recording_is_one_rosbag2_bag_for_rosbags(tmp_path):
     with open(files[0], 'rb') as f:
         names = [m.name for m in make_reader(f).iter_metadata()]
     assert names == ['rubber_rig', 'rubber_rig.close', 'rosbag2']
+
+
+def test_core_works_without_rclpy(tmp_path):
+    """Writing, reading and recovering never import rclpy (fitting and offline tools run without ROS)."""
+    code = textwrap.dedent(f'''
+        import sys
+        from rubber_rig.recording import RecordingWriter, load_recording, recover
+        with RecordingWriter({str(tmp_path / 'norclpy.mcap')!r}, metadata={{'specimen': 'x'}}) as w:
+            w.write_message('/rig/status', 'msg_defs/msg/RigStatus', {{'state_name': 'idle'}}, 1)
+        empty = RecordingWriter({str(tmp_path / 'empty.mcap')!r}); empty.close()
+        r, e = load_recording({str(tmp_path / 'norclpy.mcap')!r}), load_recording({str(tmp_path / 'empty.mcap')!r})
+        assert r.messages['/rig/status'][0][1].state_name == 'idle' and len(r) == 0 and len(e) == 0
+        assert e.duration == 0 and e.topics == {{}}
+        print('rclpy' in sys.modules)
+    ''')
+    out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, cwd=REPO, timeout=60)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == 'False'

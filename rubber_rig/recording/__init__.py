@@ -1,9 +1,24 @@
 """Recording: MCAP files in the ros2 profile that ros2 bag, Foxglove and rosbags read (ROS-free core).
 
-- :class:`RecordingWriter` writes one file; :class:`Recorder` adds splitting, start/stop, snapshots
-  and loss accounting on top (the recorder node only wires ROS to it).
-- :func:`load_recording` turns recordings (ours or `ros2 bag record`'s) into numpy arrays.
-- :func:`recover` rebuilds a file whose writer was killed.
+Writing (no rclpy needed)::
+
+    with RecordingWriter('run.mcap', metadata={'specimen': 'B-7', 'temperature': 23.0}) as w:
+        w.write_message('/rig/samples', 'msg_defs/msg/RigSampleBatch', msg_or_dict_or_cdr, log_time_ns)
+
+    rec = Recorder('recordings', metadata=..., split_size_bytes=..., split_duration_s=...,
+                   snapshot_duration_s=...)          # what the recorder node drives
+    rec.start(); rec.write(topic, msg_type, msg, log_time_ns); rec.split(); rec.snapshot(); rec.stop()
+
+Reading::
+
+    r = load_recording('recordings/rubber_rig_20261122-042000')   # file, directory or list
+    r.time, r.displacement, r.force, r.setpoint, r.prediction, r.residual, r.temperature, r.status,
+    r.sequence, r.block_index, r.metadata, r.gaps, r.samples_lost, r.messages[topic]
+
+Crashes: :func:`recover` (``rubber-rig recover FILE``) rebuilds a file whose writer was killed.
+Modules: msgdefs (ros2msg schema texts), qos (rosbag2 QoS YAML), gaps (sequence-gap accounting),
+writer, session (Recorder), reader, mcapio (checked file access), cdr (numpy CDR decoder), recover,
+bagmeta (rosbag2 metadata.yaml).
 """
 from .errors import RecordingError, RecordingWriteError
 from .gaps import GapTracker
@@ -13,3 +28,9 @@ from .writer import CLOSE_METADATA_NAME, METADATA_NAME, RecordingWriter
 from .reader import SIGNALS, Recording, load_recording
 from .session import Recorder
 from .recover import RecoverResult, recover
+from .bagmeta import write_bag_metadata
+
+__all__ = ['RecordingError', 'RecordingWriteError', 'GapTracker', 'full_definition', 'normalize_type',
+           'register_definition', 'type_hash', 'offered_qos_yaml', 'qos_entry', 'CLOSE_METADATA_NAME',
+           'METADATA_NAME', 'RecordingWriter', 'SIGNALS', 'Recording', 'load_recording', 'Recorder',
+           'RecoverResult', 'recover', 'write_bag_metadata']
