@@ -94,12 +94,12 @@ def print_table(fits, out=None):
         t = 'unknown temperature' if f.temperature is None else f'{f.temperature:g} degC'
         sk, sc = f.max_errors('simulated')
         ak, ac = f.max_errors('analytic')
-        print(f'{t}: {len(f.blocks)} blocks from {", ".join(f.runs)}; method {f.method}; Eq. 29 = {f.eq29:.3g}; '
-              f'{f.timings.get("total_s", float("nan")):.1f} s', file=out)
+        print(f'{t}: {len(f.blocks)} blocks from {", ".join(f.runs)}; method {f.method}; '
+              f'Eq. 29 = {f.eq29:.3g}; {f.timings.get("total_s", float("nan")):.1f} s', file=out)
         print(f'  max |error| per block: K_dyn {100 * sk:.2f} %, C_eq {100 * sc:.2f} % (model run on the measured '
               f'displacement); analytic {100 * ak:.2f} %, {100 * ac:.2f} %', file=out)
-        print(f'  {"f [Hz]":>7} {"x0 [mm]":>7} {"K_dyn [kN/mm]":>13} {"e_K [%]":>8} {"C_eq [kN s/m]":>13} {"e_C [%]":>8}',
-              file=out)
+        print(f'  {"f [Hz]":>7} {"x0 [mm]":>7} {"K_dyn [kN/mm]":>13} {"e_K [%]":>8} '
+              f'{"C_eq [kN s/m]":>13} {"e_C [%]":>8}', file=out)
         for q in f.quality:
             e = q.get('simulated', q['analytic'])
             print(f'  {q["frequency"]:7.3g} {q["amplitude"] * 1e3:7.3g} {q["measured"]["k_dyn"] * 1e-6:13.4g} '

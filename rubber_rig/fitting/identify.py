@@ -180,7 +180,7 @@ def fit_harmonic(t: Targets, w_k=100.0, w_c=1.0, seed=0, maxiter=400, popsize=20
                                 maxiter=maxiter, popsize=popsize, tol=1e-10, atol=0,
                                 mutation=(0.5, 1.0), recombination=0.9, init='sobol',
                                 polish=False, vectorized=True, updating='deferred',
-                                workers=workers if workers != 1 else 1, callback=cb)
+                                workers=workers, callback=cb)
     t1 = time.perf_counter()
     ls = least_squares(harmonic_residuals, de.x, bounds=(lo, hi), args=(t, w_k, w_c),
                        method='trf', x_scale='jac', xtol=1e-12, ftol=1e-12, gtol=1e-12,

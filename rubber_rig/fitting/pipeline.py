@@ -14,8 +14,6 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass, field
 
-import numpy as np
-
 from .blocks import split_blocks
 from .identify import PARAM_NAMES, Targets, fit_harmonic, objective, params_to_z
 from .metrics import window_properties
