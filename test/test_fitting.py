@@ -224,6 +224,19 @@ def test_truncated_recording_fits_what_is_there(recordings):
         assert fits[0].params[k] == pytest.approx(run.true_params[k], rel=0.02)
 
 
+def test_truncated_mcap_file_fits_what_was_written(recordings, tmp_path):
+    data = recordings[20.0].read_bytes()
+    cut = tmp_path / 'cut.mcap'
+    cut.write_bytes(data[:int(len(data) * 0.8)])     # writer killed: no summary, tail missing
+    run = load_run(cut)
+    assert any('truncated' in m for m in run.messages)
+    fits, messages = fit_runs([run], method='harmonic', simulate_quality=False)
+    assert any('truncated' in m for m in messages)
+    assert 5 <= len(fits[0].blocks) < 8
+    for k in ('k0', 'k_inf'):
+        assert fits[0].params[k] == pytest.approx(run.true_params[k], rel=0.02)
+
+
 def test_missing_channels(recordings, tmp_path):
     from rubber_rig.fitting.simulate import run_simulated, write_recording
     prog = {'name': 'tiny', 'defaults': {'taper_cycles': 1, 'cycles': 6},

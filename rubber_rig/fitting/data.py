@@ -126,11 +126,20 @@ def from_run_result(result, program=None, name='run', temperature=None, true_par
 
 def load_run(path) -> RunData:
     """Read an MCAP recording with rubber_rig.recording and keep what fitting needs."""
-    from rubber_rig.recording import load_recording
+    from rubber_rig.recording import RecordingError, load_recording
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f'no such recording: {path}')
-    rec = load_recording(str(path))
+    messages = []
+    try:
+        rec = load_recording(str(path))
+    except RecordingError as exc:
+        if 'truncated' not in str(exc):
+            raise
+        # the writer was killed or the disk filled: fit what was written before the cut
+        rec = load_recording(str(path), allow_truncated=True)
+        messages.append(f'{path.name}: truncated recording (no MCAP summary); using the '
+                        f'{len(rec.force) if rec.force is not None else 0} samples written before the cut')
     signals = getattr(rec, 'signals', None) or {}
 
     def sig(name):
@@ -155,7 +164,6 @@ def load_run(path) -> RunData:
         raise ValueError(f'{path.name}: no time channel and no sample rate in the metadata')
     temp_ch = sig('temperature')
     temperature = _meta_temperature(meta)
-    messages = []
     if temperature is None and temp_ch is not None and np.isfinite(temp_ch).any():
         temperature = float(np.nanmedian(temp_ch))
     elif temp_ch is None:
