@@ -7,6 +7,7 @@
    possible through Recorder (chunking, zstd, gap tracking): msg/s, MB/s, real-time factor, and
    the file size of that minute. Also the path that encodes dicts in Python (ROS-free producers).
 2. Core CPU, paced: the same stream at its real rate for --duration seconds; time.process_time.
+   load_recording time for that minute (the fitting side).
 3. Recorder node CPU (target < 10 % of one core at 1 kHz): the node as its own process, fed by a
    real rclpy publisher in this process at the real rate; CPU from /proc/<pid>/stat (utime+stime),
    and a check that every batch was recorded.
@@ -68,9 +69,11 @@ def core_throughput(tmp, name, rate, n, msgs, as_dict=False):
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     size = sum(f.stat().st_size for f in files)
     payload = sum(len(m) for m in msgs)
+    t0 = time.perf_counter()
     r = load_recording(files[0])
+    read = time.perf_counter() - t0
     assert len(r) == len(msgs) * n and r.samples_lost == 0
-    return dict(msgs=len(msgs), wall=wall, cpu=cpu, size=size, payload=payload)
+    return dict(msgs=len(msgs), wall=wall, cpu=cpu, size=size, payload=payload, read=read)
 
 
 def core_paced(tmp, rate, n, msgs, duration):
@@ -174,8 +177,11 @@ def main():
             print(f'{label:>6}: {r["msgs"] / r["wall"]:9.0f} msg/s  {r["payload"] / r["wall"] / 1e6:6.1f} MB/s '
                   f'payload  {r["msgs"] * n / r["wall"] / 1e6:5.2f} Msamples/s  '
                   f'real-time x{60 / r["wall"]:.0f}  ({n} samples/batch, {len(msgs[0])} B/msg)')
+            print(f'        per CPU second (robust to other load on the machine): '
+                  f'{r["msgs"] / r["cpu"]:.0f} msg/s, {r["payload"] / r["cpu"] / 1e6:.1f} MB/s')
             print(f'        file size per minute: {r["size"] / 1e6:.2f} MB '
-                  f'(payload {r["payload"] / 1e6:.2f} MB, zstd ratio {r["payload"] / r["size"]:.2f})')
+                  f'(payload {r["payload"] / 1e6:.2f} MB, zstd ratio {r["payload"] / r["size"]:.2f}); '
+                  f'load_recording of that minute: {r["read"]:.2f} s')
         rate, n = CASES['1 kHz']
         r = core_throughput(tmp, 'tp_dict', rate, n, minutes['1 kHz'], as_dict=True)
         print(f'1 kHz, messages encoded by the core (rosidl objects -> CDR in Python): '

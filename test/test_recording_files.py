@@ -4,7 +4,6 @@ Files are checked with independent readers (the mcap library's reader; rosbags i
 node tests); processes are really killed and file sizes really limited by the OS (RLIMIT_FSIZE).
 """
 import json
-import os
 import signal
 import subprocess
 import sys

@@ -73,8 +73,10 @@ def plain(value):
     if hasattr(value, 'get_fields_and_field_types'):               # rclpy: a byte field is bytes
         return {n: getattr(value, n)[0] if t == 'octet' else plain(getattr(value, n))
                 for n, t in value.get_fields_and_field_types().items()}
-    if hasattr(value, '__dataclass_fields__'):                      # rosbags
-        return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value) if f.name not in ('__msgtype__', 'structure_needs_at_least_one_member') and not f.name.isupper()}
+    if hasattr(value, '__dataclass_fields__'):                      # rosbags: skip its extras
+        skip = ('__msgtype__', 'structure_needs_at_least_one_member')
+        return {f.name: plain(getattr(value, f.name)) for f in dataclasses.fields(value)
+                if f.name not in skip and not f.name.isupper()}            # constants are fields too
     if hasattr(value, '__slots__') and not isinstance(value, (bytes, str)):   # mcap_ros2
         return {n: plain(getattr(value, n)) for n in value.__slots__}
     if isinstance(value, SimpleNamespace):                         # rubber_rig's numpy decoder

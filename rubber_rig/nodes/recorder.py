@@ -13,7 +13,6 @@ splitting, snapshots and loss accounting are rubber_rig.recording.Recorder's.
   write error (ERROR level: the recording stopped cleanly; the file stays readable).
 """
 import importlib
-import os
 
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -61,11 +60,6 @@ def offered_qos(info) -> dict:
                      deadline_ns=_ns(q.deadline), lifespan_ns=_ns(q.lifespan), liveliness=q.liveliness,
                      liveliness_lease_duration_ns=_ns(q.liveliness_lease_duration),
                      avoid_ros_namespace_conventions=q.avoid_ros_namespace_conventions)
-
-
-def type_hash_string(info) -> str:
-    h = info.topic_type_hash
-    return f'RIHS{h.version:02d}_{h.value.hex()}' if getattr(h, 'version', -1) > 0 else ''
 
 
 class RecorderNode(Node):

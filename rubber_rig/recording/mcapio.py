@@ -6,7 +6,7 @@ import struct
 from pathlib import Path
 
 from mcap.reader import make_reader
-from mcap.records import Channel, Footer, Header, Message, Metadata, Schema
+from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
 from mcap_ros2._dynamic import generate_dynamic
 
@@ -178,5 +178,4 @@ class Decoders:
                                  f'({type(exc).__name__}: {exc})') from None
 
 
-__all__ = ['recording_files', 'check_file', 'read_file', 'iter_records', 'decode_metadata', 'Decoders',
-           'Footer', 'Header']
+__all__ = ['recording_files', 'check_file', 'read_file', 'iter_records', 'decode_metadata', 'Decoders']
