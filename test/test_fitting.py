@@ -237,6 +237,18 @@ def test_truncated_mcap_file_fits_what_was_written(recordings, tmp_path):
         assert fits[0].params[k] == pytest.approx(run.true_params[k], rel=0.02)
 
 
+def test_temperature_with_too_few_blocks_is_skipped_and_the_others_fitted():
+    x, force, bi, p = model_run('seed000_m20C', [(f, a, None) for a in (0.5e-3, 1e-3) for f in (0.5, 3.0, 12.0)])
+    good = from_arrays('good', 1e-3, x, force, block_index=bi, temperature=-20.0)
+    x2_, f2_, bi2, _ = model_run('seed000_0C', [(1.0, 1e-3, None), (4.0, 1e-3, None)])
+    sparse = from_arrays('sparse', 1e-3, x2_, f2_, block_index=bi2, temperature=0.0)
+    fits, messages = fit_runs([good, sparse], method='harmonic', simulate_quality=False)
+    assert [f.temperature for f in fits] == [-20.0]
+    assert any('0 degC (sparse): not fitted' in m and 'at least 4' in m for m in messages), messages
+    with pytest.raises(ValueError, match='nothing could be fitted'):
+        fit_runs([sparse], method='harmonic')
+
+
 def test_missing_channels(recordings, tmp_path):
     from rubber_rig.fitting.simulate import run_simulated, write_recording
     prog = {'name': 'tiny', 'defaults': {'taper_cycles': 1, 'cycles': 6},

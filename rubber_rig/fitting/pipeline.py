@@ -130,8 +130,12 @@ def fit_runs(runs, method='time', w_k=100.0, w_c=1.0, settle_cycles=3, min_cycle
         t0 = time.perf_counter()
         blocks = [b for run in group for b in split[run.name]]
         targets = Targets.from_blocks(blocks)
-        h = fit_harmonic(targets, w_k=w_k, w_c=w_c, seed=seed, maxiter=maxiter, popsize=popsize,
-                         progress=(lambda f, w: stage_progress(0.5 * f if method == 'time' else f, w)))
+        try:
+            h = fit_harmonic(targets, w_k=w_k, w_c=w_c, seed=seed, maxiter=maxiter, popsize=popsize,
+                             progress=(lambda f, w: stage_progress(0.5 * f if method == 'time' else f, w)))
+        except ValueError as exc:     # e.g. too few blocks at this temperature: fit the others
+            messages.append(f'{_label(temp)} ({", ".join(run.name for run in group)}): not fitted: {exc}')
+            continue
         result = h
         stages = dict(h.stages)
         timings = dict(h.timings)
@@ -155,6 +159,8 @@ def fit_runs(runs, method='time', w_k=100.0, w_c=1.0, settle_cycles=3, min_cycle
             true_params=truth, eq29=float(objective(params_to_z(result.params), targets, w_k, w_c))))
     if progress is not None:
         progress(1.0, 'done')
+    if not fits:
+        raise ValueError('nothing could be fitted: ' + '; '.join(messages))
     return fits, messages
 
 
