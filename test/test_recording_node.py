@@ -194,3 +194,53 @@ def test_recorder_process_killed_or_interrupted(context, tmp_path, how):
     np.testing.assert_array_equal(r.force, np.concatenate([np.asarray(batch(k).force) for k in range(50)]))
     assert r.metadata['specimen'] == 'killed'
     assert bool(r.closing) == (how != 'sigkill')         # the closing report needs a clean stop
+
+
+def test_control_service_split_and_snapshot(context, tmp_path):
+    """SPLIT over ~/control: the two files hold every batch exactly once; SNAPSHOT: the last seconds."""
+    ns = '/ctltest'
+    pub_node = Node('fake_rig', namespace=ns, context=context)
+    rec = RecorderNode(namespace=ns, context=context, parameter_overrides=[
+        Parameter('output_dir', value=str(tmp_path)), Parameter('discovery_period', value=0.1),
+        Parameter('snapshot_duration', value=30.0)])
+    client_node = Node('client', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    for n in (pub_node, rec, client_node):
+        executor.add_node(n)
+    try:
+        samples = pub_node.create_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
+        control = client_node.create_client(RecorderControl, f'{ns}/recorder/control')
+        assert control.wait_for_service(timeout_sec=10)
+
+        def call(command, path=''):
+            future = control.call_async(RecorderControl.Request(command=command, path=path))
+            assert spin_until(executor, future.done)
+            return future.result()
+        assert rec.core.recording                                   # autostart
+        assert spin_until(executor, lambda: len(rec._subs) == 1)
+        for k in range(60):
+            if k == 25:
+                assert spin_until(executor, lambda: rec.core.stats()['messages_written'] == 25)
+                response = call(RecorderControl.Request.SPLIT)
+                assert response.success and response.file.endswith('_1.mcap'), response.message
+            samples.publish(batch(k))
+            executor.spin_once(timeout_sec=0)
+        assert spin_until(executor, lambda: rec.core.stats()['messages_written'] == 60)
+        snap = call(RecorderControl.Request.SNAPSHOT, str(tmp_path / 'snap.mcap'))
+        assert snap.success, snap.message
+        assert call(RecorderControl.Request.STOP).success
+        assert call(99).success is False
+    finally:
+        for n in (pub_node, rec, client_node):
+            executor.remove_node(n)
+            n.destroy_node()
+        executor.shutdown()
+    files = sorted(tmp_path.glob('rubber_rig_*/*.mcap'))
+    parts = [load_recording(f) for f in files]
+    assert [p.topics[f'{ns}/samples']['count'] for p in parts] == [25, 35]
+    whole = load_recording(files[0].parent)
+    np.testing.assert_array_equal(whole.sequence, np.arange(60 * BATCH))
+    assert whole.samples_lost == 0
+    snapshot = load_recording(tmp_path / 'snap.mcap')
+    np.testing.assert_array_equal(snapshot.sequence, np.arange(60 * BATCH))   # all within 30 s
+    assert snapshot.metadata['snapshot'] == 'true'
