@@ -152,3 +152,30 @@ def test_config_from_dict_round_trip():
                                'limits': {'force_max': 30e3}, 'sim': {'faults': [{'type': 'drop'}]}})
     again = RigConfig.from_dict(cfg.to_dict())
     assert again == cfg and again.limits.force_max == 30e3 and again.sim.faults[0].type == 'drop'
+
+
+def test_new_stream_after_a_pause_is_bridged_by_holding():
+    with open_rig({'paced': False}) as rig:
+        assert rig.wait_ready(5.0)
+        drv = rig.driver
+        ramp = 0.3e-3 * np.sin(np.linspace(0, np.pi / 2, 300)) ** 2
+        assert drv.queue_setpoints(0, ramp)
+        got = []
+        for _ in range(1000):
+            b = drv.poll()
+            if b is not None:
+                got.append(b)
+            elif sum(len(g) for g in got) >= 300:
+                break
+        # the next program starts 100 samples later: the controller holds 0.3 mm in between, no step
+        assert drv.queue_setpoints(300, np.full(100, 0.3e-3)) and drv.queue_setpoints(400, np.full(50, 0.3e-3))
+        for _ in range(1000):
+            b = drv.poll()
+            if b is not None:
+                got.append(b)
+            elif sum(len(g) for g in got) >= 450:
+                break
+        seq = np.concatenate([g.sequence for g in got])
+        u = np.concatenate([g.setpoint for g in got])
+        np.testing.assert_array_equal(seq, np.arange(450))
+        assert np.max(np.abs(np.diff(u))) < 5e-6 and drv.status.frames_lost == 0

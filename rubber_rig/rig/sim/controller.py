@@ -125,7 +125,10 @@ class SimController:
     def _can_tick(self):
         if self.state == 'ramping_down':
             return True
-        return self.state in ('running', 'holding') and self.next_seq in self.buffer
+        if self.state not in ('running', 'holding') or not self.buffer:
+            return False
+        # a stream that resumes further ahead is bridged by holding, as the paced controller does in real time
+        return self.next_seq in self.buffer or min(self.buffer) > self.next_seq
 
     # ---- receive
     def _handle(self, msg):
