@@ -13,10 +13,12 @@ simulate    simulated-rig MCAP recordings for tests, benchmarks and demos
 
 What we found (benchmarks/bench_fitting.py, simulated rig, seed-000 grid, 20 N load-cell noise):
 * Eq. 24 is not what a rig measures. Seed 000 combines Berg's element through an equal-peak,
-  equal-energy ellipse (Eq. 19-22); the first harmonic of the real Berg loop has a storage stiffness
-  up to ~0.6 % different (at 0.5 mm, 20 degC). The energy is exact either way. Fitting measured
-  first-harmonic K_dyn with Eq. 24 would bias K0 and the friction pair, so the objective uses the
-  exact first harmonic of the Berg loop (`properties`), evaluated by quadrature.
+  equal-energy ellipse (Eq. 19-22); the first harmonic of the real Berg loop has a different storage
+  stiffness (0.6 % of the friction stiffness at 0.5 mm, 20 degC). The energy (C_eq) is exact either
+  way. Over the seed-000 grid, Eq. 24's K_dyn differs from the first-harmonic K_dyn of the same model
+  by up to 0.16 % (20 degC), 0.21 % (0 degC), 0.31 % (-20 degC) and 1.03 % (-40 degC); fitting
+  first-harmonic data with Eq. 24 would bias K0 by -2.6 % and x2, F_fmax by +7-8 % at -40 degC. So
+  the objective uses the exact first harmonic of the Berg loop (`properties`), by quadrature.
 * With that, Eq. 29 alone (method 'harmonic') identifies all six parameters from K_dyn and C_eq at
   0.5 and 1 mm: worst case over the four temperatures about 2 % (tau at -40 degC); x2 and F_fmax are
   the most correlated pair (their ratio, the initial friction stiffness, is what the data pin down;
