@@ -15,7 +15,7 @@ from rclpy.parameter import Parameter
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from msg_defs.msg import RigSampleBatch, RigStatus
 from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
@@ -244,3 +244,33 @@ def test_control_service_split_and_snapshot(context, tmp_path):
     snapshot = load_recording(tmp_path / 'snap.mcap')
     np.testing.assert_array_equal(snapshot.sequence, np.arange(60 * BATCH))   # all within 30 s
     assert snapshot.metadata['snapshot'] == 'true'
+
+
+def test_unwritable_output_dir_is_reported_not_fatal(context, tmp_path):
+    blocker = tmp_path / 'not_a_dir'
+    blocker.write_text('x')
+    rec = RecorderNode(namespace='/unwritable', context=context, parameter_overrides=[
+        Parameter('output_dir', value=str(blocker / 'recordings')), Parameter('diagnostics_period', value=0.1)])
+    client_node = Node('client', context=context)
+    executor = SingleThreadedExecutor(context=context)
+    for n in (rec, client_node):
+        executor.add_node(n)
+    levels = []
+    try:
+        client_node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, lambda m: levels.extend(
+            (s.level, s.message) for s in m.status if s.name.startswith('recorder')), 10)
+        assert not rec.core.recording
+        assert spin_until(executor, lambda: levels)
+        level, message = levels[0]
+        assert level == DiagnosticStatus.ERROR and 'cannot create recording directory' in message
+        control = client_node.create_client(RecorderControl, '/unwritable/recorder/control')
+        assert control.wait_for_service(timeout_sec=10)
+        future = control.call_async(RecorderControl.Request(command=RecorderControl.Request.START,
+                                                            path=str(tmp_path / 'elsewhere')))
+        assert spin_until(executor, future.done) and future.result().success
+        assert rec.core.recording and rec.core.current_file.parent == tmp_path / 'elsewhere'
+    finally:
+        for n in (rec, client_node):
+            executor.remove_node(n)
+            n.destroy_node()
+        executor.shutdown()

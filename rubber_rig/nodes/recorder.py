@@ -105,8 +105,12 @@ class RecorderNode(Node):
         self.create_timer(diagnostics_period, self.publish_diagnostics)
         self._reported_error = None
         if autostart:
-            self.core.start()
-            self.get_logger().info(f'recording to {self.core.current_file}')
+            try:
+                self.core.start()
+                self.get_logger().info(f'recording to {self.core.current_file}')
+            except RecordingError as exc:     # unwritable output_dir: stay up, say so, accept START
+                self.core.error = exc
+                self.get_logger().error(f'not recording: {exc}')
         self.discover()
 
     # -- topics ------------------------------------------------------------------------------
@@ -119,9 +123,7 @@ class RecorderNode(Node):
             names = {self.resolve_topic_name(t) for t in configured if t}
             return [(n, t) for n, t in graph if n in names]
         ns = self.get_namespace().rstrip('/') + '/'
-        own = {self.resolve_topic_name(n) for n in ('~/control',)}
-        return [(n, t) for n, t in graph
-                if n.startswith(ns) and n not in IGNORED_TOPICS and n not in own]
+        return [(n, t) for n, t in graph if n.startswith(ns) and n not in IGNORED_TOPICS]
 
     def discover(self):
         for name, types in self.wanted_topics(self.get_topic_names_and_types()):
