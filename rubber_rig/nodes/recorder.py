@@ -26,7 +26,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from msg_defs.srv import RecorderControl
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import declare
-from rubber_rig.recording import Recorder, RecordingError
+from rubber_rig.recording import Recorder, RecordingError, full_definition
 from rubber_rig.recording.qos import qos_entry
 
 UNSUPPORTED_SEQUENCE = 2**63   # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED is UINT64_MAX
@@ -87,6 +87,8 @@ class RecorderNode(Node):
                                    range=(0.05, 60.0), units='s')
         diagnostics_period = declare(self, 'diagnostics_period', 1.0, 'publish /diagnostics this often',
                                      range=(0.1, 60.0), units='s')
+        self.include_hidden = declare(self, 'include_hidden_topics', False,
+                                      'also record hidden topics (a name part starting with _, e.g. actions)')
         self.history_depth = declare(self, 'history_depth', 1000, 'subscription history depth',
                                      range=(1, 100000))
         metadata = {name: declare(self, f'metadata.{name}', '', text) for name, text in METADATA_FIELDS.items()}
@@ -123,7 +125,8 @@ class RecorderNode(Node):
             names = {self.resolve_topic_name(t) for t in configured if t}
             return [(n, t) for n, t in graph if n in names]
         ns = self.get_namespace().rstrip('/') + '/'
-        return [(n, t) for n, t in graph if n.startswith(ns) and n not in IGNORED_TOPICS]
+        return [(n, t) for n, t in graph if n.startswith(ns) and n not in IGNORED_TOPICS
+                and (self.include_hidden or not any(part.startswith('_') for part in n.split('/')))]
 
     def discover(self):
         for name, types in self.wanted_topics(self.get_topic_names_and_types()):
@@ -136,8 +139,9 @@ class RecorderNode(Node):
             type_name = types[0]
             try:
                 cls = message_class(type_name)
+                full_definition(type_name)        # the schema must be writable before we subscribe
             except (ImportError, AttributeError, ValueError) as exc:
-                self._unrecordable[name] = f'type {type_name} not importable: {exc}'
+                self._unrecordable[name] = f'type {type_name} cannot be recorded: {exc}'
                 self.get_logger().error(f'cannot record {name}: {self._unrecordable[name]}')
                 continue
             reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
