@@ -12,8 +12,9 @@ does. A monitor node subscribes like any client.
 Loss is counted three ways: sequence gaps seen live by the monitor (samples, predictions, setpoints); gaps and
 lost samples in the MCAP recording read back from disk; and "starved" samples, where the command the rig
 applied differs from the program's setpoint (the driver ran out of setpoints). Latency: from a sample being
-taken (bus timestamp) to the prediction for it arriving at the monitor, for the last sample of each batch
-(pure pipeline delay) and the first (plus the batching wait).
+taken to the prediction for it arriving at the monitor, for the first sample of each batch (the bus timestamp of
+its frame: includes waiting for the batch to fill) and for the last one (estimated as first + (n-1)/rate: the
+pipeline delay alone; when the simulated rig catches up late ticks in a burst, this estimate runs early).
 """
 from __future__ import annotations
 
@@ -40,6 +41,10 @@ def program_text(duration: float) -> str:
             f'amplitude: {AMPLITUDE}, cycles: {cycles}, taper_cycles: 1}}\n')
 
 
+def driver_extra(args) -> dict:
+    return {'backend': 'udp_multicast', 'spawn_sim': True} if args.spawn_sim else {}
+
+
 def cpu_seconds(children: bool = False) -> float:
     r = resource.getrusage(resource.RUSAGE_CHILDREN if children else resource.RUSAGE_SELF)
     return r.ru_utime + r.ru_stime
@@ -54,7 +59,8 @@ def start_processes(args, rate, batch, out_dir, domain):
         ('recorder', ['-p', f'output_dir:={out_dir}', '-p', 'discovery_period:=0.2']),
         ('element_model', []),
         ('excitation', ['-p', f'batch_size:={batch}']),
-        ('rig_driver', ['-p', f'sample_rate:={rate}', '-p', f'batch_size:={batch}']),
+        ('rig_driver', ['-p', f'sample_rate:={rate}', '-p', f'batch_size:={batch}']
+         + sum((['-p', f'{k}:={v}'] for k, v in driver_extra(args).items()), [])),
     ]
     return [subprocess.Popen([str(bindir / exe)] + common + extra, env=env) for exe, extra in specs]
 
@@ -83,7 +89,8 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
             launcher.start(RecorderNode, {'output_dir': str(out_dir), 'discovery_period': 0.2})
             launcher.start(ElementModelNode)
             launcher.start(ExcitationNode, {'batch_size': batch})
-            driver = launcher.start(RigDriverNode, {'sample_rate': float(rate), 'batch_size': batch})
+            driver = launcher.start(RigDriverNode, dict({'sample_rate': float(rate), 'batch_size': batch},
+                                                        **driver_extra(args)))
         mon = launcher.spin(SuiteMonitor(context=launcher.context))
         if not launcher.wait_for(lambda: mon.status is not None and mon.action.server_is_ready() and
                                  mon.recorder_subscribed('samples', 'prediction', 'setpoints'), 60.0):
@@ -121,6 +128,12 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
     inside = rec.sequence < len(expected)
     starved = int(np.sum(np.abs(rec.setpoint[inside] - expected[rec.sequence[inside]]) > 1e-7))
     missing_in_program = len(expected) - int(inside.sum())
+    reasons = [name for name, bad in (
+        ('recording: samples lost', rec.samples_lost > 0), ('recording: sequence gaps', bool(rec.gaps)),
+        ('starved samples', starved > 0), ('program samples not recorded', missing_in_program > 0),
+        ('live gaps', any(v['gaps'] for v in live.values())), ('bus frames lost', status.frames_lost > 0),
+        ('program samples without prediction', bool(np.any(~np.isfinite(rec.prediction[inside])))),
+        ('program did not complete', message != 'completed')) if bad]
     pred_gaps = [g for g in rec.gaps if 'prediction' in str(g.get('topic', ''))] if rec.gaps else []
     return {
         'rate': rate, 'batch_size': batch, 'mode': 'processes' if args.processes else 'one process',
@@ -132,9 +145,8 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         'program_samples_without_prediction': int(np.sum(~np.isfinite(rec.prediction[inside]))),
         'live': live, 'frames_lost': int(status.frames_lost), 'frames_late': int(status.frames_late),
         'latency': latency, 'cpu_cores': cpu / wall, 'sim_counters': sim, 'recording': str(mcap),
-        'zero_loss': (rec.samples_lost == 0 and not rec.gaps and starved == 0 and missing_in_program == 0
-                      and all(v['gaps'] == 0 for v in live.values()) and status.frames_lost == 0
-                      and not np.any(~np.isfinite(rec.prediction[inside]))),
+        'loss_reasons': reasons,
+        'zero_loss': not reasons,
     }
 
 
@@ -145,6 +157,8 @@ def main(argv=None) -> int:
                         '10-minute run)')
     parser.add_argument('--batch-size', type=int, help='samples per batch (default: rate/20, at least 20)')
     parser.add_argument('--processes', action='store_true', help='one process per node instead of one thread each')
+    parser.add_argument('--spawn-sim', action='store_true', help="simulated rig in a process of its own, on "
+                        "python-can's udp_multicast bus over loopback (instead of a thread on the virtual bus)")
     parser.add_argument('--output-dir', help='keep the recordings here (default: a temporary directory)')
     parser.add_argument('--domain-id', type=int, help='ROS domain (default: a private one)')
     parser.add_argument('--json', help='also write the results to this JSON file')
@@ -170,15 +184,18 @@ def main(argv=None) -> int:
             print(f"    latency sample->prediction: last sample of batch median {lat.get('median_ms', float('nan')):.1f}"
                   f" ms, p99 {lat.get('p99_ms', float('nan')):.1f} ms; first sample median "
                   f"{lat1.get('median_ms', float('nan')):.1f} ms, p99 {lat1.get('p99_ms', float('nan')):.1f} ms; "
-                  f"CPU {r['cpu_cores']:.2f} cores; {'ZERO LOSS' if r['zero_loss'] else 'LOSS'}", flush=True)
+                  f"CPU {r['cpu_cores']:.2f} cores; "
+                  f"{'ZERO LOSS' if r['zero_loss'] else 'LOSS: ' + ', '.join(r['loss_reasons'])}", flush=True)
     print('\n| rate [Hz] | batch | mode | duration [s] | samples | lost (rec) | gaps (live) | starved | '
-          'latency median / p99 [ms] | CPU [cores] | zero loss |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|')
+          'latency first sample median / p99 [ms] | last sample median / p99 [ms] | CPU [cores] | zero loss |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|')
     for r in results:
         lat = r['latency'].get('last_sample', {})
+        lat1 = r['latency'].get('first_sample', {})
         gaps = sum(v['gaps'] for v in r['live'].values())
         print(f"| {r['rate']:g} | {r['batch_size']} | {r['mode']} | {r['duration_s']:.0f} | {r['samples_recorded']} | "
               f"{r['recording_samples_lost']} | {gaps} | {r['starved_samples']} | "
+              f"{lat1.get('median_ms', float('nan')):.1f} / {lat1.get('p99_ms', float('nan')):.1f} | "
               f"{lat.get('median_ms', float('nan')):.1f} / {lat.get('p99_ms', float('nan')):.1f} | "
               f"{r['cpu_cores']:.2f} | {'yes' if r['zero_loss'] else 'NO'} |")
     ok = [r['rate'] for r in results if r['zero_loss']]

@@ -6,7 +6,7 @@ accept setpoints; deactivate = safe ramp to rest, stop streaming; cleanup = clos
 the node configures and activates itself (what ``ros2 launch`` users expect from a simulated rig).
 
 Subscribes:  setpoints (msg_defs/SetpointBatch)
-Publishes:   samples (msg_defs/RigSampleBatch, ``batch_size`` samples per message)
+Publishes:   samples (msg_defs/RigSampleBatch, at least ``batch_size`` samples per message)
              status (msg_defs/RigStatus, latched, on change and every ``status_period``)
              /diagnostics (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period``)
 Services:    ~/abort (std_srvs/Trigger): safe ramp to rest now
@@ -67,7 +67,8 @@ class RigDriverNode(LifecycleNode):
         declare(self, 'spawn_sim', False, 'with a python-can interface: also run the simulated rig as a '
                 'separate process on that bus')
         declare(self, 'sample_rate', 1000.0, 'rig sample rate', range=(10.0, 20000.0), units='Hz')
-        self.batch_size = declare(self, 'batch_size', 50, 'samples per RigSampleBatch message', range=(1, 10000))
+        self.batch_size = declare(self, 'batch_size', 50, 'samples per RigSampleBatch message (at least; whole bus reads are '
+                                 'never split, so the stamp is the bus time of the first sample)', range=(1, 10000))
         self.max_batch_delay = declare(self, 'max_batch_delay', 0.1, 'a partial batch is published when its '
                                        'first sample has waited this long (the stream paused or ended)',
                                        range=(0.001, 10.0), units='s')
@@ -231,41 +232,36 @@ class RigDriverNode(LifecycleNode):
                                       + '; '.join(driver.fault_messages[-2:]))
 
     def poll(self) -> None:
-        """Move every sample the bus delivered into fixed-size batches (sequence numbers are the driver's)."""
+        """Move every sample the bus delivered into batches of at least ``batch_size`` samples. Blocks from the
+        core are never split: the stamp of a batch is the real bus time of its first sample."""
         driver = self.rig.driver if self.rig is not None else None
         while driver is not None:
             block = driver.poll()
             if block is None:
                 break
+            if self._buffer and block.first_sequence != self._buffer[-1].first_sequence + len(self._buffer[-1]):
+                self._publish_batch()   # samples lost on the bus: the next message starts after the gap
             if not self._buffer:
                 self._buffer_since = time.monotonic()
             self._buffer.append(block)
-            self._buffered += len(block.displacement)
-            while self._buffered >= self.batch_size:
-                self._publish_batch(self.batch_size)
+            self._buffered += len(block)
+            if self._buffered >= self.batch_size:
+                self._publish_batch()
         if self._buffered and time.monotonic() - self._buffer_since > self.max_batch_delay:
-            self._publish_batch(self._buffered)   # the stream paused (program end, abort ramp done)
+            self._publish_batch()   # the stream paused (program end, abort ramp done)
         status = driver.status if driver is not None else None
         if status is not None and conv.state_code(status.state) != getattr(self._last_status, 'state', None):
             self.publish_status()   # state changes are published at once, not at the next status tick
 
-    def _publish_batch(self, n: int) -> None:
-        blocks, self._buffer = self._buffer, []
-        first = blocks[0].first_sequence
+    def _publish_batch(self) -> None:
+        blocks, self._buffer, self._buffered = self._buffer, [], 0
+        if not blocks:
+            return
+        first, last = blocks[0], blocks[-1]
         cat = {k: np.concatenate([getattr(b, k) for b in blocks]) for k in ('displacement', 'force', 'setpoint')}
-        last = blocks[-1]
-        lost = sum(int(b.frames_lost) for b in blocks)
-        msg = conv.sample_batch_msg(first, blocks[0].t0, blocks[0].sample_period, cat['displacement'][:n],
-                                    cat['force'][:n], cat['setpoint'][:n], last.temperature, last.status_flags,
-                                    lost)
-        self.pub_samples.publish(msg)
-        rest = len(cat['displacement']) - n
-        self._buffered = rest
-        self._buffer_since = time.monotonic()
-        if rest:   # keep the remainder as one block
-            self._buffer = [_Rest(first + n, blocks[0].t0 + n * blocks[0].sample_period, blocks[0].sample_period,
-                                  cat['displacement'][n:], cat['force'][n:], cat['setpoint'][n:],
-                                  last.temperature, last.status_flags, 0)]
+        self.pub_samples.publish(conv.sample_batch_msg(
+            first.first_sequence, first.t0, first.sample_period, cat['displacement'], cat['force'], cat['setpoint'],
+            last.temperature, last.status_flags, sum(int(b.frames_lost) for b in blocks)))
 
     # -- status --------------------------------------------------------------------------------------------------
     def status_message(self) -> RigStatus:
@@ -301,16 +297,6 @@ class RigDriverNode(LifecycleNode):
             self.rig.driver.abort('operator abort (~/abort)')
             response.success, response.message = True, 'safe ramp to rest'
         return response
-
-
-class _Rest:
-    """The remainder of a batch split, shaped like the core's SampleBlock."""
-
-    def __init__(self, first_sequence, t0, sample_period, displacement, force, setpoint, temperature,
-                 status_flags, frames_lost):
-        self.first_sequence, self.t0, self.sample_period = first_sequence, t0, sample_period
-        self.displacement, self.force, self.setpoint = displacement, force, setpoint
-        self.temperature, self.status_flags, self.frames_lost = temperature, status_flags, frames_lost
 
 
 def _parameter_of(message: str) -> str:
