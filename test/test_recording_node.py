@@ -217,6 +217,9 @@ def test_control_service_split_and_snapshot(context, tmp_path):
             assert spin_until(executor, future.done)
             return future.result()
         assert rec.core.recording                                   # autostart
+        graph = [('/ctltest/samples', ['a/msg/B']), ('/ctltest/run/_action/status', ['a/msg/C']),
+                 ('/other/samples', ['a/msg/B']), ('/rosout', ['rcl_interfaces/msg/Log'])]
+        assert rec.wanted_topics(graph) == graph[:1]               # own namespace, no hidden topics
         assert spin_until(executor, lambda: len(rec._subs) == 1)
         for k in range(60):
             if k == 25:
