@@ -82,7 +82,9 @@ def test_paced_and_fast_runs_are_identical():
     prog = Program.from_yaml_text('name: p\nblocks:\n  - {waveform: sine, frequency: 10 Hz, amplitude: 0.5 mm, '
                                   'cycles: 2, taper_cycles: 1}\n')
     fast = run_program(prog, FAST)
-    paced = run_program(prog, {'paced': True}, lookahead=0.2)
+    # the whole program is queued at once (lookahead 0.5 s) and the wall-clock watchdog is lenient, so a
+    # loaded machine cannot make the real-time simulator thread underrun or trip
+    paced = run_program(prog, {'paced': True, 'watchdog_timeout': 1.0}, lookahead=0.5)
     n = prog.n_samples(1000.0)
     assert paced.completed and fast.completed
     # same waveform and physics, same seeded noise: identical samples (paced took real time)
