@@ -110,3 +110,19 @@ def test_setpoints_outside_limits_are_refused_before_sending():
         assert drv.status.faults == 0
         assert not drv.queue_setpoints(0, np.array([0.0, 0.2e-3]))   # 0.2 m/s step
         assert drv.status.faults & FAULT_VELOCITY_LIMIT and drv.status.setpoints_sent == 0
+
+
+def test_abort_ramp_respects_the_host_velocity_limit():
+    prog = Program.from_yaml_text('name: slow\nblocks:\n  - {waveform: sine, frequency: 1 Hz, amplitude: 1 mm, '
+                                  'cycles: 5}\n')
+    r = run_program(prog, dict(FAST, limits={'velocity_max': 0.01}), abort_after=2.3)
+    assert not r.completed and r.setpoint[-1] == 0.0
+    ramp = r.block_index == -1
+    v = np.abs(contiguous_diffs(r.sequence, r.setpoint)) * r.sample_rate
+    assert np.max(v[ramp[1:]]) <= 0.005 + 1e-4          # half the 10 mm/s limit (+ 0.1 um resolution)
+    # the controller's own ramp after a fault gets the same bound through HostCommand.CMD_RampVelocity
+    r = run_program(prog, dict(FAST, limits={'velocity_max': 0.01, 'force_max': 8e3}))
+    assert r.final_status.faults & FAULT_FORCE_LIMIT and r.setpoint[-1] == 0.0
+    ramp = r.block_index == -1
+    v = np.abs(contiguous_diffs(r.sequence, r.setpoint)) * r.sample_rate
+    assert np.max(v[ramp[1:]]) <= 0.005 + 1e-4

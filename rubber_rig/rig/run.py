@@ -76,6 +76,7 @@ def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, ab
     runner.sequence = first
     queued = first
     block_of = []                      # program block per queued setpoint
+    queued_x = []                      # the queued setpoints [m]
     got = []                           # SampleBlocks
     received = first
     next_progress = first
@@ -94,6 +95,7 @@ def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, ab
                 stopped = True
                 break
             block_of.append(runner.last_block_index)
+            queued_x.append(x)
             queued += chunk
         progressed = False
         blk = drv.poll()
@@ -131,10 +133,10 @@ def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, ab
         if not progressed:
             # paced: the rig produces 1 sample per period anyway; sleeping leaves the CPU (and the GIL) to it
             time.sleep(0.002 if cfg.paced else 0.0001)
-    return _result(program, cfg, drv, runner, got, block_of, first, message, t_wall)
+    return _result(program, cfg, drv, runner, got, block_of, queued_x, first, message, t_wall)
 
 
-def _result(program, cfg, drv, runner, got, block_of, first, message, t_wall):
+def _result(program, cfg, drv, runner, got, block_of, queued_x, first, message, t_wall):
     fs = cfg.sample_rate
     cat = (lambda name: np.concatenate([getattr(b, name) for b in got])) if got else (lambda name: np.empty(0))
     seq = np.concatenate([b.sequence for b in got]) if got else np.empty(0, dtype=np.int64)
@@ -145,6 +147,14 @@ def _result(program, cfg, drv, runner, got, block_of, first, message, t_wall):
     inside = (idx >= 0) & (idx < blocks_all.size)
     block_index = np.full(seq.size, -1, dtype=np.int32)
     block_index[inside] = blocks_all[idx[inside]]
+    if message and got:
+        # after a fault the controller flushed the queue and ramps on its own: from the first sample whose applied
+        # command is not the queued one (beyond the 0.1 um frame resolution) the samples belong to no block
+        sent = np.concatenate(queued_x)
+        applied = np.concatenate([b.setpoint for b in got])
+        off = np.nonzero(inside & (np.abs(applied - sent[np.where(inside, idx, 0)]) > 1.5e-7))[0]
+        if off.size:
+            block_index[off[0]:] = -1
     st = drv.status
     completed = runner.finished and not runner.aborted and not st.faults
     return RunResult(program.name, fs, seq, seq / fs, cat('setpoint'), cat('displacement'), cat('force'),

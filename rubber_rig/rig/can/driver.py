@@ -153,8 +153,10 @@ class RigDriver:
         to target [m] (clamped into the limits). Further setpoints are refused until reset()."""
         target = self.limits.clamp_position(target)
         arg = int(round(target / 1e-7)) % (1 << 32)
+        # ramp at most half the velocity limit (and 50 mm/s), in whole mm/s as the frame carries it
+        ramp_v = max(0.001, math.floor(min(0.5 * self.limits.velocity_max, 0.05) * 1000) / 1000)
         self.bus.send(self.proto.encode('HostCommand', {'CMD_Code': CMD_ABORT, 'CMD_Counter': 0,
-                                                        'CMD_Argument': arg}))
+                                                        'CMD_Argument': arg, 'CMD_RampVelocity': ramp_v}))
         if not self._aborting:
             self.fault_messages.append(f'abort: {reason}')
         self._aborting = True
@@ -162,7 +164,7 @@ class RigDriver:
     def reset(self):
         """Clear faults (driver and controller) so a new stream can start."""
         self.bus.send(self.proto.encode('HostCommand', {'CMD_Code': CMD_RESET, 'CMD_Counter': 0,
-                                                        'CMD_Argument': 0}))
+                                                        'CMD_Argument': 0, 'CMD_RampVelocity': 0}))
         self.faults, self.fault_messages, self._aborting = 0, [], False
         self._queued_end = self._last_queued = None
 

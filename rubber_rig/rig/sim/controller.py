@@ -161,19 +161,21 @@ class SimController:
             if code in (CMD_ABORT, CMD_DISABLE):
                 arg = int(sig['CMD_Argument'])
                 target = (arg - (1 << 32) if arg >= 1 << 31 else arg) * 1e-7
-                self.abort(target, 0)
+                self.abort(target, 0, float(sig['CMD_RampVelocity']) or None)
             elif code == CMD_RESET and self.state in ('fault', 'idle'):
                 self.fault_bits = 0
                 self.state = 'idle'
                 self._housekeeping(force=True)
 
-    def abort(self, target: float = 0.0, fault_bits: int = 0):
-        """Flush queued setpoints and ramp from the current command and velocity to target [m]."""
+    def abort(self, target: float = 0.0, fault_bits: int = 0, velocity_max: float = None):
+        """Flush queued setpoints and ramp from the current command and velocity to target [m], at most
+        velocity_max [m/s] (default RAMP_VELOCITY_MAX; the host sends half its velocity limit)."""
         self.fault_bits |= fault_bits
         self.buffer.clear()
         if self.state in ('running', 'holding', 'ramping_down'):
             v = (self.u - self.u_prev) * self.fs
-            self.ramp = SafeRamp(self.u, v, target, self.fs, velocity_max=self.RAMP_VELOCITY_MAX)
+            self.ramp = SafeRamp(self.u, v, target, self.fs,
+                                 velocity_max=min(velocity_max or self.RAMP_VELOCITY_MAX, self.RAMP_VELOCITY_MAX))
             self.state = 'ramping_down'
         elif self.fault_bits:
             self.state = 'fault'
