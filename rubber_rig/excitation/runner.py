@@ -49,6 +49,10 @@ class ProgramRunner:
     amplitude loop and the achieved-amplitude report. The program is checked against `limits` on construction
     (LimitError before anything is generated); every generated chunk is checked again, and a violation turns
     into an abort ramp instead of a setpoint outside the limits.
+
+    Open loop, the setpoints depend on the sample index only. With amplitude_control the command of a cycle also
+    depends on which measured cycles had arrived when it was generated (it uses the gain in force during each
+    measured cycle, so latency delays the correction but cannot make it overshoot).
     """
 
     def __init__(self, program, sample_rate: float, limits: Limits = None, amplitude_control: bool = False,
