@@ -181,3 +181,20 @@ def test_new_stream_after_a_pause_is_bridged_by_holding():
         u = np.concatenate([g.setpoint for g in got])
         np.testing.assert_array_equal(seq, np.arange(450))
         assert np.max(np.abs(np.diff(u))) < 5e-6 and drv.status.frames_lost == 0
+
+
+def test_sensor_offset_resolution_and_noise_are_applied():
+    prog = Program.from_yaml_text('name: s\nblocks:\n  - {waveform: sine, frequency: 5 Hz, amplitude: 0.5 mm, '
+                                  'cycles: 2}\n')
+    opt = {'displacement_offset': 20e-6, 'displacement_resolution': 1e-6, 'displacement_noise': 0.0,
+           'force_offset': -50.0, 'force_resolution': 1.0, 'force_noise': 5.0,
+           'specimen': {'model': 'linear', 'stiffness': 1.3e7, 'damping': 0.0}}
+    r = run_program(prog, dict(FAST, sim=opt))
+    assert r.completed
+    x, f = expected_plant(r, SimOptions(**{k: v for k, v in opt.items()}))
+    steps = r.displacement / 1e-6
+    np.testing.assert_allclose(steps, np.round(steps), atol=1e-6)                 # 1 um resolution
+    np.testing.assert_allclose(r.displacement, x + 20e-6, atol=0.5e-6 + 1e-9)     # offset, no noise
+    np.testing.assert_allclose(r.force / 1.0, np.round(r.force), atol=1e-6)      # 1 N resolution
+    assert np.mean(r.force - f) == pytest.approx(-50.0, abs=0.5)
+    assert np.std(r.force - f) == pytest.approx(5.0, rel=0.1)
