@@ -126,7 +126,11 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
     rec = load_recording(mcap)
     expected = program.setpoints(rate)
     inside = rec.sequence < len(expected)
-    starved = int(np.sum(np.abs(rec.setpoint[inside] - expected[rec.sequence[inside]]) > 1e-7))
+    bad = np.abs(rec.setpoint[inside] - expected[rec.sequence[inside]]) > 1e-7
+    starved = int(np.sum(bad))
+    seq_bad = rec.sequence[inside][bad]
+    breaks = np.flatnonzero(np.diff(seq_bad) != 1) + 1 if seq_bad.size else np.array([], int)
+    starved_runs = [(int(r[0]), int(r.size)) for r in np.split(seq_bad, breaks)][:10] if seq_bad.size else []
     missing_in_program = len(expected) - int(inside.sum())
     reasons = [name for name, bad in (
         ('recording: samples lost', rec.samples_lost > 0), ('recording: sequence gaps', bool(rec.gaps)),
@@ -141,7 +145,7 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         'samples_expected': len(expected), 'samples_recorded': int(len(rec)),
         'recording_samples_lost': int(rec.samples_lost), 'recording_gaps': len(rec.gaps),
         'recording_prediction_gaps': len(pred_gaps), 'program_samples_missing': missing_in_program,
-        'starved_samples': starved, 'predictions_recorded': int(np.sum(np.isfinite(rec.prediction))),
+        'starved_samples': starved, 'starved_runs': starved_runs, 'predictions_recorded': int(np.sum(np.isfinite(rec.prediction))),
         'program_samples_without_prediction': int(np.sum(~np.isfinite(rec.prediction[inside]))),
         'live': live, 'frames_lost': int(status.frames_lost), 'frames_late': int(status.frames_late),
         'latency': latency, 'cpu_cores': cpu / wall, 'sim_counters': sim, 'recording': str(mcap),
@@ -180,7 +184,9 @@ def main(argv=None) -> int:
                   f"in the program; lost: recording {r['recording_samples_lost']} ({r['recording_gaps']} gaps), "
                   f"live gaps samples/prediction/setpoints {r['live']['samples']['gaps']}/"
                   f"{r['live']['prediction']['gaps']}/{r['live']['setpoints']['gaps']}, starved {r['starved_samples']}, "
-                  f"bus frames lost {r['frames_lost']}", flush=True)
+                  f"bus frames lost {r['frames_lost']}"
+                  + (f" (starved runs [first sequence, length]: {r['starved_runs']})" if r['starved_runs'] else ''),
+                  flush=True)
             print(f"    latency sample->prediction: last sample of batch median {lat.get('median_ms', float('nan')):.1f}"
                   f" ms, p99 {lat.get('p99_ms', float('nan')):.1f} ms; first sample median "
                   f"{lat1.get('median_ms', float('nan')):.1f} ms, p99 {lat1.get('p99_ms', float('nan')):.1f} ms; "

@@ -55,8 +55,10 @@ def test_bad_parameters_are_refused_with_errors_naming_them():
     with InProcessLauncher([CONFIG], domain_id=domain_id()) as launcher:
         model = launcher.start(ElementModelNode)
         result = model.set_parameters([Parameter('values.alpha', value=1.5)])[0]
+        assert not result.successful and 'values.alpha' in result.reason      # descriptor range
+        result = model.set_parameters([Parameter('values.k_inf', value=1.0e7)])[0]   # below k0 = 1.229e7
         assert not result.successful
-        assert result.reason.startswith('values.alpha:') and '(0, 1]' in result.reason
+        assert result.reason.startswith('values.k_inf:') and 'k0' in result.reason
         result = model.set_parameters([Parameter('parameter_set', value='seed000_99C')])[0]
         assert not result.successful and result.reason.startswith('parameter_set:') and 'seed000_20C' in result.reason
         result = model.set_parameters([Parameter('temperature', value=35.0)])[0]

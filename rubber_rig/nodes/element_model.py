@@ -14,6 +14,7 @@ naming the parameter, so a running model is never replaced by an invalid one.
 from __future__ import annotations
 
 import re
+from collections import deque
 
 import rclpy
 from rcl_interfaces.msg import SetParametersResult
@@ -30,6 +31,8 @@ from rubber_rig.nodes.predictor import SOURCES, BlockIndex, ModelChoice, OnlineP
 
 VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
 VALUE_UNITS = {'k0': 'N/m', 'k_inf': 'N/m', 'tau': 's', 'alpha': '-', 'x2': 'm', 'f_fmax': 'N'}
+VALUE_RANGES = {'k0': (1e3, 1e11), 'k_inf': (1e3, 1e11), 'tau': (1e-7, 1e4), 'alpha': (1e-3, 1.0),
+                'x2': (1e-8, 1e-1), 'f_fmax': (1e-3, 1e7)}   # wide physical bounds; k_inf >= k0 is checked too
 CHOICE_PARAMS = ('source', 'parameter_set', 'temperature') + tuple('values.' + n for n in VALUE_NAMES)
 
 
@@ -46,7 +49,7 @@ class ElementModelNode(Node):
                 'rig_temperature)', range=(-40.0, 20.0), units='degC')
         for name in VALUE_NAMES:
             declare(self, 'values.' + name, defaults[name], f'explicit model parameter {name} (source values)',
-                    units=VALUE_UNITS[name])
+                    range=VALUE_RANGES[name], units=VALUE_UNITS[name])
         declare(self, 'temperature_hysteresis', 0.5, 'rig temperature change that re-evaluates the parameters',
                 range=(0.01, 20.0), units='K')
         declare(self, 'warmup_time', 5.0, 'displacement history run through a rebuilt model before it '
@@ -67,6 +70,7 @@ class ElementModelNode(Node):
 
         self.blocks = BlockIndex()
         self.cycles = CyclePairer(min_amplitude=min_amplitude)
+        self._cycles_pending = deque()
         self.pub_prediction = self.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
         self.pub_metrics = self.create_publisher(CycleMetrics, topics.CYCLE_METRICS, topics.EVENT_QOS)
         self.pub_params = self.create_publisher(ModelParameters, topics.MODEL_PARAMETERS, topics.LATCHED_QOS)
@@ -79,6 +83,7 @@ class ElementModelNode(Node):
     # -- data path --------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
         self.blocks.add(msg.first_sequence, len(msg.displacement), msg.block_index)
+        self.publish_cycles()
 
     def on_samples(self, msg: RigSampleBatch) -> None:
         x, f, _ = conv.batch_arrays(msg)
@@ -92,9 +97,22 @@ class ElementModelNode(Node):
         if self.cycle_metrics:
             t0 = conv.to_seconds(msg.header.stamp)
             for c in self.cycles.feed(msg.first_sequence, msg.sample_period, x, f, predicted):
-                block = self.blocks.lookup(c.end_sequence - 1)
-                self.pub_metrics.publish(conv.cycle_metrics_msg(
-                    c.measured, c.model, block, c.index, t0 + (c.end_sequence - msg.first_sequence) * msg.sample_period))
+                t_end = t0 + (c.end_sequence - msg.first_sequence) * msg.sample_period
+                self._cycles_pending.append((c, t_end, msg.first_sequence + len(x)))
+            self.publish_cycles()
+
+    def publish_cycles(self) -> None:
+        """Publish finished cycles with the block they belong to. Setpoints and samples travel on different
+        topics, so on a rig running faster than real time the setpoints of a cycle can arrive after its
+        samples: a cycle waits (up to one second of samples) until the setpoints covering it are in."""
+        while self._cycles_pending:
+            c, t_end, seen = self._cycles_pending[0]
+            block = self.blocks.lookup(c.end_sequence - 1)
+            if block < 0 and not self.blocks.covered(c.end_sequence - 1) and \
+                    self.predictor.next_sequence - seen < 1.0 / (self.predictor.dt or 1e-3):
+                return
+            self._cycles_pending.popleft()
+            self.pub_metrics.publish(conv.cycle_metrics_msg(c.measured, c.model, block, c.index, t_end))
 
     def publish_parameters(self) -> None:
         p = self.predictor

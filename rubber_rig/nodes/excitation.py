@@ -61,7 +61,7 @@ class ExcitationNode(Node):
                                      'the rig is ready; empty: wait for a run_program goal')
         self.amplitude_control = declare(self, 'amplitude_control', True, 'adjust command amplitude and mean '
                                          'so the measured amplitude reaches the target (program parameter only)')
-        self.lead_time = declare(self, 'lead_time', 0.25, 'how far ahead of the latest measured sample '
+        self.lead_time = declare(self, 'lead_time', 0.5, 'how far ahead of the latest measured sample '
                                  'setpoints are streamed', range=(0.02, 5.0), units='s')
         self.batch_size = declare(self, 'batch_size', 50, 'setpoints per SetpointBatch', range=(1, 5000))
         self.stream_period = declare(self, 'stream_period', 0.02, 'period of the streaming timer',
@@ -205,8 +205,10 @@ class ExcitationNode(Node):
             goal_handle.abort()
             return RunProgram.Result(success=False, message=str(exc))
         self.goal_handle, self._done = goal_handle, Future()
-        cancel_timer = self.create_timer(0.05, lambda: goal_handle.is_cancel_requested and self.runner
-                                         and self.runner.abort('goal cancelled'))
+        def check_cancel():
+            if goal_handle.is_cancel_requested and self.runner is not None and not self.runner.aborted:
+                self.runner.abort('goal cancelled')   # smooth ramp to rest; the goal ends when it is done
+        cancel_timer = self.create_timer(0.05, check_cancel)
         try:
             result = await self._done
         finally:

@@ -139,6 +139,10 @@ class BlockIndex:
     def add(self, first_sequence: int, n: int, block_index: int) -> None:
         self._ranges.append((first_sequence, first_sequence + n, block_index))
 
+    def covered(self, sequence: int) -> bool:
+        """True once setpoints up to ``sequence`` have been seen (a -1 from lookup is then final)."""
+        return bool(self._ranges) and sequence < self._ranges[-1][1]
+
     def lookup(self, sequence: int) -> int:
         for first, end, block in reversed(self._ranges):
             if first <= sequence < end:
