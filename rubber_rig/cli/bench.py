@@ -59,6 +59,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         'paced to the wall clock (same waveform and physics)')
     parser.add_argument('--output-dir', default='recordings', help='directory for the MCAP file and summary')
     parser.add_argument('--namespace', default='', help='ROS namespace of the rig')
+    parser.add_argument('--domain-id', type=int, help='ROS domain id (default: $ROS_DOMAIN_ID or 0)')
     parser.add_argument('--no-amplitude-control', action='store_true', help='open-loop command amplitude')
     parser.add_argument('--foxglove', action='store_true', help='serve the live topics to Foxglove over WebSocket '
                         '(layout: config/foxglove_layout.json)')
@@ -105,25 +106,28 @@ def build_program(args) -> tuple:
     """(Program, YAML text) after the command-line overrides; validated like any program."""
     from rubber_rig.excitation import Program, load_program
     program = load_program(args.program)
-    if not (args.cycles or args.duration_scale or args.blocks or args.taper_cycles):
+    overrides = (args.cycles, args.duration_scale, args.blocks, args.taper_cycles)
+    if all(v is None for v in overrides):
         from rubber_rig.nodes.excitation import read_program
         return read_program(args.program)
     if args.cycles is not None and args.cycles < 1:
-        raise ValueError('--cycles must be >= 1')
+        raise ValueError(f'--cycles must be >= 1, got {args.cycles}')
     if args.duration_scale is not None and not args.duration_scale > 0:
-        raise ValueError('--duration-scale must be > 0')
+        raise ValueError(f'--duration-scale must be > 0, got {args.duration_scale}')
+    if args.taper_cycles is not None and not args.taper_cycles > 0:
+        raise ValueError(f'--taper-cycles must be > 0, got {args.taper_cycles}')
     blocks = [_block_dict(b) for b in program.blocks]
     if args.blocks:
         blocks = [blocks[i] for i in _parse_blocks(args.blocks, len(blocks))]
     for d in blocks:
         if 'cycles' in d:
-            if args.cycles:
+            if args.cycles is not None:
                 d['cycles'] = args.cycles
             if args.duration_scale:
                 d['cycles'] = max(1, int(round(d['cycles'] * args.duration_scale)))
         elif 'duration' in d and args.duration_scale and d['waveform'] != 'ramp':
             d['duration'] *= args.duration_scale
-        if 'taper_cycles' in d and args.taper_cycles:
+        if 'taper_cycles' in d and args.taper_cycles is not None:
             d['taper_cycles'] = args.taper_cycles
     data = {'name': program.name, 'description': program.description + ' (rubber-rig bench overrides)',
             'initial_position': program.initial_position, 'rest_position': program.rest_position, 'blocks': blocks}
@@ -289,7 +293,7 @@ def run(args) -> int:
         driver_overrides['paced'] = False
     term = Terminal(args.quiet)
 
-    with InProcessLauncher([config], namespace=args.namespace) as launcher:
+    with InProcessLauncher([config], namespace=args.namespace, domain_id=args.domain_id) as launcher:
         recorder = launcher.start(RecorderNode, {
             'output_dir': str(out_dir), 'metadata.test_program': program_yaml,
             'metadata.notes': f'rubber-rig bench --program {args.program}'})
