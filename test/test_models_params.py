@@ -154,3 +154,29 @@ def test_core_never_imports_rclpy():
             'bad = [m for m in sys.modules if m.split(".")[0] in ("rclpy", "rosidl_runtime_py")]; '
             'sys.exit(1 if bad else 0)')
     assert subprocess.run([sys.executable, '-c', code]).returncode == 0
+
+
+def test_parameter_set_from_a_fitted_yaml_file(tmp_path):
+    """A file in the shipped layout (what `rubber-rig fit` writes) loads by path, as FILE or FILE:SET."""
+    one = tmp_path / 'one.yaml'
+    one.write_text('sets:\n  fit_m10C: {model: seed000, values: {k0: 12.5e6, k_inf: 15.0e6, tau: 0.03, '
+                   'alpha: 0.8, x2: 1.2e-3, f_fmax: 6000.0}}\n')
+    p = load_parameter_set(str(one))
+    assert (p.k0, p.k_inf, p.tau, p.alpha, p.x2, p.f_fmax) == (12.5e6, 15.0e6, 0.03, 0.8, 1.2e-3, 6000.0)
+    assert load_parameter_set(f'{one}:fit_m10C') == p
+
+    two = tmp_path / 'two.yaml'
+    two.write_text(one.read_text() + '  fit_20C: {model: seed000, values: {k0: 12.3e6, k_inf: 14.0e6, '
+                   'tau: 0.043, alpha: 0.66, x2: 1.4e-3, f_fmax: 4600.0}}\n')
+    assert load_parameter_set(f'{two}:fit_20C').tau == 0.043
+    with pytest.raises(ValueError, match='holds 2 parameter sets.*fit_20C, fit_m10C'):
+        load_parameter_set(str(two))
+    with pytest.raises(ValueError, match="unknown parameter set 'nope'"):
+        load_parameter_set(f'{two}:nope')
+    with pytest.raises(FileNotFoundError, match='no such parameter file'):
+        load_parameter_set(str(tmp_path / 'missing.yaml'))
+    bad = tmp_path / 'bad.yaml'
+    bad.write_text('sets:\n  s: {model: seed000, values: {k0: 12.5e6, k_inf: 11.0e6, tau: 0.03, '
+                   'alpha: 0.8, x2: 1.2e-3, f_fmax: 6000.0}}\n')
+    with pytest.raises(ValueError, match='k_inf'):
+        load_parameter_set(str(bad))

@@ -160,12 +160,46 @@ def list_parameter_sets() -> list:
     return sorted(_all_sets())
 
 
+def _sets_in_file(path: Path) -> dict:
+    if not path.is_file():
+        raise FileNotFoundError(f'no such parameter file: {path}')
+    try:
+        data = yaml.safe_load(path.read_text(encoding='utf-8')) or {}
+    except yaml.YAMLError as exc:
+        raise ValueError(f'{path}: not valid YAML ({exc})') from None
+    sets = data.get('sets') if isinstance(data, dict) else None
+    if not isinstance(sets, dict) or not sets:
+        raise ValueError(f'{path}: no "sets" mapping of parameter sets (the layout of models/data/seed000.yaml)')
+    return sets
+
+
+def _resolve_set(name: str) -> tuple:
+    """(set name, {model, values}) of a shipped set name, ``FILE.yaml`` (one set) or ``FILE.yaml:SET``."""
+    file_part, _, set_part = str(name).rpartition(':') if str(name).count(':') else ('', '', str(name))
+    if not file_part and set_part.endswith(('.yaml', '.yml')):
+        file_part, set_part = set_part, ''
+    if file_part:
+        sets = _sets_in_file(Path(file_part).expanduser())
+        if not set_part:
+            if len(sets) != 1:
+                raise ValueError(f'{file_part} holds {len(sets)} parameter sets; name one as '
+                                 f'{file_part}:SET with SET one of {", ".join(sorted(sets))}')
+            set_part = next(iter(sets))
+        origin = file_part
+    else:
+        sets, origin = _all_sets(), 'the shipped sets'
+    if set_part not in sets:
+        raise ValueError(f'unknown parameter set {set_part!r} in {origin}; known: {", ".join(sorted(sets))}')
+    entry = sets[set_part]
+    if not isinstance(entry, dict) or entry.get('model') not in PARAM_CLASSES or not isinstance(entry.get('values'), dict):
+        raise ValueError(f'parameter set {set_part!r} in {origin} needs "model" (one of '
+                         f'{", ".join(PARAM_CLASSES)}) and a "values" mapping')
+    return set_part, entry
+
+
 def parameter_set_model(name: str) -> str:
-    """Model name ('seed000', 'kelvin_voigt', ...) a named parameter set belongs to."""
-    sets = _all_sets()
-    if name not in sets:
-        raise ValueError(f'unknown parameter set {name!r}; known: {", ".join(sorted(sets))}')
-    return sets[name]['model']
+    """Model name ('seed000', 'kelvin_voigt', ...) a parameter set belongs to (see load_parameter_set)."""
+    return _resolve_set(name)[1]['model']
 
 
 def load_parameter_set(name: str):
@@ -174,9 +208,11 @@ def load_parameter_set(name: str):
     ``seed000_20C``, ``seed000_0C``, ``seed000_m20C``, ``seed000_m40C`` (Table 1) and
     ``seed000_case2`` .. ``seed000_case9`` give :class:`Seed000Params`; ``seed000_case1`` (the
     paper's Kelvin-Voigt reference) gives :class:`KelvinVoigtParams`.
+    ``name`` may also be a YAML file in the same layout (the output of ``rubber-rig fit``):
+    ``FILE.yaml`` when it holds one set, ``FILE.yaml:SET`` to pick one.
     """
-    model = parameter_set_model(name)
-    return PARAM_CLASSES[model].from_dict(_all_sets()[name]['values'])
+    _, entry = _resolve_set(name)
+    return PARAM_CLASSES[entry['model']].from_dict(entry['values'])
 
 
 TABLE1_TEMPERATURES = (-40.0, -20.0, 0.0, 20.0)
