@@ -171,6 +171,11 @@ class RigDriverNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
+        driver = self.rig.driver
+        if driver.faults or driver.fault_messages:   # activating again is the operator's acknowledgement
+            self.get_logger().info('clearing ' + '; '.join(driver.fault_messages))
+            driver.reset()
+            self._queued_end, self._refused_logged = None, False
         self._poll_timer = self.create_timer(self.get_parameter('poll_period').value, self.poll)
         return super().on_activate(state)
 
@@ -209,7 +214,7 @@ class RigDriverNode(LifecycleNode):
         ahead of the rig (excitation ``lead_time``): a short gap is bridged by holding the last setpoint, a
         long one (the rig has been holding since the last program) starts a new stream, and a batch that
         overlaps what is already queued is trimmed. All three happen only between programs."""
-        if self.rig is None:
+        if self.rig is None or self._poll_timer is None:   # only an active driver moves the rig
             return
         driver = self.rig.driver
         x = conv.as_array(msg.displacement)
