@@ -109,3 +109,28 @@ def test_rig_driver_lifecycle(tmp_path):
                              node_name='rig_driver_bad')
         bad.trigger_configure()
         assert bad.lifecycle_state == 'unconfigured' and bad.rig is None
+
+
+def test_model_follows_the_rig_temperature_channel(tmp_path):
+    """A 0 degC specimen, the model told to follow the rig's temperature channel (starting from 20 degC): it
+    re-evaluates its parameters at the measured temperature and then predicts the cold specimen."""
+    from rubber_rig.models import parameters_at_temperature
+    from test_nodes import by_sequence
+    launcher, nodes = start_suite(tmp_path, recorder=False, driver={
+        'sim.specimen.parameter_set': '', 'sim.specimen.temperature': 0.0, 'sim.temperature': 0.0})
+    with launcher:
+        model, mon = nodes['model'], nodes['monitor']
+        assert model.set_parameters([Parameter('source', value='rig_temperature')])[0].successful
+        result = run_program(launcher, mon, "blocks:\n  - {name: s, waveform: sine, frequency: 5 Hz, "
+                                            "amplitude: 0.5 mm, cycles: 6, taper_cycles: 1}\n")
+        assert result.success, result.message
+        assert launcher.wait_for(lambda: mon.model_parameters is not None
+                                 and abs(mon.model_parameters.temperature) < 0.5, 15.0)
+        values = dict(zip(mon.model_parameters.names, mon.model_parameters.values))
+        cold = parameters_at_temperature(mon.model_parameters.temperature)
+        assert values['k0'] == pytest.approx(cold.k0) and values['f_fmax'] == pytest.approx(cold.f_fmax)
+        assert mon.model_parameters.parameter_set == ''
+        seq, residual = by_sequence(mon.messages['prediction'], 'residual')
+        late = seq > seq[-1] - 800        # the last 0.8 s (4 cycles), long after the switch to 0 degC
+        rms = float(np.sqrt(np.mean(residual[late] ** 2)))
+        assert rms < 10.0, f'residual {rms:.1f} N: the model did not follow the 0 degC specimen'
