@@ -95,6 +95,9 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         if not launcher.wait_for(lambda: mon.status is not None and mon.action.server_is_ready() and
                                  mon.recorder_subscribed('samples', 'prediction', 'setpoints'), 60.0):
             raise RuntimeError('suite did not come up within 60 s')
+        # The graph lists the recorder's subscriptions as soon as they exist; across processes, DDS endpoint
+        # matching can take a moment longer, and messages published before it completes never reach them.
+        launcher.wait_for(lambda: False, 2.0 if args.processes else 0.2)
         cpu0, cpu0c, t0 = cpu_seconds(), cpu_seconds(True), time.monotonic()
         goal = mon.send_program(text, amplitude_control=False)
         if not launcher.wait_for(goal.done, 30.0) or not goal.result().accepted:
@@ -147,6 +150,7 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         'recording_prediction_gaps': len(pred_gaps), 'program_samples_missing': missing_in_program,
         'starved_samples': starved, 'starved_runs': starved_runs, 'predictions_recorded': int(np.sum(np.isfinite(rec.prediction))),
         'program_samples_without_prediction': int(np.sum(~np.isfinite(rec.prediction[inside]))),
+        'first_sequences_without_prediction': rec.sequence[inside][~np.isfinite(rec.prediction[inside])][:5].tolist(),
         'live': live, 'frames_lost': int(status.frames_lost), 'frames_late': int(status.frames_late),
         'latency': latency, 'cpu_cores': cpu / wall, 'sim_counters': sim, 'recording': str(mcap),
         'loss_reasons': reasons,

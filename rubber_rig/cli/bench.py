@@ -327,6 +327,7 @@ def run(args) -> int:
                                                                   'cycle_metrics', 'status'), 30.0)
         if not ready:
             raise RuntimeError('the nodes did not connect within 30 s (status, run_program, recorder topics)')
+        launcher.wait_for(lambda: False, 0.3)   # graph entries exist; let DDS finish matching the endpoints
         term.line(f'recording to {recorder.core.current_file}')
         table = BlockTable(program)
         term.line(BlockTable.COLUMNS[0])
