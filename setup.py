@@ -31,6 +31,7 @@ setup(
             'excitation = rubber_rig.nodes.excitation:main',
             'element_model = rubber_rig.nodes.element_model:main',
             'recorder = rubber_rig.nodes.recorder:main',
+            'foxglove_view = rubber_rig.nodes.foxglove_view:main',
         ],
     },
 )

@@ -16,9 +16,7 @@ from __future__ import annotations
 import re
 from collections import deque
 
-import rclpy
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from msg_defs.msg import CycleMetrics, ModelParameters, ModelPrediction, RigSampleBatch, SetpointBatch
@@ -28,6 +26,7 @@ from rubber_rig.nodes import topics
 from rubber_rig.nodes.cycles import CyclePairer
 from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.nodes.predictor import SOURCES, BlockIndex, ModelChoice, OnlinePredictor
+from rubber_rig.nodes.spin import spin_node
 
 VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
 VALUE_UNITS = {'k0': 'N/m', 'k_inf': 'N/m', 'tau': 's', 'alpha': '-', 'x2': 'm', 'f_fmax': 'N'}
@@ -177,17 +176,7 @@ class ElementModelNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ElementModelNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(ElementModelNode, args)
 
 
 if __name__ == '__main__':

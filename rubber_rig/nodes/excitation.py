@@ -17,9 +17,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 from rclpy.task import Future
 
@@ -33,6 +31,7 @@ from rubber_rig.excitation import Limits, Program, ProgramRunner, load_program
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import declare
+from rubber_rig.nodes.spin import spin_node
 
 READY_STATES = (RigStatus.STATE_IDLE, RigStatus.STATE_RUNNING, RigStatus.STATE_HOLDING)
 
@@ -258,17 +257,7 @@ class ExcitationNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = ExcitationNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(ExcitationNode, args)
 
 
 if __name__ == '__main__':

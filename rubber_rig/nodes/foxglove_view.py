@@ -20,14 +20,13 @@ from collections import deque
 from pathlib import Path
 
 import numpy as np
-import rclpy
-from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
 
 from msg_defs.msg import CycleMetrics, ModelPrediction, RigStatus
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import declare
+from rubber_rig.nodes.spin import spin_node
 
 LAYOUT_FILE = Path(__file__).resolve().parents[2] / 'config' / 'foxglove_layout.json'
 
@@ -184,18 +183,7 @@ def main(args=None):
         LAYOUT_FILE.write_text(build_layout())
         print(f'wrote {LAYOUT_FILE}')
         return
-    rclpy.init(args=ros_args)
-    node = None
-    try:
-        node = FoxgloveViewNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.close()
-            node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(FoxgloveViewNode, ros_args)
 
 
 if __name__ == '__main__':

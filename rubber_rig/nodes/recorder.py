@@ -14,11 +14,9 @@ splitting, snapshots and loss accounting are rubber_rig.recording.Recorder's.
 """
 import importlib
 
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
 from rclpy.exceptions import ParameterUninitializedException
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -28,6 +26,7 @@ from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import declare
 from rubber_rig.recording import Recorder, RecordingError, full_definition
 from rubber_rig.recording.qos import qos_entry
+from rubber_rig.nodes.spin import spin_node
 
 UNSUPPORTED_SEQUENCE = 2**63   # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED is UINT64_MAX
 IGNORED_TOPICS = ('/rosout', '/parameter_events')
@@ -225,19 +224,7 @@ class RecorderNode(Node):
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = RecorderNode()
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(RecorderNode, args)
 
 
 if __name__ == '__main__':

@@ -21,9 +21,7 @@ from __future__ import annotations
 import time
 
 import numpy as np
-import rclpy
 import yaml
-from rclpy.executors import ExternalShutdownException
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -35,6 +33,7 @@ from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import ParameterError, check, declare
 from rubber_rig.rig.config import RigConfig
 from rubber_rig.rig.session import open_rig
+from rubber_rig.nodes.spin import spin_node
 
 SIM_FLOATS = {  # sim.<name>: (default, description, range)
     'actuator_frequency': (80.0, 'natural frequency of the actuator position loop [Hz]', (1.0, 2000.0)),
@@ -318,18 +317,7 @@ def _parameter_of(message: str) -> str:
 
 
 def main(args=None):
-    rclpy.init(args=args)
-    node = None
-    try:
-        node = RigDriverNode()
-        rclpy.spin(node)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.close()
-            node.destroy_node()
-        rclpy.try_shutdown()
+    spin_node(RigDriverNode, args)
 
 
 if __name__ == '__main__':
