@@ -18,6 +18,8 @@ from pathlib import Path
 
 import yaml
 
+from rubber_rig.models import read_parameter_file
+
 from .identify import PARAM_NAMES
 
 
@@ -67,13 +69,8 @@ def write_fit_file(path, fits, prefix='fit', source=None) -> Path:
 
 def load_fit_file(path) -> dict:
     """{set name: {'model', 'values', 'temperature'}} of a parameter YAML (ours or a shipped one)."""
-    path = Path(path)
-    if not path.exists():
-        raise FileNotFoundError(f'no such parameter file: {path}')
-    data = yaml.safe_load(path.read_text()) or {}
-    sets = data.get('sets')
-    if not isinstance(sets, dict) or not sets:
-        raise ValueError(f'{path}: no "sets" mapping of parameter sets')
+    data = read_parameter_file(path)
+    sets = data['sets']
     temps = {}
     for row in data.get('table1') or []:
         vals = {k: row.get(k) for k in PARAM_NAMES}

@@ -15,7 +15,7 @@ from .fractional import (gl_complex_stiffness, two_order_complex_stiffness, zene
                          zener_storage_loss)
 from .friction import BergFriction, SmoothCoulomb, berg_force, berg_steady_state
 from .params import (KelvinVoigtParams, Seed000Params, Seed001Params, list_parameter_sets, load_parameter_set,
-                     parameters_at_temperature)
+                     parameters_at_temperature, read_parameter_file)
 from .simulate import sine_displacement, time_domain_properties
 from .steady_state import steady_state_properties
 
@@ -26,5 +26,6 @@ __all__ = [
     'gl_complex_stiffness', 'two_order_complex_stiffness', 'zener_complex_stiffness', 'zener_storage_loss',
     'berg_force', 'berg_steady_state',
     'KelvinVoigtParams', 'Seed000Params', 'Seed001Params', 'list_parameter_sets', 'load_parameter_set',
-    'parameters_at_temperature', 'steady_state_properties', 'sine_displacement', 'time_domain_properties',
+    'parameters_at_temperature', 'read_parameter_file', 'steady_state_properties', 'sine_displacement',
+    'time_domain_properties',
 ]

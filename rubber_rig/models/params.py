@@ -160,7 +160,10 @@ def list_parameter_sets() -> list:
     return sorted(_all_sets())
 
 
-def _sets_in_file(path: Path) -> dict:
+def read_parameter_file(path) -> dict:
+    """The YAML of a parameter file in the shipped layout (``sets:`` name -> {model, values}; optional
+    ``table1:`` rows), e.g. the output of ``rubber-rig fit``. Errors name the file and what is wrong."""
+    path = Path(path).expanduser()
     if not path.is_file():
         raise FileNotFoundError(f'no such parameter file: {path}')
     try:
@@ -170,7 +173,7 @@ def _sets_in_file(path: Path) -> dict:
     sets = data.get('sets') if isinstance(data, dict) else None
     if not isinstance(sets, dict) or not sets:
         raise ValueError(f'{path}: no "sets" mapping of parameter sets (the layout of models/data/seed000.yaml)')
-    return sets
+    return data
 
 
 def _resolve_set(name: str) -> tuple:
@@ -179,7 +182,7 @@ def _resolve_set(name: str) -> tuple:
     if not file_part and set_part.endswith(('.yaml', '.yml')):
         file_part, set_part = set_part, ''
     if file_part:
-        sets = _sets_in_file(Path(file_part).expanduser())
+        sets = read_parameter_file(file_part)['sets']
         if not set_part:
             if len(sets) != 1:
                 raise ValueError(f'{file_part} holds {len(sets)} parameter sets; name one as '
