@@ -4,6 +4,8 @@ A real actuator attenuates and delays the command at higher frequencies. The loo
 full-amplitude cycle of the displacement, estimates the plant gain from the command gain that was in force
 during exactly that cycle (so measurement latency cannot cause over-correction), and sets the command
 amplitude gain and mean offset for the following cycles, like peak-valley / amplitude-phase compensation.
+A block starts from gain 1 and offset 0, or from what the run's compensation memory (compensation.py) learned
+in earlier blocks; what this block learns (learned()) goes back into that memory.
 """
 import math
 
@@ -38,12 +40,23 @@ class BlockLoop:
         self._committed = {}                        # cycle -> (g0, g1, o0, o1, samples generated)
         self._pending = {}                          # cycle -> ([phase arrays], [x arrays])
         self.cycles = []                            # measured steady cycles: (cycle, amplitude, mean, gain)
+        self.estimates = []                         # control: (cycle, needed gain, needed offset) per clean cycle
+        self.initial = (1.0, 0.0)                   # (gain, offset) the block started with
         total = block.total_cycles
         self._steady = (block.taper_cycles, total - block.taper_cycles)
         # peak velocity per metre of amplitude, to cap the gain under velocity_max
         f = max(block.frequency, block.frequency_end or 0.0)
         unit_v = {'sine': 2 * math.pi * f, 'triangle': 4 * f, 'square': 4 * f * block.square_slope}
         self._unit_v = unit_v.get(block.waveform, 2 * math.pi * f)
+
+    def start_from(self, gain: float, offset: float) -> None:
+        """Start the block's command at `gain` and mean `offset` [m] (e.g. from the run's compensation memory)
+        instead of 1 and 0; the gain is capped like every correction. Call before the first command()."""
+        if self._committed:
+            raise RuntimeError('start_from() after the block has started')
+        self.offset = float(offset)
+        self.gain = self._cap(float(gain), self.offset)
+        self.initial = (self.gain, self.offset)
 
     # ---- command side
     def command(self, phase: np.ndarray):
@@ -97,6 +110,7 @@ class BlockLoop:
             plant = amp / (g_used * self.block.amplitude)
             self.gain = self._cap(1.0 / plant, rec[2] - (mean - self.block.mean))
             self.offset = rec[2] - (mean - self.block.mean)
+            self.estimates.append((cc, min(max(1.0 / plant, GAIN_MIN), GAIN_MAX), self.offset))
 
     def _cap(self, gain: float, offset: float) -> float:
         """Keep the corrected command inside the gain range and the displacement and velocity limits."""
@@ -108,6 +122,14 @@ class BlockLoop:
             gain = min(gain, max(room, 0.0) / a)
             gain = min(gain, 0.95 * self.limits.velocity_max / (self._unit_v * a))
         return gain
+
+    def learned(self):
+        """(gain, offset [m]) the block needs - 1 / plant gain and the mean correction - averaged over the last
+        half of the cycles judged so far (uncapped by the limits), or None before the first."""
+        if not self.estimates:
+            return None
+        tail = self.estimates[len(self.estimates) // 2:]
+        return float(np.mean([e[1] for e in tail])), float(np.mean([e[2] for e in tail]))
 
     # ---- reporting
     def achieved(self):

@@ -7,6 +7,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .amplitude import BlockLoop
+from .compensation import CompensationMemory
 from .limits import LimitError, Limits
 from .ramp import SafeRamp
 
@@ -53,14 +54,21 @@ class ProgramRunner:
     Open loop, the setpoints depend on the sample index only. With amplitude_control the command of a cycle also
     depends on which measured cycles had arrived when it was generated (it uses the gain in force during each
     measured cycle, so latency delays the correction but cannot make it overshoot).
+
+    compensation_memory (with amplitude_control only): every periodic block starts from the command gain and
+    mean offset that the blocks measured so far in this run learned (interpolated in log-frequency, see
+    compensation.py) instead of from gain 1 - with setpoints streamed ahead of the measurement, a block's own
+    correction may arrive only at its end. False: every block starts from gain 1 (the loop works per block).
     """
 
     def __init__(self, program, sample_rate: float, limits: Limits = None, amplitude_control: bool = False,
-                 start_sequence: int = 0, abort_bandwidth: float = 2.0):
+                 start_sequence: int = 0, abort_bandwidth: float = 2.0, compensation_memory: bool = True):
         self.program, self.fs = program, float(sample_rate)
         self.limits = limits if limits is not None else Limits()
         self.limits.check_program(program, self.fs)
         self.amplitude_control = amplitude_control
+        # what the amplitude loop learned per block (gain, offset vs frequency): the next block's starting point
+        self.compensation = CompensationMemory() if amplitude_control and compensation_memory else None
         self.abort_bandwidth = abort_bandwidth
         self._starts = program.block_starts(self.fs)
         self._total = int(self._starts[-1])
@@ -74,6 +82,7 @@ class ProgramRunner:
         self._hold_block = None
         self._ramp_from = {}                          # ramp block index -> start override after a hold
         self._loops = {}                              # block index -> BlockLoop of its latest run
+        self._learned = {}                            # block index -> (loop, estimates) last put in memory
         self._segments = []                           # [seq0, seq1, block, local0, loop]
         self._seg_starts = []
         self._completed = set()
@@ -190,6 +199,9 @@ class ProgramRunner:
             loop = self._loops.get(b)
             if loop is None or local[0] == 0:   # first sample of a (re)started block: fresh cycle bookkeeping
                 loop = self._loops[b] = BlockLoop(blk, self.fs, self.limits, self.amplitude_control)
+                start = self.compensation.lookup(blk) if self.compensation is not None else None
+                if start is not None:
+                    loop.start_from(*start)
             gain, offset = loop.command(blk.phase(t))
             x = blk.evaluate(t, gain, offset)
         else:
@@ -235,8 +247,18 @@ class ProgramRunner:
                 loop.feed(self.program.blocks[b].phase(t), x[lo - s0:hi - s0])
             if loop is not None and s1 >= seq1 and self._generated_all(b, loop):
                 loop.flush()   # the block's last cycle is complete only once generation has left the block
+            if loop is not None and self.compensation is not None:
+                self._learn(b, loop)
             j += 1
         self._measured_to = max(self._measured_to, s1)
+
+    def _learn(self, b, loop):
+        """Put what `loop` (block b) learned so far into the compensation memory (once per new judged cycle)."""
+        n = len(loop.estimates)
+        seen = self._learned.get(b)
+        if n and not (seen and seen[0] is loop and seen[1] == n):
+            self._learned[b] = (loop, n)
+            self.compensation.learn(b, self.program.blocks[b], *loop.learned())
 
     def _generated_all(self, b, loop):
         return b in self._completed and (self._loops.get(b) is not loop or self.block_index != b

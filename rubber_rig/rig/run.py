@@ -40,18 +40,28 @@ class RunResult:
 
 def run_program(program, config, on_progress: Optional[Callable] = None, amplitude_control: bool = False,
                 lookahead: float = None, rig=None, progress_period: float = 0.1,
-                abort_after: float = None) -> RunResult:
+                abort_after: float = None, compensation_memory: bool = True,
+                lead_latency: bool = False) -> RunResult:
     """Run `program` (Program, YAML path or shipped name) on the rig of `config` (RigConfig or mapping).
 
     The program is validated against the limits before the rig is opened, so nothing is sent on error.
     Setpoints are streamed `lookahead` seconds ahead of the measurement (default 0.1 s paced, 0.05 s fast).
     on_progress(Progress) is called every progress_period seconds of samples. abort_after [s of samples]:
-    abort the program there (tests of the abort path). An open `rig` may be passed in (not closed here)."""
+    abort the program there (tests of the abort path). An open `rig` may be passed in (not closed here).
+    compensation_memory: see ProgramRunner (with amplitude_control: blocks start from what earlier blocks
+    learned).
+
+    lead_latency: the runner sees each measured sample only once the setpoints `lookahead` beyond it have been
+    generated (in chunks of at most 50 ms) - the measurement latency the excitation node has with lead_time =
+    lookahead. Without it a fast run feeds the measurement as soon as the simulated rig has consumed the
+    queue, so the amplitude loop sees at most one chunk of latency; a paced rig consumes in real time and has
+    about `lookahead` of latency anyway. It changes nothing open loop."""
     cfg = RigConfig.from_dict(config)
     if not isinstance(program, Program):
         program = load_program(program)
     fs = cfg.sample_rate
-    runner = ProgramRunner(program, fs, cfg.limits, amplitude_control=amplitude_control)   # checks limits
+    runner = ProgramRunner(program, fs, cfg.limits, amplitude_control=amplitude_control,   # checks limits
+                           compensation_memory=compensation_memory)
     own = rig is None
     rig = open_rig(cfg) if own else rig
     t_wall = time.monotonic()
@@ -59,25 +69,37 @@ def run_program(program, config, on_progress: Optional[Callable] = None, amplitu
         if not rig.wait_ready(10.0):
             raise RuntimeError('the rig controller did not announce itself within 10 s')
         return _loop(program, cfg, rig.driver, runner, on_progress, lookahead, progress_period, abort_after,
-                     t_wall)
+                     t_wall, lead_latency)
     finally:
         if own:
             rig.close()
 
 
-def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, abort_after, t_wall):
+def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, abort_after, t_wall,
+          lead_latency=False):
     fs = cfg.sample_rate
     if lookahead is None:
         lookahead = 0.1 if cfg.paced else 0.05
     ahead = max(2, int(round(lookahead * fs)))
     # paced: 10 ms chunks keep the stream smooth; fast: half the lookahead amortises per-chunk overhead
     chunk = max(1, min(ahead // 2, int(round(0.01 * fs)))) if cfg.paced else max(1, ahead // 2)
+    if lead_latency:   # the node streams in 50-sample batches; big chunks would add latency on top of the lead
+        chunk = max(1, min(chunk, int(round(0.05 * fs))))
     first = drv.next_sequence
     runner.sequence = first
     queued = first
     block_of = []                      # program block per queued setpoint
     queued_x = []                      # the queued setpoints [m]
     got = []                           # SampleBlocks
+    fed = 0                            # got[:fed] have been fed to the runner
+
+    def feed(upto):
+        # measured samples below sequence `upto` to the runner (a SampleBlock only once it is whole below)
+        nonlocal fed
+        while fed < len(got) and got[fed].first_sequence + len(got[fed]) <= upto:
+            runner.feed_measurement(got[fed].first_sequence, got[fed].displacement)
+            fed += 1
+
     received = first
     next_progress = first
     abort_seq = None if abort_after is None else first + int(round(abort_after * fs))
@@ -90,6 +112,8 @@ def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, ab
         while not stopped and not runner.finished and queued - done < ahead:
             if abort_seq is not None and queued >= abort_seq and not runner.aborted:
                 runner.abort('abort_after')
+            if lead_latency:
+                feed(queued - ahead)
             x = runner.next_setpoints(chunk)
             if not drv.queue_setpoints(queued, x):
                 stopped = True
@@ -101,10 +125,13 @@ def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, ab
         blk = drv.poll()
         while blk is not None:
             got.append(blk)
-            runner.feed_measurement(blk.first_sequence, blk.displacement)
+            if not lead_latency:
+                feed(np.inf)
             received = blk.first_sequence + len(blk)
             progressed = True
             blk = drv.poll()
+        if lead_latency and (stopped or runner.finished):
+            feed(np.inf)               # nothing more is generated: the rest of the measurement is due
         if on_progress is not None and received >= next_progress:
             on_progress(runner.progress)
             next_progress = received + max(1, int(progress_period * fs))
@@ -133,6 +160,7 @@ def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, ab
         if not progressed:
             # paced: the rig produces 1 sample per period anyway; sleeping leaves the CPU (and the GIL) to it
             time.sleep(0.002 if cfg.paced else 0.0001)
+    feed(np.inf)
     return _result(program, cfg, drv, runner, got, block_of, queued_x, first, message, t_wall)
 
 
