@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import copy
+import math
 
 import numpy as np
 
@@ -113,18 +114,24 @@ def _fractional_element(p: Seed000Params, dt, scheme):
     raise ValueError(f"unknown fractional scheme {name!r}: use 'default', 'gl' or 'paper'")
 
 
-def seed000_model(params: Seed000Params, dt: float, scheme='default') -> ParallelModel:
-    """Seed 000 nonlinear rubber spring: fractional Zener + Berg; branches ('elastic', 'viscous', 'friction')."""
+def seed000_model(params: Seed000Params, dt: float, scheme='default',
+                  friction_reversal_threshold: float = 0.0) -> ParallelModel:
+    """Seed 000 nonlinear rubber spring: fractional Zener + Berg; branches ('elastic', 'viscous', 'friction').
+
+    ``friction_reversal_threshold`` [m]: Berg's reversal deadband (see :mod:`.friction`), 0 = the paper's rule.
+    """
     params.validate()
-    return ParallelModel([_fractional_element(params, dt, scheme), BergFriction(params.f_fmax, params.x2, dt)],
+    return ParallelModel([_fractional_element(params, dt, scheme),
+                          BergFriction(params.f_fmax, params.x2, dt, friction_reversal_threshold)],
                          dt, 'seed000', params)
 
 
-def seed001_model(params: Seed001Params, dt: float) -> ParallelModel:
+def seed001_model(params: Seed001Params, dt: float, friction_reversal_threshold: float = 0.0) -> ParallelModel:
     """Seed 001 combined model: tangent spring + 2 Maxwell + Berg; branches ('elastic', 'viscous_1', 'viscous_2', 'friction')."""
     params.validate()
     return ParallelModel([el.TangentSpring(params.k_t, params.d_t), el.Maxwell(params.k1, params.c1, dt),
-                          el.Maxwell(params.k2, params.c2, dt), BergFriction(params.f_fmax, params.x2, dt)],
+                          el.Maxwell(params.k2, params.c2, dt),
+                          BergFriction(params.f_fmax, params.x2, dt, friction_reversal_threshold)],
                          dt, 'seed001', params)
 
 
@@ -145,16 +152,16 @@ ELEMENT_TYPES = {
     'fractional_zener': lambda dt, scheme='default', **p: _fractional_element(
         Seed000Params(x2=1.0, f_fmax=1.0, **p).validate(), dt, scheme),
     'two_order_fractional': lambda dt, **p: el.TwoOrderFractional(dt=dt, **p),
-    'berg': lambda dt, f_fmax, x2: BergFriction(f_fmax, x2, dt),
+    'berg': lambda dt, f_fmax, x2, reversal_threshold=0.0: BergFriction(f_fmax, x2, dt, reversal_threshold),
     'smooth_coulomb': lambda dt, f_c, a: SmoothCoulomb(f_c, a, dt),
 }
 
 
-def _from_params(params, dt, scheme):
+def _from_params(params, dt, scheme, friction_reversal_threshold=0.0):
     if isinstance(params, Seed000Params):
-        return seed000_model(params, dt, scheme)
+        return seed000_model(params, dt, scheme, friction_reversal_threshold)
     if isinstance(params, Seed001Params):
-        return seed001_model(params, dt)
+        return seed001_model(params, dt, friction_reversal_threshold)
     if isinstance(params, KelvinVoigtParams):
         return kelvin_voigt_model(params, dt)
     raise ValueError(f'cannot build a model from {type(params).__name__}')
@@ -185,7 +192,17 @@ def resolve_params(spec):
     return p
 
 
-def build_model(params_or_spec, dt: float, scheme='default') -> ParallelModel:
+def _check_threshold(value) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        v = math.nan
+    if not (math.isfinite(v) and v >= 0.0):
+        raise ValueError(f'parameter friction_reversal_threshold must be a finite displacement >= 0 [m], got {value!r}')
+    return v
+
+
+def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_threshold: float = 0.0) -> ParallelModel:
     """Model object at sample period ``dt`` [s].
 
     ``params_or_spec``: a :class:`Seed000Params` / :class:`Seed001Params` / :class:`KelvinVoigtParams`;
@@ -195,11 +212,20 @@ def build_model(params_or_spec, dt: float, scheme='default') -> ParallelModel:
     ``scheme`` (fractional operator): 'default' (sum of exponentials), 'paper' (GL, N_t = 200,
     h = 1 ms) or 'gl' / ``{"name": "gl", "n_terms": N_t, "h": h}``. A dict spec may carry its own
     ``"scheme"``.
+
+    ``friction_reversal_threshold`` [m] (>= 0, default 0 = the paper's rule): reversal deadband of every
+    Berg element of the model (see :mod:`.friction`: set it a few times the displacement noise RMS when
+    the model is driven by a measured displacement); no effect on models without friction. A dict spec
+    may carry its own ``"friction_reversal_threshold"``; a ``"berg"`` element of a parallel spec may set
+    its own ``"reversal_threshold"``, which wins.
     """
     if not (isinstance(dt, (int, float, np.floating)) and np.isfinite(dt) and dt > 0):
         raise ValueError(f'sample period dt must be a finite number > 0, got {dt!r}')
     if isinstance(params_or_spec, dict):
         scheme = params_or_spec.get('scheme', scheme)
+        friction_reversal_threshold = params_or_spec.get('friction_reversal_threshold', friction_reversal_threshold)
+    friction_reversal_threshold = _check_threshold(friction_reversal_threshold)
+    if isinstance(params_or_spec, dict):
         if params_or_spec.get('model') == 'parallel':
             elems = []
             for e in params_or_spec.get('elements', []):
@@ -207,9 +233,11 @@ def build_model(params_or_spec, dt: float, scheme='default') -> ParallelModel:
                 kind = e.pop('type', None)
                 if kind not in ELEMENT_TYPES:
                     raise ValueError(f'unknown element type {kind!r}; known: {sorted(ELEMENT_TYPES)}')
+                if kind == 'berg':
+                    e.setdefault('reversal_threshold', friction_reversal_threshold)
                 try:
                     elems.append(ELEMENT_TYPES[kind](float(dt), **e))
                 except TypeError as exc:
                     raise ValueError(f'bad parameters for element {kind!r}: {exc}') from None
             return ParallelModel(elems, dt, 'parallel')
-    return _from_params(resolve_params(params_or_spec), float(dt), scheme)
+    return _from_params(resolve_params(params_or_spec), float(dt), scheme, friction_reversal_threshold)
