@@ -65,6 +65,15 @@ def test_bad_parameters_are_refused_with_errors_naming_them():
         assert not result.successful and 'temperature' in result.reason
         assert model.get_parameter('values.alpha').value == pytest.approx(0.659)   # unchanged
         assert model.predictor.params.alpha == pytest.approx(0.659)
+        assert model.predictor.choice.friction_reversal_threshold == 0.0   # config/rig_sim.yaml
+        for bad in (-1e-6, 1e-3):
+            result = model.set_parameters([Parameter('friction_reversal_threshold', value=bad)])[0]
+            assert not result.successful and 'friction_reversal_threshold' in result.reason
+        assert model.predictor.choice.friction_reversal_threshold == 0.0
+        assert model.set_parameters([Parameter('friction_reversal_threshold', value=2e-6)])[0].successful
+        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(2e-6)   # next rebuild uses it
+        with pytest.raises(ParameterError, match="'friction_reversal_threshold'"):
+            launcher.start(ElementModelNode, {'friction_reversal_threshold': -1.0})
 
         with pytest.raises(ParameterError, match="'limits.displacement_min'"):
             launcher.start(RigDriverNode, {'autostart': False, 'limits.displacement_min': 0.01})

@@ -10,6 +10,11 @@ The model is chosen by parameters (``source``): a named parameter set, a tempera
 channel (re-evaluated when it moves by ``temperature_hysteresis``), or explicit values. All of them can be
 changed at run time; the on-set-parameters callback validates the new choice and refuses it with a reason
 naming the parameter, so a running model is never replaced by an invalid one.
+
+``friction_reversal_threshold`` [m] is the Berg friction element's reversal deadband: the model runs on the
+measured displacement, whose noise would otherwise reset the friction reference state at every wiggle and
+collapse the friction loop (see rubber_rig.nodes.predictor). Set it to a few times the displacement noise RMS;
+0 is the paper's rule. Changing it rebuilds the model (warmed up on the recent history) like a parameter change.
 """
 from __future__ import annotations
 
@@ -25,14 +30,16 @@ from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.cycles import CyclePairer
 from rubber_rig.nodes.params import ParameterError, declare
-from rubber_rig.nodes.predictor import SOURCES, BlockIndex, ModelChoice, OnlinePredictor
+from rubber_rig.nodes.predictor import (DEFAULT_REVERSAL_THRESHOLD, SOURCES, BlockIndex, ModelChoice,
+                                        OnlinePredictor)
 from rubber_rig.nodes.spin import spin_node
 
 VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
 VALUE_UNITS = {'k0': 'N/m', 'k_inf': 'N/m', 'tau': 's', 'alpha': '-', 'x2': 'm', 'f_fmax': 'N'}
 VALUE_RANGES = {'k0': (1e3, 1e11), 'k_inf': (1e3, 1e11), 'tau': (1e-7, 1e4), 'alpha': (1e-3, 1.0),
                 'x2': (1e-8, 1e-1), 'f_fmax': (1e-3, 1e7)}   # wide physical bounds; k_inf >= k0 is checked too
-CHOICE_PARAMS = ('source', 'parameter_set', 'temperature') + tuple('values.' + n for n in VALUE_NAMES)
+CHOICE_PARAMS = ('source', 'parameter_set', 'temperature', 'friction_reversal_threshold') + tuple(
+    'values.' + n for n in VALUE_NAMES)
 
 
 class ElementModelNode(Node):
@@ -53,6 +60,11 @@ class ElementModelNode(Node):
                 range=(0.01, 20.0), units='K')
         declare(self, 'warmup_time', 5.0, 'displacement history run through a rebuilt model before it '
                 'predicts', range=(0.0, 60.0), units='s')
+        declare(self, 'friction_reversal_threshold', DEFAULT_REVERSAL_THRESHOLD, 'Berg friction reversal '
+                'deadband: a velocity reversal counts once the measured displacement is this far back from its '
+                'extreme, so sensor noise does not reset the friction reference state; a few times the displacement '
+                'noise RMS (default 5x the simulated rig\'s 0.2 um), 0 = the paper\'s rule', range=(0.0, 1e-4),
+                units='m')
         self.publish_branches = declare(self, 'publish_branches', True, 'publish per-branch forces')
         self.cycle_metrics = declare(self, 'cycle_metrics', True, 'publish per-cycle metrics')
         min_amplitude = declare(self, 'min_cycle_amplitude', 5e-6, 'cycles with a smaller displacement amplitude '
@@ -77,7 +89,8 @@ class ElementModelNode(Node):
         self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints, topics.STREAM_QOS)
         self._published_params = None
         self.publish_parameters()
-        self.get_logger().info(f'model seed000 from {self.predictor.choice.source}: {self.predictor.params}')
+        self.get_logger().info(f'model seed000 from {self.predictor.choice.source}: {self.predictor.params}, '
+                               f'friction reversal threshold {self.predictor.choice.friction_reversal_threshold:g} m')
 
     # -- data path --------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
@@ -125,7 +138,8 @@ class ElementModelNode(Node):
             return (changed or {}).get(name, self.get_parameter(name).value)
         return ModelChoice(source=value('source'), parameter_set=value('parameter_set'),
                            temperature=value('temperature'),
-                           values={n: value('values.' + n) for n in VALUE_NAMES})
+                           values={n: value('values.' + n) for n in VALUE_NAMES},
+                           friction_reversal_threshold=value('friction_reversal_threshold'))
 
     @staticmethod
     def _blame(message: str) -> str:
@@ -133,6 +147,8 @@ class ElementModelNode(Node):
         m = re.search(r'parameter (\w+)', message)
         if m and m.group(1) in VALUE_NAMES:
             return 'values.' + m.group(1)
+        if m and m.group(1) == 'friction_reversal_threshold':
+            return m.group(1)
         if 'parameter set' in message:
             return 'parameter_set'
         if 'temperature' in message:
@@ -168,7 +184,8 @@ class ElementModelNode(Node):
         if names & set(CHOICE_PARAMS):
             self.predictor.set_choice(self._choice())   # rebuilt (and warmed up) on the next batch
             self.publish_parameters()
-            self.get_logger().info(f'model parameters changed ({", ".join(sorted(names))}): {self.predictor.params}')
+            self.get_logger().info(f'model parameters changed ({", ".join(sorted(names))}): {self.predictor.params}, '
+                                   f'friction reversal threshold {self.predictor.choice.friction_reversal_threshold:g} m')
         if 'publish_branches' in names:
             self.publish_branches = self.get_parameter('publish_branches').value
         if 'cycle_metrics' in names:
