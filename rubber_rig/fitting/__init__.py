@@ -32,8 +32,8 @@ What we found (benchmarks/bench_fitting.py, simulated rig, seed-000 grid, 20 N l
   same scheme the node suite's online model runs, so its parameters are the ones that make that
   model reproduce the rig.
 * The time-domain fit needs care with the input: displacement noise makes Berg's element see spurious
-  reversals (tens of per cent bias in x2, F_fmax); `timefit.smooth_displacement` low-passes and then
-  flattens noise-sized reversals.
+  reversals (tens of per cent bias in x2, F_fmax); `timefit.model_input` low-passes and sets
+  the model's Berg reversal deadband at the noise-sized reversals.
 * `rubber_rig.analysis.harmonic_properties` includes a linear drift column; over N cycles of a
   non-sinusoidal loop it leaks odd harmonics into F1 by ~0.6 %/N of the friction stiffness (~0.1 %/N
   of K_dyn here). Measured and simulated blocks go through the same function, so the comparison is

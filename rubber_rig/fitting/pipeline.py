@@ -81,7 +81,7 @@ def block_quality(params, blocks, runs_by_name, simulate_blocks=True):
                          'r_k': float(pr['r_k'][i]), 'r_e': float(pr['r_e'][i])},
         })
     if simulate_blocks:
-        from .timefit import simulate, smooth_displacement
+        from .timefit import model_input, simulate
         by_run = {}
         for i, b in enumerate(blocks):
             by_run.setdefault(b.recording, []).append(i)
@@ -89,8 +89,8 @@ def block_quality(params, blocks, runs_by_name, simulate_blocks=True):
             run = runs_by_name[name]
             end = min(max(blocks[i].stop for i in idxs) + 1, run.displacement.size)
             f_max = max(blocks[i].frequency for i in idxs)
-            x = smooth_displacement(run.displacement[:end], run.dt, f_max)
-            force = simulate(params, x, run.dt)
+            x, h = model_input(run.displacement[:end], run.dt, f_max)
+            force = simulate(params, x, run.dt, h)
             for i in idxs:
                 b = blocks[i]
                 hp = window_properties(run.displacement, force, run.dt, b.start, b.stop, b.frequency)

@@ -168,10 +168,10 @@ def make_report(run, blocks, params, outdir, quality=None, title=None, param_inf
         raise ValueError(f'{run.name}: no usable block to report on')
     model_force = None
     if params is not None:
-        from .timefit import simulate, smooth_displacement
+        from .timefit import model_input, simulate
         end = min(max(b.stop for b in blocks) + 1, run.displacement.size)
-        x = smooth_displacement(run.displacement[:end], run.dt, max(b.frequency for b in blocks))
-        model_force = simulate(params, x, run.dt)
+        x, h = model_input(run.displacement[:end], run.dt, max(b.frequency for b in blocks))
+        model_force = simulate(params, x, run.dt, h)
     if quality is None and params is not None:
         from .pipeline import block_quality
         quality = block_quality(params, blocks, {run.name: run})

@@ -13,13 +13,15 @@ Eq. 28), and a per-block force offset (load-cell zero, preload) is removed analy
 contributes at most `points_per_block` evenly spaced samples.
 
 The displacement fed to the model is the measured one after a zero-phase low-pass (4th-order
-Butterworth, forward-backward, cut-off 8x the highest block frequency) and with the remaining
-noise-sized reversals flattened (`clean_reversals`): raw transducer noise makes Berg's element see
-spurious velocity reversals and reset its reference state, which biases x2 and F_fmax by tens of
-per cent (0.5 um noise on a 1 mm sine, 1 kHz); low-pass alone still leaves micro-reversals at the
-turning points. Even so, the time-domain fit is the more fragile one: its x2-F_fmax valley is
-flat (the initial friction slope F_fmax/x2 is what the loops pin down), so input errors of 1e-4 of
-the amplitude move x2 and F_fmax together by a few per cent.
+Butterworth, forward-backward, cut-off 8x the highest block frequency), and the model runs with
+Berg's reversal deadband (`model_input`: 5x the displacement noise level, at least 2e-4 of the
+amplitude): raw transducer noise makes Berg's element see spurious velocity reversals and reset its
+reference state, which biases x2 and F_fmax by tens of per cent (0.5 um noise on a 1 mm sine,
+1 kHz); low-pass alone still leaves micro-reversals at the turning points. (Until the model had the
+deadband, those were flattened here in the input, with the same threshold; the fitted parameters
+agree with that to ~1e-4 relative.) Even so, the time-domain fit is the more fragile one: its
+x2-F_fmax valley is flat (the initial friction slope F_fmax/x2 is what the loops pin down), so input
+errors of 1e-4 of the amplitude move x2 and F_fmax together by a few per cent.
 """
 from __future__ import annotations
 
@@ -32,66 +34,20 @@ from scipy.signal import butter, sosfiltfilt
 from .identify import PARAM_NAMES, FitResult, _z_bounds, jacobian_uncertainty, params_to_z, z_to_params
 
 
-def simulate(params: dict, x, dt):
-    """Force [N] of the seed-000 model (rubber_rig.models, default scheme) for displacement x [m]."""
+def simulate(params: dict, x, dt, reversal_threshold: float = 0.0):
+    """Force [N] of the seed-000 model (rubber_rig.models, default scheme) for displacement x [m];
+    ``reversal_threshold`` [m] is Berg's reversal deadband (rubber_rig.models.friction), 0 = the paper's rule."""
     from rubber_rig.models import Seed000Params, build_model
-    model = build_model(Seed000Params(**{k: float(params[k]) for k in PARAM_NAMES}), dt)
+    model = build_model(Seed000Params(**{k: float(params[k]) for k in PARAM_NAMES}), dt,
+                        friction_reversal_threshold=reversal_threshold)
     out = model.run(np.asarray(x, float))
     return np.asarray(out[0] if isinstance(out, tuple) else out, float)
 
 
-def turning_points(x, h):
-    """Indices of the alternating extrema of x that stand out by more than h (zig-zag filter)."""
-    x = np.asarray(x, float)
-    idx = [0]
-    imax = imin = ext = 0
-    direction = 0                  # +1 rising, -1 falling, 0 not yet known
-    for i in range(1, x.size):
-        xi = x[i]
-        if direction == 0:
-            if xi > x[imax]:
-                imax = i
-            if xi < x[imin]:
-                imin = i
-            if x[imax] - xi > h:
-                idx.append(imax)
-                direction, ext = -1, i
-            elif xi - x[imin] > h:
-                idx.append(imin)
-                direction, ext = 1, i
-        elif direction > 0:
-            if xi > x[ext]:
-                ext = i
-            elif x[ext] - xi > h:
-                idx.append(ext)
-                direction, ext = -1, i
-        else:
-            if xi < x[ext]:
-                ext = i
-            elif xi - x[ext] > h:
-                idx.append(ext)
-                direction, ext = 1, i
-    idx.append(x.size - 1)
-    return np.unique(np.asarray(idx, int))
-
-
-def clean_reversals(x, h):
-    """x made monotone between its real turning points (those standing out by more than h).
-
-    Berg's element resets its reference state at every velocity reversal; noise-sized wiggles
-    (< h) are not reversals of the specimen, so they are flattened (running max / min), which
-    leaves the rate-independent friction loop untouched.
-    """
-    y = np.array(x, float)
-    tp = turning_points(y, h)
-    for a, b in zip(tp[:-1], tp[1:]):
-        seg = y[a:b + 1]
-        y[a:b + 1] = np.maximum.accumulate(seg) if seg[-1] >= seg[0] else np.minimum.accumulate(seg)
-    return y
-
-
-def smooth_displacement(x, dt, f_max):
-    """Measured displacement as the model input: zero-phase low-pass, then noise reversals removed."""
+def model_input(x, dt, f_max):
+    """(displacement [m], reversal threshold [m]) to run the model on for a measured displacement ``x``:
+    zero-phase low-pass, and Berg's reversal deadband at the noise-sized reversals of x (5x its noise
+    level, at least 2e-4 of its amplitude)."""
     from .blocks import _noise_level
     x = np.asarray(x, float)
     fs = 1.0 / dt
@@ -100,7 +56,7 @@ def smooth_displacement(x, dt, f_max):
     if 0 < fc < 0.5 * fs and x.size > 30:
         y = sosfiltfilt(butter(4, fc, fs=fs, output='sos'), x)
     h = max(5.0 * _noise_level(x), 2e-4 * float(np.max(np.abs(x - np.median(x))) or 1.0))
-    return clean_reversals(y, h)
+    return y, h
 
 
 class TimeDomainProblem:
@@ -114,7 +70,7 @@ class TimeDomainProblem:
                 continue
             end = min(max(b.stop for b in blocks) + 1, run.displacement.size)
             f_max = max(b.frequency for b in blocks)
-            x = smooth_displacement(run.displacement[:end], run.dt, f_max)
+            x, h = model_input(run.displacement[:end], run.dt, f_max)
             windows = []
             for b in blocks:
                 n = b.stop - b.start
@@ -122,14 +78,14 @@ class TimeDomainProblem:
                 idx = np.arange(b.start, b.stop, step)
                 scale = 1.0 / (b.k_dyn * b.amplitude * np.sqrt(idx.size))
                 windows.append((idx, scale))
-            self.items.append((run, x, run.force[:end], windows))
+            self.items.append((run, x, h, run.force[:end], windows))
 
     def predict(self, params):
-        return [simulate(params, x, run.dt) for run, x, _, _ in self.items]
+        return [simulate(params, x, run.dt, h) for run, x, h, _, _ in self.items]
 
     def residuals_from(self, predictions):
         out = []
-        for (run, x, force, windows), pred in zip(self.items, predictions):
+        for (run, x, _, force, windows), pred in zip(self.items, predictions):
             for idx, scale in windows:
                 e = pred[idx] - force[idx]
                 out.append((e - e.mean()) * scale)
