@@ -10,7 +10,8 @@ from rclpy.parameter import Parameter
 from rubber_rig.nodes.element_model import ElementModelNode
 from rubber_rig.nodes.excitation import ExcitationNode
 from rubber_rig.nodes.launcher import InProcessLauncher
-from rubber_rig.nodes.params import ParameterError
+from rubber_rig.nodes.params import ParameterError, undeclared_overrides
+from rubber_rig.nodes.recorder import RecorderNode
 from rubber_rig.nodes.rig_driver import RigDriverNode
 from test_nodes import CONFIG, RATE, by_sequence, domain_id, run_program, start_suite
 
@@ -65,11 +66,11 @@ def test_bad_parameters_are_refused_with_errors_naming_them():
         assert not result.successful and 'temperature' in result.reason
         assert model.get_parameter('values.alpha').value == pytest.approx(0.659)   # unchanged
         assert model.predictor.params.alpha == pytest.approx(0.659)
-        assert model.predictor.choice.friction_reversal_threshold == 0.0   # config/rig_sim.yaml
+        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(1e-6)   # config/rig_sim.yaml
         for bad in (-1e-6, 1e-3):
             result = model.set_parameters([Parameter('friction_reversal_threshold', value=bad)])[0]
             assert not result.successful and 'friction_reversal_threshold' in result.reason
-        assert model.predictor.choice.friction_reversal_threshold == 0.0
+        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(1e-6)
         assert model.set_parameters([Parameter('friction_reversal_threshold', value=2e-6)])[0].successful
         assert model.predictor.choice.friction_reversal_threshold == pytest.approx(2e-6)   # next rebuild uses it
         with pytest.raises(ParameterError, match="'friction_reversal_threshold'"):
@@ -85,6 +86,22 @@ def test_bad_parameters_are_refused_with_errors_naming_them():
             launcher.start(ExcitationNode, {'program': 'no_such_program'})
         with pytest.raises(ParameterError, match="'values.k_inf'"):
             launcher.start(ElementModelNode, {'source': 'values', 'values.k_inf': 1.0e6})
+
+
+def test_every_key_of_the_shipped_configs_is_a_declared_parameter_and_typos_are_reported(tmp_path):
+    # rclpy ignores an undeclared key silently; every key of the shipped configs must reach its node
+    for config in (CONFIG, CONFIG.replace('rig_sim.yaml', 'rig_can.yaml')):
+        with InProcessLauncher([config], domain_id=domain_id()) as launcher:
+            for factory in (RigDriverNode, ExcitationNode, ElementModelNode, RecorderNode):
+                extra = {RigDriverNode: {'autostart': False}, RecorderNode: {'output_dir': str(tmp_path)}}
+                node = launcher.start(factory, extra.get(factory, {}))
+                assert undeclared_overrides(node) == [], (config, factory.__name__)
+                if hasattr(node, 'close'):
+                    node.close()
+    with InProcessLauncher([CONFIG], domain_id=domain_id()) as launcher:
+        model = launcher.start(ElementModelNode, {'frition_reversal_threshold': 2e-6})
+        assert undeclared_overrides(model) == ['frition_reversal_threshold']
+        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(1e-6)   # the file's value stays
 
 
 def test_bad_programs_are_refused_before_anything_moves(tmp_path):

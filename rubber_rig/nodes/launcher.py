@@ -22,6 +22,8 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
+from .params import undeclared_overrides
+
 
 def _as_parameters(overrides: dict | None) -> list[Parameter]:
     return [Parameter(name, value=value) for name, value in (overrides or {}).items()]
@@ -55,6 +57,7 @@ class InProcessLauncher:
     def start(self, node_factory: Callable[..., Node], overrides: dict | None = None, **kwargs) -> Node:
         """Construct a node (parameters validated in its constructor) and spin it in its own thread."""
         node = node_factory(**self.node_kwargs(overrides), **kwargs)
+        undeclared_overrides(node)   # a misspelt key in a parameter file must not pass silently
         self.spin(node)
         return node
 

@@ -65,3 +65,22 @@ def check(node: Node, condition: bool, name: str, why: str) -> None:
     """Raise ParameterError naming ``name`` unless ``condition`` holds."""
     if not condition:
         raise ParameterError(node.get_name(), name, why)
+
+
+def undeclared_overrides(node: Node) -> list[str]:
+    """Parameters given to ``node`` (parameter file, command line) that it never declared.
+
+    rclpy keeps such values in the overrides and ignores them without a word, so a misspelt key in a config
+    file (``sim.specimen.frition_reversal_threshold``) would silently leave the default in force. Call after
+    the constructor has declared everything; returns the names and logs one warning per name, with the
+    closest declared names as a hint.
+    """
+    import difflib
+    unknown = sorted(k for k in node._parameter_overrides if not node.has_parameter(k))
+    known = sorted(node._parameters)
+    for name in unknown:
+        close = difflib.get_close_matches(name, known, n=2, cutoff=0.6)
+        hint = f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ''
+        node.get_logger().warning(f"parameter '{name}' is not a parameter of node '{node.get_name()}' and is "
+                                  f"ignored{hint}")
+    return unknown

@@ -86,6 +86,8 @@ class RigDriverNode(LifecycleNode):
                 '(empty: use sim.specimen.temperature)')
         declare(self, 'sim.specimen.temperature', 20.0, 'simulated specimen: seed000 parameters at this '
                 'temperature', range=(-40.0, 20.0), units='degC')
+        declare(self, 'sim.specimen.friction_reversal_threshold', 0.0, "simulated specimen: Berg reversal deadband "
+                "on its true displacement (0 = the paper's rule)", range=(0.0, 1e-4), units='m')
         for name, (default, text, rng) in SIM_FLOATS.items():
             declare(self, f'sim.{name}', default, text, range=rng)
         declare(self, 'sim.seed', 0, 'random seed of the simulated sensors', range=(0, 2**31 - 1))
@@ -140,6 +142,7 @@ class RigDriverNode(LifecycleNode):
         specimen = ({'model': 'seed000', 'parameter_set': p['sim.specimen.parameter_set']}
                     if p['sim.specimen.parameter_set'] else
                     {'model': 'seed000', 'temperature': p['sim.specimen.temperature']})
+        specimen['friction_reversal_threshold'] = p['sim.specimen.friction_reversal_threshold']
         data = {
             'backend': p['backend'], 'channel': p['can.channel'] or None, 'bitrate': p['can.bitrate'],
             'data_bitrate': p['can.data_bitrate'], 'fd': p['can.fd'], 'bus_options': p['can.bus_options'],

@@ -12,6 +12,8 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
+from .params import undeclared_overrides
+
 
 def spin_node(node_factory: Callable[[], Node], args=None) -> None:
     """Create the node, spin it until Ctrl-C / SIGTERM / context shutdown, then release it.
@@ -22,6 +24,7 @@ def spin_node(node_factory: Callable[[], Node], args=None) -> None:
     node = None
     try:
         node = node_factory()
+        undeclared_overrides(node)   # a misspelt key in a parameter file must not pass silently
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()
