@@ -21,6 +21,12 @@ class CycleDetector:
     cycle: the :class:`HarmonicProperties` fields plus ``index`` (cycle count), ``start`` and
     ``end`` (absolute sample indices, end exclusive) and ``period`` [s]. Chunking does not change
     the result.
+
+    Why interpolated crossings: a cycle is cut at whole samples, so at 14 Hz and 1 kHz its length
+    alternates between 71 and 72 samples, and a first-harmonic fit at 1/(71 dt) or 1/(72 dt) Hz
+    misreads the amplitude by about +-1 %. The period and the fit frequency come from the mean
+    crossings interpolated between the samples that straddle them instead, which removes that
+    error (the fit itself is exact for any window length once the frequency is right).
     """
 
     def __init__(self, dt: float, hysteresis: float = 0.2, min_amplitude: float = 0.0,
@@ -40,6 +46,9 @@ class CycleDetector:
         self._bx, self._bf = [], []      # samples since _start
         self._armed = False
         self._candidate = None           # absolute index of the pending upward mean crossing
+        self._candidate_at = None        # ... and the crossing interpolated between samples
+        self._start_at = None            # interpolated crossing that opened the running cycle
+        self._prev = None                # the previous sample (across chunks)
         self._mean = self._half = None   # levels of the last complete cycle
         self._lo, self._hi = np.inf, -np.inf
         self._index = 0
@@ -52,6 +61,7 @@ class CycleDetector:
         out = []
         for i in range(x.size):     # per-sample state machine; the per-cycle arithmetic is vectorised
             xi, idx = float(x[i]), self._n + i
+            prev, self._prev = self._prev, xi
             if self._start is None and self._candidate is None:
                 self._start, self._bx, self._bf = idx, [], []   # nothing before a crossing is kept
                 self._first = True
@@ -74,31 +84,38 @@ class CycleDetector:
                     self._candidate = None
                 elif self._candidate is None:
                     self._candidate = idx
+                    # prev < m <= xi here: the crossing lies in (idx - 1, idx]
+                    self._candidate_at = idx - (xi - m) / (xi - prev) if prev is not None and xi > prev else idx
                 if self._candidate is not None and xi >= m + band:
-                    out.extend(self._boundary(self._candidate))
+                    out.extend(self._boundary(self._candidate, self._candidate_at))
                     self._armed, self._candidate = False, None
         self._n += x.size
         return out
 
-    def _boundary(self, at):
+    def _boundary(self, at, at_interpolated):
         """Confirmed upward crossing at absolute sample ``at``: close the running cycle, start the next."""
         results = []
         k = at - self._start
         if self._first:              # the first crossing only starts the first cycle
             self._bx, self._bf, self._start, self._first = self._bx[k:], self._bf[k:], at, False
+            self._start_at = at_interpolated
             return results
         cx, cf = np.array(self._bx[:k]), np.array(self._bf[:k])
         self._bx, self._bf = self._bx[k:], self._bf[k:]
         start, self._start = self._start, at
+        start_at, self._start_at = self._start_at, at_interpolated
+        period = at_interpolated - start_at if start_at is not None else float(k)   # [samples]
+        if not abs(period - k) < 1.0:    # cannot happen with prev < m <= x; keep the cut's length if it does
+            period = float(k)
         if k >= self.min_cycle_samples:
             half = 0.5 * float(cx.max() - cx.min())
             if half >= self.min_amplitude:
                 # close the loop on the next cycle's first sample
                 xs = np.append(cx, self._bx[0])
                 fs = np.append(cf, self._bf[0])
-                props = harmonic_properties(xs, fs, self.dt, frequency=1.0 / (k * self.dt))
+                props = harmonic_properties(xs, fs, self.dt, frequency=1.0 / (period * self.dt), whole_cycles=1)
                 d = props.as_dict()
-                d.update(index=self._index, start=start, end=at, period=k * self.dt)
+                d.update(index=self._index, start=start, end=at, period=period * self.dt)
                 self._index += 1
                 results.append(d)
                 self._mean, self._half = float(cx.mean()), half

@@ -40,8 +40,8 @@ class CyclePairer:
              predicted: np.ndarray) -> list[PairedCycle]:
         if self._measured is None or dt != self._dt or first_sequence != self._next:
             # first batch, new rate, or a sequence gap: a cycle across a gap would be wrong -> restart
-            self._measured = CycleDetector(dt, self.hysteresis)
-            self._model = CycleDetector(dt, self.hysteresis)
+            self._measured = CycleDetector(dt, self.hysteresis, self.min_amplitude)
+            self._model = CycleDetector(dt, self.hysteresis, self.min_amplitude)
             self._dt, self._origin = dt, first_sequence
         self._next = first_sequence + len(x)
         out = []
