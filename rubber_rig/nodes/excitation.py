@@ -60,6 +60,9 @@ class ExcitationNode(Node):
                                      'the rig is ready; empty: wait for a run_program goal')
         self.amplitude_control = declare(self, 'amplitude_control', True, 'adjust command amplitude and mean '
                                          'so the measured amplitude reaches the target (program parameter only)')
+        self.compensation_memory = declare(self, 'compensation_memory', True, 'with amplitude control, each '
+                                           'block starts from the gain and mean offset earlier blocks of the run '
+                                           'learned (false: every block starts uncompensated)')
         self.lead_time = declare(self, 'lead_time', 0.5, 'how far ahead of the latest measured sample '
                                  'setpoints are streamed', range=(0.02, 5.0), units='s')
         self.batch_size = declare(self, 'batch_size', 50, 'setpoints per SetpointBatch', range=(1, 5000))
@@ -135,7 +138,7 @@ class ExcitationNode(Node):
         # (holding) rig gets the program lead_time ahead of its latest sample.
         start = 0 if self.next_sample is None else self.next_sample + lead
         self.runner = ProgramRunner(program, self.status.sample_rate, limits, amplitude_control,
-                                    start_sequence=start)
+                                    start_sequence=start, compensation_memory=self.compensation_memory)
         self.start_sequence = self.runner.sequence
         self.end_sequence = None
         self.result = None
