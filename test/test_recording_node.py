@@ -44,6 +44,15 @@ def spin_until(executor, condition, timeout=20.0):
     return condition()
 
 
+def control_caller(executor, control):
+    """call(command, path='') -> RecorderControl response, spinning ``executor`` until it arrives."""
+    def call(command, path=''):
+        future = control.call_async(RecorderControl.Request(command=command, path=path))
+        assert spin_until(executor, future.done)
+        return future.result()
+    return call
+
+
 def batch(k, skip=0):
     m = RigSampleBatch()
     first = k * BATCH + skip
@@ -84,10 +93,7 @@ def test_recorder_node_records_published_batches(context, tmp_path):
         control = client_node.create_client(RecorderControl, f'{ns}/recorder/control')
         assert control.wait_for_service(timeout_sec=10)
 
-        def call(command, path=''):
-            future = control.call_async(RecorderControl.Request(command=command, path=path))
-            assert spin_until(executor, future.done)
-            return future.result()
+        call = control_caller(executor, control)
 
         out = tmp_path / 'run1'
         response = call(RecorderControl.Request.START, str(out))
@@ -212,10 +218,7 @@ def test_control_service_split_and_snapshot(context, tmp_path):
         control = client_node.create_client(RecorderControl, f'{ns}/recorder/control')
         assert control.wait_for_service(timeout_sec=10)
 
-        def call(command, path=''):
-            future = control.call_async(RecorderControl.Request(command=command, path=path))
-            assert spin_until(executor, future.done)
-            return future.result()
+        call = control_caller(executor, control)
         assert rec.core.recording                                   # autostart
         graph = [('/ctltest/samples', ['a/msg/B']), ('/ctltest/run/_action/status', ['a/msg/C']),
                  ('/other/samples', ['a/msg/B']), ('/rosout', ['rcl_interfaces/msg/Log'])]

@@ -100,13 +100,13 @@ class TangentSpring(_Stateless):
         return 2 * self.k_t * self.d_t / math.pi * np.tan(math.pi * x / (2 * self.d_t))
 
 
-class Dashpot:
-    """Kelvin-Voigt dashpot F = c v, c [N s/m]; v = (x[n] - x[n-1]) / dt (backward difference). Branch 'viscous'."""
-    kinds = ('viscous',)
-    branch_names = ('viscous',)
+class VelocityElement:
+    """Base of elements whose force depends on the velocity alone, v[n] = (x[n] - x[n-1]) / dt (backward
+    difference); the state is the previous displacement. Subclasses define ``force_of_velocity(v)`` for
+    scalars and arrays alike, so streaming and batch run the same arithmetic."""
 
-    def __init__(self, c: float, dt: float):
-        self.c, self.dt = float(c), float(dt)
+    def __init__(self, dt: float):
+        self.dt = float(dt)
         self.reset()
 
     def reset(self, x0: float = 0.0):
@@ -119,17 +119,30 @@ class Dashpot:
         self.x_prev = float(state[0])
 
     def step(self, x: float):
-        f = self.c * ((x - self.x_prev) / self.dt)
+        v = (x - self.x_prev) / self.dt
         self.x_prev = x
-        return (f,)
+        return (self.force_of_velocity(v),)
 
     def run(self, x):
         x = np.asarray(x, dtype=float)
         if x.size == 0:
             return np.zeros((1, 0))
-        f = self.c * (np.diff(np.concatenate(([self.x_prev], x))) / self.dt)
+        v = np.diff(np.concatenate(([self.x_prev], x))) / self.dt
         self.x_prev = float(x[-1])
-        return f[None, :]
+        return np.asarray(self.force_of_velocity(v))[None, :]
+
+
+class Dashpot(VelocityElement):
+    """Kelvin-Voigt dashpot F = c v, c [N s/m]; v = (x[n] - x[n-1]) / dt (backward difference). Branch 'viscous'."""
+    kinds = ('viscous',)
+    branch_names = ('viscous',)
+
+    def __init__(self, c: float, dt: float):
+        self.c = float(c)
+        super().__init__(dt)
+
+    def force_of_velocity(self, v):
+        return self.c * v
 
     def complex_stiffness(self, frequency, amplitude):
         w = 2 * np.pi * np.asarray(frequency, dtype=float) + 0 * np.asarray(amplitude, dtype=float)

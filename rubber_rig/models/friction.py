@@ -38,6 +38,8 @@ import math
 
 import numpy as np
 
+from .elements import VelocityElement
+
 
 def berg_force(x, x_s, f_s, f_fmax: float, x2: float):
     """Berg friction force [N] (seed 000 Eq. 16) for displacement ``x`` [m] and reference (x_s [m], f_s [N]).
@@ -252,7 +254,7 @@ class BergFriction:
         return np.asarray(ss['k_fs'] + 1j * ss['k_fl'] + 0 * np.asarray(frequency, dtype=float))[None]
 
 
-class SmoothCoulomb:
+class SmoothCoulomb(VelocityElement):
     """Smooth Coulomb friction F = F_c tanh(a v) (seed 002 Eq. 46); v from the backward difference.
 
     f_c [N] friction force level, a [s/m] steepness. Branch 'friction'.
@@ -261,30 +263,11 @@ class SmoothCoulomb:
     kinds = ('friction',)
 
     def __init__(self, f_c: float, a: float, dt: float):
-        self.f_c, self.a, self.dt = float(f_c), float(a), float(dt)
-        self.reset()
+        self.f_c, self.a = float(f_c), float(a)
+        super().__init__(dt)
 
-    def reset(self, x0: float = 0.0):
-        self.x_prev = float(x0)
-
-    def get_state(self):
-        return (self.x_prev,)
-
-    def set_state(self, state):
-        self.x_prev = float(state[0])
-
-    def step(self, x: float):
-        v = (x - self.x_prev) / self.dt
-        self.x_prev = x
-        return (self.f_c * math.tanh(self.a * v),)
-
-    def run(self, x):
-        x = np.asarray(x, dtype=float)
-        if x.size == 0:
-            return np.zeros((1, 0))
-        v = np.diff(np.concatenate(([self.x_prev], x))) / self.dt
-        self.x_prev = float(x[-1])
-        return (self.f_c * np.tanh(self.a * v))[None, :]
+    def force_of_velocity(self, v):
+        return self.f_c * np.tanh(self.a * v)
 
     def complex_stiffness(self, frequency, amplitude, n_quad: int = 512):
         """First-harmonic (describing-function) stiffness [N/m] of the continuous element, by quadrature.
