@@ -392,7 +392,8 @@ def run(args) -> int:
                                    'achieved_amplitude': b.achieved_amplitude, 'completed': b.completed,
                                    'message': b.message} for b in (result.blocks if result else [])]},
             'loss': {'live': {k: v.as_dict() for k, v in monitor.stats.items()}, 'recording': rec_loss},
-            'latency': monitor.latency_summary(),
+            # stamps are rig time (sample index / rate): only a paced rig keeps it in step with the wall clock
+            'latency': monitor.latency_summary() if cfg.paced else {},
             'blocks': [table.rows[b] for b in sorted(table.rows)],
         }
         jpath, mpath = write_summary(mcap, summary)
@@ -405,6 +406,8 @@ def run(args) -> int:
     lat = summary['latency'].get('last_sample')
     if lat:
         print(f"latency sample -> prediction: median {lat['median_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms")
+    elif not cfg.paced:
+        print('latency: not measured with --fast (rig time runs ahead of the wall clock)')
     print(f'MCAP recording: {mcap}')
     print(f'summary:        {jpath}')
     print(f'                {mpath}')

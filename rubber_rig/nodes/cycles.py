@@ -3,6 +3,11 @@
 Both streams share the measured displacement, so two CycleDetectors fed with the same x cut exactly the same
 cycles; the pairer only matches them by index and maps detector sample indices back to rig sequence numbers.
 Noise on x cannot make them disagree: the cut depends on x alone.
+
+Why a restart at every program block: a cycle that spans two blocks (another frequency, amplitude or mean)
+measures neither, and the detector's trigger levels come from the previous cycle - after a ramp to a new
+preload (seed 004) the old mean lies outside the new motion and no cycle would ever be cut. Fed block by
+block, the detector starts each block from its own data.
 """
 from __future__ import annotations
 
@@ -32,17 +37,19 @@ class CyclePairer:
         self._dt = None
         self._origin = None        # sequence number of the detectors' sample index 0
         self._next = None
+        self._block = None
 
     def reset(self) -> None:
         self._measured = self._model = None
 
     def feed(self, first_sequence: int, dt: float, x: np.ndarray, measured: np.ndarray,
-             predicted: np.ndarray) -> list[PairedCycle]:
-        if self._measured is None or dt != self._dt or first_sequence != self._next:
-            # first batch, new rate, or a sequence gap: a cycle across a gap would be wrong -> restart
+             predicted: np.ndarray, block: int = -1) -> list[PairedCycle]:
+        """Samples from ``first_sequence`` on, all of program block ``block`` (-1: unknown); finished cycles."""
+        if self._measured is None or dt != self._dt or first_sequence != self._next or block != self._block:
+            # first batch, new rate, a sequence gap or a new block: a cycle across it would be wrong -> restart
             self._measured = CycleDetector(dt, self.hysteresis, self.min_amplitude)
             self._model = CycleDetector(dt, self.hysteresis, self.min_amplitude)
-            self._dt, self._origin = dt, first_sequence
+            self._dt, self._origin, self._block = dt, first_sequence, block
         self._next = first_sequence + len(x)
         out = []
         for m, p in zip(self._measured.update(x, measured), self._model.update(x, predicted)):

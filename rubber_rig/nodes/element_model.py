@@ -81,7 +81,7 @@ class ElementModelNode(Node):
 
         self.blocks = BlockIndex()
         self.cycles = CyclePairer(min_amplitude=min_amplitude)
-        self._cycles_pending = deque()
+        self._cycle_queue = deque()      # sample batches waiting for the setpoints that say their block
         self.pub_prediction = self.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
         self.pub_metrics = self.create_publisher(CycleMetrics, topics.CYCLE_METRICS, topics.EVENT_QOS)
         self.pub_params = self.create_publisher(ModelParameters, topics.MODEL_PARAMETERS, topics.LATCHED_QOS)
@@ -95,7 +95,7 @@ class ElementModelNode(Node):
     # -- data path --------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
         self.blocks.add(msg.first_sequence, len(msg.displacement), msg.block_index)
-        self.publish_cycles()
+        self.process_cycles()
 
     def on_samples(self, msg: RigSampleBatch) -> None:
         x, f, _ = conv.batch_arrays(msg)
@@ -107,24 +107,24 @@ class ElementModelNode(Node):
         self.pub_prediction.publish(conv.prediction_msg(
             msg, predicted, self.predictor.branch_names, branches if self.publish_branches else None))
         if self.cycle_metrics:
-            t0 = conv.to_seconds(msg.header.stamp)
-            for c in self.cycles.feed(msg.first_sequence, msg.sample_period, x, f, predicted):
-                t_end = t0 + (c.end_sequence - msg.first_sequence) * msg.sample_period
-                self._cycles_pending.append((c, t_end, msg.first_sequence + len(x)))
-            self.publish_cycles()
+            self._cycle_queue.append((msg.first_sequence, msg.sample_period, x, f, predicted,
+                                      conv.to_seconds(msg.header.stamp)))
+            self.process_cycles()
 
-    def publish_cycles(self) -> None:
-        """Publish finished cycles with the block they belong to. Setpoints and samples travel on different
-        topics, so on a rig running faster than real time the setpoints of a cycle can arrive after its
-        samples: a cycle waits (up to one second of samples) until the setpoints covering it are in."""
-        while self._cycles_pending:
-            c, t_end, seen = self._cycles_pending[0]
-            block = self.blocks.lookup(c.end_sequence - 1)
-            if block < 0 and not self.blocks.covered(c.end_sequence - 1) and \
-                    self.predictor.next_sequence - seen < 1.0 / (self.predictor.dt or 1e-3):
+    def process_cycles(self) -> None:
+        """Cut cycles block by block and publish their metrics. Setpoints (which carry the block index) and
+        samples travel on different topics, so on a rig running faster than real time the setpoints of a batch
+        can arrive after its samples: a batch waits (up to one second of samples) until they are in."""
+        while self._cycle_queue:
+            first, dt, x, f, predicted, t0 = self._cycle_queue[0]
+            end = first + len(x)
+            if not self.blocks.covered(end - 1) and self.predictor.next_sequence - end < 1.0 / dt:
                 return
-            self._cycles_pending.popleft()
-            self.pub_metrics.publish(conv.cycle_metrics_msg(c.measured, c.model, block, c.index, t_end))
+            self._cycle_queue.popleft()
+            for lo, hi, block in self.blocks.segments(first, len(x)):
+                for c in self.cycles.feed(first + lo, dt, x[lo:hi], f[lo:hi], predicted[lo:hi], block):
+                    t_end = t0 + (c.end_sequence - first) * dt
+                    self.pub_metrics.publish(conv.cycle_metrics_msg(c.measured, c.model, block, c.index, t_end))
 
     def publish_parameters(self) -> None:
         p = self.predictor

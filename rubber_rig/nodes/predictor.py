@@ -161,3 +161,31 @@ class BlockIndex:
             if first <= sequence < end:
                 return block
         return -1
+
+    def segments(self, first_sequence: int, n: int) -> list[tuple[int, int, int]]:
+        """Split the samples [first_sequence, first_sequence + n) by block: [(start, stop, block)], offsets
+        into the batch, stop exclusive; samples no setpoint batch covers get block -1."""
+        end = first_sequence + n
+        marks = []                                   # (first, end, block) of ranges overlapping the samples
+        for r in reversed(self._ranges):
+            if r[1] <= first_sequence:
+                break
+            if r[0] < end:
+                marks.append(r)
+        out, at = [], first_sequence
+        for r_first, r_end, block in reversed(marks):
+            if r_first > at:
+                out.append((at, r_first, -1))
+            lo, hi = max(r_first, at), min(r_end, end)
+            if hi > lo:
+                out.append((lo, hi, block))
+                at = hi
+        if at < end:
+            out.append((at, end, -1))
+        merged = []                                  # consecutive ranges of one block: one segment
+        for seg in out:
+            if merged and merged[-1][2] == seg[2] and merged[-1][1] == seg[0]:
+                merged[-1] = (merged[-1][0], seg[1], seg[2])
+            else:
+                merged.append(seg)
+        return [(lo - first_sequence, hi - first_sequence, block) for lo, hi, block in merged]
