@@ -196,6 +196,27 @@ def test_deadband_restores_the_friction_loop_under_sensor_noise():
         assert np.abs(np.abs(refs[1:]) - 0.5e-3).max() < 5 * NOISE
 
 
+@pytest.mark.parametrize('fs', [1000.0, 5000.0])
+def test_deadband_of_10x_the_noise_holds_on_a_quasi_static_triangle(fs):
+    """Seed 001's 0.05 mm/s triangle (0.2 mm): 10 to 50 nm per sample under 0.2 um noise, so the running
+    extreme collects many noise peaks. 5x the RMS lets dips through (friction energy >10 % low); the node
+    default, 10x, keeps it within 1 % of the loop of the clean displacement."""
+    from rubber_rig.nodes.predictor import DEFAULT_REVERSAL_THRESHOLD
+    dt, amp, rate = 1.0 / fs, 0.2e-3, 0.05e-3
+    period = 4 * amp / rate                                  # 16 s
+    per_cycle = int(round(period * fs))
+    ph = (np.arange(2 * per_cycle + 1) * dt / period) % 1.0
+    clean = amp * np.where(ph < 0.25, 4 * ph, np.where(ph < 0.75, 2 - 4 * ph, 4 * ph - 4))
+    x = clean + np.random.default_rng(5).normal(size=clean.size) * NOISE
+    truth = cycle_energy(clean, BergFriction(FM, X2, dt).run(clean)[0], per_cycle, cycles=1)
+    five = cycle_energy(x, BergFriction(FM, X2, dt, reversal_threshold=5 * NOISE).run(x)[0], per_cycle, cycles=1)
+    ten = cycle_energy(x, BergFriction(FM, X2, dt, reversal_threshold=DEFAULT_REVERSAL_THRESHOLD).run(x)[0],
+                       per_cycle, cycles=1)
+    assert DEFAULT_REVERSAL_THRESHOLD == pytest.approx(10 * NOISE)
+    assert five / truth - 1 < -0.10
+    assert ten / truth == pytest.approx(1.0, abs=0.01)
+
+
 def test_deadband_follows_the_candidate_branch_inside_the_band():
     """A wiggle back from an extreme (less than d) follows Eq. 16 from (x_ext, F(x_ext)) and rejoins the
     current branch there: no jump, nothing dissipated, reference unchanged; more than d back is a reversal."""

@@ -34,10 +34,13 @@ def test_program_overrides_keep_the_program_valid():
 
 
 def test_main_job_end_to_end(tmp_path, capsys):
+    # a domain of its own: the bench refuses to start where another suite's rig_driver is visible, and DDS
+    # can still list the nodes of a suite another test module of this process has just shut down
     rc = main(['bench', '--fast', '--blocks', '5,16', '--cycles', '4', '--output-dir', str(tmp_path),
-               '--domain-id', str(domain_id()), '--quiet'])
-    out = capsys.readouterr().out
-    assert rc == 0, out
+               '--domain-id', str(domain_id() - 80), '--quiet'])
+    captured = capsys.readouterr()
+    out = captured.out
+    assert rc == 0, out + captured.err
     assert 'MCAP recording:' in out and 'summary:' in out
     mcap = Path(out.split('MCAP recording:')[1].split()[0])
     assert mcap.is_file() and mcap.suffix == '.mcap'
@@ -55,3 +58,18 @@ def test_main_job_end_to_end(tmp_path, capsys):
     md = mcap.with_suffix('').with_name(mcap.stem + '.summary.md').read_text()
     assert '| 0 | sine_0.5mm_5Hz |' in md
     assert 'sine_1mm_5Hz' in out     # the live table
+
+
+def test_bench_refuses_to_start_beside_another_suite_on_the_same_domain():
+    # two excitations on one rig's topics would both command it: a second suite must not start
+    from rubber_rig.cli.main import CommandError
+    from rubber_rig.nodes.launcher import InProcessLauncher
+    from rubber_rig.nodes.rig_driver import RigDriverNode
+    from test_nodes import CONFIG
+    domain = domain_id() - 60
+    with InProcessLauncher([CONFIG], domain_id=domain) as running:
+        running.start(RigDriverNode, {'autostart': False})
+        with InProcessLauncher([CONFIG], domain_id=domain) as second:
+            with pytest.raises(CommandError, match=f"domain {domain} in namespace '/' \\(/rig_driver\\)"):
+                bench.refuse_if_another_suite_runs(second, '')
+            bench.refuse_if_another_suite_runs(second, 'rig_b', discovery_time=0.5)   # own namespace: fine

@@ -66,13 +66,13 @@ def test_bad_parameters_are_refused_with_errors_naming_them():
         assert not result.successful and 'temperature' in result.reason
         assert model.get_parameter('values.alpha').value == pytest.approx(0.659)   # unchanged
         assert model.predictor.params.alpha == pytest.approx(0.659)
-        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(1e-6)   # config/rig_sim.yaml
+        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(2e-6)   # config/rig_sim.yaml
         for bad in (-1e-6, 1e-3):
             result = model.set_parameters([Parameter('friction_reversal_threshold', value=bad)])[0]
             assert not result.successful and 'friction_reversal_threshold' in result.reason
-        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(1e-6)
-        assert model.set_parameters([Parameter('friction_reversal_threshold', value=2e-6)])[0].successful
-        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(2e-6)   # next rebuild uses it
+        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(2e-6)
+        assert model.set_parameters([Parameter('friction_reversal_threshold', value=3e-6)])[0].successful
+        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(3e-6)   # next rebuild uses it
         with pytest.raises(ParameterError, match="'friction_reversal_threshold'"):
             launcher.start(ElementModelNode, {'friction_reversal_threshold': -1.0})
 
@@ -101,7 +101,7 @@ def test_every_key_of_the_shipped_configs_is_a_declared_parameter_and_typos_are_
     with InProcessLauncher([CONFIG], domain_id=domain_id()) as launcher:
         model = launcher.start(ElementModelNode, {'frition_reversal_threshold': 2e-6})
         assert undeclared_overrides(model) == ['frition_reversal_threshold']
-        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(1e-6)   # the file's value stays
+        assert model.predictor.choice.friction_reversal_threshold == pytest.approx(2e-6)   # the file's value stays
 
 
 def test_bad_programs_are_refused_before_anything_moves(tmp_path):

@@ -20,8 +20,11 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from rubber_rig.cli.main import CommandError
+
 CONFIG_DIR = Path(__file__).resolve().parents[2] / 'config'
 PERIODIC = ('sine', 'triangle', 'square')
+SWEEPS = ('sweep_lin', 'sweep_log')
 
 
 def find_config(name: str) -> Path:
@@ -157,15 +160,12 @@ class BlockTable:
         self.cycles.setdefault(msg.block_index, []).append(msg)
         return [b for b in sorted(self.cycles) if b < msg.block_index and b not in self.printed]
 
-    def row(self, b: int) -> dict:
+    def _row(self, b: int, name: str, frequency: float, steady: list) -> dict:
         blk = self.blocks[b]
-        cyc = [c for c in self.cycles.get(b, []) if blk.waveform in PERIODIC
-               and c.amplitude >= 0.9 * blk.amplitude and abs(c.frequency - blk.frequency) <= 0.1 * blk.frequency]
-        steady = cyc[len(cyc) // 2:] if len(cyc) > 1 else cyc
 
-        def mean(side, name):
-            return float(np.mean([getattr(getattr(c, side), name) for c in steady])) if steady else math.nan
-        r = {'block_index': b, 'name': blk.name, 'waveform': blk.waveform, 'frequency': blk.frequency,
+        def mean(side, field):
+            return float(np.mean([getattr(getattr(c, side), field) for c in steady])) if steady else math.nan
+        r = {'block_index': b, 'name': name, 'waveform': blk.waveform, 'frequency': frequency,
              'target_amplitude': blk.amplitude,
              'achieved_amplitude': float(np.mean([c.amplitude for c in steady])) if steady else math.nan,
              'cycles_used': len(steady)}
@@ -174,17 +174,39 @@ class BlockTable:
                                                   'energy_loop')}
         r['deviation_k_dyn_pct'] = 100 * (r['model']['k_dyn'] / r['measured']['k_dyn'] - 1)
         r['deviation_c_eq_pct'] = 100 * (r['model']['c_eq'] / r['measured']['c_eq'] - 1)
-        self.rows[b] = r
         return r
 
-    def format(self, b: int) -> str:
+    def row_list(self, b: int) -> list[dict]:
+        """Rows of block b: one for a periodic block, one per frequency band of a sweep, none otherwise."""
+        blk = self.blocks[b]
+        cycles = self.cycles.get(b, [])
+        if blk.waveform in PERIODIC:
+            cyc = [c for c in cycles if c.amplitude >= 0.9 * blk.amplitude
+                   and abs(c.frequency - blk.frequency) <= 0.1 * blk.frequency]
+            rows = [self._row(b, blk.name, blk.frequency, cyc[len(cyc) // 2:] if len(cyc) > 1 else cyc)]
+        elif blk.waveform in SWEEPS:
+            # a sweep has no steady state: group its cycles into bands around 1-1.5-2-3-5-7 x 10^n Hz (+-10 %),
+            # past the tapers (half the target amplitude; the actuator attenuates the top of a sweep)
+            lo, hi = sorted((blk.frequency, blk.frequency_end))
+            bands = [m * 10.0 ** e for e in range(-2, 4) for m in (1, 1.5, 2, 3, 5, 7) if lo <= m * 10.0 ** e <= hi]
+            rows = []
+            for fc in bands:
+                cyc = [c for c in cycles if c.amplitude >= 0.5 * blk.amplitude and abs(c.frequency / fc - 1) <= 0.1]
+                if cyc:
+                    rows.append(self._row(b, f'{blk.name} @{fc:g}Hz', float(np.mean([c.frequency for c in cyc])),
+                                          cyc))
+        else:
+            rows = []
+        self.rows[b] = rows
+        return rows
+
+    def format(self, b: int) -> list[str]:
         self.printed.add(b)
-        r = self.row(b)
-        return (f"{b:4d}  {r['name'][:24]:<24}  {r['frequency']:6.2f}  {r['target_amplitude'] * 1e3:6.3f}  "
-                f"{r['achieved_amplitude'] * 1e3:6.3f}  {r['measured']['k_dyn'] * 1e-6:10.3f}  "
-                f"{r['model']['k_dyn'] * 1e-6:11.3f}  {r['deviation_k_dyn_pct']:+6.2f}  "
-                f"{r['measured']['c_eq'] * 1e-3:9.2f}  {r['model']['c_eq'] * 1e-3:10.2f}  "
-                f"{r['deviation_c_eq_pct']:+6.2f}")
+        return [(f"{b:4d}  {r['name'][:24]:<24}  {r['frequency']:6.2f}  {r['target_amplitude'] * 1e3:6.3f}  "
+                 f"{r['achieved_amplitude'] * 1e3:6.3f}  {r['measured']['k_dyn'] * 1e-6:10.3f}  "
+                 f"{r['model']['k_dyn'] * 1e-6:11.3f}  {r['deviation_k_dyn_pct']:+6.2f}  "
+                 f"{r['measured']['c_eq'] * 1e-3:9.2f}  {r['model']['c_eq'] * 1e-3:10.2f}  "
+                 f"{r['deviation_c_eq_pct']:+6.2f}") for r in self.row_list(b)]
 
 
 class Terminal:
@@ -265,11 +287,28 @@ def write_summary(mcap: Path, summary: dict) -> tuple[Path, Path]:
 
 def _wait(launcher, future, timeout: float, what: str):
     if not launcher.wait_for(future.done, timeout):
-        raise RuntimeError(f'timed out after {timeout:.0f} s waiting for {what}')
+        raise CommandError(f'timed out after {timeout:.0f} s waiting for {what}')
     return future.result()
 
 
 # -- the job -----------------------------------------------------------------------------------------------------------
+def refuse_if_another_suite_runs(launcher, namespace: str, discovery_time: float = 1.5) -> None:
+    """Two suites with the same topics on one ROS domain would command one rig from two excitations (and
+    record each other): wait for DDS discovery, and refuse to start if a rig_driver or excitation node
+    already runs in this namespace."""
+    from rclpy.node import Node
+    probe = launcher.spin(Node('rubber_rig_bench_probe', context=launcher.context, namespace=namespace or None))
+    ns = '/' + namespace.strip('/') if namespace.strip('/') else '/'
+
+    def others():
+        return sorted(f"{n_ns.rstrip('/')}/{name}" for name, n_ns in probe.get_node_names_and_namespaces()
+                      if name in ('rig_driver', 'excitation') and n_ns == ns)
+    if launcher.wait_for(lambda: bool(others()), discovery_time):
+        domain = launcher.context.get_domain_id()
+        raise CommandError(f"another rubber_rig suite runs on ROS domain {domain} in namespace '{ns}' "
+                           f"({', '.join(others())}): give this one its own --domain-id or --namespace")
+
+
 def run(args) -> int:
     os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
     from msg_defs.srv import RecorderControl
@@ -294,6 +333,7 @@ def run(args) -> int:
     term = Terminal(args.quiet)
 
     with InProcessLauncher([config], namespace=args.namespace, domain_id=args.domain_id) as launcher:
+        refuse_if_another_suite_runs(launcher, args.namespace)
         recorder = launcher.start(RecorderNode, {
             'output_dir': str(out_dir), 'metadata.test_program': program_yaml,
             'metadata.notes': f'rubber-rig bench --program {args.program}'})
@@ -301,7 +341,7 @@ def run(args) -> int:
         excitation = launcher.start(ExcitationNode, {'program': ''})
         driver = launcher.start(RigDriverNode, driver_overrides)
         if driver.lifecycle_state != 'active':
-            raise RuntimeError(f'rig_driver did not come up (lifecycle state {driver.lifecycle_state}); see the log')
+            raise CommandError(f'rig_driver did not come up (lifecycle state {driver.lifecycle_state}); see the log')
         if args.foxglove:
             from rubber_rig.nodes.foxglove_view import LAYOUT_FILE, FoxgloveViewNode
             launcher.start(FoxgloveViewNode, {'port': args.foxglove_port})
@@ -326,7 +366,7 @@ def run(args) -> int:
                                   and monitor.recorder_subscribed('samples', 'prediction', 'setpoints',
                                                                   'cycle_metrics', 'status'), 30.0)
         if not ready:
-            raise RuntimeError('the nodes did not connect within 30 s (status, run_program, recorder topics)')
+            raise CommandError('the nodes did not connect within 30 s (status, run_program, recorder topics)')
         launcher.wait_for(lambda: False, 0.3)   # graph entries exist; let DDS finish matching the endpoints
         term.line(f'recording to {recorder.core.current_file}')
         table = BlockTable(program)
@@ -337,7 +377,8 @@ def run(args) -> int:
         goal_handle = _wait(launcher, monitor.send_program(program_yaml, amplitude_control=not
                                                            args.no_amplitude_control), 30.0, 'the goal to be accepted')
         if not goal_handle.accepted:
-            raise RuntimeError('the excitation refused the program (another one is running?)')
+            raise CommandError('the excitation refused the program: another program is running on this ROS domain '
+                               '(a second bench? give it its own --domain-id)')
         result_future = goal_handle.get_result_async()
         n_fb = n_cm = 0
         interrupted = False
@@ -352,7 +393,8 @@ def run(args) -> int:
                 n_cm += len(cms)
                 for c in cms:
                     for b in table.add(c):
-                        term.line(table.format(b))
+                        for line in table.format(b):
+                            term.line(line)
                 time.sleep(0.1)
         except KeyboardInterrupt:
             interrupted = True
@@ -367,10 +409,13 @@ def run(args) -> int:
             table.add(c)
         for b in sorted(table.cycles):
             if b not in table.printed:
-                term.line(table.format(b))
+                for line in table.format(b):
+                    term.line(line)
         result = result_future.result().result if result_future.done() else None
 
         stop = _wait(launcher, monitor.recorder(RecorderControl.Request.STOP), 30.0, 'the recorder to stop')
+        if not stop.file:
+            raise CommandError(f'the recorder did not report its file: {stop.message or "no message"}')
         mcap = Path(stop.file)
         rec_loss = {}
         try:
@@ -394,7 +439,7 @@ def run(args) -> int:
             'loss': {'live': {k: v.as_dict() for k, v in monitor.stats.items()}, 'recording': rec_loss},
             # stamps are rig time (sample index / rate): only a paced rig keeps it in step with the wall clock
             'latency': monitor.latency_summary() if cfg.paced else {},
-            'blocks': [table.rows[b] for b in sorted(table.rows)],
+            'blocks': [r for b in sorted(table.rows) for r in table.rows[b]],
         }
         jpath, mpath = write_summary(mcap, summary)
 

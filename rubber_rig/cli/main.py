@@ -3,6 +3,10 @@ import argparse
 import importlib
 import sys
 
+
+class CommandError(RuntimeError):
+    """A job could not be done for a reason the message states (no traceback is shown)."""
+
 # sub-command -> module that provides `add_arguments(parser)` and `run(args) -> int`
 COMMANDS = {
     'bench': 'rubber_rig.cli.bench',
@@ -36,6 +40,9 @@ def main(argv=None) -> int:
     except (ValueError, FileNotFoundError) as exc:  # bad input: a clear message, no traceback
         print(f'rubber-rig {args.command}: error: {exc}', file=sys.stderr)
         return 2
+    except CommandError as exc:                      # the job failed for a stated reason
+        print(f'rubber-rig {args.command}: error: {exc}', file=sys.stderr)
+        return 1
 
 
 if __name__ == '__main__':

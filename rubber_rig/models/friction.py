@@ -20,11 +20,13 @@ inside the band dissipates nothing and leaves no trace in the state. In the virg
 follows the virgin curve from (x_0, 0) both ways until the displacement first leaves
 (x_0 - d, x_0 + d), which fixes the first direction.
 
-Choosing d: a few times the displacement noise RMS, well below the smallest amplitude of interest.
-What d must exceed is the spread between the running extreme of the noisy samples near a turning
-point and a later sample, which grows with the number of samples there: 5x the RMS is enough at
-1 kHz, at 5 kHz use ~8x (0.5 Hz, 0.5 mm, 0.2 um noise: 5x still lets an occasional noise dip
-through). The price: a real reversal smaller than d is not a reversal any more. On a clean signal
+Choosing d: about 10x the displacement noise RMS, well below the smallest amplitude of interest.
+What d must exceed is the spread between the running extreme of the noisy samples and a later
+sample, which grows with the number of samples spent near the extreme - most in slow motion: with
+0.2 um noise, 5x the RMS (1 um) is enough for a 0.5 Hz, 0.5 mm sine at 1 kHz, but on seed 001's
+quasi-static 0.05 mm/s triangle (50 nm per sample) it lets noise dips through and the friction
+energy per cycle comes out 15 % low at 1 kHz, 78 % low at 5 kHz; 10x (2 um) gets both within
+0.6 %. The price: a real reversal smaller than d is not a reversal any more. On a clean signal
 without such small reversals the reference states are exactly the paper's, so the forces agree
 with d = 0 to round-off; but where the paper's rule restarts a fresh (stiff, F_fmax/x2) branch after
 a tiny real reversal -- e.g. a few-nm servo overshoot where the motion stops and resumes in the

@@ -62,8 +62,8 @@ class ElementModelNode(Node):
                 'predicts', range=(0.0, 60.0), units='s')
         declare(self, 'friction_reversal_threshold', DEFAULT_REVERSAL_THRESHOLD, 'Berg friction reversal '
                 'deadband: a velocity reversal counts once the measured displacement is this far back from its '
-                'extreme, so sensor noise does not reset the friction reference state; a few times the displacement '
-                'noise RMS (default 5x the simulated rig\'s 0.2 um), 0 = the paper\'s rule', range=(0.0, 1e-4),
+                'extreme, so sensor noise does not reset the friction reference state; about 10x the displacement '
+                'noise RMS (default: 10x the simulated rig\'s 0.2 um), 0 = the paper\'s rule', range=(0.0, 1e-4),
                 units='m')
         self.publish_branches = declare(self, 'publish_branches', True, 'publish per-branch forces')
         self.cycle_metrics = declare(self, 'cycle_metrics', True, 'publish per-cycle metrics')

@@ -9,7 +9,7 @@ a few milliseconds.
 Why a friction reversal deadband (``friction_reversal_threshold``): the model is driven by the *measured*
 displacement, and with the paper's rule every sensor-noise wiggle is a velocity reversal that resets Berg's
 reference state, which collapses the friction loop (C_eq several per cent low at 0.5 Hz / 0.5 mm with 0.2 um
-noise). A few times the displacement noise RMS keeps the noise out of the reference state (see
+noise). About 10x the displacement noise RMS keeps the noise out of the reference state (see
 rubber_rig.models.friction); 0 is the paper's rule.
 """
 from __future__ import annotations
@@ -23,8 +23,9 @@ import numpy as np
 from rubber_rig.models import build_model, load_parameter_set, parameters_at_temperature, Seed000Params
 
 SOURCES = ('parameter_set', 'temperature', 'rig_temperature', 'values')
-# [m] 5x the simulated rig's default displacement noise (rig.config.SimOptions.displacement_noise = 0.2 um)
-DEFAULT_REVERSAL_THRESHOLD = 1e-6
+# [m] 10x the simulated rig's default displacement noise (rig.config.SimOptions.displacement_noise = 0.2 um);
+# 5x is too little for quasi-static motion (see rubber_rig.models.friction)
+DEFAULT_REVERSAL_THRESHOLD = 2e-6
 
 
 @dataclass(frozen=True)
