@@ -122,3 +122,15 @@ def test_cycle_metrics_do_not_depend_on_where_the_samples_fall(f):
     phi = 2 * np.pi * f * dt
     assert k.mean() == pytest.approx(ref['k_dyn'], rel=0.002)
     assert c.mean() == pytest.approx(ref['c_eq'] * np.sin(phi) / phi, rel=0.005)
+
+
+def test_cycle_detector_reports_the_peak_amplitude_of_a_triangle():
+    # a triangle's amplitude (what the program and the amplitude loop mean) is half its peak-valley range
+    from rubber_rig.excitation.waveforms import triangle
+    dt, f, a = 1e-3, 0.5, 0.2e-3
+    x = a * triangle(np.arange(12_000) * dt * f)
+    out = CycleDetector(dt, min_amplitude=1e-5).update(x, K * x)
+    assert len(out) >= 4
+    for r in out:
+        assert r['peak_amplitude'] == pytest.approx(a, rel=1e-3)
+        assert r['k_dyn'] == pytest.approx(K, rel=1e-6)

@@ -22,6 +22,7 @@ class HarmonicProperties:
     force_mean: float       # [N]
     cycles: int
     samples: int
+    peak_amplitude: float   # [m] half the peak-to-peak displacement (first harmonic of a triangle: 8/pi^2 of it)
 
     def as_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -100,4 +101,4 @@ def harmonic_properties(x, force, dt: float, frequency: float = None, detrend: b
         damping=e_loop / (np.pi * amp ** 2 * k_dyn), c_eq=e_loop / (np.pi * w * amp ** 2),
         energy_harmonic=float(np.pi * amp * abs(f1) * np.sin(np.angle(k1))), energy_loop=e_loop,
         k_peak=float((fs.max() - fs.min()) / xr) if xr > 0 else float('nan'), force_mean=float(fs[:-1].mean()),
-        cycles=cycles, samples=m)
+        cycles=cycles, samples=m, peak_amplitude=0.5 * float(xr))

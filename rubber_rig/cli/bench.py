@@ -160,6 +160,11 @@ class BlockTable:
         self.cycles.setdefault(msg.block_index, []).append(msg)
         return [b for b in sorted(self.cycles) if b < msg.block_index and b not in self.printed]
 
+    @staticmethod
+    def _amplitude(blk, c) -> float:
+        """Measured amplitude in the program's sense: first harmonic for sines, half peak-valley otherwise."""
+        return c.amplitude if blk.waveform not in ('triangle', 'square') else c.peak_amplitude
+
     def _row(self, b: int, name: str, frequency: float, steady: list) -> dict:
         blk = self.blocks[b]
 
@@ -167,7 +172,7 @@ class BlockTable:
             return float(np.mean([getattr(getattr(c, side), field) for c in steady])) if steady else math.nan
         r = {'block_index': b, 'name': name, 'waveform': blk.waveform, 'frequency': frequency,
              'target_amplitude': blk.amplitude,
-             'achieved_amplitude': float(np.mean([c.amplitude for c in steady])) if steady else math.nan,
+             'achieved_amplitude': float(np.mean([self._amplitude(blk, c) for c in steady])) if steady else math.nan,
              'cycles_used': len(steady)}
         for side in ('measured', 'model'):
             r[side] = {n: mean(side, n) for n in ('k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy_harmonic',
@@ -181,7 +186,7 @@ class BlockTable:
         blk = self.blocks[b]
         cycles = self.cycles.get(b, [])
         if blk.waveform in PERIODIC:
-            cyc = [c for c in cycles if c.amplitude >= 0.9 * blk.amplitude
+            cyc = [c for c in cycles if self._amplitude(blk, c) >= 0.9 * blk.amplitude
                    and abs(c.frequency - blk.frequency) <= 0.1 * blk.frequency]
             rows = [self._row(b, blk.name, blk.frequency, cyc[len(cyc) // 2:] if len(cyc) > 1 else cyc)]
         elif blk.waveform in SWEEPS:

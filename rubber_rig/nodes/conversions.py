@@ -193,6 +193,7 @@ def cycle_metrics_msg(measured: Any, model: Any, block_index: int, cycle_index: 
     msg.cycle_index = int(cycle_index)
     msg.frequency = float(_get(measured, 'frequency', float('nan')))
     msg.amplitude = float(_get(measured, 'amplitude', float('nan')))
+    msg.peak_amplitude = float(_get(measured, 'peak_amplitude', float('nan')))
     msg.mean = float(_get(measured, 'mean', float('nan')))
     msg.measured = cycle_properties_msg(measured)
     msg.model = cycle_properties_msg(model)
