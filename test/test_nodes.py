@@ -57,7 +57,7 @@ def start_suite(tmp_path, driver=None, excitation=None, recorder=True):
     nodes['monitor'] = launcher.spin(SuiteMonitor(context=launcher.context, keep_messages=True))
     mon = nodes['monitor']
     wanted = ('samples', 'prediction', 'setpoints', 'cycle_metrics') if recorder else ()
-    assert launcher.wait_for(lambda: mon.status is not None and nodes['excitation'].status is not None
+    assert launcher.wait_for(lambda: mon.status is not None and nodes['excitation'].rig_ready() == ''
                              and mon.action.server_is_ready() and mon.recorder_subscribed(*wanted), 30.0), \
         'suite did not connect'
     return launcher, nodes

@@ -366,12 +366,14 @@ def run(args) -> int:
         if args.foxglove:
             term.line(f'Foxglove: connect to ws://127.0.0.1:{args.foxglove_port}, import layout {LAYOUT_FILE}')
 
+        # the excitation must have seen the rig ready (not the driver's first, pre-configure status)
         ready = launcher.wait_for(lambda: monitor.status is not None and monitor.action.server_is_ready()
-                                  and excitation.status is not None
+                                  and excitation.rig_ready() == ''
                                   and monitor.recorder_subscribed('samples', 'prediction', 'setpoints',
                                                                   'cycle_metrics', 'status'), 30.0)
         if not ready:
-            raise CommandError('the nodes did not connect within 30 s (status, run_program, recorder topics)')
+            why = excitation.rig_ready() or 'status, run_program or recorder topics missing'
+            raise CommandError(f'the nodes did not connect within 30 s ({why})')
         launcher.wait_for(lambda: False, 0.3)   # graph entries exist; let DDS finish matching the endpoints
         term.line(f'recording to {recorder.core.current_file}')
         table = BlockTable(program)

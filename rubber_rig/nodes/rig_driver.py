@@ -120,6 +120,7 @@ class RigDriverNode(LifecycleNode):
         self.publish_status()
         if self.autostart and self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
             self.trigger_activate()
+            self.publish_status()   # the latched status says at once what autostart reached, not 'unconfigured'
 
     @property
     def lifecycle_state(self) -> str:
