@@ -134,3 +134,24 @@ def test_cycle_detector_reports_the_peak_amplitude_of_a_triangle():
     for r in out:
         assert r['peak_amplitude'] == pytest.approx(a, rel=1e-3)
         assert r['k_dyn'] == pytest.approx(K, rel=1e-6)
+
+
+def test_cycle_detector_with_several_force_channels_equals_one_detector_per_channel():
+    f, dt, x0 = 2.0, 1e-3, 1e-3
+    x, force = kv_signal(f, x0, dt, 6000, mean=0.3e-3, noise=0.01, seed=2, phase=-np.pi / 2)
+    other = 0.7 * force + 5.0 * np.sin(2 * np.pi * 3 * f * np.arange(x.size) * dt)
+    both = CycleDetector(dt, min_amplitude=0.2e-3)
+    one, two = CycleDetector(dt, min_amplitude=0.2e-3), CycleDetector(dt, min_amplitude=0.2e-3)
+    got, a, b = [], [], []
+    for i in range(0, x.size, 137):
+        s = slice(i, i + 137)
+        got += both.update(x[s], force[s], other[s])
+        a += one.update(x[s], force[s])
+        b += two.update(x[s], other[s])
+    assert len(got) == len(a) == len(b) >= 8
+    for c, ra, rb in zip(got, a, b):
+        assert (c['start'], c['end']) == (ra['start'], ra['end'])
+        assert c['channels'][0] == ra['channels'][0] and c['channels'][1] == rb['channels'][0]
+        assert c['k_dyn'] == ra['k_dyn']
+    with pytest.raises(ValueError, match='force channels'):
+        both.update(x[:10], force[:10])

@@ -36,13 +36,15 @@ def test_pairer_cuts_cycles_of_each_block_after_a_ramp_to_a_new_preload():
         idx.add(first, 50, int(blocks[first]))
         for lo, hi, block in idx.segments(first, 50):
             s = slice(first + lo, first + hi)
-            cycles += [(block, c) for c in pairer.feed(first + lo, dt, x[s], force[s], force[s], block)]
+            # the model channel reads 2 % stiffer: the pairer must keep the channels apart on the same cycles
+            cycles += [(block, c) for c in pairer.feed(first + lo, dt, x[s], force[s], 1.02 * force[s], block)]
     assert len(cycles) >= 8 and {b for b, _ in cycles} == {1}
     for _, c in cycles:
         assert c.start_sequence >= ramp.size                     # no cycle reaches back into the ramp
         assert c.measured['amplitude'] == pytest.approx(a, rel=2e-3)
         assert c.measured['mean'] == pytest.approx(x0, abs=0.02 * a)
-        assert c.measured['k_dyn'] == pytest.approx(c.model['k_dyn'])
+        assert c.model['k_dyn'] == pytest.approx(1.02 * c.measured['k_dyn'], rel=1e-9)
+        assert c.model['amplitude'] == c.measured['amplitude']          # one cut, one displacement
     # the same data without block information: the stale levels never trigger
     pairer = CyclePairer(min_amplitude=5e-6)
-    assert pairer.feed(0, dt, x, force, force) == []
+    assert pairer.feed(0, dt, x, force, 1.02 * force) == []

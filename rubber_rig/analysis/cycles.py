@@ -1,4 +1,4 @@
-"""Streaming cycle detection: per-cycle harmonic properties as chunks of (x, force) arrive."""
+"""Streaming cycle detection: per-cycle harmonic properties as chunks of (x, force...) arrive."""
 from __future__ import annotations
 
 import numpy as np
@@ -17,10 +17,12 @@ class CycleDetector:
     ``min_amplitude`` [m] - set it above the displacement noise, or noise at start-up (when the
     levels come from little data) can open false cycles.
 
-    ``update(x, force)`` takes chunks of any length and returns a list of dicts, one per completed
-    cycle: the :class:`HarmonicProperties` fields plus ``index`` (cycle count), ``start`` and
-    ``end`` (absolute sample indices, end exclusive) and ``period`` [s]. Chunking does not change
-    the result.
+    ``update(x, force, *more_forces)`` takes chunks of any length and returns a list of dicts, one
+    per completed cycle: the :class:`HarmonicProperties` fields of ``force`` plus ``index`` (cycle
+    count), ``start`` and ``end`` (absolute sample indices, end exclusive), ``period`` [s] and
+    ``channels`` (the properties of every force channel, ``force`` first). The cut depends on x
+    alone, so several forces measured against one displacement (e.g. measured and model) share one
+    detector and its cycles. Chunking does not change the result.
 
     Why interpolated crossings: a cycle is cut at whole samples, so at 14 Hz and 1 kHz its length
     alternates between 71 and 72 samples, and a first-harmonic fit at 1/(71 dt) or 1/(72 dt) Hz
@@ -43,7 +45,8 @@ class CycleDetector:
         self._n = 0                      # samples consumed
         self._start = None               # absolute index of the buffer's first sample
         self._first = True               # no cycle started yet
-        self._bx, self._bf = [], []      # samples since _start
+        self._bx = []                    # samples of x since _start
+        self._bf = None                  # ... and of every force channel (a list per channel)
         self._armed = False
         self._candidate = None           # absolute index of the pending upward mean crossing
         self._candidate_at = None        # ... and the crossing interpolated between samples
@@ -53,22 +56,28 @@ class CycleDetector:
         self._lo, self._hi = np.inf, -np.inf
         self._index = 0
 
-    def update(self, x, force) -> list:
+    def update(self, x, force, *more_forces) -> list:
         x = np.asarray(x, dtype=float).ravel()
-        force = np.asarray(force, dtype=float).ravel()
-        if x.shape != force.shape:
-            raise ValueError(f'x and force chunks must have equal length, got {x.size} and {force.size}')
+        forces = [np.asarray(f, dtype=float).ravel() for f in (force,) + more_forces]
+        for f in forces:
+            if f.shape != x.shape:
+                raise ValueError(f'x and force chunks must have equal length, got {x.size} and {f.size}')
+        if self._bf is None:
+            self._bf = [[] for _ in forces]
+        elif len(forces) != len(self._bf):
+            raise ValueError(f'{len(self._bf)} force channels so far, got {len(forces)}')
         out = []
         for i in range(x.size):     # per-sample state machine; the per-cycle arithmetic is vectorised
             xi, idx = float(x[i]), self._n + i
             prev, self._prev = self._prev, xi
-            if self._start is None and self._candidate is None:
-                self._start, self._bx, self._bf = idx, [], []   # nothing before a crossing is kept
-                self._first = True
+            if self._start is None:                             # the first sample after reset()
+                self._start = idx
             self._bx.append(xi)
-            self._bf.append(float(force[i]))
+            for buf, f in zip(self._bf, forces):
+                buf.append(float(f[i]))
             if len(self._bx) > self.max_cycle_samples:          # lost the excitation: start over
-                self._start, self._bx, self._bf, self._first = idx + 1, [], [], True
+                self._start, self._first = idx + 1, True
+                self._bx, self._bf = [], [[] for _ in forces]
             if self._mean is None:
                 self._lo, self._hi = min(self._lo, xi), max(self._hi, xi)
                 m, half = 0.5 * (self._hi + self._lo), 0.5 * (self._hi - self._lo)
@@ -97,24 +106,23 @@ class CycleDetector:
         results = []
         k = at - self._start
         if self._first:              # the first crossing only starts the first cycle
-            self._bx, self._bf, self._start, self._first = self._bx[k:], self._bf[k:], at, False
-            self._start_at = at_interpolated
+            self._bx, self._bf = self._bx[k:], [buf[k:] for buf in self._bf]
+            self._start, self._start_at, self._first = at, at_interpolated, False
             return results
-        cx, cf = np.array(self._bx[:k]), np.array(self._bf[:k])
-        self._bx, self._bf = self._bx[k:], self._bf[k:]
+        # close the loop on the next cycle's first sample
+        xs = np.array(self._bx[:k + 1])
+        fs = [np.array(buf[:k + 1]) for buf in self._bf]
+        self._bx, self._bf = self._bx[k:], [buf[k:] for buf in self._bf]
         start, self._start = self._start, at
-        start_at, self._start_at = self._start_at, at_interpolated
-        period = at_interpolated - start_at if start_at is not None else float(k)   # [samples]
-        if not abs(period - k) < 1.0:    # cannot happen with prev < m <= x; keep the cut's length if it does
-            period = float(k)
+        period = at_interpolated - self._start_at   # [samples], within (k - 1, k + 1)
+        self._start_at = at_interpolated
         if k >= self.min_cycle_samples:
+            cx = xs[:-1]
             half = 0.5 * float(cx.max() - cx.min())
             if half >= self.min_amplitude:
-                # close the loop on the next cycle's first sample
-                xs = np.append(cx, self._bx[0])
-                fs = np.append(cf, self._bf[0])
-                props = harmonic_properties(xs, fs, self.dt, frequency=1.0 / (period * self.dt), whole_cycles=1)
-                d = props.as_dict()
+                channels = [harmonic_properties(xs, f, self.dt, frequency=1.0 / (period * self.dt),
+                                                whole_cycles=1).as_dict() for f in fs]
+                d = dict(channels[0], channels=channels)
                 d.update(index=self._index, start=start, end=at, period=period * self.dt)
                 self._index += 1
                 results.append(d)

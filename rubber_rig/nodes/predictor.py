@@ -81,10 +81,6 @@ class OnlinePredictor:
         self.model = None
         self.dt = None
         self.next_sequence = None
-        self.samples = 0
-        self.gaps = 0
-        self.samples_missing = 0
-        self.rebuilds = 0
         self._history: deque[np.ndarray] = deque()
         self._history_len = 0
         self._dirty = True
@@ -103,9 +99,6 @@ class OnlinePredictor:
     def process(self, first_sequence: int, dt: float, x: np.ndarray,
                 temperature: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Predicted force and branch forces [n_branch, n] for one batch of measured displacement."""
-        if self.next_sequence is not None and first_sequence != self.next_sequence:
-            self.gaps += 1
-            self.samples_missing += max(0, first_sequence - self.next_sequence)
         self.next_sequence = first_sequence + len(x)
         if self.choice.source == 'rig_temperature' and temperature is not None and math.isfinite(temperature):
             if not math.isfinite(self.temperature) or abs(temperature - self.temperature) >= self.temperature_hysteresis:
@@ -118,7 +111,6 @@ class OnlinePredictor:
             self._rebuild(dt)
         total, branches = self.model.run(np.asarray(x, dtype=np.float64), return_branches=True)
         self._remember(x)
-        self.samples += len(x)
         return np.asarray(total), np.asarray(branches)
 
     # -- internals --------------------------------------------------------------------------------------
@@ -132,7 +124,6 @@ class OnlinePredictor:
             self._history_len = 0
         self.dt = dt
         self._dirty = False
-        self.rebuilds += 1
 
     def _remember(self, x: np.ndarray) -> None:
         keep = int(self.warmup_time / self.dt) if self.dt else 0
@@ -154,14 +145,8 @@ class BlockIndex:
         self._ranges.append((first_sequence, first_sequence + n, block_index))
 
     def covered(self, sequence: int) -> bool:
-        """True once setpoints up to ``sequence`` have been seen (a -1 from lookup is then final)."""
+        """True once setpoints up to ``sequence`` have been seen (a -1 block from segments is then final)."""
         return bool(self._ranges) and sequence < self._ranges[-1][1]
-
-    def lookup(self, sequence: int) -> int:
-        for first, end, block in reversed(self._ranges):
-            if first <= sequence < end:
-                return block
-        return -1
 
     def segments(self, first_sequence: int, n: int) -> list[tuple[int, int, int]]:
         """Split the samples [first_sequence, first_sequence + n) by block: [(start, stop, block)], offsets
