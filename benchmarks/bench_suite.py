@@ -69,6 +69,7 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
     from msg_defs.srv import RecorderControl
     from rubber_rig.excitation import Program
     from rubber_rig.nodes.launcher import InProcessLauncher
+    from rubber_rig.nodes.excitation import READY_STATES
     from rubber_rig.nodes.monitor import SuiteMonitor
     from rubber_rig.recording import load_recording
 
@@ -92,7 +93,9 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
             driver = launcher.start(RigDriverNode, dict({'sample_rate': float(rate), 'batch_size': batch},
                                                         **driver_extra(args)))
         mon = launcher.spin(SuiteMonitor(context=launcher.context))
-        if not launcher.wait_for(lambda: mon.status is not None and mon.action.server_is_ready() and
+        # the rig ready, not just any status (the driver's first one, before autostart, says 'unconfigured')
+        if not launcher.wait_for(lambda: mon.status is not None and mon.status.state in READY_STATES
+                                 and mon.action.server_is_ready() and
                                  mon.recorder_subscribed('samples', 'prediction', 'setpoints'), 60.0):
             raise RuntimeError('suite did not come up within 60 s')
         # The graph lists the recorder's subscriptions as soon as they exist; across processes, DDS endpoint

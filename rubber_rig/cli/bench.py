@@ -21,10 +21,9 @@ import numpy as np
 import yaml
 
 from rubber_rig.cli.main import CommandError
+from rubber_rig.excitation.waveforms import PERIODIC, SWEEPS
 
 CONFIG_DIR = Path(__file__).resolve().parents[2] / 'config'
-PERIODIC = ('sine', 'triangle', 'square')
-SWEEPS = ('sweep_lin', 'sweep_log')
 
 
 def find_config(name: str) -> Path:
@@ -108,11 +107,11 @@ def _parse_blocks(spec: str, n: int) -> list[int]:
 def build_program(args) -> tuple:
     """(Program, YAML text) after the command-line overrides; validated like any program."""
     from rubber_rig.excitation import Program, load_program
-    program = load_program(args.program)
+    from rubber_rig.nodes.excitation import read_program
     overrides = (args.cycles, args.duration_scale, args.blocks, args.taper_cycles)
     if all(v is None for v in overrides):
-        from rubber_rig.nodes.excitation import read_program
         return read_program(args.program)
+    program = load_program(args.program)
     if args.cycles is not None and args.cycles < 1:
         raise ValueError(f'--cycles must be >= 1, got {args.cycles}')
     if args.duration_scale is not None and not args.duration_scale > 0:

@@ -121,15 +121,21 @@ def _expand_grid(raw, first_index):
     return out
 
 
-def load_program(path_or_name) -> Program:
-    """Load a program from a YAML path, or by name from the shipped programs (e.g. "seed000_grid")."""
+def program_source(path_or_name) -> tuple[str, str]:
+    """(YAML text, name) of a program given as a YAML path or the name of a shipped program."""
     path = Path(path_or_name)
     if not path.suffix and not path.exists():
         path = PROGRAM_DIR / f'{path_or_name}.yaml'
     if not path.exists():
-        shipped = ', '.join(sorted(p.stem for p in PROGRAM_DIR.glob('*.yaml')))
-        raise FileNotFoundError(f'no program {str(path_or_name)!r} (shipped programs: {shipped})')
-    return Program.from_yaml_text(path.read_text(), name=path.stem)
+        raise FileNotFoundError(f'no program {str(path_or_name)!r} (shipped programs: '
+                                f'{", ".join(shipped_programs())})')
+    return path.read_text(), path.stem
+
+
+def load_program(path_or_name) -> Program:
+    """Load a program from a YAML path, or by name from the shipped programs (e.g. "seed000_grid")."""
+    text, name = program_source(path_or_name)
+    return Program.from_yaml_text(text, name=name)
 
 
 def shipped_programs() -> List[str]:

@@ -23,11 +23,8 @@ def _program_text(program) -> str:
         return yaml.safe_dump(program, sort_keys=False)
     if isinstance(program, str) and '\n' in program:
         return program
-    from rubber_rig.excitation.program import PROGRAM_DIR
-    path = Path(program)
-    if not path.exists():
-        path = PROGRAM_DIR / f'{program}.yaml'
-    return path.read_text()
+    from rubber_rig.excitation.program import program_source
+    return program_source(program)[0]
 
 
 def run_simulated(program, specimen: dict, temperature: float, *, force_noise=10.0, displacement_noise=0.2e-6,

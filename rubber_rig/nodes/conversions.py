@@ -11,6 +11,8 @@ from typing import Any, Iterable, Mapping
 
 import numpy as np
 
+from rubber_rig.excitation import Limits
+
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from msg_defs.msg import (BlockSummary, BranchForce, CycleMetrics, CycleProperties, ModelParameters,
@@ -94,6 +96,12 @@ def limits_msg(limits: Any) -> RigLimits:
         if value is not None:
             setattr(msg, name, float(value))
     return msg
+
+
+def limits_from_msg(msg: RigLimits):
+    """rubber_rig.excitation.Limits from a msg_defs/RigLimits (the inverse of limits_msg)."""
+    return Limits(displacement_min=msg.displacement_min, displacement_max=msg.displacement_max,
+                  velocity_max=msg.velocity_max, force_max=msg.force_max)
 
 
 def state_code(state: Any) -> int:

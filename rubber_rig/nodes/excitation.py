@@ -15,7 +15,6 @@ queued. The sample rate and the limits come from the driver's latched status, so
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
@@ -27,7 +26,7 @@ from msg_defs.srv import LoadProgram
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
-from rubber_rig.excitation import Limits, Program, ProgramRunner, load_program
+from rubber_rig.excitation import Program, ProgramRunner, program_source
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import declare
@@ -39,14 +38,8 @@ READY_STATES = (RigStatus.STATE_IDLE, RigStatus.STATE_RUNNING, RigStatus.STATE_H
 def read_program(path: str = '', yaml_text: str = '') -> tuple[Program, str]:
     """(validated Program, its YAML text) from a file path / shipped name, or from YAML text."""
     if path:
-        program = load_program(path)
-        p = Path(path)
-        text = p.read_text() if p.exists() else ''
-        if not text:
-            from rubber_rig.excitation.program import PROGRAM_DIR
-            shipped = PROGRAM_DIR / f'{path}.yaml'
-            text = shipped.read_text() if shipped.exists() else ''
-        return program, text
+        text, name = program_source(path)
+        return Program.from_yaml_text(text, name=name), text
     if not yaml_text.strip():
         raise ValueError('no program: give program_path or program_yaml')
     return Program.from_yaml_text(yaml_text, name='goal'), yaml_text
@@ -130,9 +123,7 @@ class ExcitationNode(Node):
 
     def start(self, program: Program, text: str, amplitude_control: bool) -> None:
         """Build the runner (limits checked against every setpoint before anything is sent)."""
-        lim = self.status.limits
-        limits = Limits(displacement_min=lim.displacement_min, displacement_max=lim.displacement_max,
-                        velocity_max=lim.velocity_max, force_max=lim.force_max)
+        limits = conv.limits_from_msg(self.status.limits)
         lead = int(math.ceil(self.lead_time * self.status.sample_rate))
         # An idle rig streams nothing and starts at the sequence of the first setpoint it gets; a streaming
         # (holding) rig gets the program lead_time ahead of its latest sample.
@@ -249,9 +240,7 @@ class ExcitationNode(Node):
             program, _ = read_program(request.path, request.program_yaml)
             rate = self.status.sample_rate if self.status else 1000.0
             if self.status is not None:
-                lim = self.status.limits
-                Limits(lim.displacement_min, lim.displacement_max, lim.velocity_max,
-                       lim.force_max).check_program(program, rate)
+                conv.limits_from_msg(self.status.limits).check_program(program, rate)
             response.success, response.message = True, f"program '{program.name}' is valid"
             response.block_count, response.duration = len(program.blocks), program.duration(rate)
         except (ValueError, FileNotFoundError) as exc:
