@@ -15,20 +15,15 @@ import yaml
 
 import rclpy
 from rclpy.node import Node
+from test_support_package import console_scripts_specs
 
 ROOT = Path(__file__).resolve().parents[1]
 LAUNCH_FILES = sorted((ROOT / 'launch').glob('*.launch.py'))
 
 
 def console_scripts() -> dict:
-    tree = ast.parse((ROOT / 'setup.py').read_text())
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Dict):
-            for key, value in zip(node.keys, node.values):
-                if isinstance(key, ast.Constant) and key.value == 'console_scripts':
-                    specs = [ast.literal_eval(e) for e in value.elts]
-                    return {s.split('=')[0].strip(): s.split('=')[1].strip() for s in specs}
-    raise AssertionError('no console_scripts in setup.py')
+    specs = console_scripts_specs()
+    return {s.split('=')[0].strip(): s.split('=')[1].strip() for s in specs}
 
 
 def _kw(call: ast.Call, name: str):

@@ -166,26 +166,22 @@ def test_online_predictor_friction_deadband_keeps_the_loop_on_noisy_displacement
     """ROS-free: the predictor runs on the measured displacement (0.2 um noise) in 50-sample batches. With the
     default reversal deadband (10x the noise) the friction branch dissipates what it does on the true
     displacement; with the paper's rule (0) noise reversals cut the loop by ~10 %."""
-    from rubber_rig.models import build_model, sine_displacement
+    from rubber_rig.models import build_model
     from rubber_rig.nodes.predictor import DEFAULT_REVERSAL_THRESHOLD, ModelChoice, OnlinePredictor
+    from test_models_friction import cycle_energy, noisy_sine
     dt, per_cycle = 1e-3, 2000
-    x = sine_displacement(0.5, 0.5e-3, dt, 8)
-    noisy = x + np.random.default_rng(5).normal(size=x.size) * DISP_NOISE
+    x, noisy = noisy_sine(seed=5, cycles=8, dt=dt, frequency=0.5, amplitude=0.5e-3, noise=DISP_NOISE)
     assert DEFAULT_REVERSAL_THRESHOLD == pytest.approx(10 * DISP_NOISE)
     params = load_parameter_set('seed000_20C')
     true_friction = build_model(params, dt).run(x, return_branches=True)[1][2]
 
-    def loop_energy(f, xs):
-        f, xs = f[-per_cycle - 1:], xs[-per_cycle - 1:]
-        return float(np.sum(0.5 * (f[1:] + f[:-1]) * np.diff(xs)))
-
-    reference = loop_energy(true_friction, x)
+    reference = cycle_energy(x, true_friction, per_cycle, cycles=1)
     got = {}
     for threshold in (DEFAULT_REVERSAL_THRESHOLD, 0.0):
         p = OnlinePredictor(ModelChoice(friction_reversal_threshold=threshold))
         branches = np.concatenate([p.process(i, dt, noisy[i:i + 50])[1] for i in range(0, x.size, 50)], axis=1)
         assert p.model.elements[1].reversal_threshold == threshold
-        got[threshold] = loop_energy(branches[2], noisy) / reference - 1
+        got[threshold] = cycle_energy(noisy, branches[2], per_cycle, cycles=1) / reference - 1
     assert abs(got[DEFAULT_REVERSAL_THRESHOLD]) < 0.02 and got[0.0] < -0.08, got
     with pytest.raises(ValueError, match='friction_reversal_threshold'):
         ModelChoice(friction_reversal_threshold=-1e-6).resolve()

@@ -1,21 +1,11 @@
 """Foundation checks: the ament packages are well-formed and every declared executable exists."""
-import ast
 import importlib
 import pathlib
 
 from catkin_pkg.package import parse_package
+from test_support_package import console_scripts_specs
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
-
-
-def _console_scripts():
-    tree = ast.parse((ROOT / 'setup.py').read_text())
-    for node in ast.walk(tree):
-        if isinstance(node, ast.Dict):
-            for key, value in zip(node.keys, node.values):
-                if isinstance(key, ast.Constant) and key.value == 'console_scripts':
-                    return [ast.literal_eval(v) for v in value.elts]
-    raise AssertionError('setup.py declares no console_scripts')
 
 
 def test_rubber_rig_package_xml_declares_jazzy_dependencies():
@@ -39,7 +29,7 @@ def test_msg_defs_is_an_interface_package():
 
 
 def test_every_console_script_resolves_to_a_callable():
-    scripts = _console_scripts()
+    scripts = console_scripts_specs()
     names = {s.split('=')[0].strip() for s in scripts}
     assert {'rubber-rig', 'rig_driver', 'excitation', 'element_model', 'recorder'} <= names
     for spec in scripts:

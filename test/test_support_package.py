@@ -1,0 +1,16 @@
+"""Shared helpers of the package/launch static tests (not a test module)."""
+import ast
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def console_scripts_specs() -> list:
+    """The ``console_scripts`` entry-point strings declared in setup.py, read from its AST."""
+    tree = ast.parse((ROOT / 'setup.py').read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Dict):
+            for key, value in zip(node.keys, node.values):
+                if isinstance(key, ast.Constant) and key.value == 'console_scripts':
+                    return [ast.literal_eval(v) for v in value.elts]
+    raise AssertionError('setup.py declares no console_scripts')
