@@ -68,16 +68,24 @@ def file_summary(path: Path):
     return entry, topics
 
 
-def write_bag_metadata(directory, files=None) -> Path:
-    """Write ``directory/metadata.yaml`` for its complete .mcap files (in split order)."""
+def write_bag_metadata(directory, files=None, summaries: dict = None) -> Path:
+    """Write ``directory/metadata.yaml`` for its complete .mcap files (in split order).
+
+    ``summaries``: {Path: file_summary(path)} of closed files read before; a complete file not in it
+    is read and added (the Recorder keeps one, so each split reads only the file just closed)."""
     from .mcapio import check_file, recording_files
     directory = Path(directory)
     files = recording_files(directory) if files is None else [Path(f) for f in files]
     entries, topics = [], {}
     for f in files:
-        if not f.exists() or not check_file(f):
-            continue                         # killed mid-file: recover it first
-        summary = file_summary(f)
+        if summaries is not None and f in summaries:
+            summary = summaries[f]
+        else:
+            if not f.exists() or not check_file(f):
+                continue                     # killed mid-file: recover it first
+            summary = file_summary(f)
+            if summaries is not None:
+                summaries[f] = summary
         if summary is None:
             continue
         entry, file_topics = summary

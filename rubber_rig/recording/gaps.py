@@ -71,6 +71,13 @@ class GapTracker:
             self.events.append(event)
         return event
 
+    def observe_message(self, topic: str, msg_type: str, msg, log_time_ns: int = 0):
+        """Account one decoded message (one of another type than SEQUENCED_TYPES is ignored: None)."""
+        span = sequence_span(msg_type, msg)
+        if span is None:
+            return None
+        return self.observe(topic, span[0], span[1], log_time_ns)
+
     def summary(self) -> dict:
         return {'sequence_gaps': self.gaps, 'samples_lost': self.samples_lost,
                 'sequence_restarts': self.restarts, 'samples_seen': self.samples_seen,

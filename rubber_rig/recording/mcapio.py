@@ -141,13 +141,27 @@ def decode_metadata(values: dict) -> dict:
 
 
 class Decoders:
-    """CDR decoders generated from the schemas in the file (mcap_ros2, pure Python: no rclpy)."""
+    """CDR decoders generated from the schemas in the file (mcap_ros2, pure Python: no rclpy), cached
+    per schema: the numpy decoder (cdr.make_decoder) where it applies, mcap_ros2's reference decoder
+    where it does not or fails (big-endian, damaged).
 
-    def __init__(self, path):
+    ``lazy_fallback`` (the writer's gap check): build the reference decoder only when it is first
+    needed; by default it is built up front, which also rejects a schema it cannot parse."""
+
+    def __init__(self, path, lazy_fallback: bool = False):
         self.path = path
+        self.lazy_fallback = lazy_fallback
         self._cache = {}
 
+    def _reference(self, schema: Schema, text: str):
+        try:
+            return generate_dynamic(schema.name, text)[schema.name]
+        except Exception as exc:  # noqa: BLE001
+            raise RecordingError(f'{self.path}: cannot parse the schema of {schema.name}: '
+                                 f'{exc}') from None
+
     def get(self, schema: Schema):
+        """[numpy decoder or None, reference decoder or None (lazy_fallback: not built yet)]"""
         key = (schema.name, schema.data)
         fns = self._cache.get(key)
         if fns is None:
@@ -156,21 +170,28 @@ class Decoders:
                                      f'{schema.encoding!r}; only ros2msg is supported')
             try:
                 text = schema.data.decode()
-                slow = generate_dynamic(schema.name, text)[schema.name]
             except Exception as exc:  # noqa: BLE001
                 raise RecordingError(f'{self.path}: cannot parse the schema of {schema.name}: '
                                      f'{exc}') from None
-            fns = (make_decoder(schema.name, text), slow)
+            if self.lazy_fallback:
+                fast = make_decoder(schema.name, text)
+                fns = [fast, self._reference(schema, text) if fast is None else None]
+            else:
+                slow = self._reference(schema, text)
+                fns = [make_decoder(schema.name, text), slow]
             self._cache[key] = fns
         return fns
 
     def decode(self, schema: Schema, data: bytes, topic: str):
-        fast, slow = self.get(schema)
+        fns = self.get(schema)
+        fast, slow = fns
         if fast is not None:
             try:
                 return fast(data)
             except Exception:  # noqa: BLE001 - big-endian or damaged: the reference decoder decides
                 pass
+        if slow is None:                     # lazy_fallback: first message the numpy decoder refused
+            slow = fns[1] = self._reference(schema, schema.data.decode())
         try:
             return slow(data)
         except Exception as exc:  # noqa: BLE001

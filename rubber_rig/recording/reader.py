@@ -121,10 +121,10 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
     sample_topic = _pick(by_type.get(BATCH), 'samples') or _pick(by_type.get(SAMPLE), 'samples')
     pred_topic = _pick(by_type.get(PREDICTION), 'prediction')
     setp_topic = _pick(by_type.get(SETPOINTS), 'setpoints')
-    decoders = {}
+    decoders = {f: Decoders(f) for f in files}
     samples, predictions, setpoints = [], [], []
     for log_time, topic, type_name, schema, data, f in raw:
-        dec = decoders.setdefault(f, Decoders(f))
+        dec = decoders[f]
         if topic == sample_topic:
             samples.append(dec.decode(schema, data, topic))
         elif topic == pred_topic:
@@ -160,6 +160,10 @@ def _stamp_ns(msg) -> int:
     return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
 
 
+def _cat(parts, dtype):
+    return np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype)
+
+
 def _fill_samples(rec: Recording, samples, topic):
     tracker = GapTracker()
     t, d, fo, sp, te, st, seq = [], [], [], [], [], [], []
@@ -190,11 +194,10 @@ def _fill_samples(rec: Recording, samples, topic):
             raise RecordingError(f'{topic}: batch at sequence {first} has arrays of different '
                                  f'lengths ({n}, {len(fo[-1])}, {len(sp[-1])})')
         tracker.observe(topic, first, n)
-    cat = (lambda parts, dtype: np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype))
-    rec.time_ns = cat(t, np.int64)
+    rec.time_ns = _cat(t, np.int64)
     rec.time = (rec.time_ns - rec.time_ns[0]) * 1e-9 if len(rec.time_ns) else np.zeros(0)
-    rec.displacement, rec.force, rec.setpoint = cat(d, float), cat(fo, float), cat(sp, float)
-    rec.temperature, rec.status, rec.sequence = cat(te, float), cat(st, np.uint32), cat(seq, np.uint64)
+    rec.displacement, rec.force, rec.setpoint = _cat(d, float), _cat(fo, float), _cat(sp, float)
+    rec.temperature, rec.status, rec.sequence = _cat(te, float), _cat(st, np.uint32), _cat(seq, np.uint64)
     rec.gaps = [e for e in tracker.events if e['kind'] == 'gap']
     rec.samples_lost = tracker.samples_lost
     if periods:
@@ -222,15 +225,14 @@ def _join(rec: Recording, predictions, setpoints):
         pforce.append(np.asarray(m.predicted_force, dtype=float))
         resid = np.asarray(m.residual, dtype=float)
         presid.append(resid if len(resid) == n else np.full(n, np.nan))
-    cat = (lambda parts, dtype: np.concatenate(parts).astype(dtype) if parts else np.zeros(0, dtype))
-    seq = cat(pseq, np.uint64)
-    rec.prediction = _lookup(rec.sequence, seq, cat(pforce, float), np.nan)
-    rec.residual = _lookup(rec.sequence, seq, cat(presid, float), np.nan)
+    seq = _cat(pseq, np.uint64)
+    rec.prediction = _lookup(rec.sequence, seq, _cat(pforce, float), np.nan)
+    rec.residual = _lookup(rec.sequence, seq, _cat(presid, float), np.nan)
     sseq, blocks = [], []
     for m in setpoints:
         n, first = len(m.displacement), int(m.first_sequence)
         sseq.append(np.arange(first, first + n, dtype=np.uint64))
         blocks.append(np.full(n, int(m.block_index), dtype=np.int32))
-    rec.block_index = _lookup(rec.sequence, cat(sseq, np.uint64), cat(blocks, np.int32), -1)
+    rec.block_index = _lookup(rec.sequence, _cat(sseq, np.uint64), _cat(blocks, np.int32), -1)
     if rec.block_index.dtype != np.int32:
         rec.block_index = rec.block_index.astype(np.int32)

@@ -16,7 +16,7 @@ from mcap.writer import Writer as McapWriter
 
 from .bagmeta import METADATA_FILE, write_bag_metadata
 from .errors import RecordingError
-from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
+from .gaps import SEQUENCED_TYPES, GapTracker
 from .mcapio import Decoders, check_file, iter_records
 from .writer import encode_metadata
 
@@ -31,7 +31,6 @@ class RecoverResult:
     messages: int
     channels: int
     metadata_records: int
-    bytes_in: int
     samples_lost: int
     sequence_gaps: int
 
@@ -79,11 +78,11 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
                     topic, schema = channel_types[record.channel_id]
                     if schema is not None and schema.name in SEQUENCED_TYPES:
                         try:
-                            span = sequence_span(schema.name, decoders.decode(schema, record.data, topic))
+                            gaps.observe_message(topic, schema.name,
+                                                 decoders.decode(schema, record.data, topic),
+                                                 record.log_time)
                         except RecordingError:
-                            span = None
-                        if span:
-                            gaps.observe(topic, span[0], span[1], record.log_time)
+                            pass
                 elif isinstance(record, Metadata):
                     writer.add_metadata(record.name, dict(record.metadata))
                     counts['metadata'] += 1
@@ -115,5 +114,4 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
         if (path.parent / METADATA_FILE).exists():   # part of a bag: index the recovered file too
             write_bag_metadata(path.parent)
     return RecoverResult(str(path), str(target), was_complete, counts['messages'], len(channels),
-                         counts['metadata'], path.stat().st_size if path.exists() else 0,
-                         gaps.samples_lost, gaps.gaps)
+                         counts['metadata'], gaps.samples_lost, gaps.gaps)

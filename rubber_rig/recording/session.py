@@ -52,6 +52,7 @@ class Recorder:
         self.writer = None
         self.gaps = GapTracker()
         self.files = []                      # files of the current/last recording, in order
+        self._summaries = {}                 # closed file -> bagmeta.file_summary, for metadata.yaml
         self.reports = []                    # loss report of each closed file
         self.error = None                    # RecordingWriteError that stopped the recording
         self.not_recorded_after_error = 0
@@ -107,7 +108,7 @@ class Recorder:
                                       exc.errno) from None
         self._base, self._index = base, 0
         self.gaps = GapTracker()
-        self.files, self.reports = [], []
+        self.files, self.reports, self._summaries = [], [], {}
         self.error, self.not_recorded_after_error = None, 0
         self.messages_written = self.dropped = 0
         self._open()
@@ -133,7 +134,7 @@ class Recorder:
         self.messages_written += w.messages_written
         self.dropped += sum(w.dropped.values())
         try:                                 # the bag so far, for rosbag2 / rosbags readers
-            write_bag_metadata(self._base, self.files)
+            write_bag_metadata(self._base, self.files, self._summaries)
         except (OSError, RecordingError) as exc:   # the MCAP files are complete; only the index is missing
             self.warnings.append(f'metadata.yaml of {self._base} not written: {exc}')
 
@@ -150,9 +151,6 @@ class Recorder:
         if self.error is None:
             self._open()
         return self.current_file
-
-    def close(self):
-        self.stop()
 
     def _fail(self, exc: RecordingWriteError):
         self.error = exc

@@ -17,14 +17,15 @@ import time
 from datetime import datetime, timezone
 from pathlib import Path
 
+from mcap.records import Schema
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
-from mcap_ros2._dynamic import generate_dynamic, serialize_dynamic
+from mcap_ros2._dynamic import serialize_dynamic
 
 from . import bagmeta
-from .cdr import make_decoder
 from .errors import RecordingError, RecordingWriteError
-from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
+from .gaps import SEQUENCED_TYPES, GapTracker
+from .mcapio import Decoders
 from .msgdefs import MessageDefinitionError, full_definition, normalize_type, type_hash, type_of
 from .qos import offered_qos_yaml
 
@@ -79,23 +80,6 @@ def _plain(value):
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]
     return value
-
-
-def _decoder_factory(msg_type, text):
-    """numpy CDR decoder (fast; gap tracking at 10 kHz), else mcap_ros2's."""
-    fast = make_decoder(msg_type, text)
-    if fast is None:
-        return generate_dynamic(msg_type, text)
-    slow = {}
-
-    def decode(data):
-        try:
-            return fast(data)
-        except Exception:  # noqa: BLE001 - e.g. big-endian CDR: the reference decoder
-            if not slow:
-                slow.update(generate_dynamic(msg_type, text))
-            return slow[msg_type](data)
-    return {msg_type: decode}
 
 
 class _UnbufferedFile:
@@ -153,14 +137,16 @@ class RecordingWriter:
         self._flush_interval_ns = int(flush_interval_s * 1e9) if flush_interval_s else 0
         self._schemas, self._channels, self._sequences = {}, {}, {}
         self._channel_qos, self._channel_hash = {}, {}
-        self._encoders, self._decoders = {}, {}
+        self._schema_records = {}          # msg_type -> its Schema record (for the gap check's decoder)
+        self._encoders = {}
+        # numpy decoder for the gap check (10 kHz), mcap_ros2's only if it fails (e.g. big-endian CDR)
+        self._decoders = Decoders(self.path, lazy_fallback=True)
         self.gaps = gaps if gaps is not None else GapTracker()
         self._gaps_at_open = (self.gaps.gaps, self.gaps.samples_lost, self.gaps.restarts,
                               len(self.gaps.events))
         self.messages_written = 0
         self.messages_flushed = 0          # messages in complete chunks handed to the OS
         self.messages_by_topic = {}
-        self.payload_bytes = 0
         self.dropped = {}                  # reason -> count of messages not written
         self.first_log_time_ns = None
         self.last_log_time_ns = None
@@ -168,12 +154,12 @@ class RecordingWriter:
         self._pending = 0                  # uncompressed bytes in the chunk in progress
         self.failure = None                # the OSError that stopped this writer, if any
         self.closed = False
-        self.start_time_ns = time.time_ns()
+        start_time_ns = time.time_ns()
         self.metadata = dict(metadata or {})
         self.metadata.setdefault('software_version', software_version())
         self.metadata.setdefault('start_time', datetime.fromtimestamp(
-            self.start_time_ns / 1e9, tz=timezone.utc).isoformat())
-        self.metadata.setdefault('start_time_ns', str(self.start_time_ns))
+            start_time_ns / 1e9, tz=timezone.utc).isoformat())
+        self.metadata.setdefault('start_time_ns', str(start_time_ns))
         try:
             self._guard(self._mcap.start, 'ros2', f'rubber_rig {software_version()}')
             self._guard(self._mcap.add_metadata, METADATA_NAME, encode_metadata(self.metadata))
@@ -183,10 +169,6 @@ class RecordingWriter:
             raise
 
     # -- state -------------------------------------------------------------------------------
-    @property
-    def bytes_on_disk(self) -> int:
-        return self._file.tell()
-
     @property
     def size_estimate(self) -> int:
         """Bytes on disk plus the (uncompressed) chunk in progress: an upper bound for splitting."""
@@ -224,9 +206,10 @@ class RecordingWriter:
             return known[0]
         schema_id = self._schemas.get(msg_type)
         if schema_id is None:
-            text = full_definition(msg_type)
-            schema_id = self._guard(self._mcap.register_schema, msg_type, 'ros2msg', text.encode())
+            text = full_definition(msg_type).encode()
+            schema_id = self._guard(self._mcap.register_schema, msg_type, 'ros2msg', text)
             self._schemas[msg_type] = schema_id
+            self._schema_records[msg_type] = Schema(schema_id, text, 'ros2msg', msg_type)
         metadata = {'offered_qos_profiles': offered_qos_yaml(qos or []),
                     'topic_type_hash': topic_type_hash if topic_type_hash is not None
                     else type_hash(msg_type)}
@@ -237,11 +220,11 @@ class RecordingWriter:
         self._sequences[channel_id] = 0
         return channel_id
 
-    def _codec(self, table, factory, msg_type):
-        fn = table.get(msg_type)
+    def _encoder(self, msg_type):
+        fn = self._encoders.get(msg_type)
         if fn is None:
-            fn = factory(msg_type, full_definition(msg_type))[msg_type]
-            table[msg_type] = fn
+            fn = serialize_dynamic(msg_type, full_definition(msg_type))[msg_type]
+            self._encoders[msg_type] = fn
         return fn
 
     # -- messages ----------------------------------------------------------------------------
@@ -268,7 +251,7 @@ class RecordingWriter:
             decoded = None
         else:
             try:
-                data = self._codec(self._encoders, serialize_dynamic, msg_type)(_plain(msg))
+                data = self._encoder(msg_type)(_plain(msg))
             except Exception as exc:  # the encoder raises many types; name the message instead
                 self.count_dropped('encode_error')
                 raise RecordingError(f'cannot encode a {msg_type} for {topic}: {exc}') from None
@@ -290,7 +273,6 @@ class RecordingWriter:
         self._pending += len(data) + 31
         self.messages_written += 1
         self.messages_by_topic[topic] = self.messages_by_topic.get(topic, 0) + 1
-        self.payload_bytes += len(data)
         if self.first_log_time_ns is None:
             self.first_log_time_ns = self._last_flush_ns = log_time_ns
         self.last_log_time_ns = log_time_ns
@@ -302,18 +284,14 @@ class RecordingWriter:
         if self._flush_interval_ns and log_time_ns - self._last_flush_ns >= self._flush_interval_ns:
             self.flush()
 
-    write_serialized = write_message
-
     def _track(self, topic, msg_type, data, decoded, log_time_ns):
         if decoded is None:
             try:
-                decoded = self._codec(self._decoders, _decoder_factory, msg_type)(data)
+                decoded = self._decoders.decode(self._schema_records[msg_type], data, topic)
             except Exception:  # undecodable bytes are recorded anyway; count them
                 self.count_dropped('undecodable_for_gap_check')
                 return
-        span = sequence_span(msg_type, decoded)
-        if span is not None:
-            self.gaps.observe(topic, span[0], span[1], log_time_ns)
+        self.gaps.observe_message(topic, msg_type, decoded, log_time_ns)
 
     def add_metadata(self, name: str, values: dict) -> None:
         self._guard(self._mcap.add_metadata, name, encode_metadata(values))
