@@ -4,6 +4,7 @@ import signal
 import subprocess
 import sys
 import time
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -35,6 +36,22 @@ def context():
     rclpy.init(context=ctx)
     yield ctx
     rclpy.try_shutdown(context=ctx)
+
+
+@contextmanager
+def spinning(context, *nodes):
+    """A SingleThreadedExecutor with ``nodes`` added; on exit the nodes are removed and destroyed and the
+    executor shut down."""
+    executor = SingleThreadedExecutor(context=context)
+    for n in nodes:
+        executor.add_node(n)
+    try:
+        yield executor
+    finally:
+        for n in nodes:
+            executor.remove_node(n)
+            n.destroy_node()
+        executor.shutdown()
 
 
 def spin_until(executor, condition, timeout=20.0):
@@ -80,10 +97,7 @@ def test_recorder_node_records_published_batches(context, tmp_path):
         Parameter('metadata.temperature', value='23.0'),
     ])
     client_node = Node('client', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    for n in (pub_node, rec, client_node):
-        executor.add_node(n)
-    try:
+    with spinning(context, pub_node, rec, client_node) as executor:
         samples = pub_node.create_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
         status = pub_node.create_publisher(RigStatus, topics.STATUS, topics.LATCHED_QOS)
         status.publish(RigStatus(state=RigStatus.STATE_RUNNING, state_name='running'))
@@ -114,11 +128,6 @@ def test_recorder_node_records_published_batches(context, tmp_path):
         files = sorted(out.glob('*.mcap'))
         assert [f.name for f in files] == ['run1_0.mcap']
         assert call(RecorderControl.Request.SPLIT).success is False     # not recording: clear refusal
-    finally:
-        for n in (pub_node, rec, client_node):
-            executor.remove_node(n)
-            n.destroy_node()
-        executor.shutdown()
 
     r = load_recording(files[0])
     assert len(r) == 100 * BATCH
@@ -165,33 +174,29 @@ def test_recorder_process_killed_or_interrupted(context, tmp_path, how):
     # all topics of the namespace, or an explicit list (relative names resolve in the namespace)
     proc = run_recorder_process(ns, tmp_path, () if how == 'sigkill' else ('-p', 'topics:=[samples]'))
     node = Node('fake_rig', namespace=ns, context=context)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
     stats = {}
 
     def on_diag(msg):
         for s in msg.status:
             if s.hardware_id == str(tmp_path):
                 stats.update({kv.key: kv.value for kv in s.values})
-    try:
-        node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diag, 10)
-        pub = node.create_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
-        assert spin_until(executor, lambda: stats.get('topics') == '1' and pub.get_subscription_count() == 1)
-        for k in range(50):
-            pub.publish(batch(k))
-            executor.spin_once(timeout_sec=0)
-        # the recorder says all 50 are written and flushed to the OS
-        assert spin_until(executor, lambda: stats.get('messages_flushed_current_file') == '50'), stats
-        sig = {'sigkill': signal.SIGKILL, 'sigint': signal.SIGINT, 'sigterm': signal.SIGTERM}[how]
-        proc.send_signal(sig)
-        assert proc.wait(timeout=30) == (-signal.SIGKILL if how == 'sigkill' else 0), proc.stderr.read()
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait()
-        executor.remove_node(node)
-        node.destroy_node()
-        executor.shutdown()
+    with spinning(context, node) as executor:
+        try:
+            node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, on_diag, 10)
+            pub = node.create_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
+            assert spin_until(executor, lambda: stats.get('topics') == '1' and pub.get_subscription_count() == 1)
+            for k in range(50):
+                pub.publish(batch(k))
+                executor.spin_once(timeout_sec=0)
+            # the recorder says all 50 are written and flushed to the OS
+            assert spin_until(executor, lambda: stats.get('messages_flushed_current_file') == '50'), stats
+            sig = {'sigkill': signal.SIGKILL, 'sigint': signal.SIGINT, 'sigterm': signal.SIGTERM}[how]
+            proc.send_signal(sig)
+            assert proc.wait(timeout=30) == (-signal.SIGKILL if how == 'sigkill' else 0), proc.stderr.read()
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
     [path] = tmp_path.glob('rubber_rig_*/*_0.mcap')
     if how == 'sigkill':
         assert cli(['recover', '--in-place', str(path)]) == 0
@@ -210,10 +215,7 @@ def test_control_service_split_and_snapshot(context, tmp_path):
         Parameter('output_dir', value=str(tmp_path)), Parameter('discovery_period', value=0.1),
         Parameter('snapshot_duration', value=30.0)])
     client_node = Node('client', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    for n in (pub_node, rec, client_node):
-        executor.add_node(n)
-    try:
+    with spinning(context, pub_node, rec, client_node) as executor:
         samples = pub_node.create_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
         control = client_node.create_client(RecorderControl, f'{ns}/recorder/control')
         assert control.wait_for_service(timeout_sec=10)
@@ -236,11 +238,6 @@ def test_control_service_split_and_snapshot(context, tmp_path):
         assert snap.success, snap.message
         assert call(RecorderControl.Request.STOP).success
         assert call(99).success is False
-    finally:
-        for n in (pub_node, rec, client_node):
-            executor.remove_node(n)
-            n.destroy_node()
-        executor.shutdown()
     files = sorted(tmp_path.glob('rubber_rig_*/*.mcap'))
     parts = [load_recording(f) for f in files]
     assert [p.topics[f'{ns}/samples']['count'] for p in parts] == [25, 35]
@@ -258,11 +255,8 @@ def test_unwritable_output_dir_is_reported_not_fatal(context, tmp_path):
     rec = RecorderNode(namespace='/unwritable', context=context, parameter_overrides=[
         Parameter('output_dir', value=str(blocker / 'recordings')), Parameter('diagnostics_period', value=0.1)])
     client_node = Node('client', context=context)
-    executor = SingleThreadedExecutor(context=context)
-    for n in (rec, client_node):
-        executor.add_node(n)
     levels = []
-    try:
+    with spinning(context, rec, client_node) as executor:
         client_node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, lambda m: levels.extend(
             (s.level, s.message) for s in m.status if s.name.startswith('recorder')), 10)
         assert not rec.core.recording
@@ -275,8 +269,3 @@ def test_unwritable_output_dir_is_reported_not_fatal(context, tmp_path):
                                                             path=str(tmp_path / 'elsewhere')))
         assert spin_until(executor, future.done) and future.result().success
         assert rec.core.recording and rec.core.current_file.parent == tmp_path / 'elsewhere'
-    finally:
-        for n in (rec, client_node):
-            executor.remove_node(n)
-            n.destroy_node()
-        executor.shutdown()
