@@ -43,15 +43,15 @@ def estimate_frequency(x, dt: float) -> float:
     return float(k / (n * dt))
 
 
-def harmonic_properties(x, force, dt: float, frequency: float = None, detrend: bool = True,
+def harmonic_properties(x, force, dt: float, frequency: float = None,
                         whole_cycles: int | None = None) -> HarmonicProperties:
     """First-harmonic and loop properties over the last whole number of cycles of (x [m], force [N]).
 
     x, force: 1-D arrays sampled every ``dt`` [s]. ``frequency`` [Hz] of the excitation; estimated
     from ``x`` when None. Uses the last floor(n dt f) cycles (the end of a record is the most
-    settled); needs at least one full cycle. ``detrend`` adds a linear-drift column to the
-    first-harmonic fit: it keeps drift (thermal, or a decaying transient) out of F1, at the price of
-    a small leak of a non-sinusoidal force's odd harmonics into F1 (~0.6 % / cycles for a Berg loop).
+    settled); needs at least one full cycle. The first-harmonic fit always has a linear-drift column:
+    it keeps drift (thermal, or a decaying transient) out of F1, at the price of a small leak of a
+    non-sinusoidal force's odd harmonics into F1 (~0.6 % / cycles for a Berg loop).
     ``whole_cycles``: the record was cut at sampled crossings and spans this many cycles from its
     first to its last sample (the loop closes on the last sample) although ``frequency`` says the
     period is a fraction of a sample longer or shorter; then all samples are used.
@@ -79,8 +79,7 @@ def harmonic_properties(x, force, dt: float, frequency: float = None, detrend: b
     t = np.arange(m) * dt
     w = 2 * np.pi * f
     # a linear trend column keeps slow drift (thermal, or a decaying simulation transient) out of F1
-    cols = [np.ones(m), np.cos(w * t), np.sin(w * t)] + ([t - t.mean()] if detrend else [])
-    basis = np.column_stack(cols)
+    basis = np.column_stack([np.ones(m), np.cos(w * t), np.sin(w * t), t - t.mean()])
     cx, *_ = np.linalg.lstsq(basis, xs[:-1], rcond=None)
     cf, *_ = np.linalg.lstsq(basis, fs[:-1], rcond=None)
     x1 = cx[1] - 1j * cx[2]                      # phasor of a cos + b sin = Re(X e^{jwt})

@@ -60,11 +60,13 @@ def _noise_level(x):
 
 
 def _cycles(x):
-    """Upward zero crossings (sample index just after the crossing) of x about its median."""
+    """(crossings, median): upward zero crossings (sample index just after the crossing) of x about
+    its median, and that median."""
     x = np.asarray(x, float)
     if x.size < 4:
-        return np.zeros(0, int)
-    xc = x - np.median(x)
+        return np.zeros(0, int), float('nan')
+    med = np.median(x)
+    xc = x - med
     peak = np.percentile(np.abs(xc), 99)
     h = max(5.0 * _noise_level(x), 0.02 * peak)
     below = xc < -h
@@ -77,14 +79,14 @@ def _cycles(x):
         lo, hi = idx[r], idx[r + 1]
         # first sample above zero after the last one below -h: the crossing to within one sample
         crossings.append(lo + 1 + int(np.argmax(xc[lo + 1:hi + 1] > 0)))
-    return np.asarray(crossings, int)
+    return np.asarray(crossings, int), med
 
 
-def _frac_crossing(x, j):
-    """Sub-sample position of the upward crossing just before sample j (linear interpolation)."""
+def _frac_crossing(x, j, med):
+    """Sub-sample position of the upward crossing about ``med`` (the median of x, from `_cycles`)
+    just before sample j (linear interpolation)."""
     if j < 1:
         return float(j)
-    med = np.median(x)
     xc0, xc1 = x[j - 1] - med, x[j] - med
     if xc1 == xc0:
         return float(j)
@@ -170,7 +172,7 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
             k = int(np.argmax(np.diff(edges)))
             s, e = s + edges[k] + 1, s + edges[k + 1]
         xs = x[s:e]
-        crossings = _cycles(xs)
+        crossings, med = _cycles(xs)
         runs = _steady_runs(xs, crossings, tolerance)
         if label is not None:
             runs = [max(runs, key=lambda r: r[1] - r[0])] if runs else []
@@ -193,8 +195,8 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
             a0 = s + crossings[c0 + settle_cycles]
             a1 = s + crossings[c1 + 1]
             ncyc = n_steady - settle_cycles
-            freq = ncyc / ((_frac_crossing(xs, crossings[c1 + 1]) - _frac_crossing(xs, crossings[c0 + settle_cycles]))
-                           * dt)
+            freq = ncyc / ((_frac_crossing(xs, crossings[c1 + 1], med)
+                            - _frac_crossing(xs, crossings[c0 + settle_cycles], med)) * dt)
             if nf and abs(freq / nf - 1) < 0.005:
                 freq = nf      # the program's frequency is exact (setpoints come from the sample index)
             props = window_properties(x, f, dt, a0, a1, freq)

@@ -66,8 +66,12 @@ def _temp_key(t):
     return None if t is None else round(float(t) * 2.0) / 2.0
 
 
-def block_quality(params, blocks, runs_by_name, simulate_blocks=True):
-    """Per-block measured vs model K_dyn and C_eq (relative errors as Eq. 28)."""
+def block_quality(params, blocks, runs_by_name, simulate_blocks=True, forces=None):
+    """Per-block measured vs model K_dyn and C_eq (relative errors as Eq. 28).
+
+    ``forces``: optional {recording name: model force [N]} already computed by
+    `timefit.model_force` for that recording's blocks (not simulated again).
+    """
     t = Targets.from_blocks(blocks)
     pr = measured_style_properties(*(params[k] for k in PARAM_NAMES), t.frequency, t.amplitude)
     rows = []
@@ -81,16 +85,16 @@ def block_quality(params, blocks, runs_by_name, simulate_blocks=True):
                          'r_k': float(pr['r_k'][i]), 'r_e': float(pr['r_e'][i])},
         })
     if simulate_blocks:
-        from .timefit import model_input, simulate
+        from .timefit import model_force
+        forces = forces or {}
         by_run = {}
         for i, b in enumerate(blocks):
             by_run.setdefault(b.recording, []).append(i)
         for name, idxs in by_run.items():
             run = runs_by_name[name]
-            end = min(max(blocks[i].stop for i in idxs) + 1, run.displacement.size)
-            f_max = max(blocks[i].frequency for i in idxs)
-            x, h = model_input(run.displacement[:end], run.dt, f_max)
-            force = simulate(params, x, run.dt, h)
+            force = forces.get(name)
+            if force is None:
+                _, force = model_force(params, run, [blocks[i] for i in idxs])
             for i in idxs:
                 b = blocks[i]
                 hp = window_properties(run.displacement, force, run.dt, b.start, b.stop, b.frequency)

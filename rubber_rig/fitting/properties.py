@@ -22,6 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from rubber_rig.models.fractional import zener_complex_stiffness
+from rubber_rig.models.friction import berg_energy, berg_peak_force   # noqa: F401  (re-exported)
+
 # Gauss-Legendre nodes on [-pi/2, pi/2] for the ascending branch x = x0 sin(theta).
 # The integrand is smooth (analytic in theta for x0 > 0), so 48 nodes give ~1e-12 relative error.
 _GL_X, _GL_W = np.polynomial.legendre.leggauss(48)
@@ -29,20 +32,6 @@ _THETA = 0.5 * np.pi * _GL_X
 _WEIGHT = 0.5 * np.pi * _GL_W
 _SIN = np.sin(_THETA)
 _COS = np.cos(_THETA)
-
-
-def berg_peak_force(f_fmax, x2, x0):
-    """Seed 000 Eq. 17: steady-state friction force amplitude F_f0."""
-    f_fmax, x2, x0 = np.asarray(f_fmax, float), np.asarray(x2, float), np.asarray(x0, float)
-    return f_fmax / (2.0 * x2) * (np.sqrt(x2 ** 2 + x0 ** 2 + 6.0 * x2 * x0) - x2 - x0)
-
-
-def berg_energy(f_fmax, x2, x0):
-    """Seed 000 Eq. 18: energy dissipated per steady cycle by Berg's element (loop area)."""
-    mu0 = berg_peak_force(1.0, x2, x0)
-    f_fmax, x2, x0 = np.asarray(f_fmax, float), np.asarray(x2, float), np.asarray(x0, float)
-    a = x2 * (1.0 + mu0)
-    return 2.0 * f_fmax * (2.0 * x0 - a * (1.0 + mu0) * np.log((a + 2.0 * x0) / a))
 
 
 def friction_first_harmonic(f_fmax, x2, x0):
@@ -61,12 +50,6 @@ def friction_first_harmonic(f_fmax, x2, x0):
     return f_fmax * (b1 + 1j * a1) / x0
 
 
-def zener_complex_stiffness(k0, k_inf, tau, alpha, omega):
-    """Seed 000 Eq. 11: complex stiffness of the fractional-derivative Zener model."""
-    z = (1j * np.asarray(omega, float) * np.asarray(tau, float)) ** np.asarray(alpha, float)
-    return (np.asarray(k0, float) + np.asarray(k_inf, float) * z) / (1.0 + z)
-
-
 def measured_style_properties(k0, k_inf, tau, alpha, x2, f_fmax, frequency, amplitude):
     """K_dyn (first harmonic), loss angle, D, energy per cycle and C_eq of the seed-000 model.
 
@@ -76,7 +59,7 @@ def measured_style_properties(k0, k_inf, tau, alpha, x2, f_fmax, frequency, ampl
     """
     omega = 2.0 * np.pi * np.asarray(frequency, float)
     x0 = np.asarray(amplitude, float)
-    k_ev = zener_complex_stiffness(k0, k_inf, tau, alpha, omega)
+    k_ev = zener_complex_stiffness(omega, *(np.asarray(v, float) for v in (k0, k_inf, tau, alpha)))
     k_f = friction_first_harmonic(f_fmax, x2, x0)
     k = k_ev + k_f
     k_dyn = np.abs(k)

@@ -168,13 +168,11 @@ def make_report(run, blocks, params, outdir, quality=None, title=None, param_inf
         raise ValueError(f'{run.name}: no usable block to report on')
     model_force = None
     if params is not None:
-        from .timefit import model_input, simulate
-        end = min(max(b.stop for b in blocks) + 1, run.displacement.size)
-        x, h = model_input(run.displacement[:end], run.dt, max(b.frequency for b in blocks))
-        model_force = simulate(params, x, run.dt, h)
+        from .timefit import model_force as run_model
+        _, model_force = run_model(params, run, blocks)
     if quality is None and params is not None:
         from .pipeline import block_quality
-        quality = block_quality(params, blocks, {run.name: run})
+        quality = block_quality(params, blocks, {run.name: run}, forces={run.name: model_force})
     figs = {'loops': fig_loops(blocks, run, model_force, plt),
             'kdyn_ceq': fig_kdyn_ceq(blocks, params, plt)}
     if params is not None:

@@ -40,8 +40,7 @@ def simulate(params: dict, x, dt, reversal_threshold: float = 0.0):
     from rubber_rig.models import Seed000Params, build_model
     model = build_model(Seed000Params(**{k: float(params[k]) for k in PARAM_NAMES}), dt,
                         friction_reversal_threshold=reversal_threshold)
-    out = model.run(np.asarray(x, float))
-    return np.asarray(out[0] if isinstance(out, tuple) else out, float)
+    return np.asarray(model.run(np.asarray(x, float)), float)
 
 
 def model_input(x, dt, f_max):
@@ -59,6 +58,22 @@ def model_input(x, dt, f_max):
     return y, h
 
 
+def run_input(run, blocks):
+    """(end, x, h): the model input (`model_input`, at the blocks' highest frequency) for the measured
+    displacement of ``run`` (RunData) up to the closing sample of the last of its ``blocks``,
+    i.e. samples [0, end)."""
+    end = min(max(b.stop for b in blocks) + 1, run.displacement.size)
+    x, h = model_input(run.displacement[:end], run.dt, max(b.frequency for b in blocks))
+    return end, x, h
+
+
+def model_force(params: dict, run, blocks):
+    """(end, force [N] over samples [0, end)): the model with ``params`` run over the measured
+    displacement of ``run`` as `run_input` prepares it."""
+    end, x, h = run_input(run, blocks)
+    return end, simulate(params, x, run.dt, h)
+
+
 class TimeDomainProblem:
     """Residuals of the force over the analysed cycles of every block of several runs."""
 
@@ -68,9 +83,7 @@ class TimeDomainProblem:
         for run, blocks in runs_blocks:
             if not blocks:
                 continue
-            end = min(max(b.stop for b in blocks) + 1, run.displacement.size)
-            f_max = max(b.frequency for b in blocks)
-            x, h = model_input(run.displacement[:end], run.dt, f_max)
+            end, x, h = run_input(run, blocks)
             windows = []
             for b in blocks:
                 n = b.stop - b.start

@@ -7,7 +7,7 @@ import math
 import numpy as np
 
 from . import elements as el
-from .friction import BergFriction, SmoothCoulomb
+from .friction import BergFriction, SmoothCoulomb, check_reversal_threshold
 from .params import (KelvinVoigtParams, Seed000Params, Seed001Params, load_parameter_set,
                      parameters_at_temperature, PARAM_CLASSES)
 
@@ -197,9 +197,7 @@ def _check_threshold(value) -> float:
         v = float(value)
     except (TypeError, ValueError):
         v = math.nan
-    if not (math.isfinite(v) and v >= 0.0):
-        raise ValueError(f'parameter friction_reversal_threshold must be a finite displacement >= 0 [m], got {value!r}')
-    return v
+    return check_reversal_threshold(v, value, 'friction_reversal_threshold')
 
 
 def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_threshold: float = 0.0) -> ParallelModel:

@@ -1,4 +1,5 @@
-"""Elastic and viscoelastic elements. Every element works at a fixed sample period ``dt`` [s] and offers
+"""Elastic and viscoelastic elements. Every element with memory works at a fixed sample period ``dt`` [s]
+(the elastic, stateless ones take none); all offer
 
 * ``step(x) -> tuple`` of branch forces [N] (streaming), ``run(x) -> array (n_branch, n)`` (batch,
   continuing from and updating the same state), ``reset(x0)``, ``get_state()``/``set_state()``;
@@ -46,7 +47,7 @@ class _Stateless:
 class LinearSpring(_Stateless):
     """F = k x, k [N/m]."""
 
-    def __init__(self, k: float, dt: float = None):
+    def __init__(self, k: float):
         self.k = float(k)
 
     def force(self, x):
@@ -56,19 +57,19 @@ class LinearSpring(_Stateless):
 class PolynomialSpring(_Stateless):
     """F = a0 + a1 x + ... + an x^n (seed 003 Eq. 4); coefficients in SI (a_i in N/m^i)."""
 
-    def __init__(self, coefficients, dt: float = None):
+    def __init__(self, coefficients):
         self.coefficients = tuple(float(c) for c in coefficients)
         if not self.coefficients:
             raise ValueError('parameter coefficients of the polynomial spring must not be empty')
         self._poly = np.polynomial.Polynomial(self.coefficients)
 
     @classmethod
-    def odd(cls, k_odd, dt: float = None):
+    def odd(cls, k_odd):
         """Odd polynomial K1 x + K3 x^3 + K5 x^5 + ... (seed 004 Eq. 5), k_odd = (K1, K3, K5, ...)."""
         c = [0.0] * (2 * len(k_odd))
         for i, k in enumerate(k_odd):
             c[2 * i + 1] = float(k)
-        return cls(c, dt)
+        return cls(c)
 
     def force(self, x):
         if np.ndim(x) == 0:
@@ -89,7 +90,7 @@ class TangentSpring(_Stateless):
     |x| -> d_t, so |x| >= d_t is rejected (ValueError) instead of returning an infinite force.
     """
 
-    def __init__(self, k_t: float, d_t: float, dt: float = None):
+    def __init__(self, k_t: float, d_t: float):
         self.k_t, self.d_t = float(k_t), float(d_t)
 
     def force(self, x):

@@ -65,6 +65,28 @@ def _berg_scalar(x, x_s, f_s, f_fmax, x2):
     return f_s + d * (f_fmax + f_s) / (x2 * (1.0 + mu) - d)
 
 
+def _berg_peak_force(f_fmax, x2, x0):
+    # Eq. 17 on the arguments as given (Python floats and numpy arrays round x2 ** 2 differently)
+    return f_fmax / (2.0 * x2) * (np.sqrt(x2 ** 2 + x0 ** 2 + 6.0 * x2 * x0) - x2 - x0)
+
+
+def _berg_energy(f_fmax, x2, x0, mu0):
+    # Eq. 18 with mu0 = F_f0 / F_fmax, on the arguments as given
+    a = x2 * (1.0 + mu0)
+    return 2.0 * f_fmax * (2.0 * x0 - a * (1.0 + mu0) * np.log((a + 2.0 * x0) / a))
+
+
+def berg_peak_force(f_fmax, x2, x0):
+    """Seed 000 Eq. 17: steady-state friction force amplitude F_f0 [N] for amplitude ``x0`` [m]. Broadcasts."""
+    return _berg_peak_force(np.asarray(f_fmax, float), np.asarray(x2, float), np.asarray(x0, float))
+
+
+def berg_energy(f_fmax, x2, x0):
+    """Seed 000 Eq. 18: energy [J] dissipated per steady cycle by Berg's element (loop area). Broadcasts."""
+    mu0 = berg_peak_force(1.0, x2, x0)
+    return _berg_energy(np.asarray(f_fmax, float), np.asarray(x2, float), np.asarray(x0, float), mu0)
+
+
 def berg_steady_state(amplitude, f_fmax: float, x2: float):
     """Steady-state Berg properties for x = x0 sin(wt) (seed 000 Eq. 17-22).
 
@@ -72,14 +94,20 @@ def berg_steady_state(amplitude, f_fmax: float, x2: float):
     k_df [N/m] (Eq. 19), d_f [-] (Eq. 20), k_fs, k_fl [N/m] (Eq. 21, 22).
     """
     x0 = np.asarray(amplitude, dtype=float)
-    f0 = f_fmax / (2 * x2) * (np.sqrt(x2 ** 2 + x0 ** 2 + 6 * x2 * x0) - x2 - x0)
-    mu0 = f0 / f_fmax
-    xa = x2 * (1 + mu0)
-    energy = 2 * f_fmax * (2 * x0 - xa * (1 + mu0) * np.log((xa + 2 * x0) / xa))
+    f0 = _berg_peak_force(f_fmax, x2, x0)
+    energy = _berg_energy(f_fmax, x2, x0, f0 / f_fmax)
     k_df = f0 / x0
     d_f = energy / (np.pi * f0 * x0)
     return {'f_f0': f0, 'energy': energy, 'k_df': k_df, 'd_f': d_f,
             'k_fs': k_df * np.sqrt(1 - d_f ** 2), 'k_fl': k_df * d_f}
+
+
+def check_reversal_threshold(d: float, given, name: str = 'reversal_threshold') -> float:
+    """``d``, the reversal deadband [m] converted from the ``given`` value of parameter ``name``, if it
+    is finite and >= 0; else ValueError naming the parameter and the given value."""
+    if not (math.isfinite(d) and d >= 0.0):
+        raise ValueError(f'parameter {name} must be a finite displacement >= 0 [m], got {given!r}')
+    return d
 
 
 _DENSE = 96   # batch: after a stretch between accepted reversals shorter than _DENSE/2 samples, the next one runs
@@ -97,11 +125,7 @@ class BergFriction:
 
     def __init__(self, f_fmax: float, x2: float, dt: float, reversal_threshold: float = 0.0):
         self.f_fmax, self.x2, self.dt = float(f_fmax), float(x2), float(dt)
-        d = float(reversal_threshold)
-        if not (math.isfinite(d) and d >= 0.0):
-            raise ValueError(f'parameter reversal_threshold must be a finite displacement >= 0 [m], '
-                             f'got {reversal_threshold!r}')
-        self.reversal_threshold = d
+        self.reversal_threshold = check_reversal_threshold(float(reversal_threshold), reversal_threshold)
         self.reset()
 
     def reset(self, x0: float = 0.0):

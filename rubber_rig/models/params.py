@@ -178,7 +178,7 @@ def read_parameter_file(path) -> dict:
 
 def _resolve_set(name: str) -> tuple:
     """(set name, {model, values}) of a shipped set name, ``FILE.yaml`` (one set) or ``FILE.yaml:SET``."""
-    file_part, _, set_part = str(name).rpartition(':') if str(name).count(':') else ('', '', str(name))
+    file_part, _, set_part = str(name).rpartition(':')
     if not file_part and set_part.endswith(('.yaml', '.yml')):
         file_part, set_part = set_part, ''
     if file_part:
@@ -200,11 +200,6 @@ def _resolve_set(name: str) -> tuple:
     return set_part, entry
 
 
-def parameter_set_model(name: str) -> str:
-    """Model name ('seed000', 'kelvin_voigt', ...) a parameter set belongs to (see load_parameter_set)."""
-    return _resolve_set(name)[1]['model']
-
-
 def load_parameter_set(name: str):
     """Parameter set by name, as a validated frozen dataclass in SI units.
 
@@ -216,9 +211,6 @@ def load_parameter_set(name: str):
     """
     _, entry = _resolve_set(name)
     return PARAM_CLASSES[entry['model']].from_dict(entry['values'])
-
-
-TABLE1_TEMPERATURES = (-40.0, -20.0, 0.0, 20.0)
 
 
 @lru_cache(maxsize=None)
