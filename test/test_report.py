@@ -56,9 +56,10 @@ def test_report_with_a_fitted_parameter_file(recording, tmp_path, capsys):
 def test_report_fits_when_no_parameters_are_given(recording, tmp_path, capsys):
     from rubber_rig.cli.main import main
     out = tmp_path / 'auto'
-    assert main(['report', str(recording), '-o', str(out), '--method', 'harmonic']) == 0
-    assert 'report.html' in capsys.readouterr().out
-    page = _check_report({**{n: None for n in FIGURES}, 'html': None}, out, n_blocks=6)
+    assert main(['report', str(recording), '-o', str(out), '--method', 'harmonic', '--json']) == 0
+    files = json.loads(capsys.readouterr().out)['files']
+    assert files['html'].endswith('report.html')
+    page = _check_report(files, out, n_blocks=6)
     assert 'fitted to this recording' in page and '&plusmn;' in page      # uncertainty shown
 
 
@@ -70,8 +71,9 @@ def test_report_with_a_shipped_parameter_set(recording, tmp_path, capsys):
     from rubber_rig.cli.main import main
     shipped = Path(rubber_rig.models.__file__).parent / 'data' / 'seed000.yaml'
     out = tmp_path / 'shipped'
-    assert main(['report', str(recording), '--fit', str(shipped), '--set', 'seed000_20C', '-o', str(out)]) == 0
-    page = _check_report({**{n: None for n in FIGURES}, 'html': None}, out, n_blocks=6)
+    assert main(['report', str(recording), '--fit', str(shipped), '--set', 'seed000_20C', '-o', str(out),
+                 '--json']) == 0
+    page = _check_report(json.loads(capsys.readouterr().out)['files'], out, n_blocks=6)
     # the true specimen reproduces the measured K_dyn within 1 % in every block
     errors = [float(e) for e in re.findall(r'<td>([-0-9.]+)</td><td>[-0-9.]+</td><td>[-0-9.]+</td><td>[-0-9.e+]+</td>'
                                            r'<td>[-0-9.e+]+</td><td>[-0-9.e+]+</td><td>[-0-9.e+]+</td></tr>', page)]
