@@ -39,8 +39,7 @@ def run(rate: float, duration: float, paced: bool) -> dict:
     return dict(rate=rate, mode='paced' if paced else 'fast', samples=n, expected=prog.n_samples(rate),
                 lost=st.frames_lost, late=st.frames_late, malformed=st.frames_malformed, completed=r.completed,
                 wall=wall, achieved=n / wall, wall_us=wall / n * 1e6, cpu_us=cpu / n * 1e6,
-                realtime=(n / rate) / wall, message=r.message, faults=st.fault_messages,
-                underruns=st.extra.get('underruns', 0))
+                realtime=(n / rate) / wall, message=r.message)
 
 
 def main(argv=None) -> int:

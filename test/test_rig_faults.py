@@ -24,7 +24,7 @@ def assert_safe_ramp(r, t_fault):
     after = r.time > t_fault + 0.05
     assert np.any(after)
     assert r.setpoint[-1] == 0.0 and abs(r.displacement[-1]) < 5e-6
-    assert np.all(r.block_index[-50:] == -1) or not r.completed
+    assert np.all(r.block_index[-50:] == -1)
 
 
 FAULTS = {

@@ -9,7 +9,7 @@ from rubber_rig.excitation import Program, load_program
 from rubber_rig.rig import RigConfig, open_rig, run_program
 from rubber_rig.rig.config import SimOptions
 
-from test_rig_support import FAST, expected_plant
+from test_rig_support import FAST, expected_plant, poll_samples
 
 WAVES = {
     'sine': '{waveform: sine, frequency: 8 Hz, amplitude: 0.5 mm, cycles: 4}',
@@ -137,14 +137,8 @@ def test_driver_status_and_sample_blocks_on_open_rig():
         assert st.state == 'idle' and st.faults == 0
         x = 0.2e-3 * np.sin(np.linspace(0, np.pi, 200)) ** 2
         assert drv.queue_setpoints(0, x)
-        blocks, n = [], 0
-        for _ in range(20000):
-            b = drv.poll()
-            if b is not None:
-                blocks.append(b)
-                n += len(b)
-            if n >= 200:
-                break
+        blocks = []
+        n = poll_samples(drv, blocks, 200, 20000)
         assert n == 200 and blocks[0].first_sequence == 0 and blocks[0].sample_period == 1e-3
         seq = np.concatenate([b.sequence for b in blocks])
         np.testing.assert_array_equal(seq, np.arange(200))
@@ -183,20 +177,10 @@ def test_new_stream_after_a_pause_is_bridged_by_holding():
         ramp = 0.3e-3 * np.sin(np.linspace(0, np.pi / 2, 300)) ** 2
         assert drv.queue_setpoints(0, ramp)
         got = []
-        for _ in range(1000):
-            b = drv.poll()
-            if b is not None:
-                got.append(b)
-            elif sum(len(g) for g in got) >= 300:
-                break
+        poll_samples(drv, got, 300, 1000)
         # the next program starts 100 samples later: the controller holds 0.3 mm in between, no step
         assert drv.queue_setpoints(300, np.full(100, 0.3e-3)) and drv.queue_setpoints(400, np.full(50, 0.3e-3))
-        for _ in range(1000):
-            b = drv.poll()
-            if b is not None:
-                got.append(b)
-            elif sum(len(g) for g in got) >= 450:
-                break
+        poll_samples(drv, got, 450, 1000)
         seq = np.concatenate([g.sequence for g in got])
         u = np.concatenate([g.setpoint for g in got])
         np.testing.assert_array_equal(seq, np.arange(450))

@@ -19,6 +19,18 @@ def expected_plant(result, options: SimOptions = None):
     return x, f
 
 
+def poll_samples(drv, got, n, tries):
+    """Poll the driver (at most `tries` times), appending its SampleBlocks to `got`, until `got` holds at least n
+    samples and a poll finds nothing more; return the number of samples in `got`."""
+    for _ in range(tries):
+        b = drv.poll()
+        if b is not None:
+            got.append(b)
+        elif sum(len(g) for g in got) >= n:
+            break
+    return sum(len(g) for g in got)
+
+
 def contiguous_diffs(seq, values):
     """np.diff of values only between consecutive sequence numbers (gaps from lost frames skipped)."""
     ok = np.diff(seq) == 1

@@ -16,6 +16,11 @@ from .waveforms import smoothstep
 GAIN_MIN, GAIN_MAX = 0.5, 2.0
 
 
+def _clamp_gain(gain: float) -> float:
+    """gain limited to GAIN_MIN..GAIN_MAX."""
+    return min(max(gain, GAIN_MIN), GAIN_MAX)
+
+
 def fit_cycle(waveform: str, phase: np.ndarray, x: np.ndarray):
     """Amplitude [m] and mean [m] of one measured cycle.
 
@@ -108,13 +113,13 @@ class BlockLoop:
         self.cycles.append((cc, amp, mean, g_used))
         if self.control and rec[0] == rec[1] and rec[2] == rec[3] and amp > 0:
             plant = amp / (g_used * self.block.amplitude)
-            self.gain = self._cap(1.0 / plant, rec[2] - (mean - self.block.mean))
             self.offset = rec[2] - (mean - self.block.mean)
-            self.estimates.append((cc, min(max(1.0 / plant, GAIN_MIN), GAIN_MAX), self.offset))
+            self.gain = self._cap(1.0 / plant, self.offset)
+            self.estimates.append((cc, _clamp_gain(1.0 / plant), self.offset))
 
     def _cap(self, gain: float, offset: float) -> float:
         """Keep the corrected command inside the gain range and the displacement and velocity limits."""
-        gain = min(max(gain, GAIN_MIN), GAIN_MAX)
+        gain = _clamp_gain(gain)
         if self.limits is not None:
             a = self.block.amplitude
             centre = self.block.mean + offset

@@ -109,6 +109,10 @@ class Block:
         return (wf.envelope(phase, self.total_cycles, self.taper_cycles)
                 * wf.shape(self.waveform, phase, self.square_slope))
 
+    def evaluate_phase(self, phase, gain=1.0, offset=0.0):
+        """Setpoint [m] of a periodic block at phase [cycles] (= phase(t)), with gain and offset as evaluate()."""
+        return self.mean + offset + gain * self.amplitude * self.unit(phase)
+
     def evaluate(self, t, gain=1.0, offset=0.0, start_level=None):
         """Setpoint [m] at local times t [s] (array).
 
@@ -116,7 +120,7 @@ class Block:
         where a ramp starts (resume after hold)."""
         t = np.asarray(t, dtype=float)
         if self.periodic:
-            return self.mean + offset + gain * self.amplitude * self.unit(self.phase(t))
+            return self.evaluate_phase(self.phase(t), gain, offset)
         start = self.start_level if start_level is None else start_level
         if self.waveform == 'hold':
             return np.full_like(t, start)

@@ -86,7 +86,6 @@ class ProgramRunner:
         self._segments = []                           # [seq0, seq1, block, local0, loop]
         self._seg_starts = []
         self._completed = set()
-        self._measured_to = start_sequence
         self.last_block_index = np.empty(0, dtype=np.int32)
 
     # ---- state
@@ -202,8 +201,9 @@ class ProgramRunner:
                 start = self.compensation.lookup(blk) if self.compensation is not None else None
                 if start is not None:
                     loop.start_from(*start)
-            gain, offset = loop.command(blk.phase(t))
-            x = blk.evaluate(t, gain, offset)
+            phase = blk.phase(t)
+            gain, offset = loop.command(phase)
+            x = blk.evaluate_phase(phase, gain, offset)
         else:
             x = blk.evaluate(t, start_level=self._ramp_from.get(b))
         if local[-1] == int(self._starts[b + 1] - self._starts[b]) - 1:
@@ -250,7 +250,6 @@ class ProgramRunner:
             if loop is not None and self.compensation is not None:
                 self._learn(b, loop)
             j += 1
-        self._measured_to = max(self._measured_to, s1)
 
     def _learn(self, b, loop):
         """Put what `loop` (block b) learned so far into the compensation memory (once per new judged cycle)."""

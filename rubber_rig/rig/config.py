@@ -171,10 +171,7 @@ def _build(cls, data, path):
         if key not in known:
             raise ConfigError(f"rig config: field '{fpath}': unknown (known: {', '.join(sorted(known))})")
         kwargs[key] = _convert(known[key].type, value, fpath)
-    try:
-        return cls(**kwargs)
-    except LimitError as exc:
-        raise ConfigError(f"rig config: field '{path}': {exc}") from None
+    return cls(**kwargs)
 
 
 def _convert(typ, value, fpath):

@@ -1,6 +1,6 @@
 """run_program: a ROS-free runner of a test program on a rig (simulated or real), returning numpy arrays."""
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Callable, List, Optional
 
 import numpy as np
@@ -34,8 +34,6 @@ class RunResult:
     message: str
     final_status: RigStatus
     wall_time: float
-    frames_lost: int = 0
-    extra: dict = field(default_factory=dict)
 
 
 def run_program(program, config, on_progress: Optional[Callable] = None, amplitude_control: bool = False,
@@ -175,17 +173,17 @@ def _result(program, cfg, drv, runner, got, block_of, queued_x, first, message, 
     inside = (idx >= 0) & (idx < blocks_all.size)
     block_index = np.full(seq.size, -1, dtype=np.int32)
     block_index[inside] = blocks_all[idx[inside]]
+    setpoint = cat('setpoint')
     if message and got:
         # after a fault the controller flushed the queue and ramps on its own: from the first sample whose applied
         # command is not the queued one (beyond the 0.1 um frame resolution) the samples belong to no block
         sent = np.concatenate(queued_x)
-        applied = np.concatenate([b.setpoint for b in got])
-        off = np.nonzero(inside & (np.abs(applied - sent[np.where(inside, idx, 0)]) > 1.5e-7))[0]
+        off = np.nonzero(inside & (np.abs(setpoint - sent[np.where(inside, idx, 0)]) > 1.5e-7))[0]
         if off.size:
             block_index[off[0]:] = -1
     st = drv.status
     completed = runner.finished and not runner.aborted and not st.faults
-    return RunResult(program.name, fs, seq, seq / fs, cat('setpoint'), cat('displacement'), cat('force'),
+    return RunResult(program.name, fs, seq, seq / fs, setpoint, cat('displacement'), cat('force'),
                      rep('temperature', float), rep('status_flags', np.uint32), block_index,
                      runner.block_summaries, completed, message or ('completed' if completed else runner.abort_reason),
-                     st, time.monotonic() - t_wall, st.frames_lost)
+                     st, time.monotonic() - t_wall)

@@ -9,7 +9,7 @@ from typing import List
 import numpy as np
 
 from .protocol import (CMD_ABORT, CMD_RESET, FAULT_BUS, FAULT_DISPLACEMENT_LIMIT, FAULT_FORCE_LIMIT,
-                       FAULT_SENSOR, FAULT_VELOCITY_LIMIT, FAULT_WATCHDOG, SEQ_MOD, STATE_CODE, STATES,
+                       FAULT_SENSOR, FAULT_VELOCITY_LIMIT, FAULT_WATCHDOG, SEQ_MOD, STATES,
                        MalformedFrame, Protocol, unwrap_sequence)
 
 
@@ -57,10 +57,6 @@ class RigStatus:
     limits: object = None
     extra: dict = field(default_factory=dict)
 
-    @property
-    def state_code(self) -> int:
-        return STATE_CODE[self.state]
-
 
 class RigDriver:
     """Driver for the rig controller on python-can `bus` with RigConfig `config`.
@@ -74,7 +70,6 @@ class RigDriver:
         self.fs = float(config.sample_rate)
         self.limits = config.limits
         self._clock = clock
-        self._ids = self.proto.ids
         self._handlers = {'Feedback': self._on_feedback, 'ControllerStatus': self._on_status,
                           'ControllerHeartbeat': self._on_heartbeat, 'Temperature': self._on_temperature}
         # stream bookkeeping
@@ -82,8 +77,8 @@ class RigDriver:
         self._last_queued = None         # last queued setpoint [m]
         self._last_applied = None        # last command the controller reported applying [m]
         self._expected = None            # next feedback sequence expected
-        self._pend = ([], [], [], [])    # x, f, u, t0 of the contiguous samples not yet returned
-        self._pend_first, self._pend_lost = None, 0
+        self._pend = ([], [], [])        # x, f, u of the contiguous samples not yet returned
+        self._pend_first, self._pend_t0, self._pend_lost = None, None, 0   # first sequence, its frame time
         self._ready = collections.deque()
         self._recent = collections.deque(maxlen=max(20, int(0.05 * self.fs)))   # (u, x, f) for sensor checks
         self._bad = collections.deque()  # (sample position, count) of bad-frame events, 1 s window
@@ -152,11 +147,10 @@ class RigDriver:
         """Command the safe ramp: the controller flushes queued setpoints and ramps smoothly from where it is
         to target [m] (clamped into the limits). Further setpoints are refused until reset()."""
         target = self.limits.clamp_position(target)
-        arg = int(round(target / 1e-7)) % (1 << 32)
         # ramp at most half the velocity limit (and 50 mm/s), in whole mm/s as the frame carries it
         ramp_v = max(0.001, math.floor(min(0.5 * self.limits.velocity_max, 0.05) * 1000) / 1000)
         self.bus.send(self.proto.encode('HostCommand', {'CMD_Code': CMD_ABORT, 'CMD_Counter': 0,
-                                                        'CMD_Argument': arg, 'CMD_RampVelocity': ramp_v}))
+                                                        'CMD_Argument': target, 'CMD_RampVelocity': ramp_v}))
         if not self._aborting:
             self.fault_messages.append(f'abort: {reason}')
         self._aborting = True
@@ -224,13 +218,12 @@ class RigDriver:
                 self._fault(FAULT_BUS, f'{lost} consecutive samples lost ({lost / self.fs * 1e3:.1f} ms > '
                                        f'{self.cfg.lost_burst_max * 1e3:g} ms)')
         if self._pend_first is None:
-            self._pend_first = seq
+            self._pend_first, self._pend_t0 = seq, msg.timestamp
         x, f, u = float(sig['FB_Displacement']), float(sig['FB_Force']), float(sig['FB_Setpoint'])
-        px, pf, pu, pt = self._pend
+        px, pf, pu = self._pend
         px.append(x)
         pf.append(f)
         pu.append(u)
-        pt.append(msg.timestamp)
         self._recent.append((u, x, f))
         self._last_applied = u
         self._expected = seq + 1
@@ -244,28 +237,25 @@ class RigDriver:
         self.controller_faults = int(sig['ST_Faults'])
         ref = self.controller_sequence if self.controller_sequence >= 0 else (self._expected or 0)
         self.controller_sequence = unwrap_sequence(int(sig['ST_LastSequence']), ref)
-        self._on_heartbeat(None, msg, count=False)
 
-    def _on_heartbeat(self, sig, msg, count=True):
-        if sig is not None:
-            code = int(sig['HB_State'])
-            self.controller_state = STATES[code] if code < len(STATES) else 'fault'
-        if count:
-            self.counters['heartbeats_received'] += 1
-            self._last_hb_wall = self._clock()
-            self._hb_sample = self._expected
+    def _on_heartbeat(self, sig, msg):
+        code = int(sig['HB_State'])
+        self.controller_state = STATES[code] if code < len(STATES) else 'fault'
+        self.counters['heartbeats_received'] += 1
+        self._last_hb_wall = self._clock()
+        self._hb_sample = self._expected
 
     def _on_temperature(self, sig, msg):
         self.temperature = float(sig['TEMP_Specimen'])
 
     def _flush_pending(self):
-        px, pf, pu, pt = self._pend
+        px, pf, pu = self._pend
         if px:
-            self._ready.append(SampleBlock(self._pend_first, pt[0], 1.0 / self.fs, np.array(px), np.array(pf),
-                                           np.array(pu), self.temperature, self.controller_faults,
+            self._ready.append(SampleBlock(self._pend_first, self._pend_t0, 1.0 / self.fs, np.array(px),
+                                           np.array(pf), np.array(pu), self.temperature, self.controller_faults,
                                            self._pend_lost))
-            self._pend = ([], [], [], [])
-            self._pend_first, self._pend_lost = None, 0
+            self._pend = ([], [], [])
+            self._pend_first, self._pend_t0, self._pend_lost = None, None, 0
 
     # ---- checks
     def _bad_event(self, n):
@@ -353,11 +343,6 @@ class RigDriver:
     def next_sequence(self) -> int:
         """Sequence the next queued setpoint must have (0 before the first)."""
         return 0 if self._queued_end is None else self._queued_end
-
-    @property
-    def received_sequence(self) -> int:
-        """Sequence after the last received sample (-1 before the first)."""
-        return -1 if self._expected is None else self._expected
 
     def close(self):
         """Shut the bus down (the caller decides whether to abort first)."""

@@ -85,7 +85,6 @@ class Protocol:
             if not (crc.name.endswith('_Crc') and crc.start == 8 * (m.length - 1) and crc.length == 8):
                 raise ValueError(f'{dbc_path}: message {m.name}: last signal must be an 8-bit CRC in the last byte')
         self._crc_name = {m.name: m.signals[-1].name for m in self.db.messages}
-        self.ids = {name: m.frame_id for name, m in self.by_name.items()}
 
     def encode(self, name: str, signals: dict) -> can.Message:
         """A python-can Message for DBC message `name` with physical signal values (SI, as in the DBC)."""

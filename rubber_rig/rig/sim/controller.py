@@ -159,9 +159,7 @@ class SimController:
         elif name == 'HostCommand':
             code = int(sig['CMD_Code'])
             if code in (CMD_ABORT, CMD_DISABLE):
-                arg = int(sig['CMD_Argument'])
-                target = (arg - (1 << 32) if arg >= 1 << 31 else arg) * 1e-7
-                self.abort(target, 0, float(sig['CMD_RampVelocity']) or None)
+                self.abort(float(sig['CMD_Argument']), 0, float(sig['CMD_RampVelocity']) or None)
             elif code == CMD_RESET and self.state in ('fault', 'idle'):
                 self.fault_bits = 0
                 self.state = 'idle'

@@ -12,7 +12,6 @@ class FaultInjector:
         self.faults = list(faults)
         self.fs = sample_rate
         self.rng = np.random.default_rng(seed + 7919)
-        self.injected = {k: 0 for k in ('drop', 'delay', 'duplicate', 'corrupt', 'silent')}
 
     def silent(self, t: float) -> bool:
         """True while a silent-controller fault suppresses heartbeat and status."""
@@ -25,14 +24,12 @@ class FaultInjector:
     def transmit(self, name: str, msg, t: float):
         out = [(0, msg)]
         if name in ('ControllerHeartbeat', 'ControllerStatus') and self.silent(t):
-            self.injected['silent'] += 1
             return []
         for f in self.faults:
             if f.type in ('stuck_sensor', 'silent_controller') or name not in f.frames or not f.active(t):
                 continue
             if f.probability < 1.0 and self.rng.random() >= f.probability:
                 continue
-            self.injected[f.type] += 1
             if f.type == 'drop':
                 return []
             if f.type == 'duplicate':
