@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from rubber_rig.analysis import harmonic_properties
-from rubber_rig.models import (Dashpot, LinearSpring, Maxwell, PolynomialSpring, Seed001Params, TangentSpring,
+from rubber_rig.models import (Dashpot, Maxwell, PolynomialSpring, Seed001Params, TangentSpring,
                                build_model, load_parameter_set, sine_displacement, steady_state_properties)
 
 P20 = load_parameter_set('seed000_20C')

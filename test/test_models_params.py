@@ -1,6 +1,5 @@
 """Parameter sets, validation and temperature interpolation (seed 000 Table 1/2)."""
 import dataclasses
-import math
 
 import numpy as np
 import pytest

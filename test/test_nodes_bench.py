@@ -1,6 +1,5 @@
 """`rubber-rig bench`: program overrides, and a quick end-to-end run of the main job (unpaced simulated rig)."""
 import json
-import math
 from pathlib import Path
 
 import pytest

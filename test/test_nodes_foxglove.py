@@ -89,7 +89,7 @@ class FoxgloveClient:
 def test_live_view_serves_force_samples_over_websocket():
     port = 20000 + os.getpid() % 20000
     with InProcessLauncher(domain_id=domain_id()) as launcher:
-        view = launcher.start(FoxgloveViewNode, {'port': port, 'live_rate': 100.0})
+        launcher.start(FoxgloveViewNode, {'port': port, 'live_rate': 100.0})
         feeder = Node('feeder', context=launcher.context)
         pub = feeder.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
         client = FoxgloveClient(port)

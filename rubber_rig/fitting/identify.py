@@ -67,7 +67,7 @@ def data_bounds(t: Targets) -> dict:
     """Documented search bounds (see module docstring) in physical units: name -> (lo, hi)."""
     kmin, kmax = float(t.k_dyn.min()), float(t.k_dyn.max())
     fmin, fmax = float(t.frequency.min()), float(t.frequency.max())
-    amin, amax = float(t.amplitude.min()), float(t.amplitude.max())
+    amax = float(t.amplitude.max())
     force = float(np.max(t.k_dyn * t.amplitude))
     return {'k0': (0.05 * kmin, 1.0 * kmin), 'dk': (1e-4 * kmax, 20.0 * kmax),
             'tau': (0.01 / (2 * np.pi * fmax), 100.0 / (2 * np.pi * fmin)), 'alpha': (0.05, 1.0),

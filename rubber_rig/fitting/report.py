@@ -218,7 +218,7 @@ def _html(run, blocks, params, quality, images, title, param_info, messages):
             parts.append(f'<p>Parameters: {esc(str(param_info["source"]))}</p>')
     if quality:
         kind = 'simulated' if 'simulated' in quality[0] else 'analytic'
-        parts.append(f'<h2>Blocks</h2><table><tr><th>f [Hz]</th><th>x0 [mm]</th><th>cycles</th>'
+        parts.append('<h2>Blocks</h2><table><tr><th>f [Hz]</th><th>x0 [mm]</th><th>cycles</th>'
                      '<th>K_dyn [kN/mm]</th><th>model</th><th>e_K [%]</th><th>loss angle [deg]</th>'
                      '<th>D</th><th>E [J]</th><th>C_eq [kN s/m]</th><th>model</th><th>e_C [%]</th></tr>')
         for q in quality:
