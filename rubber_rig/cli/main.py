@@ -1,13 +1,20 @@
 """`rubber-rig` command line: one entry point, one sub-command per job."""
 import argparse
 import importlib
+import os
 import sys
+
+# DDS discovery stays on this machine unless the user opens it (README "Networking"): set before any
+# sub-command imports rclpy, and inherited by the node processes the bench starts.
+DISCOVERY_RANGE_VARIABLE = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
+DISCOVERY_RANGE_DEFAULT = 'LOCALHOST'
 
 
 class CommandError(RuntimeError):
     """A job could not be done for a reason the message states (no traceback is shown)."""
 
-# sub-command -> module that provides `add_arguments(parser)` and `run(args) -> int`
+# sub-command -> module that provides `add_arguments(parser)` and `run(args) -> int`, optionally
+# `check_arguments(args) -> message or None` for option combinations argparse cannot express
 COMMANDS = {
     'bench': 'rubber_rig.cli.bench',
     'props': 'rubber_rig.cli.props',
@@ -18,10 +25,25 @@ COMMANDS = {
 }
 
 
+def keep_discovery_local(environ=os.environ) -> str:
+    """Default ROS_AUTOMATIC_DISCOVERY_RANGE to LOCALHOST when unset (an empty value counts as unset:
+    rcl reads it as the network-wide default). Returns the range in effect."""
+    if not environ.get(DISCOVERY_RANGE_VARIABLE):
+        environ[DISCOVERY_RANGE_VARIABLE] = DISCOVERY_RANGE_DEFAULT
+    return environ[DISCOVERY_RANGE_VARIABLE]
+
+
+def _os_error_text(exc: OSError) -> str:
+    paths = [p for p in (exc.filename, exc.filename2) if p is not None]
+    reason = exc.strerror or type(exc).__name__
+    return f'{" -> ".join(str(p) for p in paths)}: {reason}' if paths else str(exc) or reason
+
+
 def main(argv=None) -> int:
+    keep_discovery_local()
     parser = argparse.ArgumentParser(prog='rubber-rig', description=__doc__)
     sub = parser.add_subparsers(dest='command', required=True)
-    available = {}
+    available, parsers = {}, {}
     for name, module_name in COMMANDS.items():
         try:
             module = importlib.import_module(module_name)
@@ -31,17 +53,28 @@ def main(argv=None) -> int:
             raise
         p = sub.add_parser(name, help=(module.__doc__ or '').strip().splitlines()[0])
         module.add_arguments(p)
-        available[name] = module
+        available[name], parsers[name] = module, p
     args = parser.parse_args(argv)
+    module = available[args.command]
+    check = getattr(module, 'check_arguments', None)
+    problem = check(args) if check else None
+    if problem:
+        parsers[args.command].error(problem)         # usage + message, exit 2
     try:
-        return int(available[args.command].run(args) or 0)
+        return int(module.run(args) or 0)
     except KeyboardInterrupt:
         return 130
-    except (ValueError, FileNotFoundError) as exc:  # bad input: a clear message, no traceback
-        print(f'rubber-rig {args.command}: error: {exc}', file=sys.stderr)
-        return 2
     except CommandError as exc:                      # the job failed for a stated reason
         print(f'rubber-rig {args.command}: error: {exc}', file=sys.stderr)
+        return 1
+    except FileNotFoundError as exc:                 # a named input does not exist: bad input
+        print(f'rubber-rig {args.command}: error: {_os_error_text(exc)}', file=sys.stderr)
+        return 2
+    except ValueError as exc:                        # bad input: a clear message, no traceback
+        print(f'rubber-rig {args.command}: error: {exc}', file=sys.stderr)
+        return 2
+    except OSError as exc:                           # an output could not be written (read-only, full, ...)
+        print(f'rubber-rig {args.command}: error: {_os_error_text(exc)}', file=sys.stderr)
         return 1
 
 

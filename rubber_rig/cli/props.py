@@ -10,12 +10,24 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 
 import numpy as np
 
 from .units import parse_quantity
 
 KEYS = ('frequency', 'amplitude', 'k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy', 'r_k', 'r_e')
+
+# Physical input ranges (SI); anything outside is a typo or a unit slip, refused with the range named.
+AMPLITUDE_RANGE = (1e-9, 1.0)          # 1 nm .. 1 m displacement amplitude
+FREQUENCY_RANGE = (1e-6, 1e6)          # 1 uHz .. 1 MHz
+RATE_RANGE = (1.0, 1e6)                # --rate of --method time: 1 Hz .. 1 MHz
+CYCLES_RANGE = (3, 10_000)             # --cycles of --method time
+MAX_GRID_POINTS = 10_000               # --frequency-grid N
+# Cost bound of --method time: samples simulated per (frequency, amplitude) point and in total. One
+# sample costs about 90 bytes and 0.6 us (0.01 Hz x 30 cycles at 1 kHz = 3e6 samples: ~0.3 GB, ~2 s).
+MAX_TIME_SAMPLES = 3_000_000
+MAX_TIME_SAMPLES_TOTAL = 30_000_000
 
 
 def add_arguments(parser):
@@ -50,12 +62,46 @@ def _spec(args):
 def _frequencies(args):
     if args.frequency_grid is not None:
         lo, hi = (parse_quantity(v, 'frequency') for v in args.frequency_grid[:2])
-        n = int(args.frequency_grid[2])
-        if n < 1 or lo <= 0 or hi <= 0:
-            raise ValueError('--frequency-grid needs START, STOP > 0 Hz and N >= 1')
+        try:
+            n = int(args.frequency_grid[2])
+        except ValueError:
+            raise ValueError(f'--frequency-grid N must be a whole number, not {args.frequency_grid[2]!r}') from None
+        if not 1 <= n <= MAX_GRID_POINTS:
+            raise ValueError(f'--frequency-grid N = {n} is outside the allowed range 1 .. {MAX_GRID_POINTS}')
+        for v, text in zip((lo, hi), args.frequency_grid[:2]):
+            _check_range('--frequency-grid', v, FREQUENCY_RANGE, 'Hz', text)
         return list(np.geomspace(lo, hi, n))
     values = args.frequency or ['0.5Hz', '1Hz', '2Hz', '4Hz', '8Hz', '14Hz']
-    return [parse_quantity(v, 'frequency') for v in values]
+    freqs = [parse_quantity(v, 'frequency') for v in values]
+    for v, text in zip(freqs, values):
+        _check_range('--frequency', v, FREQUENCY_RANGE, 'Hz', text)
+    return freqs
+
+
+def _check_range(option, value, allowed, unit, text=None):
+    lo, hi = allowed
+    if not lo <= value <= hi:
+        given = f'{text} (= {value:g} {unit})' if text is not None and str(text) != f'{value:g}' else f'{value:g} {unit}'
+        raise ValueError(f'{option} {given} is outside the allowed range {lo:g} .. {hi:g} {unit}')
+
+
+def _check_time_cost(freqs, n_amps, rate, cycles):
+    """Refuse --method time runs whose simulated length is unbounded in memory or time."""
+    for f in freqs:
+        if f > 0.25 * rate:
+            raise ValueError(f'--frequency {f:g} Hz needs a higher --rate than {rate:g} Hz (>= 4 samples/cycle)')
+    f_min = cycles * rate / MAX_TIME_SAMPLES
+    slow = min(freqs)
+    if slow < f_min:
+        raise ValueError(f'--frequency {slow:g} Hz with --method time needs {cycles * rate / slow:.3g} samples '
+                         f'({cycles} cycles at {rate:g} Hz); allowed: --frequency >= {f_min:.3g} Hz '
+                         f'(at most {MAX_TIME_SAMPLES} samples per point), a lower --rate or fewer --cycles, '
+                         f'or --method analytic')
+    total = n_amps * sum(cycles * rate / f for f in freqs)
+    if total > MAX_TIME_SAMPLES_TOTAL:
+        raise ValueError(f'--method time over {len(freqs)} frequencies x {n_amps} amplitudes needs {total:.3g} '
+                         f'samples; allowed: at most {MAX_TIME_SAMPLES_TOTAL} in total (fewer points, '
+                         f'or --method analytic)')
 
 
 def _clean(v):
@@ -68,9 +114,8 @@ def compute(args) -> list:
     spec = _spec(args)
     freqs = _frequencies(args)
     amps = [parse_quantity(v, 'length') for v in args.amplitude]
-    for name, vals in (('frequency', freqs), ('amplitude', amps)):
-        if any(not (v > 0) for v in vals):
-            raise ValueError(f'{name} values must be > 0')
+    for a, text in zip(amps, args.amplitude):
+        _check_range('--amplitude', a, AMPLITUDE_RANGE, 'm', text)
     rows = []
     if args.method == 'analytic':
         model = build_model(spec, dt=1e-3)
@@ -80,13 +125,14 @@ def compute(args) -> list:
                 rows.append({k: _clean(r[k]) for k in KEYS})
     else:
         rate = parse_quantity(args.rate, 'frequency')
-        if args.cycles < 3:
-            raise ValueError('--cycles must be >= 3 (2 are analysed after at least one settling cycle)')
+        _check_range('--rate', rate, RATE_RANGE, 'Hz', args.rate)
+        if not CYCLES_RANGE[0] <= args.cycles <= CYCLES_RANGE[1]:
+            raise ValueError(f'--cycles {args.cycles} is outside the allowed range {CYCLES_RANGE[0]} .. '
+                             f'{CYCLES_RANGE[1]} (2 are analysed after at least one settling cycle)')
+        _check_time_cost(freqs, len(amps), rate, args.cycles)
         model = build_model(spec, dt=1.0 / rate, scheme=args.scheme)
         for a in amps:
             for f in freqs:
-                if f > 0.25 * rate:
-                    raise ValueError(f'frequency {f:g} Hz needs a higher --rate than {rate:g} Hz (>= 4 samples/cycle)')
                 r = time_domain_properties(model, f, a, cycles=args.cycles)
                 rows.append({k: _clean(r[k]) for k in KEYS})
     return rows
@@ -96,13 +142,28 @@ def _table(rows) -> str:
     head = (f'{"f [Hz]":>9} {"x0 [mm]":>8} {"K_dyn [N/m]":>12} {"delta [deg]":>11} {"D [-]":>7} '
             f'{"C_eq [N s/m]":>13} {"E [J]":>10} {"R_K":>7} {"R_E":>7}')
     lines = [head, '-' * len(head)]
+
+    def cell(value, fmt, width, scale=1.0):   # None: not finite (JSON null), shown as '-'
+        return f'{"-":>{width}}' if value is None else f'{value * scale:{width}{fmt}}'
+
     for r in rows:
-        rk = f'{r["r_k"]:7.3f}' if r['r_k'] is not None else f'{"-":>7}'
-        re_ = f'{r["r_e"]:7.3f}' if r['r_e'] is not None else f'{"-":>7}'
-        lines.append(f'{r["frequency"]:9.4g} {r["amplitude"] * 1e3:8.4g} {r["k_dyn"]:12.5e} '
-                     f'{math.degrees(r["loss_angle"]):11.3f} {r["damping"]:7.4f} {r["c_eq"]:13.5e} '
-                     f'{r["energy"]:10.4e} {rk} {re_}')
+        delta = None if r['loss_angle'] is None else math.degrees(r['loss_angle'])
+        lines.append(' '.join([cell(r['frequency'], '.4g', 9), cell(r['amplitude'], '.4g', 8, 1e3),
+                               cell(r['k_dyn'], '.5e', 12), cell(delta, '.3f', 11), cell(r['damping'], '.4f', 7),
+                               cell(r['c_eq'], '.5e', 13), cell(r['energy'], '.4e', 10), cell(r['r_k'], '.3f', 7),
+                               cell(r['r_e'], '.3f', 7)]))
     return '\n'.join(lines)
+
+
+def _not_finite_note(rows):
+    """One stderr line naming the points whose closed forms or runs gave no finite K_dyn/loss angle."""
+    bad = [r for r in rows if r['k_dyn'] is None or r['loss_angle'] is None]
+    if not bad:
+        return None
+    where = ', '.join(f'{r["frequency"]:g} Hz x {r["amplitude"] * 1e3:g} mm' for r in bad[:5])
+    more = f' and {len(bad) - 5} more' if len(bad) > 5 else ''
+    return (f'rubber-rig props: warning: no finite K_dyn/loss angle at {where}{more} (amplitude beyond the '
+            f'numeric range of the closed forms for this parameter set; try a smaller amplitude or --method time)')
 
 
 def run(args) -> int:
@@ -112,4 +173,7 @@ def run(args) -> int:
         return 0
     rows = compute(args)
     print(json.dumps(rows, indent=1) if args.json else _table(rows))
+    note = _not_finite_note(rows)
+    if note:
+        print(note, file=sys.stderr)
     return 0

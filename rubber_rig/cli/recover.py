@@ -1,17 +1,30 @@
 """Rebuild the summary of an MCAP recording whose recorder was killed (SIGKILL, power cut, full disk)."""
-from rubber_rig.recording import recover
+from rubber_rig.recording import RecordingWriteError, recover
+
+from .main import CommandError
 
 
 def add_arguments(parser):
     parser.add_argument('file', help='MCAP file to recover')
-    parser.add_argument('-o', '--output', help='output file (default: <name>.recovered.mcap)')
-    parser.add_argument('--in-place', action='store_true',
-                        help='replace FILE by the recovered file (the original is kept as FILE.bak)')
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument('-o', '--output', help='output file (default: <name>.recovered.mcap)')
+    where.add_argument('--in-place', action='store_true',
+                       help='replace FILE by the recovered file (the original is kept as FILE.bak)')
     parser.add_argument('--no-backup', action='store_true', help='with --in-place: keep no .bak')
 
 
+def check_arguments(args):
+    """Option combinations argparse cannot express; a message here is a usage error (exit 2)."""
+    if args.no_backup and not args.in_place:
+        return 'argument --no-backup: only allowed with argument --in-place (without it FILE is never replaced)'
+    return None
+
+
 def run(args) -> int:
-    result = recover(args.file, args.output, in_place=args.in_place, backup=not args.no_backup)
+    try:
+        result = recover(args.file, args.output, in_place=args.in_place, backup=not args.no_backup)
+    except RecordingWriteError as exc:     # the output cannot be written: the input is fine, the job failed
+        raise CommandError(str(exc)) from None
     state = 'was already complete' if result.was_complete else 'was truncated'
     print(f'{result.source} {state}; wrote {result.output}: {result.messages} messages on '
           f'{result.channels} topics, {result.metadata_records} metadata records')

@@ -15,7 +15,7 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
 from .bagmeta import METADATA_FILE, write_bag_metadata
-from .errors import RecordingError
+from .errors import RecordingError, RecordingWriteError
 from .gaps import SEQUENCED_TYPES, GapTracker
 from .mcapio import Decoders, check_file, iter_records
 from .writer import encode_metadata
@@ -101,17 +101,34 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
     except FileExistsError:
         raise RecordingError(f'{target} exists already; choose another output with -o') from None
     except OSError as exc:
-        target.unlink(missing_ok=True)
-        raise RecordingError(f'cannot write {target}: {exc.strerror}') from None
+        _discard(target)
+        raise _write_error(target, exc) from None
     except BaseException:
-        target.unlink(missing_ok=True)
+        _discard(target)
         raise
     if in_place:
-        if backup:
-            os.replace(path, path.with_name(path.name + '.bak'))
-        os.replace(target, path)
+        try:
+            if backup:
+                os.replace(path, path.with_name(path.name + '.bak'))
+            os.replace(target, path)
+        except OSError as exc:
+            _discard(target)
+            raise _write_error(Path(exc.filename or path), exc) from None
         target = path
         if (path.parent / METADATA_FILE).exists():   # part of a bag: index the recovered file too
             write_bag_metadata(path.parent)
     return RecoverResult(str(path), str(target), was_complete, counts['messages'], len(channels),
                          counts['metadata'], gaps.samples_lost, gaps.gaps)
+
+
+def _write_error(target: Path, exc: OSError) -> RecordingWriteError:
+    return RecordingWriteError(f'cannot write {target}: {exc.strerror or exc}', exc.errno or 0)
+
+
+def _discard(target: Path):
+    """Remove a partial output; on a path that could not be written (read-only file system, a parent
+    that is not a directory, ...) removing fails the same way and there is nothing to remove."""
+    try:
+        target.unlink(missing_ok=True)
+    except OSError:
+        pass
