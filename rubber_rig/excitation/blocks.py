@@ -28,6 +28,19 @@ _ALLOWED = {
     'ramp': {'target', 'rate', 'duration'},
 }
 DEFAULT_TAPER_CYCLES = 1.0
+# The longest program (and so the longest block) accepted [s]: 24 h of rig time. Durations, cycle counts and
+# frequencies are refused on load when a block would run longer, so everything computed from a program
+# (sample counts, setpoint generation, the pre-start limit check) has a bounded cost: a request of
+# `cycles: 1e8` or `frequency: 1e-9 Hz` is an error naming the field, not an executor busy for hours.
+MAX_PROGRAM_DURATION = 24 * 3600.0
+# The lowest frequency of a periodic block [Hz]: one cycle must fit into the longest program.
+MIN_FREQUENCY = 1.0 / MAX_PROGRAM_DURATION
+# The highest frequency of a periodic block relative to the sample rate it runs at (checked where the rate is
+# known: Program.check_sample_rate, called by Limits.check_program and so by every ProgramRunner). A
+# servo-hydraulic rig sampled at fs cannot sensibly follow sines above fs/10: at 10 samples per cycle the
+# setpoint staircase already misses the peak by up to 5 % (1 - cos(pi/10)), the cycle detector needs at least
+# 8 samples per cycle, and closer to fs/2 the command aliases (990 Hz at 1 kHz is a 10 Hz wave).
+MAX_FREQUENCY_FRACTION = 0.1
 
 
 @dataclass
@@ -159,19 +172,13 @@ def parse_block(raw, index: int, start_level: float, defaults: dict) -> Block:
         dim = _FIELDS[key]
         try:
             if key == 'cycles':
-                v = data[key]
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or v != int(v):
-                    raise ValueError(f'expected a whole number of cycles, got {v!r}')
-                values[key] = int(v)
+                values[key] = _whole_cycles(data[key])
             elif key == 'taper_cycles':
-                values[key] = to_si(data[key], 'number') if not isinstance(data[key], (int, float)) else float(
-                    data[key])
+                values[key] = to_si(data[key], 'number')
             else:
                 values[key] = to_si(data[key], dim)
         except ValueError as exc:
             raise _err(index, name, key, str(exc)) from None
-        if not math.isfinite(values[key]):
-            raise _err(index, name, key, 'must be finite')
 
     def need(key, positive=True):
         if key not in values:
@@ -224,4 +231,46 @@ def parse_block(raw, index: int, start_level: float, defaults: dict) -> Block:
             blk.duration = max(math.pi / 2 * abs(blk.target - start_level) / blk.rate, 0.0)
         else:
             blk.duration = need('duration')
+    _check_duration(blk, values)
     return blk
+
+
+def _whole_cycles(v) -> int:
+    """A cycle count: a whole, finite number >= 1 (YAML .inf, 2.5 or '8' are refused before any int())."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        raise ValueError(f'expected a whole number of cycles, got {v!r}')
+    if isinstance(v, float) and not math.isfinite(v):
+        raise ValueError(f'must be a finite whole number of cycles, got {v!r}')
+    if abs(v) > 1e15:      # far beyond any program that fits MAX_PROGRAM_DURATION; keeps int/float exact
+        raise ValueError(f'{v:.6g} cycles is far more than fit into the longest program '
+                         f'({MAX_PROGRAM_DURATION / 3600:g} h)')
+    if v != int(v):
+        raise ValueError(f'expected a whole number of cycles, got {v!r}')
+    return int(v)
+
+
+def _check_duration(blk: Block, values: dict) -> None:
+    """Refuse a block that cannot run within MAX_PROGRAM_DURATION, naming the field that makes it too long."""
+    hours = f'{MAX_PROGRAM_DURATION / 3600:g} h'
+    if blk.waveform in wf.SWEEPS:
+        frequencies = [('f_start', blk.frequency), ('f_end', blk.frequency_end)]
+    elif blk.periodic:
+        frequencies = [('rate' if blk.waveform == 'triangle' and 'rate' in values else 'frequency', blk.frequency)]
+    else:
+        frequencies = []
+    for key, f in frequencies:
+        if f < MIN_FREQUENCY:
+            raise _err(blk.index, blk.name, key, f'{f:.6g} Hz is below the lowest frequency {MIN_FREQUENCY:.6g} Hz: '
+                                                 f'one cycle would take longer than the longest program ({hours})')
+    seconds = blk.seconds()
+    if math.isfinite(seconds) and seconds <= MAX_PROGRAM_DURATION:
+        return
+    if blk.waveform in wf.PERIODIC:        # the larger part of the block is to blame
+        key = 'cycles' if blk.cycles >= 2 * blk.taper_cycles else 'taper_cycles'
+    elif blk.waveform in wf.SWEEPS:
+        tapers = blk.taper_cycles / blk.frequency + blk.taper_cycles / blk.frequency_end
+        key = 'duration' if blk.duration >= tapers else 'taper_cycles'
+    else:
+        key = 'rate' if 'rate' in values else 'duration'
+    raise _err(blk.index, blk.name, key, f'the block would run {seconds:.6g} s, longer than the longest program '
+                                         f'({MAX_PROGRAM_DURATION:g} s = {hours})')

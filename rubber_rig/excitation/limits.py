@@ -1,9 +1,29 @@
-"""Safety limits on displacement, velocity and force, checked before a program starts and on every setpoint."""
+"""Safety limits on displacement, velocity and force, checked before a program starts and on every setpoint.
+
+The pre-start check (Limits.check_program) has a bounded cost for every program that loads (at most 24 h, see
+blocks.MAX_PROGRAM_DURATION): it generates and checks the setpoints exactly, block by block, as long as the
+program has generated at most EXACT_SAMPLES of them; a block beyond that budget is checked from closed-form
+bounds instead (its taper in and out still sample by sample while the budget lasts). Those bounds are the
+supremum of what the samples can reach - the sampled sine's peak velocity 2 A fs sin(pi f / fs) rather than
+2 pi f A - so a long block is refused only where some of its samples would come arbitrarily close to the
+limit. A 24 h program checks in milliseconds (benchmarks/bench_checks.py).
+
+The peak force: with `stiffness_estimate` [N/m] the check predicts k |x|; with a `force_model` (a callable
+block -> predicted peak |force| [N], e.g. element_force_model() from the element model's parameters) it
+predicts each block's force, so a program whose force limit is exceeded only at its highest frequency is
+refused before anything moves.
+"""
 import math
-from dataclasses import dataclass, asdict
-from typing import Optional
+from dataclasses import dataclass, field, fields
+from typing import Callable, Optional
 
 import numpy as np
+
+from . import waveforms as wf
+
+# setpoints the pre-start check generates at most per program (about 0.1 s of numpy); the rest is bounded
+EXACT_SAMPLES = 1 << 21
+_CHUNK = 1 << 18
 
 
 class LimitError(ValueError):
@@ -14,12 +34,15 @@ class LimitError(ValueError):
 class Limits:
     """Safe envelope, SI: displacement_min/max [m], velocity_max [m/s], force_max [N] (absolute).
 
-    stiffness_estimate [N/m], if given, lets the pre-start check predict the peak force k * |x|."""
+    stiffness_estimate [N/m], if given, lets the pre-start check predict the peak force k * |x|; force_model, if
+    given, is a callable block -> predicted peak |force| [N] that the pre-start check asks for every block
+    (see element_force_model); check_program(force_model=...) overrides it for one check."""
     displacement_min: float = -5e-3
     displacement_max: float = 5e-3
     velocity_max: float = 0.2
     force_max: float = 60e3
     stiffness_estimate: Optional[float] = None
+    force_model: Optional[Callable] = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         for name in ('displacement_min', 'displacement_max', 'velocity_max', 'force_max'):
@@ -32,6 +55,13 @@ class Limits:
         for name in ('velocity_max', 'force_max'):
             if getattr(self, name) <= 0:
                 raise LimitError(f"limits: field '{name}': must be > 0")
+        k = self.stiffness_estimate
+        if k is not None and (isinstance(k, bool) or not isinstance(k, (int, float)) or not math.isfinite(k)
+                              or k < 0):
+            raise LimitError(f"limits: field 'stiffness_estimate': expected a finite stiffness >= 0 [N/m], got {k!r}")
+        if self.force_model is not None and not callable(self.force_model):
+            raise LimitError(f"limits: field 'force_model': expected a callable block -> peak force [N], got "
+                             f"{type(self.force_model).__name__}")
 
     @classmethod
     def from_dict(cls, data) -> 'Limits':
@@ -49,7 +79,8 @@ class Limits:
         return cls(**data)
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        """The numeric fields (not the force model)."""
+        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != 'force_model'}
 
     def clamp_position(self, x: float) -> float:
         """x [m] moved inside the displacement range."""
@@ -64,34 +95,170 @@ class Limits:
         if not np.all(np.isfinite(x)):
             raise LimitError(f'{where}: not finite')
         lo, hi = float(x.min()), float(x.max())
+        self._check_range(lo, hi, where)
+        seq = x if previous is None else np.concatenate([[previous], x])
+        if seq.size > 1:
+            self._check_velocity(float(np.max(np.abs(np.diff(seq)))) * sample_rate, where)
+
+    def _check_range(self, lo: float, hi: float, where: str):
         if lo < self.displacement_min - 1e-12 or hi > self.displacement_max + 1e-12:
             raise LimitError(f'{where}: displacement {lo:.6g}..{hi:.6g} m outside the limits '
                              f'{self.displacement_min:g}..{self.displacement_max:g} m')
-        seq = x if previous is None else np.concatenate([[previous], x])
-        if seq.size > 1:
-            v = float(np.max(np.abs(np.diff(seq)))) * sample_rate
-            if v > self.velocity_max * (1 + 1e-9):
-                raise LimitError(f'{where}: velocity {v:.6g} m/s above velocity_max {self.velocity_max:g} m/s')
 
-    def check_program(self, program, sample_rate: float):
-        """Check every setpoint of `program` (open loop) at sample_rate [Hz] before it starts, block by block,
-        so the error names the block. Also predicts peak force if stiffness_estimate is set."""
-        starts = program.block_starts(sample_rate)
+    def _check_velocity(self, v: float, where: str):
+        if not v <= self.velocity_max * (1 + 1e-9):
+            raise LimitError(f'{where}: velocity {v:.6g} m/s above velocity_max {self.velocity_max:g} m/s')
+
+    def _check_stiffness_force(self, peak_x: float, where: str):
+        if self.stiffness_estimate:
+            f = self.stiffness_estimate * peak_x
+            if f > self.force_max:
+                raise LimitError(f'{where}: predicted force {f:.6g} N (stiffness_estimate x |x|) above '
+                                 f'force_max {self.force_max:g} N')
+
+    def check_program(self, program, sample_rate: float, force_model: Optional[Callable] = None):
+        """Check `program` (open loop) at sample_rate [Hz] before it starts, block by block, so the error names
+        the block: the sample-rate rule (ProgramError, see Program.check_sample_rate), displacement, velocity,
+        and the peak force predicted by stiffness_estimate and by `force_model` (default: self.force_model), a
+        callable block -> predicted peak |force| [N]. Bounded cost (module docstring)."""
+        program.check_sample_rate(sample_rate)
+        fs = float(sample_rate)
+        model = force_model if force_model is not None else self.force_model
+        starts = program.block_starts(fs)
         prev = program.initial_position
         if not self.displacement_min <= prev <= self.displacement_max:
             raise LimitError(f'program {program.name!r}: initial_position {prev:g} m outside the limits')
         if not self.displacement_min <= program.rest_position <= self.displacement_max:
             raise LimitError(f'program {program.name!r}: rest_position {program.rest_position:g} m outside '
                              f'the limits')
-        chunk = 1 << 18
+        budget = EXACT_SAMPLES
         for i, blk in enumerate(program.blocks):
             where = f"program {program.name!r} block {i} '{blk.name}'"
-            for lo in range(int(starts[i]), int(starts[i + 1]), chunk):
-                x = program.setpoints(sample_rate, lo, min(lo + chunk, int(starts[i + 1])))
-                self.check_setpoints(x, sample_rate, prev, where)
-                if self.stiffness_estimate:
-                    f = self.stiffness_estimate * float(np.max(np.abs(x)))
-                    if f > self.force_max:
-                        raise LimitError(f'{where}: predicted force {f:.6g} N (stiffness_estimate x |x|) above '
-                                         f'force_max {self.force_max:g} N')
-                prev = float(x[-1])
+            n = int(starts[i + 1] - starts[i])
+            if n <= budget:
+                budget -= n
+                for lo in range(0, n, _CHUNK):
+                    x = blk.evaluate(np.arange(lo, min(lo + _CHUNK, n)) / fs)
+                    self.check_setpoints(x, fs, prev, where)
+                    self._check_stiffness_force(float(np.max(np.abs(x))), where)
+                    prev = float(x[-1])
+            else:
+                prev, budget = self._check_block_bounds(blk, fs, n, prev, budget, where)
+            if model is not None:
+                self._check_model_force(model, blk, where)
+
+    def _check_model_force(self, model, blk, where: str):
+        try:
+            f = model(blk)
+        except (ValueError, ArithmeticError) as exc:
+            raise LimitError(f'{where}: the force model cannot predict the force: {exc}') from None
+        if f is None:
+            return
+        f = float(f)
+        if not math.isfinite(f):
+            raise LimitError(f'{where}: the force model predicts a non-finite force ({f})')
+        if f > self.force_max:
+            what = (f'{_max_frequency(blk):g} Hz, {blk.amplitude * 1e3:g} mm amplitude, {blk.mean * 1e3:g} mm mean'
+                    if blk.periodic else f'{blk.waveform} to {blk.end_level * 1e3:g} mm')
+            raise LimitError(f'{where}: predicted peak force {f:.6g} N (element model, {what}) above force_max '
+                             f'{self.force_max:g} N')
+
+    def _check_block_bounds(self, blk, fs: float, n: int, prev: float, budget: int, where: str):
+        """Check a block of n samples (more than the exact budget) from closed-form bounds on its samples.
+
+        Returns (its last setpoint, the budget left). The taper in and out (and the step from `prev` into the
+        block) are generated exactly if they fit the budget; the rest is bounded by the supremum of its samples."""
+        first = float(blk.evaluate(np.zeros(1))[0])
+        last = float(blk.evaluate(np.array([(n - 1) / fs]))[0])
+        self.check_setpoints([first], fs, prev, where)                    # the step into the block
+        if blk.periodic:
+            a, f_top = blk.amplitude, _max_frequency(blk)
+            lo, hi = blk.mean - a, blk.mean + a
+            h = f_top / fs                                                 # <= 0.1 (check_sample_rate)
+            if blk.waveform == 'triangle':
+                steady = 4.0 * blk.frequency * a                           # constant edge slope
+            elif blk.waveform == 'square':
+                steady = min(4.0 * blk.frequency * a * blk.square_slope, 2.0 * a * fs)
+            else:                                                          # sine, sweeps: |sin(p + d) - sin p|
+                steady = 2.0 * a * fs * math.sin(math.pi * min(h, 0.5))   # <= 2 sin(d / 2), d = 2 pi f / fs
+            f_out = blk.frequency_end if blk.waveform in wf.SWEEPS else blk.frequency
+            k_in = min(n, int(math.ceil(blk.taper_cycles / blk.frequency * fs)) + 2)
+            k_out = min(n, int(math.ceil(blk.taper_cycles / f_out * fs)) + 2)
+            if k_in + k_out <= budget:                                     # the tapers sample by sample
+                budget -= k_in + k_out
+                self.check_setpoints(blk.evaluate(np.arange(k_in) / fs), fs, prev, where)
+                self.check_setpoints(blk.evaluate(np.arange(n - k_out, n) / fs), fs, None, where)
+                v = steady
+            else:   # d/dt [A env(p) shape(p)] <= A f (|env'| + |shape'|): |env'| <= pi / (2 taper_cycles)
+                unit_slope = {'triangle': 4.0, 'square': 4.0 * blk.square_slope}.get(blk.waveform, 2 * math.pi)
+                v = max(steady, a * f_top * (unit_slope + math.pi / (2.0 * blk.taper_cycles)))
+        elif blk.waveform == 'ramp':
+            d = abs(blk.target - blk.start_level)
+            lo, hi = min(blk.start_level, blk.target), max(blk.start_level, blk.target)
+            # raised cosine sampled every 1/(D fs) of its length: steps <= d sin(pi / (2 D fs))
+            v = d * fs * math.sin(0.5 * math.pi * min(1.0, 1.0 / (blk.duration * fs))) if blk.duration > 0 else 0.0
+        else:                                                              # hold
+            lo = hi = blk.start_level
+            v = 0.0
+        self._check_range(lo, hi, where)
+        self._check_velocity(v, where)
+        self._check_stiffness_force(max(abs(lo), abs(hi)), where)
+        return last, budget
+
+
+def _max_frequency(blk) -> float:
+    """Highest frequency [Hz] a block runs at (0 for hold and ramp)."""
+    return max(blk.frequency, blk.frequency_end) if blk.periodic else 0.0
+
+
+def element_force_model(params='seed000_20C', harmonics: int = 256) -> Callable:
+    """A force model for Limits.check_program: block -> predicted peak |force| [N] of the seed-000 element.
+
+    params: a parameter-set name (default seed000_20C: the simulated specimen at 20 degC), a Seed000Params or a
+    mapping of its values. Steady state, analytic (seed 000 Eq. 11, 17):
+
+        F_peak ~ k0 |mean| + max_t |F_ev(t)| + F_f0(A)
+
+    with F_ev the fractional Zener's periodic steady force under the block's unit shape (sine: exactly
+    |K_ev(j 2 pi f)| A; triangle and square summed over `harmonics` harmonics), at the block's highest frequency
+    (|K_ev| grows with frequency, so that covers a sweep), F_f0 Berg's steady peak friction force (Eq. 17; rate
+    independent, so the same for every shape) and the static stiffness k0 carrying the mean (preload). At
+    20 degC and 1 mm it gives 14.14 kN at 0.5 Hz and 15.18 kN at 14 Hz (first-harmonic K_dyn x A: 14.08 and
+    15.12 kN); a time-domain run of the model over the block from rest peaks 0.1-0.2 % higher (start-up
+    transient), well inside the margin force_max should keep anyway. Hold and ramp blocks: k0 |x| + F_fmax
+    (quasi-static).
+    """
+    from rubber_rig.models import Seed000Params, load_parameter_set
+    from rubber_rig.models.fractional import zener_complex_stiffness
+    from rubber_rig.models.friction import berg_peak_force
+
+    if isinstance(params, str):
+        p = load_parameter_set(params)
+    elif isinstance(params, dict):
+        p = Seed000Params.from_dict(params)
+    else:
+        p = params
+    if not isinstance(p, Seed000Params):
+        raise ValueError(f'element_force_model needs seed000 parameters, got {type(p).__name__}')
+    n_grid = 8 * harmonics
+    phase = np.arange(n_grid) / n_grid
+
+    def k_ev(frequency):
+        return zener_complex_stiffness(2 * np.pi * np.asarray(frequency, float), p.k0, p.k_inf, p.tau, p.alpha)
+
+    def peak_force(block) -> float:
+        if not block.periodic:
+            level = max(abs(block.start_level), abs(block.end_level))
+            return float(p.k0 * level + p.f_fmax)
+        a, f = block.amplitude, _max_frequency(block)
+        if block.waveform in ('triangle', 'square'):
+            coef = np.fft.rfft(wf.shape(block.waveform, phase, block.square_slope))[:harmonics + 1]
+            n = np.arange(coef.size)
+            coef[0] = 0.0                                                  # zero-mean shapes; k0 carries the mean
+            coef[1:] *= k_ev(n[1:] * f)
+            linear = float(np.max(np.abs(np.fft.irfft(coef, n_grid)))) * a
+        else:
+            linear = float(abs(k_ev(f))) * a
+        return float(p.k0 * abs(block.mean) + linear + berg_peak_force(p.f_fmax, p.x2, a))
+
+    return peak_force

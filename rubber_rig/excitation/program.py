@@ -1,5 +1,11 @@
-"""Test programs: an ordered list of blocks loaded from YAML and validated on load."""
+"""Test programs: an ordered list of blocks loaded from YAML and validated on load.
+
+Bounded by construction, so no request can occupy the excitation for long: at most MAX_BLOCKS blocks (grids
+included) and MAX_PROGRAM_DURATION (24 h) of rig time, every number finite, every block frequency at least
+MIN_FREQUENCY; the sample-rate rule (f <= MAX_FREQUENCY_FRACTION * fs, i.e. fs/10) is checked by
+Program.check_sample_rate where the rate is known (Limits.check_program, ProgramRunner)."""
 import itertools
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import List
@@ -7,10 +13,14 @@ from typing import List
 import numpy as np
 import yaml
 
-from .blocks import Block, ProgramError, parse_block
+from .blocks import (MAX_FREQUENCY_FRACTION, MAX_PROGRAM_DURATION, MIN_FREQUENCY, Block,  # noqa: F401
+                     ProgramError, parse_block)
 from .units import to_si
 
 PROGRAM_DIR = Path(__file__).with_name('programs')
+# The most blocks a program may have (after grid expansion): far above any real test plan (seed000_grid has
+# 22), low enough that parsing and checking a program stays well below a second.
+MAX_BLOCKS = 10000
 _TOP_FIELDS = {'name', 'description', 'source', 'initial_position', 'rest_position', 'defaults', 'blocks'}
 
 
@@ -55,14 +65,40 @@ class Program:
         raw_blocks = data.get('blocks')
         if not isinstance(raw_blocks, list) or not raw_blocks:
             raise ProgramError(f"program '{name}': field 'blocks': expected a non-empty list of blocks")
-        blocks, level = [], positions['initial_position']
+        blocks, level, seconds = [], positions['initial_position'], 0.0
         for raw in raw_blocks:
             for expanded in _expand_grid(raw, len(blocks)):
                 blk = parse_block(expanded, len(blocks), level, defaults)
                 blocks.append(blk)
                 level = blk.end_level
+                seconds += blk.seconds()
+                if seconds > MAX_PROGRAM_DURATION:
+                    raise ProgramError(f"program '{name}': block {blk.index} '{blk.name}': the program would run "
+                                       f"longer than {MAX_PROGRAM_DURATION:g} s ({MAX_PROGRAM_DURATION / 3600:g} h), "
+                                       f"the longest accepted")
         return cls(name=name, blocks=blocks, description=str(data.get('description', '')),
                    source=str(data.get('source', '')), **positions)
+
+    def check_sample_rate(self, sample_rate: float) -> None:
+        """Raise ProgramError unless the program can run at sample_rate [Hz]: a finite positive rate, every
+        periodic block's highest frequency at most MAX_FREQUENCY_FRACTION * sample_rate (fs/10, see blocks.py)
+        and at most MAX_PROGRAM_DURATION of samples. Cost: one pass over the blocks."""
+        fs = sample_rate
+        if isinstance(fs, bool) or not isinstance(fs, (int, float)) or not math.isfinite(fs) or fs <= 0:
+            raise ProgramError(f'program {self.name!r}: sample rate {fs!r} Hz must be a finite number > 0')
+        f_max = MAX_FREQUENCY_FRACTION * fs
+        seconds = 0.0
+        for blk in self.blocks:
+            for key, f in _frequency_fields(blk):
+                if not f <= f_max:
+                    raise ProgramError(f"block {blk.index} '{blk.name}': field '{key}': {f:g} Hz is above "
+                                       f"{f_max:g} Hz, the highest frequency at a sample rate of {fs:g} Hz "
+                                       f"(sample_rate/{1 / MAX_FREQUENCY_FRACTION:g}: at least "
+                                       f"{1 / MAX_FREQUENCY_FRACTION:g} samples per cycle)")
+            seconds += blk.seconds()
+        if not seconds <= MAX_PROGRAM_DURATION:
+            raise ProgramError(f'program {self.name!r}: runs {seconds:.6g} s, longer than {MAX_PROGRAM_DURATION:g} s '
+                               f'({MAX_PROGRAM_DURATION / 3600:g} h), the longest accepted')
 
     # ---- timing
     def block_starts(self, sample_rate: float) -> np.ndarray:
@@ -96,14 +132,22 @@ class Program:
 def _expand_grid(raw, first_index):
     """A block whose 'amplitude' and/or 'frequency' is a list stands for the grid of all combinations
     (amplitude outer, frequency inner), named <name>_<A>mm_<f>Hz."""
+    if first_index >= MAX_BLOCKS:
+        raise ProgramError(f'block {first_index}: the program has more than {MAX_BLOCKS} blocks')
     if not isinstance(raw, dict):
         return [raw]
     grid_keys = [k for k in ('amplitude', 'frequency') if isinstance(raw.get(k), list)]
     if not grid_keys:
         return [raw]
+    count = 1
     for k in grid_keys:
         if not raw[k]:
             raise ProgramError(f"block {first_index} '{raw.get('name', '')}': field '{k}': empty list")
+        count *= len(raw[k])
+    if first_index + count > MAX_BLOCKS:   # before expanding: a 1000 x 1000 grid is a short text
+        raise ProgramError(f"block {first_index} '{raw.get('name', '')}': field '{grid_keys[-1]}': the grid "
+                           f"({' x '.join(str(len(raw[k])) for k in grid_keys)}) would take the program to "
+                           f"{first_index + count} blocks, more than {MAX_BLOCKS}")
     out = []
     base = raw.get('name') or raw.get('waveform', 'block')
     for combo in itertools.product(*(raw[k] for k in grid_keys)):
@@ -119,6 +163,15 @@ def _expand_grid(raw, first_index):
         blk['name'] = '_'.join([str(base)] + parts)
         out.append(blk)
     return out
+
+
+def _frequency_fields(blk: Block):
+    """(field, frequency [Hz]) of the frequencies a block runs at (none for hold and ramp)."""
+    if blk.waveform in ('sweep_lin', 'sweep_log'):
+        return [('f_start', blk.frequency), ('f_end', blk.frequency_end)]
+    if blk.periodic:
+        return [('rate' if blk.waveform == 'triangle' and blk.rate > 0 else 'frequency', blk.frequency)]
+    return []
 
 
 def program_source(path_or_name) -> tuple[str, str]:
