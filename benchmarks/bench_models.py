@@ -14,6 +14,9 @@ Run: .venv/bin/python benchmarks/bench_models.py [--quick]
 """
 from __future__ import annotations
 
+import os
+if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse
 import time
 

@@ -12,8 +12,10 @@
    real rclpy publisher in this process at the real rate; CPU from /proc/<pid>/stat (utime+stime),
    and a check that every batch was recorded.
 """
-import argparse
 import os
+if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
+import argparse
 import subprocess
 import sys
 import tempfile

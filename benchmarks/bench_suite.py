@@ -18,9 +18,11 @@ pipeline delay alone; when the simulated rig catches up late ticks in a burst, t
 """
 from __future__ import annotations
 
+import os
+if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse
 import json
-import os
 import resource
 import subprocess
 import sys

@@ -2,5 +2,8 @@
 import os
 
 os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
-# Keep test traffic on this machine and away from other ROS graphs on the network.
-os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+# Keep test traffic on this machine and away from other ROS graphs on the network, unless the caller chose
+# a range (README "Networking"); an empty value counts as unset, as in `rubber-rig`. Set here, at import,
+# before any test module imports rclpy; node processes the tests start inherit it.
+if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
