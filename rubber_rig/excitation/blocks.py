@@ -242,8 +242,8 @@ def _whole_cycles(v) -> int:
     if isinstance(v, float) and not math.isfinite(v):
         raise ValueError(f'must be a finite whole number of cycles, got {v!r}')
     if abs(v) > 1e15:      # far beyond any program that fits MAX_PROGRAM_DURATION; keeps int/float exact
-        raise ValueError(f'{v:.6g} cycles is far more than fit into the longest program '
-                         f'({MAX_PROGRAM_DURATION / 3600:g} h)')
+        raise ValueError(f'{str(v)[:12]}{"..." if len(str(v)) > 12 else ""} cycles are far more than fit '
+                         f'into the longest program ({MAX_PROGRAM_DURATION / 3600:g} h)')
     if v != int(v):
         raise ValueError(f'expected a whole number of cycles, got {v!r}')
     return int(v)

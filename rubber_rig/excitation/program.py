@@ -19,8 +19,8 @@ from .units import to_si
 
 PROGRAM_DIR = Path(__file__).with_name('programs')
 # The most blocks a program may have (after grid expansion): far above any real test plan (seed000_grid has
-# 22), low enough that parsing and checking a program stays well below a second.
-MAX_BLOCKS = 10000
+# 22), low enough that parsing and checking a program stays well below half a second (bench_checks.py).
+MAX_BLOCKS = 2000
 _TOP_FIELDS = {'name', 'description', 'source', 'initial_position', 'rest_position', 'defaults', 'blocks'}
 
 
