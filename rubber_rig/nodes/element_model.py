@@ -15,11 +15,21 @@ naming the parameter, so a running model is never replaced by an invalid one.
 measured displacement, whose noise would otherwise reset the friction reference state at every wiggle and
 collapse the friction loop (see rubber_rig.nodes.predictor). Set it to a few times the displacement noise RMS;
 0 is the paper's rule. Changing it rebuilds the model (warmed up on the recent history) like a parameter change.
+
+No callback takes the node down: a parameter change that cannot be resolved (a missing or malformed parameter
+file, values out of range) is refused through the SetParametersResult with a reason naming the parameter - the
+parameter set is read in that validating callback, and what it read is what the post-set callback installs. A
+sample batch the node cannot use (array lengths differ, a sample period that is not finite and positive) is
+dropped with a throttled warning; non-finite samples are skipped by the model and predicted as NaN (see
+rubber_rig.nodes.predictor) and kept out of the cycle metrics; a sequence that goes backwards (a restarted
+driver) restarts the model and the cycle detection with a log line.
 """
 from __future__ import annotations
 
 import re
 from collections import deque
+
+import numpy as np
 
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
@@ -31,13 +41,14 @@ from rubber_rig.nodes import topics
 from rubber_rig.nodes.cycles import CyclePairer
 from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.nodes.predictor import (DEFAULT_REVERSAL_THRESHOLD, SOURCES, BlockIndex, ModelChoice,
-                                        OnlinePredictor)
+                                        OnlinePredictor, batch_problem)
 from rubber_rig.nodes.spin import spin_node
 
 VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
 VALUE_UNITS = {'k0': 'N/m', 'k_inf': 'N/m', 'tau': 's', 'alpha': '-', 'x2': 'm', 'f_fmax': 'N'}
 VALUE_RANGES = {'k0': (1e3, 1e11), 'k_inf': (1e3, 1e11), 'tau': (1e-7, 1e4), 'alpha': (1e-3, 1.0),
                 'x2': (1e-8, 1e-1), 'f_fmax': (1e-3, 1e7)}   # wide physical bounds; k_inf >= k0 is checked too
+WARN_EVERY = 5.0      # [s] throttle of the warnings about bad sample batches
 CHOICE_PARAMS = ('source', 'parameter_set', 'temperature', 'friction_reversal_threshold') + tuple(
     'values.' + n for n in VALUE_NAMES)
 
@@ -82,6 +93,9 @@ class ElementModelNode(Node):
         self.blocks = BlockIndex()
         self.cycles = CyclePairer(min_amplitude=min_amplitude)
         self._cycle_queue = deque()      # sample batches waiting for the setpoints that say their block
+        self._validated = None           # (choice, resolved) of the parameter change being set
+        self.batches_dropped = 0         # sample batches refused (batch_problem)
+        self.cycle_errors = 0            # cycles the metrics could not evaluate
         self.pub_prediction = self.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
         self.pub_metrics = self.create_publisher(CycleMetrics, topics.CYCLE_METRICS, topics.EVENT_QOS)
         self.pub_params = self.create_publisher(ModelParameters, topics.MODEL_PARAMETERS, topics.LATCHED_QOS)
@@ -99,9 +113,29 @@ class ElementModelNode(Node):
 
     def on_samples(self, msg: RigSampleBatch) -> None:
         x, f, _ = conv.batch_arrays(msg)
+        problem = batch_problem(msg.first_sequence, msg.sample_period, len(x), len(f))
+        if problem is not None:
+            self.batches_dropped += 1
+            self.get_logger().warning(f'sample batch at sequence {msg.first_sequence} dropped: {problem} '
+                                      f'({self.batches_dropped} dropped so far)', throttle_duration_sec=WARN_EVERY)
+            return
         if len(x) == 0:
             return
+        if self.predictor.goes_back(msg.first_sequence):
+            self.get_logger().info(f'sample sequence went back from {self.predictor.next_sequence} to '
+                                   f'{msg.first_sequence} (driver restarted?): model and cycle detection start afresh')
+            self.predictor.restart()
+            self._cycle_queue.clear()
+            self.cycles = CyclePairer(self.cycles.hysteresis, self.cycles.min_amplitude)
+        bad = self.predictor.nonfinite_samples
         predicted, branches = self.predictor.process(msg.first_sequence, msg.sample_period, x, msg.temperature)
+        bad_force = len(f) - int(np.count_nonzero(np.isfinite(f)))
+        if self.predictor.nonfinite_samples > bad or bad_force:
+            self.get_logger().warning(f'sample batch at sequence {msg.first_sequence}: '
+                                      f'{self.predictor.nonfinite_samples - bad} non-finite displacement and '
+                                      f'{bad_force} non-finite force samples of {len(x)} left out of the model and '
+                                      f'the cycle metrics ({self.predictor.nonfinite_samples} displacement samples '
+                                      f'so far)', throttle_duration_sec=WARN_EVERY)
         if self.predictor.params is not self._published_params:
             self.publish_parameters()
         self.pub_prediction.publish(conv.prediction_msg(
@@ -122,9 +156,23 @@ class ElementModelNode(Node):
                 return
             self._cycle_queue.popleft()
             for lo, hi, block in self.blocks.segments(first, len(x)):
-                for c in self.cycles.feed(first + lo, dt, x[lo:hi], f[lo:hi], predicted[lo:hi], block):
-                    t_end = t0 + (c.end_sequence - first) * dt
-                    self.pub_metrics.publish(conv.cycle_metrics_msg(c.measured, c.model, block, c.index, t_end))
+                for a, b in _finite_runs(x[lo:hi], f[lo:hi], predicted[lo:hi]):
+                    # a run after skipped samples starts at a later sequence: the pairer restarts its detector
+                    self._feed_cycles(first, first + lo + a, dt, x[lo + a:lo + b], f[lo + a:lo + b],
+                                      predicted[lo + a:lo + b], block, t0)
+
+    def _feed_cycles(self, first, start, dt, x, f, predicted, block, t0) -> None:
+        try:
+            cycles = self.cycles.feed(start, dt, x, f, predicted, block)
+        except ValueError as exc:   # a cycle the harmonic fit cannot evaluate: report it, start the detection afresh
+            self.cycle_errors += 1
+            self.get_logger().warning(f'cycle metrics at sequence {start}: {exc}; cycle detection restarts '
+                                      f'({self.cycle_errors} so far)', throttle_duration_sec=WARN_EVERY)
+            self.cycles = CyclePairer(self.cycles.hysteresis, self.cycles.min_amplitude)
+            return
+        for c in cycles:
+            t_end = t0 + (c.end_sequence - first) * dt
+            self.pub_metrics.publish(conv.cycle_metrics_msg(c.measured, c.model, block, c.index, t_end))
 
     def publish_parameters(self) -> None:
         p = self.predictor
@@ -156,33 +204,44 @@ class ElementModelNode(Node):
         return 'source'
 
     @staticmethod
-    def _validate(choice: ModelChoice, changed) -> None:
+    def _validate(choice: ModelChoice, changed) -> tuple:
         """Check every model parameter that changed, used by the current source or not (a later switch of
-        ``source`` must never meet an invalid value), then the resulting choice. Raises ValueError."""
+        ``source`` must never meet an invalid value), then the resulting choice; returns ``choice.resolve()``.
+        Raises ValueError (also for a parameter file that is missing or unreadable)."""
         if choice.source not in SOURCES:
             raise ValueError(f"source '{choice.source}' is not one of {', '.join(SOURCES)}")
         if any(name.startswith('values.') for name in changed):
             ModelChoice(source='values', values=choice.values).resolve()
-        if 'parameter_set' in changed:
+        if 'parameter_set' in changed and choice.source != 'parameter_set':
             ModelChoice(source='parameter_set', parameter_set=choice.parameter_set).resolve()
         if 'temperature' in changed:
             ModelChoice(source='temperature', temperature=choice.temperature).resolve()
-        choice.resolve()
+        return choice.resolve()
 
     def _on_set_parameters(self, params) -> SetParametersResult:
         changed = {p.name: p.value for p in params}
         if not set(changed) & set(CHOICE_PARAMS):
             return SetParametersResult(successful=True)
         try:
-            self._validate(self._choice(changed), changed)
-        except ValueError as exc:
-            return SetParametersResult(successful=False, reason=f'{self._blame(str(exc))}: {exc}')
+            choice = self._choice(changed)
+            self._validated = (choice, self._validate(choice, changed))
+        except Exception as exc:   # noqa: BLE001 - whatever goes wrong, refuse the change; never raise from here
+            self._validated = None
+            what = str(exc) if isinstance(exc, ValueError) else f'{type(exc).__name__}: {exc}'
+            return SetParametersResult(successful=False, reason=f'{self._blame(what)}: {what}')
         return SetParametersResult(successful=True)
 
     def _after_set_parameters(self, params) -> None:
         names = {p.name for p in params}
         if names & set(CHOICE_PARAMS):
-            self.predictor.set_choice(self._choice())   # rebuilt (and warmed up) on the next batch
+            choice = self._choice()
+            validated, self._validated = self._validated, None
+            try:   # install what the validating callback resolved (a parameter file is read once, there)
+                self.predictor.set_choice(choice, validated[1] if validated and validated[0] == choice else None)
+            except Exception as exc:   # noqa: BLE001 - cannot happen after validation; keep the running model
+                self.get_logger().error(f'model parameters ({", ".join(sorted(names))}) not applied: {exc}; the '
+                                        f'model keeps {self.predictor.params}')
+                return
             self.publish_parameters()
             self.get_logger().info(f'model parameters changed ({", ".join(sorted(names))}): {self.predictor.params}, '
                                    f'friction reversal threshold {self.predictor.choice.friction_reversal_threshold:g} m')
@@ -190,6 +249,15 @@ class ElementModelNode(Node):
             self.publish_branches = self.get_parameter('publish_branches').value
         if 'cycle_metrics' in names:
             self.cycle_metrics = self.get_parameter('cycle_metrics').value
+
+
+def _finite_runs(*arrays) -> list[tuple[int, int]]:
+    """[(start, stop)] of the runs of samples finite in every array (all of them when there is nothing to skip)."""
+    good = np.logical_and.reduce([np.isfinite(a) for a in arrays])
+    if good.all():
+        return [(0, len(good))] if len(good) else []
+    edges = np.flatnonzero(np.diff(np.concatenate([[False], good, [False]]).astype(np.int8)))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
 def main(args=None):

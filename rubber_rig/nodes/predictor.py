@@ -11,6 +11,14 @@ displacement, and with the paper's rule every sensor-noise wiggle is a velocity 
 reference state, which collapses the friction loop (C_eq several per cent low at 0.5 Hz / 0.5 mm with 0.2 um
 noise). About 10x the displacement noise RMS keeps the noise out of the reference state (see
 rubber_rig.models.friction); 0 is the paper's rule.
+
+Why non-finite samples are skipped: one NaN displacement fed to the model would poison its state (the
+fractional branch remembers its whole history), and every later prediction would be NaN. A sample whose
+displacement is not finite is left out of the model run - exactly as if its frame had been lost - and its
+prediction is NaN; the model continues from the last finite sample, so the predictions afterwards equal those of
+a run without the bad samples. A batch whose sequence goes backwards (a restarted driver) starts the model
+afresh; batches the node cannot use at all (mismatched array lengths, a sample period that is not a finite
+positive number) are refused before they get here (``batch_problem``).
 """
 from __future__ import annotations
 
@@ -46,7 +54,10 @@ class ModelChoice:
         if not (isinstance(d, (int, float)) and math.isfinite(d) and d >= 0.0):
             raise ValueError(f'parameter friction_reversal_threshold must be a finite displacement >= 0 [m], got {d!r}')
         if self.source == 'parameter_set':
-            p = load_parameter_set(self.parameter_set)
+            try:   # a file set may be missing, unreadable, not YAML or hold bad values: all are a ValueError here
+                p = load_parameter_set(self.parameter_set)
+            except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
+                raise ValueError(f'parameter set {self.parameter_set!r}: {exc}') from None
             if not isinstance(p, Seed000Params):
                 raise ValueError(f'parameter set {self.parameter_set!r} is not a seed000 parameter set')
             t = _set_temperature(self.parameter_set)
@@ -85,12 +96,31 @@ class OnlinePredictor:
         self._history_len = 0
         self._dirty = True
 
-    def set_choice(self, choice: ModelChoice) -> None:
-        """Validate (raises ValueError) and switch; the model is rebuilt and warmed up on the next batch."""
-        resolved = choice.resolve()
+        self.nonfinite_samples = 0      # samples whose displacement was not finite (skipped by the model)
+        self.restarts = 0               # times the sequence went backwards and the model started afresh
+
+    def set_choice(self, choice: ModelChoice, resolved: tuple | None = None) -> None:
+        """Switch to ``choice``; the model is rebuilt and warmed up on the next batch. ``resolved``: what
+        ``choice.resolve()`` returned when the choice was validated (so a parameter file is read once, in the
+        validating callback); otherwise it is resolved here (raises ValueError, nothing changes then)."""
+        if resolved is None:
+            resolved = choice.resolve()
         self.choice = choice
         self.params, self.parameter_set, self.temperature = resolved
         self._dirty = True
+
+    def goes_back(self, first_sequence: int) -> bool:
+        """True if a batch starting at ``first_sequence`` does not follow the last one (sequence backwards or
+        repeated: a restarted driver, or a replayed recording)."""
+        return self.next_sequence is not None and first_sequence < self.next_sequence
+
+    def restart(self) -> None:
+        """Forget the stream: the next batch builds the model from rest (no warm-up on the old history)."""
+        self.model, self.dt, self.next_sequence = None, None, None
+        self._history.clear()
+        self._history_len = 0
+        self._dirty = True
+        self.restarts += 1
 
     @property
     def branch_names(self) -> list[str]:
@@ -98,7 +128,13 @@ class OnlinePredictor:
 
     def process(self, first_sequence: int, dt: float, x: np.ndarray,
                 temperature: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Predicted force and branch forces [n_branch, n] for one batch of measured displacement."""
+        """Predicted force and branch forces [n_branch, n] for one batch of measured displacement.
+
+        Samples whose displacement is not finite are skipped by the model and predicted as NaN (module doc); a
+        batch whose sequence goes backwards restarts the model (``restart``)."""
+        if self.goes_back(first_sequence):
+            self.restart()
+        x = np.asarray(x, dtype=np.float64)
         self.next_sequence = first_sequence + len(x)
         if self.choice.source == 'rig_temperature' and temperature is not None and math.isfinite(temperature):
             if not math.isfinite(self.temperature) or abs(temperature - self.temperature) >= self.temperature_hysteresis:
@@ -109,9 +145,25 @@ class OnlinePredictor:
                     pass  # outside the identified range: keep the last valid parameters
         if self._dirty or self.dt is None or not math.isclose(dt, self.dt, rel_tol=1e-9):
             self._rebuild(dt)
-        total, branches = self.model.run(np.asarray(x, dtype=np.float64), return_branches=True)
-        self._remember(x)
-        return np.asarray(total), np.asarray(branches)
+        good = np.isfinite(x)
+        bad = x.size - int(np.count_nonzero(good))
+        self.nonfinite_samples += bad
+        xs = x[good] if bad else x
+        total = np.full(x.size, np.nan)
+        branches = np.full((len(self.model.branch_names), x.size), np.nan)
+        if xs.size:
+            t, b = self.model.run(xs, return_branches=True)
+            if not np.all(np.isfinite(t)):
+                # finite input, non-finite output: never carry such a state on; start afresh on the next batch
+                self.restart()
+                self.next_sequence = first_sequence + len(x)
+                return total, branches
+            if bad:
+                total[good], branches[:, good] = t, b
+            else:
+                total, branches = np.asarray(t), np.asarray(b)
+        self._remember(xs)
+        return total, branches
 
     # -- internals --------------------------------------------------------------------------------------
     def _rebuild(self, dt: float) -> None:
@@ -127,12 +179,23 @@ class OnlinePredictor:
 
     def _remember(self, x: np.ndarray) -> None:
         keep = int(self.warmup_time / self.dt) if self.dt else 0
-        if keep <= 0:
+        if keep <= 0 or len(x) == 0:
             return
         self._history.append(np.array(x, dtype=np.float64))
         self._history_len += len(x)
         while self._history and self._history_len - len(self._history[0]) >= keep:
             self._history_len -= len(self._history.popleft())
+
+
+def batch_problem(first_sequence: int, sample_period: float, n_displacement: int, n_force: int) -> str | None:
+    """Why a sample batch cannot be used at all (None if it can): the node drops such a batch with a warning."""
+    if n_force != n_displacement:
+        return f'{n_displacement} displacement and {n_force} force samples (lengths differ)'
+    if not (isinstance(sample_period, (int, float)) and math.isfinite(sample_period) and sample_period > 0):
+        return f'sample_period {sample_period!r} s is not a finite positive number'
+    if first_sequence < 0:
+        return f'first_sequence {first_sequence} is negative'
+    return None
 
 
 class BlockIndex:
@@ -142,6 +205,8 @@ class BlockIndex:
         self._ranges: deque[tuple[int, int, int]] = deque(maxlen=keep)
 
     def add(self, first_sequence: int, n: int, block_index: int) -> None:
+        if self._ranges and first_sequence < self._ranges[-1][0]:
+            self._ranges.clear()       # the setpoint sequence went backwards: a new run, the old ranges are void
         self._ranges.append((first_sequence, first_sequence + n, block_index))
 
     def covered(self, sequence: int) -> bool:
