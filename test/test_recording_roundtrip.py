@@ -109,7 +109,7 @@ def recorded(tmp_path_factory):
 
 
 def test_type_list_is_complete():
-    assert len(message_types('msg_defs')) == 11
+    assert len(message_types('msg_defs')) == 12   # 11 + RecorderStatus
     assert 'std_msgs/msg/Header' in TYPES and 'diagnostic_msgs/msg/DiagnosticArray' in TYPES
 
 

@@ -11,7 +11,12 @@ Topics are found by message type, not by name, so namespaces do not matter:
 - every other topic -> ``messages[topic]``: list of (log_time_ns, decoded message).
 - metadata: the ``rubber_rig`` record (specimen, temperature, model, ...) of the first file;
   ``closing``: the loss reports (``rubber_rig.close``) of the files; ``gaps``: sequence gaps computed
-  from the data itself (so they are known for foreign recordings too).
+  from the data itself (so they are known for foreign recordings too): bus loss the driver reported
+  (``frames_lost``) and messages missed in transport (the stored DDS publication sequence skipped); a
+  sequence jump with nothing published in between (between two programs) is not a loss (``jumps``).
+- a file that was not closed (recorder killed, write error) is read up to its last complete chunk when
+  ``allow_truncated``; ``unclosed`` says where its intact data ends, and ``tail_unaccounted`` that an
+  unknown number of samples after that point is missing (``loss_text()`` says it in words).
 """
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -21,7 +26,7 @@ import numpy as np
 from .errors import RecordingError
 from .gaps import GapTracker
 from .mcapio import Decoders, decode_metadata, read_file, recording_files
-from .writer import CLOSE_METADATA_NAME, METADATA_NAME
+from .writer import CLOSE_METADATA_NAME, METADATA_NAME, SEQUENCE_SOURCE_KEY
 
 BATCH = 'msg_defs/msg/RigSampleBatch'
 SAMPLE = 'msg_defs/msg/RigSample'
@@ -41,7 +46,9 @@ class Recording:
     other_metadata: dict = field(default_factory=dict)
     gaps: list = field(default_factory=list)
     samples_lost: int = 0
+    jumps: list = field(default_factory=list)       # sequence jumps that are not loss (between programs)
     complete: bool = True
+    unclosed: list = field(default_factory=list)    # per unclosed file: where its intact data ends
     start_ns: int = 0
     end_ns: int = 0
     sample_period: float = float('nan')
@@ -68,6 +75,29 @@ class Recording:
     def __len__(self):
         return len(self.sequence)
 
+    @property
+    def tail_unaccounted(self) -> bool:
+        """True if a file was not closed: samples after its last intact chunk are missing, how many is
+        unknown (the recorder that knew was killed or could not write)."""
+        return bool(self.unclosed)
+
+    def loss_text(self) -> str:
+        """The loss of this recording in words (one line per finding), never '0 lost' when unknown."""
+        lines = []
+        known = f'{self.samples_lost} samples lost in {len(self.gaps)} sequence gaps'
+        if self.jumps:
+            known += f' ({len(self.jumps)} sequence jumps between programs, not loss)'
+        if self.unclosed:
+            lines.append(known + ' within the intact data, plus an unknown number after its end:')
+            for u in self.unclosed:
+                seq = '' if u['last_sequence'] is None else f", last sample sequence {u['last_sequence']}"
+                lines.append(f"  {u['file']}: NOT CLOSED (recorder killed or its writes failed); intact data ends "
+                             f"at log time {u['last_log_time_ns'] / 1e9:.3f} s{seq}; samples after that are "
+                             f'unaccounted for')
+        else:
+            lines.append(known)
+        return '\n'.join(lines)
+
 
 def _pick(topics_of_type, preferred):
     if not topics_of_type:
@@ -85,10 +115,13 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
     ``allow_truncated`` (then everything up to the last complete chunk is read)."""
     files = recording_files(path)
     rec = Recording(files=[str(f) for f in files])
-    raw = []                                   # (log_time, topic, type, schema, data, file)
+    raw = []                                   # (log_time, topic, type, schema, data, file, pub. sequence)
     for f in files:
         schemas, channels, messages, metadata, complete = read_file(Path(f), allow_truncated)
         rec.complete &= complete
+        if not complete:
+            rec.unclosed.append({'file': str(f), 'last_log_time_ns': max((m[1] for m in messages), default=0),
+                                 'last_sequence': None, 'messages': len(messages)})
         for name, values in metadata:
             if name == METADATA_NAME:
                 if not rec.metadata:
@@ -111,7 +144,8 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
                 'type': schema.name, 'count': 0,
                 'qos': channel.metadata.get('offered_qos_profiles', '')})
             info['count'] += 1
-            raw.append((log_time, channel.topic, schema.name, schema, data, f))
+            pubseq = sequence if channel.metadata.get(SEQUENCE_SOURCE_KEY) == 'publication' else None
+            raw.append((log_time, channel.topic, schema.name, schema, data, f, pubseq))
     if raw:
         rec.start_ns = min(r[0] for r in raw)
         rec.end_ns = max(r[0] for r in raw)
@@ -123,10 +157,10 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
     setp_topic = _pick(by_type.get(SETPOINTS), 'setpoints')
     decoders = {f: Decoders(f) for f in files}
     samples, predictions, setpoints = [], [], []
-    for log_time, topic, type_name, schema, data, f in raw:
+    for log_time, topic, type_name, schema, data, f, pubseq in raw:
         dec = decoders[f]
         if topic == sample_topic:
-            samples.append(dec.decode(schema, data, topic))
+            samples.append((dec.decode(schema, data, topic), pubseq, str(f)))
         elif topic == pred_topic:
             predictions.append(dec.decode(schema, data, topic))
         elif topic == setp_topic:
@@ -168,7 +202,8 @@ def _fill_samples(rec: Recording, samples, topic):
     tracker = GapTracker()
     t, d, fo, sp, te, st, seq = [], [], [], [], [], [], []
     periods = []
-    for m in samples:
+    last_in_file = {}
+    for m, pubseq, f in samples:
         if hasattr(m, 'first_sequence'):                       # RigSampleBatch
             n = len(m.displacement)
             first = int(m.first_sequence)
@@ -193,12 +228,18 @@ def _fill_samples(rec: Recording, samples, topic):
         if len(fo[-1]) != n or len(sp[-1]) != n:
             raise RecordingError(f'{topic}: batch at sequence {first} has arrays of different '
                                  f'lengths ({n}, {len(fo[-1])}, {len(sp[-1])})')
-        tracker.observe(topic, first, n)
+        tracker.observe(topic, first, n, frames_lost=int(getattr(m, 'frames_lost', 0) or 0),
+                        publication_sequence=pubseq)
+        if n:
+            last_in_file[f] = first + n - 1
     rec.time_ns = _cat(t, np.int64)
     rec.time = (rec.time_ns - rec.time_ns[0]) * 1e-9 if len(rec.time_ns) else np.zeros(0)
     rec.displacement, rec.force, rec.setpoint = _cat(d, float), _cat(fo, float), _cat(sp, float)
     rec.temperature, rec.status, rec.sequence = _cat(te, float), _cat(st, np.uint32), _cat(seq, np.uint64)
     rec.gaps = [e for e in tracker.events if e['kind'] == 'gap']
+    rec.jumps = [e for e in tracker.events if e['kind'] == 'jump']
+    for u in rec.unclosed:
+        u['last_sequence'] = last_in_file.get(u['file'])
     rec.samples_lost = tracker.samples_lost
     if periods:
         rec.sample_period = float(np.median(periods))

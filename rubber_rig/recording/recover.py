@@ -18,7 +18,8 @@ from .bagmeta import METADATA_FILE, write_bag_metadata
 from .errors import RecordingError, RecordingWriteError
 from .gaps import SEQUENCED_TYPES, GapTracker
 from .mcapio import Decoders, check_file, iter_records
-from .writer import encode_metadata
+from .gaps import sequence_span
+from .writer import SEQUENCE_SOURCE_KEY, encode_metadata
 
 RECOVERED_METADATA_NAME = 'rubber_rig.recovered'
 
@@ -33,6 +34,22 @@ class RecoverResult:
     metadata_records: int
     samples_lost: int
     sequence_gaps: int
+    last_log_time_ns: int = 0          # log time of the last message recovered (where intact data ends)
+    last_sequence: int = None          # sequence of the last sample recovered (None: no samples)
+
+    @property
+    def tail_unaccounted(self) -> bool:
+        """A truncated file lost an unknown number of samples after its last intact chunk."""
+        return not self.was_complete
+
+    def loss_text(self) -> str:
+        known = f'{self.samples_lost} samples lost in {self.sequence_gaps} sequence gaps'
+        if self.was_complete:
+            return known
+        seq = '' if self.last_sequence is None else f', last sample sequence {self.last_sequence}'
+        return (f'{self.source} was NOT CLOSED (recorder killed or its writes failed): intact data ends at log '
+                f'time {self.last_log_time_ns / 1e9:.3f} s{seq}; samples after that are unaccounted for '
+                f'(unknown number); {known} within the intact data')
 
 
 def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
@@ -53,6 +70,7 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
     gaps = GapTracker()
     decoders = Decoders(path)
     header_seen = False
+    last = {'log_time': 0, 'sequence': None}
     try:
         with open(target, 'wb' if in_place else 'xb') as out:
             writer = McapWriter(out, chunk_size=chunk_size, compression=CompressionType.ZSTD)
@@ -70,17 +88,22 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
                     channels[record.id] = writer.register_channel(
                         record.topic, record.message_encoding, schemas.get(record.schema_id, 0),
                         dict(record.metadata))
-                    channel_types[record.id] = (record.topic, schema_records.get(record.schema_id))
+                    channel_types[record.id] = (record.topic, schema_records.get(record.schema_id),
+                                                record.metadata.get(SEQUENCE_SOURCE_KEY) == 'publication')
                 elif isinstance(record, Message) and record.channel_id in channels:
                     writer.add_message(channels[record.channel_id], record.log_time, record.data,
                                        record.publish_time, record.sequence)
                     counts['messages'] += 1
-                    topic, schema = channel_types[record.channel_id]
+                    last['log_time'] = max(last['log_time'], record.log_time)
+                    topic, schema, pubseq = channel_types[record.channel_id]
                     if schema is not None and schema.name in SEQUENCED_TYPES:
                         try:
-                            gaps.observe_message(topic, schema.name,
-                                                 decoders.decode(schema, record.data, topic),
-                                                 record.log_time)
+                            msg = decoders.decode(schema, record.data, topic)
+                            gaps.observe_message(topic, schema.name, msg, record.log_time,
+                                                 record.sequence if pubseq else None)
+                            span = sequence_span(schema.name, msg)
+                            if span and span[1] and schema.name.endswith(('RigSampleBatch', 'RigSample')):
+                                last['sequence'] = span[0] + span[1] - 1
                         except RecordingError:
                             pass
                 elif isinstance(record, Metadata):
@@ -93,7 +116,9 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
                 raise RecordingError(f'{path}: no MCAP header record: nothing to recover')
             report = dict(gaps.summary(), source=str(path), was_complete=was_complete,
                           messages_recovered=counts['messages'],
-                          gap_events=gaps.events)
+                          gap_events=gaps.events, last_log_time_ns=last['log_time'],
+                          last_sample_sequence=last['sequence'],
+                          tail_unaccounted=not was_complete)
             writer.add_metadata(RECOVERED_METADATA_NAME, encode_metadata(report))
             writer.finish()
             out.flush()
@@ -118,7 +143,7 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
         if (path.parent / METADATA_FILE).exists():   # part of a bag: index the recovered file too
             write_bag_metadata(path.parent)
     return RecoverResult(str(path), str(target), was_complete, counts['messages'], len(channels),
-                         counts['metadata'], gaps.samples_lost, gaps.gaps)
+                         counts['metadata'], gaps.samples_lost, gaps.gaps, last['log_time'], last['sequence'])
 
 
 def _write_error(target: Path, exc: OSError) -> RecordingWriteError:

@@ -5,7 +5,11 @@
 - Sequence gaps are tracked across the files of one recording (a gap across a split is still seen).
 - A write error (disk full, file too large) stops the recording cleanly: the file keeps everything up
   to its last complete chunk, the error is kept in ``error`` and messages that arrive afterwards are
-  counted as not recorded (never silently lost).
+  counted as not recorded (never silently lost): the samples of the chunk that could not be written and
+  of every sample batch that arrives after the error are added to ``samples_lost_total``.
+- ``start`` creates the directory and the first file and writes its header before it returns, so a
+  recording that started is known writable; a directory that cannot be created or written raises
+  RecordingWriteError naming the path (and keeps it in ``error``).
 - Snapshot: with ``snapshot_duration_s`` > 0 the last N seconds (log time) are kept in memory, and
   ``snapshot()`` writes them to their own file, recording or not (like rosbag2's snapshot mode).
 """
@@ -16,7 +20,9 @@ from pathlib import Path
 
 from .errors import RecordingError, RecordingWriteError
 from .bagmeta import write_bag_metadata
-from .gaps import GapTracker
+from .gaps import GapTracker, sequence_span
+from .mcapio import Decoders
+from .msgdefs import full_definition, normalize_type
 from .writer import RecordingWriter
 
 
@@ -56,6 +62,9 @@ class Recorder:
         self.reports = []                    # loss report of each closed file
         self.error = None                    # RecordingWriteError that stopped the recording
         self.not_recorded_after_error = 0
+        self.samples_not_recorded = 0        # samples of batches that arrived after a write error
+        self.samples_unwritten = 0           # samples in chunks a write error lost
+        self._decoders = None
         self.warnings = []
         self.messages_written = 0
         self.dropped = 0
@@ -71,6 +80,12 @@ class Recorder:
     def current_file(self):
         return self.writer.path if self.writer is not None else None
 
+    @property
+    def samples_lost_total(self) -> int:
+        """Every sample known lost: sequence gaps that are real loss, and samples received but not
+        written (a write error's lost chunk, batches after the error)."""
+        return self.gaps.samples_lost + self.samples_not_recorded + self.samples_unwritten
+
     def set_qos(self, topic: str, qos) -> None:
         self._qos[topic] = qos
 
@@ -85,6 +100,8 @@ class Recorder:
             + self.not_recorded_after_error,
             'messages_flushed_current_file': w.messages_flushed if w else 0,
             'not_recorded_after_error': self.not_recorded_after_error,
+            'samples_not_recorded': self.samples_not_recorded + self.samples_unwritten,
+            'samples_lost_total': self.samples_lost_total,
             'bytes_current_file': w.size_estimate if w else 0,
             'error': str(self.error) if self.error else '',
             'warnings': '; '.join(self.warnings),
@@ -104,18 +121,24 @@ class Recorder:
         try:
             base.mkdir(parents=True, exist_ok=True)
         except OSError as exc:
-            raise RecordingWriteError(f'cannot create recording directory {base}: {exc.strerror}',
-                                      exc.errno) from None
+            self.error = RecordingWriteError(f'cannot create recording directory {base.absolute()}: '
+                                             f'{exc.strerror}', exc.errno)
+            raise self.error from None
         self._base, self._index = base, 0
         self.gaps = GapTracker()
         self.files, self.reports, self._summaries = [], [], {}
         self.error, self.not_recorded_after_error = None, 0
+        self.samples_not_recorded = self.samples_unwritten = 0
         self.messages_written = self.dropped = 0
-        self._open()
+        try:
+            self._open()
+        except RecordingError as exc:        # read-only directory, disk full at the header, ...
+            self.error = exc
+            raise
         return self.writer.path
 
     def _open(self):
-        path = self._base / f'{self._base.name}_{self._index}.mcap'
+        path = (self._base / f'{self._base.name}_{self._index}.mcap').absolute()
         self._index += 1
         metadata = dict(self.metadata, recording=self._base.name, file_index=str(self._index - 1))
         self.writer = RecordingWriter(path, metadata, compression=self.compression,
@@ -133,6 +156,7 @@ class Recorder:
             self.error = self.error or exc
         self.messages_written += w.messages_written
         self.dropped += sum(w.dropped.values())
+        self.samples_unwritten += w.samples_lost_unwritten
         try:                                 # the bag so far, for rosbag2 / rosbags readers
             write_bag_metadata(self._base, self.files, self._summaries)
         except (OSError, RecordingError) as exc:   # the MCAP files are complete; only the index is missing
@@ -168,6 +192,7 @@ class Recorder:
         if w is None:
             if self.error is not None:
                 self.not_recorded_after_error += 1
+                self.samples_not_recorded += self._samples_in(topic, msg_type, msg)
             return False
         try:
             if w.messages_written and (
@@ -181,9 +206,25 @@ class Recorder:
             return True
         except RecordingWriteError as exc:
             self._fail(exc)
+            self.samples_not_recorded += self._samples_in(topic, msg_type, msg)
             return False
         except (RecordingError, ValueError):
             return False                     # counted by the writer (unknown type / encode error)
+
+    def _samples_in(self, topic, msg_type, msg) -> int:
+        """Samples carried by a message that could not be written (0 for other types)."""
+        try:
+            msg_type = normalize_type(msg_type)
+            if isinstance(msg, (bytes, bytearray, memoryview)):
+                from mcap.records import Schema
+                if self._decoders is None:
+                    self._decoders = Decoders('(not recorded)', lazy_fallback=True)
+                schema = Schema(0, full_definition(msg_type).encode(), 'ros2msg', msg_type)
+                msg = self._decoders.decode(schema, bytes(msg), topic)
+            span = sequence_span(msg_type, msg)
+        except Exception:  # noqa: BLE001 - not a sample stream, or undecodable: no samples to count
+            return 0
+        return span[1] if span else 0
 
     def flush(self, fsync: bool = False) -> None:
         if self.writer is not None:

@@ -24,12 +24,15 @@ from mcap_ros2._dynamic import serialize_dynamic
 
 from . import bagmeta
 from .errors import RecordingError, RecordingWriteError
-from .gaps import SEQUENCED_TYPES, GapTracker
+from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
 from .mcapio import Decoders
 from .msgdefs import MessageDefinitionError, full_definition, normalize_type, type_hash, type_of
 from .qos import offered_qos_yaml
 
 METADATA_NAME = 'rubber_rig'           # self-description record written at the start of every file
+# channel metadata key: 'publication' when the MCAP message sequence is the DDS publication sequence number
+# (gaps in it are messages lost in transport), 'writer' when the writer numbered the messages itself
+SEQUENCE_SOURCE_KEY = 'rubber_rig.sequence'
 CLOSE_METADATA_NAME = 'rubber_rig.close'  # loss accounting written when a file is closed
 COMPRESSION = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE,
                '': CompressionType.NONE}
@@ -146,6 +149,10 @@ class RecordingWriter:
                               len(self.gaps.events))
         self.messages_written = 0
         self.messages_flushed = 0          # messages in complete chunks handed to the OS
+        self.samples_written = 0           # samples of sequenced messages (RigSampleBatch, ...) written
+        self.samples_flushed = 0           # ... of them in complete chunks handed to the OS
+        self.samples_lost_unwritten = 0    # samples of the chunk a write error lost
+        self.last_flushed_log_time_ns = None
         self.messages_by_topic = {}
         self.dropped = {}                  # reason -> count of messages not written
         self.first_log_time_ns = None
@@ -185,6 +192,7 @@ class RecordingWriter:
             # messages of the chunk that could not be written are lost too: say how many
             if self.messages_written > self.messages_flushed:
                 self.count_dropped('lost_in_unwritten_chunk', self.messages_written - self.messages_flushed)
+            self.samples_lost_unwritten = self.samples_written - self.samples_flushed
             what = {errno_mod.ENOSPC: 'disk full', errno_mod.EFBIG: 'file too large',
                     errno_mod.EDQUOT: 'disk quota exceeded'}.get(exc.errno, exc.strerror)
             raise RecordingWriteError(f'writing {self.path} failed ({what}); the file is kept up to '
@@ -195,7 +203,8 @@ class RecordingWriter:
         self.dropped[reason] = self.dropped.get(reason, 0) + n
 
     # -- channels ----------------------------------------------------------------------------
-    def add_channel(self, topic: str, msg_type: str, qos=None, topic_type_hash: str = None) -> int:
+    def add_channel(self, topic: str, msg_type: str, qos=None, topic_type_hash: str = None,
+                    sequence_source: str = 'writer') -> int:
         """Register a topic (done implicitly by write_message). ``qos``: offered profiles as a list
         of dicts (qos.qos_entry keywords) or the rosbag2 YAML string."""
         msg_type = normalize_type(msg_type)
@@ -212,7 +221,7 @@ class RecordingWriter:
             self._schema_records[msg_type] = Schema(schema_id, text, 'ros2msg', msg_type)
         metadata = {'offered_qos_profiles': offered_qos_yaml(qos or []),
                     'topic_type_hash': topic_type_hash if topic_type_hash is not None
-                    else type_hash(msg_type)}
+                    else type_hash(msg_type), SEQUENCE_SOURCE_KEY: sequence_source}
         self._channel_qos[topic] = metadata['offered_qos_profiles']
         self._channel_hash[topic] = metadata['topic_type_hash']
         channel_id = self._guard(self._mcap.register_channel, topic, 'cdr', schema_id, metadata)
@@ -236,7 +245,8 @@ class RecordingWriter:
             msg_type = type_of(msg)
         try:
             msg_type = normalize_type(msg_type)
-            channel_id = self.add_channel(topic, msg_type, qos)
+            channel_id = self.add_channel(topic, msg_type, qos,
+                                          sequence_source='writer' if sequence is None else 'publication')
         except MessageDefinitionError:
             self.count_dropped('unknown_type')
             raise
@@ -260,6 +270,7 @@ class RecordingWriter:
             log_time_ns = time.time_ns()
         if publish_time_ns is None:
             publish_time_ns = log_time_ns
+        publication_sequence = sequence
         if sequence is None:
             sequence = self._sequences[channel_id] + 1
         self._sequences[channel_id] = sequence
@@ -277,21 +288,32 @@ class RecordingWriter:
             self.first_log_time_ns = self._last_flush_ns = log_time_ns
         self.last_log_time_ns = log_time_ns
         if msg_type in SEQUENCED_TYPES:
-            self._track(topic, msg_type, data, decoded, log_time_ns)
+            self._track(topic, msg_type, data, decoded, log_time_ns, publication_sequence)
         if self._file.tell() != before:    # mcap closed a full chunk (with this message) just now
             self._pending = 0
-            self.messages_flushed = self.messages_written
+            self._mark_flushed()
         if self._flush_interval_ns and log_time_ns - self._last_flush_ns >= self._flush_interval_ns:
             self.flush()
 
-    def _track(self, topic, msg_type, data, decoded, log_time_ns):
+    def _mark_flushed(self):
+        self.messages_flushed = self.messages_written
+        self.samples_flushed = self.samples_written
+        self.last_flushed_log_time_ns = self.last_log_time_ns
+
+    def _track(self, topic, msg_type, data, decoded, log_time_ns, publication_sequence=None):
         if decoded is None:
             try:
                 decoded = self._decoders.decode(self._schema_records[msg_type], data, topic)
             except Exception:  # undecodable bytes are recorded anyway; count them
                 self.count_dropped('undecodable_for_gap_check')
                 return
-        self.gaps.observe_message(topic, msg_type, decoded, log_time_ns)
+        event = self.gaps.observe_message(topic, msg_type, decoded, log_time_ns,
+                                          publication_sequence & 0xFFFFFFFF
+                                          if publication_sequence is not None else None)
+        span = sequence_span(msg_type, decoded)
+        if span is not None:
+            self.samples_written += span[1]
+        return event
 
     def add_metadata(self, name: str, values: dict) -> None:
         self._guard(self._mcap.add_metadata, name, encode_metadata(values))
@@ -300,7 +322,7 @@ class RecordingWriter:
         """Close the chunk in progress and hand it to the OS (survives SIGKILL; fsync: power loss)."""
         self._guard(self._mcap.flush)
         self._pending = 0
-        self.messages_flushed = self.messages_written
+        self._mark_flushed()
         self._last_flush_ns = self.last_log_time_ns or 0
         if fsync:
             self._guard(self._file.fsync)
@@ -314,6 +336,7 @@ class RecordingWriter:
             'dropped_by_reason': dict(self.dropped),
             'sequence_gaps': self.gaps.gaps - g0,
             'samples_lost': self.gaps.samples_lost - lost0,
+            'samples_lost_unwritten': self.samples_lost_unwritten,
             'sequence_restarts': self.gaps.restarts - r0,
             'gap_events': self.gaps.events[e0:],
             'total_sequence_gaps': self.gaps.gaps,
