@@ -19,6 +19,8 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from .ramp import stopping_positions
+
 from . import waveforms as wf
 
 # setpoints the pre-start check generates at most per program (about 0.1 s of numpy); the rest is bounded
@@ -32,7 +34,9 @@ class LimitError(ValueError):
 
 @dataclass
 class Limits:
-    """Safe envelope, SI: displacement_min/max [m], velocity_max [m/s], force_max [N] (absolute).
+    """Safe envelope, SI: displacement_min/max [m], velocity_max [m/s], force_max [N] (absolute),
+    deceleration_max [m/s^2]: the hardest braking an abort ramp may use, so every setpoint must be able to stop
+    inside the displacement range at it (ramp.stopping_positions) - then an abort at any phase stays inside.
 
     stiffness_estimate [N/m], if given, lets the pre-start check predict the peak force k * |x|; force_model, if
     given, is a callable block -> predicted peak |force| [N] that the pre-start check asks for every block
@@ -41,18 +45,19 @@ class Limits:
     displacement_max: float = 5e-3
     velocity_max: float = 0.2
     force_max: float = 60e3
+    deceleration_max: float = 100.0
     stiffness_estimate: Optional[float] = None
     force_model: Optional[Callable] = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
-        for name in ('displacement_min', 'displacement_max', 'velocity_max', 'force_max'):
+        for name in ('displacement_min', 'displacement_max', 'velocity_max', 'force_max', 'deceleration_max'):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise LimitError(f"limits: field '{name}': expected a finite number, got {v!r}")
         if self.displacement_min >= self.displacement_max:
             raise LimitError(f"limits: field 'displacement_min': {self.displacement_min:g} m must be below "
                              f"displacement_max {self.displacement_max:g} m")
-        for name in ('velocity_max', 'force_max'):
+        for name in ('velocity_max', 'force_max', 'deceleration_max'):
             if getattr(self, name) <= 0:
                 raise LimitError(f"limits: field '{name}': must be > 0")
         k = self.stiffness_estimate
@@ -98,7 +103,15 @@ class Limits:
         self._check_range(lo, hi, where)
         seq = x if previous is None else np.concatenate([[previous], x])
         if seq.size > 1:
-            self._check_velocity(float(np.max(np.abs(np.diff(seq)))) * sample_rate, where)
+            v = np.diff(seq) * sample_rate
+            self._check_velocity(float(np.max(np.abs(v))), where)
+            stop = stopping_positions(seq[1:], v, self.deceleration_max, sample_rate)
+            k = int(np.argmax(np.maximum(self.displacement_min - stop, stop - self.displacement_max)))
+            if stop[k] < self.displacement_min - 1e-9 or stop[k] > self.displacement_max + 1e-9:
+                raise LimitError(f'{where}: at {seq[k + 1] * 1e3:.4f} mm and {v[k]:.4g} m/s an abort braking at '
+                                 f'deceleration_max {self.deceleration_max:g} m/s^2 would stop at '
+                                 f'{stop[k] * 1e3:.4f} mm, outside the limits {self.displacement_min * 1e3:g}..'
+                                 f'{self.displacement_max * 1e3:g} mm')
 
     def _check_range(self, lo: float, hi: float, where: str):
         if lo < self.displacement_min - 1e-12 or hi > self.displacement_max + 1e-12:
@@ -200,6 +213,12 @@ class Limits:
         else:                                                              # hold
             lo = hi = blk.start_level
             v = 0.0
+        if blk.periodic and not (blk.waveform != 'triangle' and blk.waveform != 'square'
+                                 and (2 * math.pi * f_top) ** 2 * a <= self.deceleration_max):
+            # where an abort can stop: a sine whose acceleration stays below deceleration_max stops inside its
+            # own peaks; otherwise allow for the braking distance at the peak speed
+            brake = v * v / (2 * self.deceleration_max) + v / fs
+            lo, hi = lo - brake, hi + brake
         self._check_range(lo, hi, where)
         self._check_velocity(v, where)
         self._check_stiffness_force(max(abs(lo), abs(hi)), where)

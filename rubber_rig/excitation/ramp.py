@@ -1,40 +1,91 @@
-"""The safe ramp: a smooth move from any position and velocity to a rest position, never a step."""
+"""The safe ramp: a smooth move from any position and velocity to a rest position, never a step, never
+outside the displacement limits, never faster than the stated velocity and deceleration.
+
+Why a velocity-from-distance law and not a linear follower: a follower (second-order loop towards the
+target) overshoots when it starts fast (aborting a 14 Hz sine near its peak) and has no notion of the limits;
+the braking curve below is the discrete-time stopping distance, so the ramp provably stops inside
+[lower, upper] whenever the starting state can stop there at ``decel_max`` (which is what
+``stopping_positions`` lets the host check on every streamed setpoint before it is sent)."""
 import math
 
 import numpy as np
 
+# Defaults of the controller-side and host-side ramps [m/s, m/s^2]
+RAMP_VELOCITY = 0.05       # travel speed towards the rest position
+RAMP_ACCEL = 2.0           # gentle acceleration/deceleration of the travel part
+DECEL_MAX = 100.0          # hardest braking a ramp may use to stop the motion it inherited
+
+
+def braking_velocity(distance, dv: float, dt: float):
+    """Largest speed [m/s] from which a motion that loses at most dv [m/s] per sample of dt [s] still stops
+    within `distance` [m] (>= 0): the positive root of dt * v * (v / dv + 1) / 2 = distance, the distance
+    covered by v, v - dv, v - 2 dv, ... Works on scalars and arrays."""
+    d = np.maximum(distance, 0.0)
+    return 0.5 * (-dv + np.sqrt(dv * dv + 8.0 * dv * d / dt))
+
+
+def stopping_positions(x, v, decel: float, sample_rate: float):
+    """Where a motion at positions x [m] with velocities v [m/s] (arrays of the same shape) comes to rest when it
+    brakes at `decel` [m/s^2] from the next sample on (discrete-time: dt * v * (|v| / dv + 1) / 2 further)."""
+    dt = 1.0 / sample_rate
+    v = np.asarray(v, dtype=float)
+    speed = np.abs(v)
+    return np.asarray(x, dtype=float) + np.sign(v) * dt * speed * (speed / (decel * dt) + 1.0) / 2.0
+
 
 class SafeRamp:
-    """Critically damped second-order follower with velocity and acceleration limits.
+    """Move from x0 [m] at velocity v0 [m/s] to `target` [m] and stop there.
 
-    Starts from the current setpoint x0 [m] and velocity v0 [m/s], so there is no step and no velocity jump,
-    and settles on `target` [m]. bandwidth [Hz] sets how fast (about 1/bandwidth s per 1e-4 of the distance);
-    velocity_max [m/s] and accel_max [m/s^2] bound the motion. Used by the program runner (abort, hold) and by
-    the simulated controller (abort, host watchdog).
-    """
+    Each sample: the speed towards the target is at most ``velocity_max`` and at most the speed from which
+    ``accel_max`` stops it at the target (trapezoidal profile); a velocity the ramp inherited (faster, or away
+    from the target) is braked at up to ``decel_max``. With `lower`/`upper` [m] the motion also never plans
+    past a bound it could not stop before; if the start state cannot stop inside them at ``decel_max`` (a
+    program the host did not check), it brakes harder and counts it in ``decel_exceeded`` rather than leave
+    the limits. Position and velocity are continuous at the start (no step); the last move is below
+    ``tolerance`` (0.05 um). Used by the program runner (abort, hold, approach) and the simulated controller
+    (abort, host watchdog, stream loss)."""
 
-    def __init__(self, x0: float, v0: float, target: float, sample_rate: float, bandwidth: float = 2.0,
-                 velocity_max: float = 0.05, accel_max: float = 20.0, tolerance: float = 5e-8):
-        self.x, self.v, self.target = float(x0), float(v0), float(target)
-        self.dt = 1.0 / sample_rate
-        self.wn = 2 * math.pi * bandwidth
-        self.v_max, self.a_max, self.tol = velocity_max, accel_max, tolerance
+    def __init__(self, x0: float, v0: float, target: float, sample_rate: float, *,
+                 velocity_max: float = RAMP_VELOCITY, accel_max: float = RAMP_ACCEL, decel_max: float = DECEL_MAX,
+                 lower: float = -math.inf, upper: float = math.inf, tolerance: float = 5e-8):
+        if not lower < upper:
+            raise ValueError(f'SafeRamp: lower {lower} must be below upper {upper}')
+        self.lower, self.upper = float(lower), float(upper)
+        self.x, self.v = float(x0), float(v0)
+        self.target = min(max(float(target), self.lower), self.upper)
+        self.dt = 1.0 / float(sample_rate)
+        self.v_max, self.tol = float(velocity_max), float(tolerance)
+        self.dv_travel = float(accel_max) * self.dt
+        self.dv_brake = max(float(decel_max), float(accel_max)) * self.dt
+        self.decel_exceeded = 0      # samples where staying inside [lower, upper] needed more than decel_max
         self.done = False
 
     def step(self) -> float:
         """Advance one sample; return the next setpoint [m]."""
         if self.done:
             return self.x
-        a = self.wn ** 2 * (self.target - self.x) - 2 * self.wn * self.v
-        a = min(max(a, -self.a_max), self.a_max)
-        v = self.v + a * self.dt
-        if abs(v) > self.v_max:
-            # faster than allowed (e.g. aborting a fast sine): brake at accel_max instead of a velocity jump
-            v = math.copysign(max(self.v_max, abs(self.v) - self.a_max * self.dt), v)
-        self.v = v
-        self.x += self.v * self.dt
-        if abs(self.x - self.target) < self.tol and abs(self.v) < self.tol * self.wn:
-            # the last move is below tol (0.05 um): no perceptible step
+        dt, v, x = self.dt, self.v, self.x
+        dist = self.target - x
+        v_des = math.copysign(min(self.v_max, float(braking_velocity(abs(dist), self.dv_travel, dt)),
+                                  abs(dist) / dt), dist) if dist else 0.0
+        change = v_des - v
+        if v and (change > 0) != (v > 0):
+            # braking the inherited motion (harder allowed); past zero speed it is acceleration again
+            v_new = v + max(-self.dv_brake, min(self.dv_brake, change))
+            if v_new and (v_new > 0) != (v > 0):
+                v_new = math.copysign(min(abs(v_new), self.dv_travel), v_new)
+        else:
+            v_new = v + max(-self.dv_travel, min(self.dv_travel, change))
+        # never plan past a bound the motion could not stop before
+        room = (self.upper - x) if v_new > 0 else (x - self.lower)
+        v_room = float(braking_velocity(room, self.dv_brake, dt))
+        if abs(v_new) > v_room:
+            if abs(v) - abs(v_room) > self.dv_brake * (1 + 1e-9):
+                self.decel_exceeded += 1
+            v_new = math.copysign(v_room, v_new)
+        x_new = min(max(x + v_new * dt, self.lower), self.upper)
+        self.v, self.x = (x_new - x) / dt, x_new
+        if abs(self.target - self.x) <= max(self.tol, 1e-12) and abs(self.v) <= self.dv_travel:
             self.x, self.v, self.done = self.target, 0.0, True
         return self.x
 
