@@ -43,11 +43,18 @@ class Sensor:
         self.stuck_value = None
 
     def read(self, true_value: float) -> float:
-        """Measured value for the true value (or the frozen value while stuck)."""
+        """Measured value for the true value (or the frozen value while stuck).
+
+        A true value that is not finite (a diverged specimen model), or one beyond what the quantiser can count,
+        reads NaN: an invalid channel, for the controller to fault on, rather than an exception in its loop. The
+        noise sequence advances as for any other sample."""
         if self.stuck_value is not None:
             return self.stuck_value
         if self._i >= self._buf.size:
             self._buf, self._i = self._rng.standard_normal(self._block) * self.noise, 0
         n = self._buf[self._i]
         self._i += 1
-        return round((true_value + self.offset + n) / self.res) * self.res
+        counts = (true_value + self.offset + n) / self.res
+        if not math.isfinite(counts):
+            return math.nan
+        return round(counts) * self.res
