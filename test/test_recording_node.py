@@ -70,7 +70,7 @@ def control_caller(executor, control):
     return call
 
 
-def batch(k, skip=0):
+def batch(k, skip=0, frames_lost=0):
     m = RigSampleBatch()
     first = k * BATCH + skip
     m.first_sequence = first
@@ -82,6 +82,7 @@ def batch(k, skip=0):
     m.setpoint = 1e-3 * np.sin(n * 0.01 + 0.1)
     m.temperature = 23.0 + k * 0.01
     m.status_flags = k % 3
+    m.frames_lost = frames_lost
     return m
 
 
@@ -117,7 +118,8 @@ def test_recorder_node_records_published_batches(context, tmp_path):
         assert spin_until(executor, lambda: rec.core.writer.messages_by_topic.get(f'{ns}/status', 0) == 1)
         sent = 0
         for k in range(100):
-            samples.publish(batch(k, skip=7 if k >= 60 else 0))   # one gap of 7 samples at batch 60
+            # one gap of 7 samples at batch 60, lost on the bus: the driver reports it on the next batch
+            samples.publish(batch(k, skip=7 if k >= 60 else 0, frames_lost=7 if k == 60 else 0))
             sent += 1
             executor.spin_once(timeout_sec=0)
         assert spin_until(executor, lambda: rec.core.writer.messages_by_topic.get(f'{ns}/samples', 0) == sent)
@@ -258,7 +260,7 @@ def test_unwritable_output_dir_is_reported_not_fatal(context, tmp_path):
     levels = []
     with spinning(context, rec, client_node) as executor:
         client_node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, lambda m: levels.extend(
-            (s.level, s.message) for s in m.status if s.name.startswith('recorder')), 10)
+            (s.level, s.message) for s in m.status if s.name == '/unwritable/recorder: recording'), 10)   # fully qualified: no collision
         assert not rec.core.recording
         assert spin_until(executor, lambda: levels)
         level, message = levels[0]

@@ -9,10 +9,22 @@ splitting, snapshots and loss accounting are rubber_rig.recording.Recorder's.
 - Topics: the ``topics`` parameter (relative names resolve in the node's namespace), or, if empty,
   every topic under the node's namespace; discovery repeats every ``discovery_period`` seconds.
 - ``~/control`` (msg_defs/srv/RecorderControl): START [path], STOP, SPLIT, SNAPSHOT [path].
-- ``/diagnostics``: messages written/dropped, sequence gaps and lost samples, the current file and any
-  write error (ERROR level: the recording stopped cleanly; the file stays readable).
+- ``recorder_status`` (msg_defs/msg/RecorderStatus, latched): IDLE / RECORDING / ERROR with the file, the
+  error, the topics subscribed and matched with a publisher, messages written and samples known lost;
+  published at once on a change of state, file, error, topics or loss (a failed write is reported by the
+  callback that saw it), and at least every ``status_period``. RECORDING is only reported after the file
+  was created and its header written: the directory is known writable. Programs that must be recorded
+  wait for it (excitation ``require_recording``) and are aborted when it turns to ERROR.
+- Failures never take the node down: an output directory that cannot be created or written, a full
+  disk or any other write error turns the status to ERROR with a message naming the path, the file is
+  kept readable up to its last complete chunk, and a later START (``~/control``) tries again.
+- ``/diagnostics``: status named after the node's fully qualified name (``/rig1/recorder: recording``),
+  hardware_id the absolute output directory; WARN only for real loss (not for sequence jumps between
+  programs), ERROR when the recording stopped on an error.
 """
 import importlib
+import time
+from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rcl_interfaces.msg import ParameterDescriptor
@@ -21,6 +33,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from msg_defs.msg import RecorderStatus
 from msg_defs.srv import RecorderControl
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import declare
@@ -79,11 +92,14 @@ class RecorderNode(Node):
                                     'keep the last N seconds in memory for SNAPSHOT (0: off)',
                                     range=(0.0, 3600.0), units='s')
         chunk_size = declare(self, 'chunk_size', 1024, 'MCAP chunk size', range=(16, 65536), units='KiB')
-        flush_period = declare(self, 'flush_period', 1.0,
+        flush_period = declare(self, 'flush_period', 0.25,
                                'close the chunk in progress at least this often (data at risk on a crash)',
                                range=(0.05, 60.0), units='s')
-        discovery_period = declare(self, 'discovery_period', 1.0, 'look for new topics this often',
+        discovery_period = declare(self, 'discovery_period', 0.25, 'look for new topics this often',
                                    range=(0.05, 60.0), units='s')
+        self.status_period = declare(self, 'status_period', 0.5,
+                                     'publish recorder_status at least this often (and on every change)',
+                                     range=(0.05, 10.0), units='s')
         diagnostics_period = declare(self, 'diagnostics_period', 1.0, 'publish /diagnostics this often',
                                      range=(0.1, 60.0), units='s')
         self.include_hidden = declare(self, 'include_hidden_topics', False,
@@ -100,19 +116,51 @@ class RecorderNode(Node):
         self._subs = {}                       # topic -> (subscription, type)
         self._unrecordable = {}               # topic -> reason
         self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        self._status_pub = self.create_publisher(RecorderStatus, topics.RECORDER_STATUS, topics.LATCHED_QOS)
+        self._status_key = None
+        self._status_time = 0.0
+        self._callback_errors = 0
         self.create_service(RecorderControl, '~/control', self._on_control)
-        self.create_timer(discovery_period, self.discover)
-        self.create_timer(flush_period, self.core.flush)
-        self.create_timer(diagnostics_period, self.publish_diagnostics)
+        self.create_timer(discovery_period, self._guarded(self.discover))
+        self.create_timer(flush_period, self._guarded(self.flush))
+        self.create_timer(diagnostics_period, self._guarded(self.publish_diagnostics))
+        self.create_timer(min(0.1, self.status_period), self._guarded(self.update_status))
         self._reported_error = None
         if autostart:
+            self.start_recording()
+        self._guarded(self.discover)()
+        self.update_status()
+
+    def _guarded(self, fn):
+        """A timer callback that logs instead of raising: no exception may take the node down."""
+        def call():
             try:
-                self.core.start()
-                self.get_logger().info(f'recording to {self.core.current_file}')
-            except RecordingError as exc:     # unwritable output_dir: stay up, say so, accept START
-                self.core.error = exc
-                self.get_logger().error(f'not recording: {exc}')
-        self.discover()
+                fn()
+            except Exception as exc:  # noqa: BLE001 - reported, counted, the node keeps running
+                self._callback_errors += 1
+                self.get_logger().error(f'{getattr(fn, "__name__", "callback")} failed: '
+                                        f'{type(exc).__name__}: {exc}', throttle_duration_sec=5.0)
+        return call
+
+    def start_recording(self, path=None):
+        """Start (or keep) recording; returns the file, or None on failure (then the status is ERROR with
+        the reason naming the path, and the reason is logged once, without a traceback)."""
+        try:
+            file = self.core.start(path)
+        except (RecordingError, OSError) as exc:   # unwritable / uncreatable directory, disk full
+            if self.core.error is None or self.core.recording:
+                self.core.error = RecordingError(str(exc))
+            self.get_logger().error(f'not recording: {self.core.error}')
+            self.update_status()
+            return None
+        self.get_logger().info(f'recording to {file}')
+        self.update_status()
+        return file
+
+    def flush(self):
+        self.core.flush()
+        if self.core.error is not None:
+            self.update_status()
 
     # -- topics ------------------------------------------------------------------------------
     def wanted_topics(self, graph):
@@ -160,11 +208,19 @@ class RecorderNode(Node):
         write, clock = self.core.write, self.get_clock()
 
         def on_message(data, info):
-            log_ns = info.get('received_timestamp') or clock.now().nanoseconds
-            seq = info.get('publication_sequence_number')
-            if seq is None or seq >= UNSUPPORTED_SEQUENCE:   # rmw without sequence numbers
-                seq = None                                    # -> the core counts per channel
-            write(topic, type_name, data, log_ns, info.get('source_timestamp') or log_ns, seq)
+            try:
+                log_ns = info.get('received_timestamp') or clock.now().nanoseconds
+                seq = info.get('publication_sequence_number')
+                if seq is None or seq >= UNSUPPORTED_SEQUENCE:   # rmw without sequence numbers
+                    seq = None                                    # -> the core counts per channel
+                if not write(topic, type_name, data, log_ns, info.get('source_timestamp') or log_ns, seq) \
+                        and self.core.error is not None and self._status_key is not None \
+                        and self._status_key[0] != RecorderStatus.STATE_ERROR:
+                    self.update_status()                          # ERROR at once, not at the next tick
+            except Exception as exc:  # noqa: BLE001 - a bad message must not take the recorder down
+                self._callback_errors += 1
+                self.get_logger().error(f'recording a message on {topic} failed: {type(exc).__name__}: {exc}',
+                                        throttle_duration_sec=5.0)
         return on_message
 
     # -- control -----------------------------------------------------------------------------
@@ -172,7 +228,9 @@ class RecorderNode(Node):
         cmd = request.command
         try:
             if cmd == RecorderControl.Request.START:
-                response.file = str(self.core.start(request.path or None))
+                response.file = str(self.start_recording(request.path or None) or '')
+                if not self.core.recording:
+                    raise RecordingError(str(self.core.error or 'not recording'))
                 response.message = 'recording'
             elif cmd == RecorderControl.Request.STOP:
                 files = self.core.stop()
@@ -187,26 +245,72 @@ class RecorderNode(Node):
             else:
                 raise RecordingError(f'unknown command {cmd} (START=0, STOP=1, SPLIT=2, SNAPSHOT=3)')
             response.success = True
-        except (RecordingError, OSError) as exc:
-            response.success, response.message = False, str(exc)
+        except Exception as exc:  # noqa: BLE001 - refused with the reason, the node keeps running
+            response.success, response.message = False, str(exc) or type(exc).__name__
+        if not response.file and self.core.files:
+            response.file = str(self.core.files[-1])
         self.get_logger().info(f'control {cmd}: {response.message}')
+        self.update_status()
         return response
+
+    # -- status ------------------------------------------------------------------------------
+    def subscribed_topics(self) -> list:
+        """Fully qualified topics subscribed and matched with at least one publisher."""
+        out = []
+        for name, (sub, _) in sorted(self._subs.items()):
+            try:
+                if sub.get_publisher_count() > 0:
+                    out.append(name)
+            except Exception:  # noqa: BLE001 - a subscription being destroyed
+                pass
+        return out
+
+    def status_message(self) -> RecorderStatus:
+        core = self.core
+        if core.recording:
+            state, name = RecorderStatus.STATE_RECORDING, 'recording'
+        elif core.error is not None:
+            state, name = RecorderStatus.STATE_ERROR, 'error'
+        else:
+            state, name = RecorderStatus.STATE_IDLE, 'idle'
+        path = core.current_file or (core.files[-1] if core.files else '')
+        stats_written = core.messages_written + (core.writer.messages_written if core.writer else 0)
+        msg = RecorderStatus(state=state, state_name=name, path=str(path),
+                             error=str(core.error) if core.error is not None and not core.recording else '',
+                             topics=self.subscribed_topics(), messages_written=int(stats_written),
+                             samples_lost=int(core.samples_lost_total))
+        msg.header.stamp = self.get_clock().now().to_msg()
+        return msg
+
+    def update_status(self, force: bool = False) -> None:
+        """Publish recorder_status if anything but the counters changed, or status_period passed."""
+        msg = self.status_message()
+        key = (msg.state, msg.path, msg.error, tuple(msg.topics), msg.samples_lost)
+        now = time.monotonic()
+        if not force and key == self._status_key and now - self._status_time < self.status_period:
+            return
+        if key[:3] != (self._status_key or (None,) * 3)[:3] and msg.state == RecorderStatus.STATE_ERROR:
+            self.get_logger().error(f'recorder status: error: {msg.error}')
+        self._status_key, self._status_time = key, now
+        self._status_pub.publish(msg)
 
     # -- diagnostics -------------------------------------------------------------------------
     def publish_diagnostics(self):
         stats = self.core.stats()
         stats['topics'] = len(self._subs)
         stats['unrecordable_topics'] = ', '.join(sorted(self._unrecordable))
-        d = DiagnosticStatus(name=f'{self.get_name()}: recording', hardware_id=self.output_dir)
+        stats['callback_errors'] = self._callback_errors
+        d = DiagnosticStatus(name=f'{self.get_fully_qualified_name()}: recording',
+                             hardware_id=str(Path(self.output_dir).absolute()))
         if stats['error']:
             d.level, d.message = DiagnosticStatus.ERROR, 'stopped: ' + stats['error']
             if self._reported_error != stats['error']:
                 self._reported_error = stats['error']
                 self.get_logger().error(stats['error'])
-        elif stats['messages_dropped'] or stats['samples_lost'] or self._unrecordable:
+        elif stats['messages_dropped'] or stats['samples_lost_total'] or self._unrecordable:
             d.level = DiagnosticStatus.WARN
             d.message = (f'{stats["messages_dropped"]} messages not recorded, '
-                         f'{stats["samples_lost"]} samples lost in {stats["sequence_gaps"]} gaps')
+                         f'{stats["samples_lost_total"]} samples lost ({stats["sequence_gaps"]} gaps)')
         else:
             d.level = DiagnosticStatus.OK
             d.message = 'recording' if stats['recording'] else 'idle'
@@ -217,7 +321,11 @@ class RecorderNode(Node):
 
     def destroy_node(self):
         was_recording = self.core.recording
-        files = self.core.stop()
+        try:
+            files = self.core.stop()
+        except Exception as exc:  # noqa: BLE001 - shutting down: say so, do not raise
+            files = list(self.core.files)
+            self.get_logger().error(f'closing the recording failed: {exc}')
         if was_recording and files:
             self.get_logger().info(f'closed {len(files)} file(s), last {files[-1]}')
         return super().destroy_node()
