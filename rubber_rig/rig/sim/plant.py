@@ -52,7 +52,7 @@ class Sensor:
             return self.stuck_value
         if self._i >= self._buf.size:
             self._buf, self._i = self._rng.standard_normal(self._block) * self.noise, 0
-        n = self._buf[self._i]
+        n = float(self._buf[self._i])   # Python floats: an overflow is inf, without a numpy warning
         self._i += 1
         counts = (true_value + self.offset + n) / self.res
         if not math.isfinite(counts):
