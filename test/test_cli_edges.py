@@ -204,3 +204,15 @@ def test_discovery_range_default_reaches_the_sub_command(tmp_path):
                              text=True, timeout=60)
         assert out.returncode == 0, out.stderr
         assert out.stdout.strip() == expected
+
+
+def test_recover_and_info_of_a_truncated_file_say_the_tail_is_unaccounted(tmp_path, mcap_file):
+    data = mcap_file.read_bytes()
+    cut = tmp_path / 'cut.mcap'
+    cut.write_bytes(data[:len(data) * 2 // 3])       # writer killed: no summary, no footer
+    info = cli('info', cut)
+    assert info.returncode == 0 and 'Traceback' not in info.stderr, info.stderr
+    assert 'NOT CLOSED' in info.stdout and 'unaccounted' in info.stdout
+    proc = cli('recover', cut, '-o', tmp_path / 'fixed.mcap')
+    assert proc.returncode == 0, proc.stderr
+    assert 'was truncated' in proc.stdout and 'unaccounted' in proc.stdout

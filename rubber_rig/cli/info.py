@@ -31,6 +31,7 @@ def run(args) -> int:
                    for t, v in sorted(rec.topics.items())},
         'samples': len(rec.sequence), 'sample_period_s': rec.sample_period,
         'sequence_gaps': len(rec.gaps), 'samples_lost': rec.samples_lost, 'gaps': rec.gaps[:20],
+        'tail_unaccounted': bool(getattr(rec, 'unclosed', None)), 'unclosed': getattr(rec, 'unclosed', []),
         'metadata': rec.metadata, 'closing': rec.closing, 'other_metadata': rec.other_metadata,
     }
     if args.json:
@@ -52,6 +53,9 @@ def run(args) -> int:
         print(f'samples:    {len(rec.sequence)} at {1 / rec.sample_period:.1f} Hz, '
               f'sequence {int(rec.sequence[0])}..{int(rec.sequence[-1])}')
     print(f'gaps:       {len(rec.gaps)} sequence gaps, {rec.samples_lost} samples lost')
+    if getattr(rec, 'unclosed', None):    # never a bare '0 lost' for a file whose tail is unaccounted
+        for line in rec.loss_text().splitlines():
+            print(f'loss:       {line.strip()}')
     for gap in rec.gaps[:20]:
         print(f'  expected {gap["expected"]}, got {gap["received"]} ({gap["lost"]} lost)')
     if rec.metadata:

@@ -28,7 +28,9 @@ def run(args) -> int:
     state = 'was already complete' if result.was_complete else 'was truncated'
     print(f'{result.source} {state}; wrote {result.output}: {result.messages} messages on '
           f'{result.channels} topics, {result.metadata_records} metadata records')
-    if result.sequence_gaps:
+    if not result.was_complete and hasattr(result, 'loss_text'):   # the tail's loss is unknown: say so
+        print(result.loss_text())
+    elif result.sequence_gaps:
         print(f'sequence gaps in the recovered data: {result.sequence_gaps} '
               f'({result.samples_lost} samples lost)')
     return 0
