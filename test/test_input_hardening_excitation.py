@@ -68,13 +68,13 @@ def test_program_level_bounds():
 ])
 def test_frequencies_above_a_tenth_of_the_sample_rate_are_refused(block, fld, ok_rate):
     p = program(block)
-    for check in (lambda: Limits(velocity_max=10.0).check_program(p, FS),
-                  lambda: ProgramRunner(p, FS, Limits(velocity_max=10.0))):
+    fast = Limits(velocity_max=10.0, deceleration_max=1e9)     # only the frequency rule can refuse these
+    for check in (lambda: fast.check_program(p, FS), lambda: ProgramRunner(p, FS, fast)):
         with pytest.raises(ProgramError) as exc:
             check()
         msg = str(exc.value)
         assert msg.startswith("block 0 'a'") and f"field '{fld}'" in msg and 'sample rate of 1000 Hz' in msg, msg
-    Limits(velocity_max=10.0).check_program(p, ok_rate)           # exactly fs/10 is accepted
+    fast.check_program(p, ok_rate)                                # exactly fs/10 is accepted
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ProgramError, match='sample rate'):
             Limits().check_program(p, bad)
@@ -126,16 +126,22 @@ def test_closed_form_bounds_agree_with_every_setpoint(block, tapers_exact, monke
     v_peak = float(np.max(np.abs(np.diff(x)))) * FS
     x_peak = float(np.max(np.abs(x)))
     monkeypatch.setattr(limits_module, 'EXACT_SAMPLES', 1001 + (4000 if tapers_exact else 0))
+    # braking at deceleration_max adds up to one sample of travel at the reversals (limits.py); a deceleration
+    # this high leaves only that, so the displacement and velocity bounds are what is compared here
+    brake = v_peak / FS
+
+    def limits(**kw):
+        return Limits(**{'deceleration_max': 1e9, 'velocity_max': 1.0, **kw})
     with pytest.raises(LimitError, match="block 1 'b'.*velocity"):
-        Limits(velocity_max=v_peak * 0.999).check_program(p, FS)
+        limits(velocity_max=v_peak * 0.999).check_program(p, FS)
     with pytest.raises(LimitError, match="block 1 'b'.*displacement"):
-        Limits(displacement_min=-x_peak * 0.999, displacement_max=x_peak * 0.999,
-               velocity_max=1.0).check_program(p, FS)
+        limits(displacement_min=-x_peak * 0.999, displacement_max=x_peak * 0.999).check_program(p, FS)
     with pytest.raises(LimitError, match="block 1 'b'.*stiffness_estimate"):
-        Limits(stiffness_estimate=1e7, force_max=1e7 * x_peak * 0.999, velocity_max=1.0).check_program(p, FS)
+        limits(stiffness_estimate=1e7, force_max=1e7 * x_peak * 0.999).check_program(p, FS)
     margin = 1.005 if tapers_exact or 'ramp' in block else 1.05
-    Limits(velocity_max=v_peak * margin, displacement_min=-x_peak * 1.001, displacement_max=x_peak * 1.001,
-           stiffness_estimate=1e7, force_max=1e7 * x_peak * 1.001).check_program(p, FS)
+    room = (x_peak + brake) * 1.001
+    limits(velocity_max=v_peak * margin, displacement_min=-room, displacement_max=room,
+           stiffness_estimate=1e7, force_max=1e7 * room).check_program(p, FS)
 
 
 GRID = ['{name: slow, waveform: sine, frequency: 0.5 Hz, amplitude: 1 mm, cycles: 8, taper_cycles: 2}',
