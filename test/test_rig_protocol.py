@@ -14,7 +14,7 @@ from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, Protocol, crc8
 def test_dbc_defines_the_rig_frames_with_units_and_counters():
     db = cantools.database.load_file(str(DBC_PATH))
     names = {m.name for m in db.messages}
-    assert names == {'HostCommand', 'Setpoint', 'Feedback', 'ControllerStatus', 'Temperature',
+    assert names == {'HostCommand', 'HostLimits', 'Setpoint', 'Feedback', 'ControllerStatus', 'Temperature',
                      'ControllerHeartbeat', 'HostHeartbeat'}
     fb = db.get_message_by_name('Feedback')
     units = {s.name: s.unit for s in fb.signals}

@@ -12,8 +12,9 @@ import numpy as np
 
 # Defaults of the controller-side and host-side ramps [m/s, m/s^2]
 RAMP_VELOCITY = 0.05       # travel speed towards the rest position
-RAMP_ACCEL = 2.0           # gentle acceleration/deceleration of the travel part
-DECEL_MAX = 100.0          # hardest braking a ramp may use to stop the motion it inherited
+RAMP_ACCEL = 0.2           # gentle acceleration/deceleration of the travel part (1 mm in 0.14 s)
+BRAKE_DECEL = 20.0         # braking of the motion a ramp inherits (a fast sine at abort)
+DECEL_MAX = 100.0          # hardest braking, only where the displacement limits need it (Limits.deceleration_max)
 
 
 def braking_velocity(distance, dv: float, dt: float):
@@ -25,29 +26,31 @@ def braking_velocity(distance, dv: float, dt: float):
 
 
 def stopping_positions(x, v, decel: float, sample_rate: float):
-    """Where a motion at positions x [m] with velocities v [m/s] (arrays of the same shape) comes to rest when it
-    brakes at `decel` [m/s^2] from the next sample on (discrete-time: dt * v * (|v| / dv + 1) / 2 further)."""
+    """Where a motion that reached positions x [m] with velocities v [m/s] (the last step's; arrays of the same
+    shape) comes to rest when it brakes at `decel` [m/s^2] from the next step on: the steps v - dv, v - 2 dv,
+    ... (dv = decel / sample_rate) cover dt * |v| * (|v| / dv - 1) / 2 - the distance SafeRamp needs."""
     dt = 1.0 / sample_rate
     v = np.asarray(v, dtype=float)
     speed = np.abs(v)
-    return np.asarray(x, dtype=float) + np.sign(v) * dt * speed * (speed / (decel * dt) + 1.0) / 2.0
+    return np.asarray(x, dtype=float) + np.sign(v) * dt * speed * np.maximum(speed / (decel * dt) - 1.0, 0.0) / 2.0
 
 
 class SafeRamp:
     """Move from x0 [m] at velocity v0 [m/s] to `target` [m] and stop there.
 
-    Each sample: the speed towards the target is at most ``velocity_max`` and at most the speed from which
-    ``accel_max`` stops it at the target (trapezoidal profile); a velocity the ramp inherited (faster, or away
-    from the target) is braked at up to ``decel_max``. With `lower`/`upper` [m] the motion also never plans
-    past a bound it could not stop before; if the start state cannot stop inside them at ``decel_max`` (a
-    program the host did not check), it brakes harder and counts it in ``decel_exceeded`` rather than leave
-    the limits. Position and velocity are continuous at the start (no step); the last move is below
-    ``tolerance`` (0.05 um). Used by the program runner (abort, hold, approach) and the simulated controller
-    (abort, host watchdog, stream loss)."""
+    The motion the ramp inherits is braked at the deceleration that stops it at the target if it is heading
+    there (at most ``brake_decel``), else at ``brake_decel``; the travel to the target then has a trapezoidal
+    profile (``velocity_max``, ``accel_max``). With `lower`/`upper` [m] the motion never plans past a bound it
+    could not stop before at ``decel_max`` (harder braking than brake_decel, only where the limits need it); if
+    even that cannot keep it inside (a start state the host did not check), it brakes harder still and counts
+    the samples in ``decel_exceeded`` rather than leave the limits. Position and velocity are continuous at the
+    start (no step); the last move is below ``tolerance`` (0.05 um). Used by the program runner (abort, hold,
+    approach) and the simulated controller (abort, hold, host watchdog)."""
 
     def __init__(self, x0: float, v0: float, target: float, sample_rate: float, *,
-                 velocity_max: float = RAMP_VELOCITY, accel_max: float = RAMP_ACCEL, decel_max: float = DECEL_MAX,
-                 lower: float = -math.inf, upper: float = math.inf, tolerance: float = 5e-8):
+                 velocity_max: float = RAMP_VELOCITY, accel_max: float = RAMP_ACCEL, brake_decel: float = BRAKE_DECEL,
+                 decel_max: float = DECEL_MAX, lower: float = -math.inf, upper: float = math.inf,
+                 tolerance: float = 5e-8):
         if not lower < upper:
             raise ValueError(f'SafeRamp: lower {lower} must be below upper {upper}')
         self.lower, self.upper = float(lower), float(upper)
@@ -56,7 +59,8 @@ class SafeRamp:
         self.dt = 1.0 / float(sample_rate)
         self.v_max, self.tol = float(velocity_max), float(tolerance)
         self.dv_travel = float(accel_max) * self.dt
-        self.dv_brake = max(float(decel_max), float(accel_max)) * self.dt
+        self.dv_limit = max(float(decel_max), float(accel_max)) * self.dt
+        self.dv_brake = min(max(float(brake_decel), float(accel_max)), max(float(decel_max), float(accel_max))) * self.dt
         self.decel_exceeded = 0      # samples where staying inside [lower, upper] needed more than decel_max
         self.done = False
 
@@ -66,21 +70,22 @@ class SafeRamp:
             return self.x
         dt, v, x = self.dt, self.v, self.x
         dist = self.target - x
-        v_des = math.copysign(min(self.v_max, float(braking_velocity(abs(dist), self.dv_travel, dt)),
-                                  abs(dist) / dt), dist) if dist else 0.0
-        change = v_des - v
-        if v and (change > 0) != (v > 0):
-            # braking the inherited motion (harder allowed); past zero speed it is acceleration again
-            v_new = v + max(-self.dv_brake, min(self.dv_brake, change))
-            if v_new and (v_new > 0) != (v > 0):
-                v_new = math.copysign(min(abs(v_new), self.dv_travel), v_new)
+        d = abs(dist)
+        travel = math.copysign(min(self.v_max, float(braking_velocity(d, self.dv_travel, dt)), d / dt), dist) \
+            if dist else 0.0
+        if v and (v > 0) == (dist > 0) and abs(v) > abs(travel) + self.dv_travel:
+            # heading for the target too fast for the gentle profile: brake so as to stop at the target
+            need = v * v * dt / (2 * d - abs(v) * dt) if 2 * d > abs(v) * dt else math.inf
+            v_new = v - math.copysign(min(max(need, self.dv_travel), self.dv_brake, abs(v)), v)
+        elif v and (v > 0) != (dist > 0) and abs(v) > self.dv_travel:
+            v_new = v - math.copysign(min(self.dv_brake, abs(v)), v)   # heading away: brake, then travel back
         else:
-            v_new = v + max(-self.dv_travel, min(self.dv_travel, change))
-        # never plan past a bound the motion could not stop before
+            v_new = v + max(-self.dv_travel, min(self.dv_travel, travel - v))
+        # never plan past a bound the motion could not stop before at decel_max
         room = (self.upper - x) if v_new > 0 else (x - self.lower)
-        v_room = float(braking_velocity(room, self.dv_brake, dt))
+        v_room = float(braking_velocity(room, self.dv_limit, dt))
         if abs(v_new) > v_room:
-            if abs(v) - abs(v_room) > self.dv_brake * (1 + 1e-9):
+            if abs(v) - v_room > self.dv_limit * (1 + 1e-9):
                 self.decel_exceeded += 1
             v_new = math.copysign(v_room, v_new)
         x_new = min(max(x + v_new * dt, self.lower), self.upper)

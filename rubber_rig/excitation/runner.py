@@ -9,7 +9,7 @@ import numpy as np
 from .amplitude import BlockLoop
 from .compensation import CompensationMemory
 from .limits import LimitError, Limits
-from .ramp import SafeRamp
+from .ramp import RAMP_VELOCITY, SafeRamp
 
 
 @dataclass
@@ -62,22 +62,28 @@ class ProgramRunner:
     """
 
     def __init__(self, program, sample_rate: float, limits: Limits = None, amplitude_control: bool = False,
-                 start_sequence: int = 0, abort_bandwidth: float = 2.0, compensation_memory: bool = True):
+                 start_sequence: int = 0, compensation_memory: bool = True, start_position: float = None,
+                 start_velocity: float = 0.0):
         self.program, self.fs = program, float(sample_rate)
         self.limits = limits if limits is not None else Limits()
         self.limits.check_program(program, self.fs)
         self.amplitude_control = amplitude_control
         # what the amplitude loop learned per block (gain, offset vs frequency): the next block's starting point
         self.compensation = CompensationMemory() if amplitude_control and compensation_memory else None
-        self.abort_bandwidth = abort_bandwidth
         self._starts = program.block_starts(self.fs)
         self._total = int(self._starts[-1])
         self._p = 0                                   # program sample index of the next setpoint
         self.sequence = int(start_sequence)           # sequence number of the next setpoint
-        self.state = 'running'                        # running | holding | ramping_down | finished
+        self.state = 'running'                        # approaching | running | holding | ramping_down | finished
         self.aborted, self.abort_reason = False, ''
         self._x = self._x_prev = program.initial_position
         self._ramp = None
+        if start_position is not None and (abs(start_position - program.initial_position) > 1e-7 or start_velocity):
+            # the rig is elsewhere (held, stopped after a lost stream): approach the program's start smoothly
+            self.limits.check_setpoints([start_position], self.fs, where='approach from the rig position')
+            self._x, self._x_prev = float(start_position), float(start_position) - start_velocity / self.fs
+            self._start_ramp(program.initial_position)
+            self.state = 'approaching'
         self._resume = False
         self._hold_block = None
         self._ramp_from = {}                          # ramp block index -> start override after a hold
@@ -129,8 +135,11 @@ class ProgramRunner:
             self._resume = True
 
     def _start_ramp(self, target):
-        self._ramp = SafeRamp(self._x, self._velocity(), target, self.fs, self.abort_bandwidth,
-                              velocity_max=0.5 * self.limits.velocity_max)
+        lim = self.limits
+        self._ramp = SafeRamp(self._x, self._velocity(), target, self.fs,
+                              velocity_max=min(RAMP_VELOCITY, 0.5 * lim.velocity_max),
+                              decel_max=lim.deceleration_max, lower=lim.displacement_min,
+                              upper=lim.displacement_max)
 
     # ---- generation
     def next_setpoints(self, n: int) -> np.ndarray:
@@ -160,6 +169,15 @@ class ProgramRunner:
                 i += m
                 if self._p >= self._total:
                     self.state = 'finished'
+            elif self.state == 'approaching':
+                k = n - i
+                x = self._ramp.run(k) if not self._ramp.done else np.empty(0)
+                j = int(np.argmax(x == self._ramp.target)) + 1 if self._ramp.done and x.size else x.size
+                out[i:i + j] = x[:j]
+                self._set_last(x[:j])
+                i += j
+                if self._ramp.done:
+                    self.state, self._ramp = 'running', None
             elif self.state in ('ramping_down', 'holding'):
                 if self._ramp.done and self.state == 'ramping_down':
                     self.state = 'finished'

@@ -77,10 +77,12 @@ def batch_arrays(msg: RigSampleBatch) -> tuple[np.ndarray, np.ndarray, np.ndarra
 
 
 def setpoint_batch_msg(first_sequence: int, sample_period: float, displacement, block_index: int,
-                       t: float | None = None) -> SetpointBatch:
+                       t: float | None = None, stream_id: int = 0, source: str = '',
+                       end_of_stream: bool = False) -> SetpointBatch:
     msg = SetpointBatch()
     if t is not None:
         msg.header.stamp = stamp(t)
+    msg.stream_id, msg.source, msg.end_of_stream = int(stream_id), str(source), bool(end_of_stream)
     msg.first_sequence = int(first_sequence)
     msg.sample_period = float(sample_period)
     msg.displacement = f64(displacement)
@@ -91,7 +93,7 @@ def setpoint_batch_msg(first_sequence: int, sample_period: float, displacement, 
 # -- status and diagnostics -----------------------------------------------------------------------------------
 def limits_msg(limits: Any) -> RigLimits:
     msg = RigLimits()
-    for name in ('displacement_min', 'displacement_max', 'velocity_max', 'force_max'):
+    for name in ('displacement_min', 'displacement_max', 'velocity_max', 'force_max', 'deceleration_max'):
         value = _get(limits, name)
         if value is not None:
             setattr(msg, name, float(value))
@@ -101,7 +103,8 @@ def limits_msg(limits: Any) -> RigLimits:
 def limits_from_msg(msg: RigLimits):
     """rubber_rig.excitation.Limits from a msg_defs/RigLimits (the inverse of limits_msg)."""
     return Limits(displacement_min=msg.displacement_min, displacement_max=msg.displacement_max,
-                  velocity_max=msg.velocity_max, force_max=msg.force_max)
+                  velocity_max=msg.velocity_max, force_max=msg.force_max,
+                  deceleration_max=msg.deceleration_max or Limits.deceleration_max)
 
 
 def state_code(state: Any) -> int:
@@ -133,6 +136,13 @@ def status_msg(snapshot: Any, limits: Any, sample_rate: float, t: float) -> RigS
         setattr(msg, name, int(value or 0))
     temperature = _get(snapshot, 'temperature', None)
     msg.temperature = float('nan') if temperature is None else float(temperature)
+    extra = _get(snapshot, 'extra', None) or {}
+    msg.next_sequence = int(extra.get('next_sequence', 0))
+    msg.position = float(extra.get('position', 0.0))
+    msg.stream_owner = str(extra.get('stream_owner', ''))
+    msg.stream_id = int(extra.get('stream_id', 0))
+    msg.setpoints_refused = int(extra.get('setpoints_refused', 0))
+    msg.last_event = str(extra.get('last_event', ''))
     return msg
 
 
@@ -153,13 +163,18 @@ def diagnostics_msg(status: RigStatus, hardware_id: str, extra: Mapping[str, Any
     elif status.frames_lost or status.frames_malformed:
         d.level = DiagnosticStatus.WARN
         d.message = f'{status.state_name}; {status.frames_lost} frames lost, {status.frames_malformed} malformed'
+    elif status.setpoints_refused:
+        d.level = DiagnosticStatus.WARN
+        d.message = f'{status.state_name}; {status.setpoints_refused} setpoints refused (foreign or broken stream)'
     else:
         d.level = DiagnosticStatus.OK
         d.message = status.state_name
     values = {'state': status.state_name, 'faults': status.faults, 'sample_rate': status.sample_rate,
               'samples_received': status.samples_received, 'frames_lost': status.frames_lost,
               'frames_late': status.frames_late, 'frames_malformed': status.frames_malformed,
-              'frames_unknown': status.frames_unknown, 'temperature': status.temperature}
+              'frames_unknown': status.frames_unknown, 'temperature': status.temperature,
+              'stream_owner': status.stream_owner, 'setpoints_refused': status.setpoints_refused,
+              'position_m': status.position, 'last_event': status.last_event}
     values.update(extra or {})
     d.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
     arr = DiagnosticArray()

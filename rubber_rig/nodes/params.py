@@ -84,3 +84,17 @@ def undeclared_overrides(node: Node) -> list[str]:
         node.get_logger().warning(f"parameter '{name}' is not a parameter of node '{node.get_name()}' and is "
                                   f"ignored{hint}")
     return unknown
+
+
+def accept_integers_for_doubles(node: Node) -> None:
+    """``ros2 param set /rig_driver limits.force_max 5`` sends an integer; for a double parameter that is what
+    the user meant. rclpy's public pre-set hook converts it before the type check refuses it."""
+    def promote(parameters):
+        out = []
+        for p in parameters:
+            if p.type_ == Parameter.Type.INTEGER and node.has_parameter(p.name) \
+                    and node.get_parameter(p.name).type_ == Parameter.Type.DOUBLE:
+                p = Parameter(p.name, Parameter.Type.DOUBLE, float(p.value))
+            out.append(p)
+        return out
+    node.add_pre_set_parameters_callback(promote)

@@ -5,36 +5,49 @@ rig on python-can's virtual bus, or any python-can interface/channel/bitrate); a
 accept setpoints; deactivate = safe ramp to rest, stop streaming; cleanup = close the bus. With ``autostart``
 the node configures and activates itself (what ``ros2 launch`` users expect from a simulated rig).
 
-Subscribes:  setpoints (msg_defs/SetpointBatch)
+Subscribes:  setpoints (msg_defs/SetpointBatch; only the open stream's owner commands the rig, see below)
 Publishes:   samples (msg_defs/RigSampleBatch, at least ``batch_size`` samples per message)
              status (msg_defs/RigStatus, latched, on change and every ``status_period``)
              /diagnostics (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period``)
-Services:    ~/abort (std_srvs/Trigger): safe ramp to rest now
-             ~/reset (std_srvs/Trigger): clear faults after an abort or fault so a new program can run
+Services:    ~/open_stream (msg_defs/OpenStream): the right to command the rig; one owner at a time
+             ~/stop_stream (msg_defs/StopStream): the owner stops now: abort (ramp to rest) or hold
+             ~/abort (std_srvs/Trigger): safe ramp to rest now, whoever streams
+             ~/reset (std_srvs/Trigger): acknowledge and clear faults once the rig is at rest
 QoS: see rubber_rig/nodes/topics.py.
 
-Watchdog, limits, fault detection and the safe ramp are the core driver's (rubber_rig.rig); this node only
-moves data between it and ROS.
+The driver is the one safety authority: the watchdog, the limits (changeable at run time: applied at once),
+stream ownership and stream-loss detection, fault detection and the safe ramp are the core driver's
+(rubber_rig.rig); this node moves data between it and ROS and logs every transition it reports.
 """
 from __future__ import annotations
 
+import math
 import time
 
-import numpy as np
 import yaml
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from diagnostic_msgs.msg import DiagnosticArray
 from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
+from msg_defs.srv import OpenStream, StopStream
+from rcl_interfaces.msg import SetParametersResult
 from std_srvs.srv import Trigger
 
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.params import ParameterError, check, declare
+from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles, check, declare
+from rubber_rig.excitation import Limits
+from rubber_rig.excitation.limits import LimitError
+from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.config import RigConfig
 from rubber_rig.rig.session import open_rig
 from rubber_rig.nodes.spin import spin_node
 
+LIMIT_FIELDS = ('displacement_min', 'displacement_max', 'velocity_max', 'force_max', 'deceleration_max')
+# parameters the running driver applies at once; every other one needs configure (refused while configured)
+LIVE_PARAMETERS = {'limits.' + k for k in LIMIT_FIELDS} | {'stream_timeout', 'stream_loss_action', 'rest_position',
+                                                          'batch_size', 'max_batch_delay', 'status_period',
+                                                          'diagnostics_period', 'autostart'}
 SIM_FLOATS = {  # sim.<name>: (default, description, range)
     'actuator_frequency': (80.0, 'natural frequency of the actuator position loop [Hz]', (1.0, 2000.0)),
     'actuator_damping': (0.8, 'damping ratio of the actuator position loop [-]', (0.05, 5.0)),
@@ -77,11 +90,18 @@ class RigDriverNode(LifecycleNode):
         declare(self, 'heartbeat_period', 0.05, 'host heartbeat period', range=(0.001, 5.0), units='s')
         declare(self, 'bus_error_max', 20, 'bad frames per second of samples that fault the bus', range=(0, 100000))
         declare(self, 'lost_burst_max', 0.02, 'longest run of lost samples tolerated', range=(1e-4, 10.0), units='s')
+        declare(self, 'stream_timeout', 0.3, "a running program's setpoint stream silent this long is lost (the "
+                'rig ramps to rest, or holds: stream_loss_action)', range=(0.01, 10.0), units='s')
+        declare(self, 'stream_loss_action', 'ramp', "what a lost stream does: 'ramp' to rest_position or 'hold' "
+                'where the motion can stop (a stream fault either way)', choices=('ramp', 'hold'))
+        declare(self, 'rest_position', 0.0, 'where aborts and faults ramp to', range=(-1.0, 1.0), units='m')
         declare(self, 'paced', True, 'simulated rig runs in real time (false: as fast as setpoints arrive)')
         declare(self, 'limits.displacement_min', -5e-3, 'lowest allowed displacement', range=(-1.0, 1.0), units='m')
         declare(self, 'limits.displacement_max', 5e-3, 'highest allowed displacement', range=(-1.0, 1.0), units='m')
         declare(self, 'limits.velocity_max', 0.2, 'highest allowed velocity', range=(1e-6, 100.0), units='m/s')
         declare(self, 'limits.force_max', 60e3, 'highest allowed absolute force', range=(1.0, 1e7), units='N')
+        declare(self, 'limits.deceleration_max', 100.0, 'hardest braking of a ramp; every setpoint must be able to '
+                'stop inside the displacement limits at it', range=(0.1, 500.0), units='m/s^2')
         declare(self, 'sim.specimen.parameter_set', '', 'simulated specimen: seed000 parameter set '
                 '(empty: use sim.specimen.temperature)')
         declare(self, 'sim.specimen.temperature', 20.0, 'simulated specimen: seed000 parameters at this '
@@ -106,13 +126,16 @@ class RigDriverNode(LifecycleNode):
         self._buffered = 0
         self._buffer_since = 0.0
         self._last_status = None
-        self._refused_logged = False
-        self._queued_end = None            # sequence after the last setpoint queued on the bus
-        self._last_setpoint = 0.0
+        self._refused_at = -1e9            # wall time of the last refusal warning (throttled)
+        self._status_key = None
         self.pub_status = self.create_publisher(RigStatus, topics.STATUS, topics.LATCHED_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         self.create_service(Trigger, '~/abort', self.on_abort)
         self.create_service(Trigger, '~/reset', self.on_reset)
+        self.create_service(OpenStream, '~/open_stream', self.on_open_stream)
+        self.create_service(StopStream, '~/stop_stream', self.on_stop_stream)
+        accept_integers_for_doubles(self)
+        self.add_on_set_parameters_callback(self.on_set_parameters)
         self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints, topics.STREAM_QOS)
         self._poll_timer = None
         self.create_timer(self.status_period, self.publish_status)
@@ -150,8 +173,9 @@ class RigDriverNode(LifecycleNode):
             'sample_rate': p['sample_rate'], 'watchdog_timeout': p['watchdog_timeout'],
             'heartbeat_period': p['heartbeat_period'], 'bus_error_max': p['bus_error_max'],
             'lost_burst_max': p['lost_burst_max'], 'paced': p['paced'], 'spawn_sim': p['spawn_sim'],
-            'limits': {k: p['limits.' + k] for k in ('displacement_min', 'displacement_max', 'velocity_max',
-                                                       'force_max')},
+            'stream_timeout': p['stream_timeout'], 'stream_loss_action': p['stream_loss_action'],
+            'rest_position': p['rest_position'],
+            'limits': {k: p['limits.' + k] for k in LIMIT_FIELDS},
             'sim': dict({k: p['sim.' + k] for k in SIM_FLOATS}, specimen=specimen, seed=p['sim.seed'],
                         faults=p['sim.faults']),
         }
@@ -176,15 +200,18 @@ class RigDriverNode(LifecycleNode):
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         driver = self.rig.driver
         if driver.faults or driver.fault_messages:   # activating again is the operator's acknowledgement
-            self.get_logger().info('clearing ' + '; '.join(driver.fault_messages))
-            driver.reset()
-            self._queued_end, self._refused_logged = None, False
+            why = driver.reset()
+            if why:
+                self.get_logger().error(f'activate refused: {why}')
+                return TransitionCallbackReturn.FAILURE
         self._poll_timer = self.create_timer(self.get_parameter('poll_period').value, self.poll)
+        self.get_logger().info('active: streaming samples, accepting a setpoint stream')
         return super().on_activate(state)
 
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         if self.rig is not None:
-            self.rig.driver.abort('deactivated')
+            self.rig.driver.abort('driver deactivated')
+            self._log_events()
         self._stop_polling()
         return super().on_deactivate(state)
 
@@ -197,10 +224,21 @@ class RigDriverNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def close(self) -> None:
-        """Ramp to rest and close the bus (also called by the in-process launcher at shutdown)."""
+        """Ramp to rest, then close the bus (also called by the in-process launcher at shutdown). A hardware
+        controller finishes its ramp on its own; the simulated one is polled until it is at rest (<= 5 s)."""
         self._stop_polling()
         if self.rig is not None:
             rig, self.rig = self.rig, None
+            driver = rig.driver
+            if driver.controller_state in ('running', 'holding', 'ramping_down'):
+                driver.abort('rig_driver shutting down')
+                deadline = time.monotonic() + 5.0
+                while driver.controller_state not in ('idle', 'fault') and time.monotonic() < deadline:
+                    driver.poll()
+                    time.sleep(0.005)
+            self._log_events(driver)
+            self.get_logger().info(f'rig closed (controller {driver.controller_state}, at '
+                                   f'{driver.status.extra["position"] * 1e3:.4f} mm)')
             rig.close()
         if self.pub_samples is not None:
             self.destroy_lifecycle_publisher(self.pub_samples)
@@ -211,33 +249,60 @@ class RigDriverNode(LifecycleNode):
             self.destroy_timer(self._poll_timer)
             self._poll_timer = None
 
+    # -- parameters at run time -------------------------------------------------------------------------------
+    def on_set_parameters(self, params) -> SetParametersResult:
+        """Limits and stream settings apply at once (tighter limits: the rig ramps into them if it must);
+        everything else needs configure, so it is refused while the rig is configured, with the reason."""
+        changed = {p.name: p.value for p in params}
+        fixed = sorted(n for n in changed if n not in LIVE_PARAMETERS)
+        if fixed and self.rig is not None:
+            return SetParametersResult(successful=False, reason=f"{', '.join(fixed)}: applied at configure; the "
+                                       'rig is configured (deactivate and clean up first)')
+        lim_changes = {n.split('.', 1)[1]: float(v) for n, v in changed.items() if n.startswith('limits.')}
+        try:
+            limits = Limits(**dict(self.config.limits.to_dict(), **lim_changes)) if lim_changes else None
+        except LimitError as exc:
+            return SetParametersResult(successful=False, reason=str(exc))
+        rest = float(changed.get('rest_position', self.config.rest_position))
+        lim = limits or self.config.limits
+        if not lim.displacement_min <= rest <= lim.displacement_max:
+            return SetParametersResult(successful=False, reason=f'rest_position {rest:g} m outside the '
+                                       'displacement limits')
+        if 'stream_loss_action' in changed and changed['stream_loss_action'] not in ('ramp', 'hold'):
+            return SetParametersResult(successful=False, reason="stream_loss_action: 'ramp' or 'hold'")
+        self.config.rest_position = rest
+        for name in ('stream_timeout', 'stream_loss_action'):
+            if name in changed:
+                setattr(self.config, name, changed[name])
+        if 'batch_size' in changed:
+            self.batch_size = int(changed['batch_size'])
+        if 'max_batch_delay' in changed:
+            self.max_batch_delay = float(changed['max_batch_delay'])
+        if limits is not None:
+            self.config.limits = limits
+            if self.rig is not None:
+                self.rig.driver.set_limits(limits)
+                self._log_events()
+            self.publish_status()
+        return SetParametersResult(successful=True)
+
     # -- data path ------------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
-        """Queue setpoints on the bus. The core wants one contiguous stream, but a new program starts a little
-        ahead of the rig (excitation ``lead_time``): a short gap is bridged by holding the last setpoint, a
-        long one (the rig has been holding since the last program) starts a new stream, and a batch that
-        overlaps what is already queued is trimmed. All three happen only between programs."""
+        """Queue setpoints on the bus - only the open stream's, exactly continuing it (the core refuses the rest
+        and counts them; the first refusal per second is logged with the sender)."""
         if self.rig is None or self._poll_timer is None:   # only an active driver moves the rig
             return
         driver = self.rig.driver
-        x = conv.as_array(msg.displacement)
-        first = msg.first_sequence
-        if self._queued_end is not None and first != self._queued_end:
-            if first < self._queued_end:
-                x, first = x[self._queued_end - first:], self._queued_end
-                if x.size == 0:
-                    return
-            elif first - self._queued_end <= self.config.sample_rate:
-                x = np.concatenate([np.full(first - self._queued_end, self._last_setpoint), x])
-                first = self._queued_end
-            elif not driver.faults and not driver.fault_messages:   # healthy and no abort pending
-                driver.reset()
-        if driver.queue_setpoints(first, x):
-            self._queued_end, self._last_setpoint = first + x.size, float(x[-1])
-        elif not self._refused_logged:
-            self._refused_logged = True
-            self.get_logger().warning(f'setpoints refused by the rig ({driver.status.state}): '
-                                      + '; '.join(driver.fault_messages[-2:]))
+        if driver.queue_setpoints(msg.first_sequence, conv.as_array(msg.displacement), msg.stream_id):
+            if msg.end_of_stream:
+                driver.end_stream(msg.stream_id)
+        else:
+            now = time.monotonic()
+            if now - self._refused_at > 1.0:
+                self._refused_at = now
+                self.get_logger().warning(f'setpoints from {msg.source or "an unnamed sender"} refused: '
+                                          f'{driver.refusal or driver.status.state}')
+        self._log_events()
 
     def poll(self) -> None:
         """Move every sample the bus delivered into batches of at least ``batch_size`` samples. Blocks from the
@@ -257,9 +322,14 @@ class RigDriverNode(LifecycleNode):
                 self._publish_batch()
         if self._buffered and time.monotonic() - self._buffer_since > self.max_batch_delay:
             self._publish_batch()   # the stream paused (program end, abort ramp done)
-        status = driver.status if driver is not None else None
-        if status is not None and conv.state_code(status.state) != getattr(self._last_status, 'state', None):
-            self.publish_status()   # state changes are published at once, not at the next status tick
+        if driver is None:
+            return
+        self._log_events(driver)
+        status = driver.status
+        key = (status.state, status.faults, status.extra['stream_id'], status.extra['last_event'])
+        if key != self._status_key:
+            self._status_key = key
+            self.publish_status()   # transitions are published at once, not at the next status tick
 
     def _publish_batch(self) -> None:
         blocks, self._buffer, self._buffered = self._buffer, [], 0
@@ -286,25 +356,66 @@ class RigDriverNode(LifecycleNode):
 
     def publish_diagnostics(self) -> None:
         status = self._last_status or self.status_message()
-        hw = f'{self.config.backend}:{self.config.channel or ""}'
+        hw = f'{self.config.backend}:{self.config.channel or self.get_fully_qualified_name()}'
         self.pub_diag.publish(conv.diagnostics_msg(status, hw, name=self.get_fully_qualified_name()))
 
     def on_reset(self, request, response):
         if self.rig is None:
             response.success, response.message = False, 'rig not configured'
         else:
-            self.rig.driver.reset()
-            self._refused_logged, self._queued_end = False, None
-            response.success, response.message = True, 'faults cleared'
+            why = self.rig.driver.reset()
+            response.success, response.message = not why, why or 'faults cleared'
+            self._log_events()
+            self.publish_status()
         return response
 
     def on_abort(self, request, response):
         if self.rig is None:
             response.success, response.message = False, 'rig not configured'
         else:
-            self.rig.driver.abort('operator abort (~/abort)')
+            self.rig.driver.abort('operator abort (rig_driver/abort)')
+            self._log_events()
+            self.publish_status()
             response.success, response.message = True, 'safe ramp to rest'
         return response
+
+    def on_open_stream(self, request, response):
+        if self.rig is None or self._poll_timer is None:
+            response.success, response.message = False, f'rig_driver is {self.lifecycle_state}, not active'
+            return response
+        driver = self.rig.driver
+        try:
+            grant = driver.open_stream(request.owner, int(math.ceil(request.lead_time * self.config.sample_rate)))
+        except StreamRefused as exc:
+            response.success, response.message = False, str(exc)
+            return response
+        finally:
+            self._log_events()
+        response.success, response.message = True, f'stream {grant.stream_id} open'
+        response.stream_id, response.first_sequence = grant.stream_id, grant.first_sequence
+        response.position, response.velocity = grant.position, grant.velocity
+        self.publish_status()
+        return response
+
+    def on_stop_stream(self, request, response):
+        if self.rig is None:
+            response.success, response.message = False, 'rig not configured'
+            return response
+        why = self.rig.driver.stop_stream(request.stream_id, request.target, request.reason or 'stop requested',
+                                          hold=request.action == StopStream.Request.ACTION_HOLD)
+        self._log_events()
+        self.publish_status()
+        response.success, response.message = not why, why or 'ramping'
+        return response
+
+    def _log_events(self, driver=None) -> None:
+        driver = driver or (self.rig.driver if self.rig is not None else None)
+        if driver is None:
+            return
+        log = self.get_logger()
+        while driver.events:
+            level, text = driver.events.popleft()
+            {'info': log.info, 'warn': log.warning, 'error': log.error}[level](text)
 
 
 def _parameter_of(message: str) -> str:

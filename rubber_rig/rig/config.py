@@ -106,7 +106,10 @@ class RigConfig:
     and extra `bus_options` passed to can.Bus. spawn_sim: with an interface backend, also start the simulated
     rig as a separate process on that bus. sample_rate [Hz]; watchdog_timeout [s]: feedback/heartbeat silence
     that faults the rig; heartbeat_period [s]; bus_error_max: bad frames (lost, late, malformed) per second of
-    samples that fault the bus; lost_burst_max [s]: longest run of lost samples tolerated. paced: the simulated
+    samples that fault the bus; lost_burst_max [s]: longest run of lost samples tolerated. stream_timeout [s]:
+    a running program's setpoint stream that is silent this long (or runs dry before its last batch) is lost:
+    the rig ramps to rest_position [m] (stream_loss_action 'ramp') or stops and holds where it can
+    ('hold'), with a stream fault either way. paced: the simulated
     rig runs in real time (True) or as fast as setpoints arrive (False) - identical waveform and physics.
     """
     backend: str = 'sim'
@@ -120,6 +123,9 @@ class RigConfig:
     heartbeat_period: float = 0.05
     bus_error_max: int = 20
     lost_burst_max: float = 0.02
+    stream_timeout: float = 0.3
+    stream_loss_action: str = 'ramp'
+    rest_position: float = 0.0
     limits: Limits = field(default_factory=Limits)
     paced: bool = True
     spawn_sim: bool = False
@@ -154,6 +160,14 @@ class RigConfig:
                 raise ConfigError(f"rig config: field '{name}': must be > 0")
         if self.heartbeat_period >= self.watchdog_timeout:
             raise ConfigError("rig config: field 'heartbeat_period': must be shorter than watchdog_timeout")
+        if not self.stream_timeout > 0:
+            raise ConfigError("rig config: field 'stream_timeout': must be > 0")
+        if self.stream_loss_action not in ('ramp', 'hold'):
+            raise ConfigError(f"rig config: field 'stream_loss_action': 'ramp' or 'hold', got "
+                              f"{self.stream_loss_action!r}")
+        if not self.limits.displacement_min <= self.rest_position <= self.limits.displacement_max:
+            raise ConfigError(f"rig config: field 'rest_position': {self.rest_position:g} m outside the "
+                              "displacement limits")
         if self.bus_error_max < 0:
             raise ConfigError("rig config: field 'bus_error_max': must be >= 0")
         self.sim.check()

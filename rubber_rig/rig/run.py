@@ -83,7 +83,8 @@ def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, ab
     chunk = max(1, min(ahead // 2, int(round(0.01 * fs)))) if cfg.paced else max(1, ahead // 2)
     if lead_latency:   # the node streams in 50-sample batches; big chunks would add latency on top of the lead
         chunk = max(1, min(chunk, int(round(0.05 * fs))))
-    first = drv.next_sequence
+    grant = drv.open_stream('run_program')        # StreamRefused (a ValueError) says why not
+    first = grant.first_sequence
     runner.sequence = first
     queued = first
     block_of = []                      # program block per queued setpoint
@@ -113,12 +114,14 @@ def _loop(program, cfg, drv, runner, on_progress, lookahead, progress_period, ab
             if lead_latency:
                 feed(queued - ahead)
             x = runner.next_setpoints(chunk)
-            if not drv.queue_setpoints(queued, x):
+            if not drv.queue_setpoints(queued, x, grant.stream_id):
                 stopped = True
                 break
             block_of.append(runner.last_block_index)
             queued_x.append(x)
             queued += chunk
+            if runner.finished:
+                drv.end_stream(grant.stream_id)   # running dry after this is the program's end, not a loss
         progressed = False
         blk = drv.poll()
         while blk is not None:

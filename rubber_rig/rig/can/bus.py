@@ -24,6 +24,7 @@ def open_bus(config, channel=None) -> can.BusABC:
     if config.backend == 'udp_multicast':
         udp = importlib.import_module('can.interfaces.udp_multicast')   # needs msgpack
         kwargs.setdefault('fd', config.fd)
+        kwargs.setdefault('hop_limit', 0)   # frames stay on this host unless the user asks (bus_options)
         return can.Bus(interface='udp_multicast', channel=channel or config.channel or
                        udp.UdpMulticastBus.DEFAULT_GROUP_IPv4, **kwargs)
     kwargs.setdefault('bitrate', config.bitrate)

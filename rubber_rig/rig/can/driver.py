@@ -1,6 +1,7 @@
 """Host driver over any python-can Bus: streams setpoints, assembles measured samples, counts bad frames,
 checks limits and sensors, and runs the watchdog. poll() is non-blocking and never raises on bad frames."""
 import collections
+import itertools
 import math
 import time
 from dataclasses import dataclass, field
@@ -8,9 +9,10 @@ from typing import List
 
 import numpy as np
 
-from .protocol import (CMD_ABORT, CMD_RESET, FAULT_BUS, FAULT_DISPLACEMENT_LIMIT, FAULT_FORCE_LIMIT,
-                       FAULT_SENSOR, FAULT_VELOCITY_LIMIT, FAULT_WATCHDOG, SEQ_MOD, STATES,
-                       MalformedFrame, Protocol, unwrap_sequence)
+from ...excitation.ramp import stopping_positions
+from .protocol import (CMD_ABORT, CMD_HOLD, CMD_RESET, FAULT_BUS, FAULT_DISPLACEMENT_LIMIT, FAULT_FORCE_LIMIT,
+                       FAULT_SENSOR, FAULT_STREAM, FAULT_VELOCITY_LIMIT, FAULT_WATCHDOG, SEQ_MOD, STATES,
+                       MalformedFrame, Protocol, fault_names, unwrap_sequence)
 
 
 @dataclass
@@ -58,11 +60,46 @@ class RigStatus:
     extra: dict = field(default_factory=dict)
 
 
+class StreamRefused(ValueError):
+    """A stream could not be opened or a batch was refused; the message says why."""
+
+
+@dataclass
+class StreamGrant:
+    """The right to command the rig: setpoints of stream `stream_id` start at first_sequence and must continue
+    from `position` [m] (the command the rig holds) at `velocity` [m/s]."""
+    stream_id: int
+    owner: str
+    first_sequence: int
+    position: float
+    velocity: float
+
+
+@dataclass
+class _Stream:
+    grant: StreamGrant
+    queued_end: int             # sequence after the last queued setpoint
+    last_queued: float          # last queued setpoint [m] (the true continuation of the applied command)
+    last_velocity: float        # velocity at the end of the queue [m/s]
+    last_rx_wall: float         # wall time of the latest batch
+    ended: bool = False         # the owner sent its last batch: running dry is the end, not a loss
+    held: bool = False          # stopped by a hold: the owner keeps the rig and re-opens to resume
+
+
 class RigDriver:
-    """Driver for the rig controller on python-can `bus` with RigConfig `config`.
+    """Driver for the rig controller on python-can `bus` with RigConfig `config`; the one safety authority.
+
+    Only the owner of the open stream commands the rig (open_stream -> queue_setpoints with its id ->
+    end_stream); every batch is checked against the limits as the continuation of what is already queued,
+    including that the rig can still stop inside the displacement range at limits.deceleration_max. Faults,
+    aborts, holds and a stream that stops (no batch for stream_timeout, or the controller running dry before
+    the owner's last batch) end in the controller's own ramp, inside the limits. `events` collects one
+    (level, text) line per transition for the caller's log.
 
     Call poll() often (at least every watchdog_timeout / 2): it drains the bus without blocking, updates the
     watchdog and returns the next block of contiguous samples or None."""
+
+    MAX_LEAD_SAMPLES = 16384     # a stream may start at most this far ahead (16-bit sequences stay unambiguous)
 
     def __init__(self, bus, config, protocol: Protocol = None, clock=time.monotonic):
         self.bus, self.cfg = bus, config
@@ -73,24 +110,29 @@ class RigDriver:
         self._handlers = {'Feedback': self._on_feedback, 'ControllerStatus': self._on_status,
                           'ControllerHeartbeat': self._on_heartbeat, 'Temperature': self._on_temperature}
         # stream bookkeeping
-        self._queued_end = None          # sequence after the last queued setpoint
-        self._last_queued = None         # last queued setpoint [m]
-        self._last_applied = None        # last command the controller reported applying [m]
+        self._stream = None              # _Stream of the owner, or None
+        self._stream_ids = itertools.count(int(clock() * 1000) % 1_000_000 * 1000 + 1)
+        self._jump_to = None             # a stream on an idle rig starts at this sequence: the jump is no loss
+        self._last_applied = 0.0         # last command the controller reported applying [m]
+        self._prev_applied = 0.0
         self._expected = None            # next feedback sequence expected
         self._pend = ([], [], [])        # x, f, u of the contiguous samples not yet returned
         self._pend_first, self._pend_t0, self._pend_lost = None, None, 0   # first sequence, its frame time
         self._ready = collections.deque()
-        self._recent = collections.deque(maxlen=max(20, int(0.05 * self.fs)))   # (u, x, f) for sensor checks
+        self._sensor = _SensorCheck(self.fs)
         self._bad = collections.deque()  # (sample position, count) of bad-frame events, 1 s window
+        self.events = collections.deque(maxlen=1000)   # (level 'info'|'warn'|'error', text)
+        self.last_event = ''
+        self.refusal = ''                # why the latest batch was refused
         # counters and state
         self.counters = dict(samples_received=0, frames_lost=0, frames_late=0, frames_malformed=0,
-                             frames_unknown=0, setpoints_sent=0, heartbeats_received=0)
+                             frames_unknown=0, setpoints_sent=0, setpoints_refused=0, heartbeats_received=0)
         self.faults, self.fault_messages = 0, []
         self.controller_state, self.controller_faults, self.controller_sequence = 'unconfigured', 0, -1
         self.temperature = math.nan
-        self._aborting = False
+        self._aborting = False           # a ramp commanded by the host is under way
         now = clock()
-        self._last_fb_wall = self._last_hb_wall = self._last_host_hb_wall = now
+        self._last_fb_wall = self._last_hb_wall = self._last_host_hb_wall = self._last_poll_wall = now
         self._hb_sample = None           # feedback position at the last controller heartbeat
         self._host_hb_counter = 0
         self._hb_every = max(1, round(config.heartbeat_period * self.fs))
@@ -98,37 +140,137 @@ class RigDriver:
         self._wd_wall = config.watchdog_timeout if config.paced else max(config.watchdog_timeout, 2.0)
         self.pump = None                 # callable run at the start of poll() (in-process fast simulator)
         self._send_host_heartbeat()
+        self.send_limits()
 
-    # ---- host -> controller
-    def queue_setpoints(self, first_sequence: int, displacement) -> bool:
-        """Stream setpoints [m] for samples first_sequence .. + n - 1 (contiguous with the previous call).
+    # ---- events
+    def _event(self, level: str, text: str):
+        self.events.append((level, text))
+        self.last_event = text
 
-        The whole batch is checked against the limits before anything is sent; a violation faults the rig
-        (safe ramp) and returns False. Also returns False while faulted or ramping down."""
+    # ---- limits
+    def set_limits(self, limits):
+        """Apply new limits at once: the controller's ramps follow them, and if the rig or what is queued lies
+        outside them the rig ramps into them now (a fault: the program no longer fits)."""
+        self.limits = limits
+        self.send_limits()
+        self._event('info', f'limits: displacement {limits.displacement_min * 1e3:g}..{limits.displacement_max * 1e3:g}'
+                            f' mm, velocity {limits.velocity_max:g} m/s, force {limits.force_max:g} N, deceleration '
+                            f'{limits.deceleration_max:g} m/s^2')
+        s = self._stream
+        inside = limits.displacement_min <= self._last_applied <= limits.displacement_max
+        if s is not None and not s.held and (s.queued_end > self.next_sequence or not inside):
+            self._fault(FAULT_DISPLACEMENT_LIMIT, 'limits changed while streaming: the queued setpoints were '
+                                                  'checked against the old limits')
+        elif not inside:
+            self.abort('limits changed: the rig is outside the new displacement limits')
+
+    def send_limits(self):
+        lim = self.limits
+        self.bus.send(self.proto.encode('HostLimits', {
+            'HL_DisplacementMin': lim.displacement_min, 'HL_DisplacementMax': lim.displacement_max,
+            'HL_Deceleration': min(510.0, math.floor(lim.deceleration_max / 2) * 2.0)}))
+
+    # ---- streams
+    @property
+    def stream(self):
+        """The open StreamGrant, or None."""
+        return self._stream.grant if self._stream is not None else None
+
+    def why_not_ready(self) -> str:
+        """'' when a stream can open now, else why not."""
+        if self.faults:
+            return 'rig fault: ' + '; '.join(self.fault_messages[-3:]) + ' (reset to acknowledge)'
+        if self.controller_state == 'unconfigured':
+            return 'the controller has not announced itself'
+        if self._aborting or self.controller_state == 'ramping_down':
+            return 'the rig is ramping to rest'
+        if self.controller_state == 'fault' or self.controller_faults:
+            return f'controller fault {fault_names(self.controller_faults)} (reset to acknowledge)'
+        return ''
+
+    def open_stream(self, owner: str, lead_samples: int = 0) -> StreamGrant:
+        """Grant the setpoint stream to `owner` (StreamRefused says why not). The first setpoint is due at
+        first_sequence, lead_samples after every sample the rig has taken or been sent; the rig holds until
+        then. The owner of a held or ended stream may re-open it (resume)."""
+        why = self.why_not_ready()
+        if why:
+            raise StreamRefused(why)
+        s = self._stream
+        if s is not None:
+            if s.grant.owner != owner:
+                raise StreamRefused(f'the rig is streaming for {s.grant.owner or "another client"} '
+                                    f'(stream {s.grant.stream_id})')
+            if not (s.held or s.ended):
+                raise StreamRefused(f'{owner} already has stream {s.grant.stream_id} open (end it first)')
+        lead = max(0, min(int(lead_samples), self.MAX_LEAD_SAMPLES))
+        first = self.next_sequence + lead
+        if self.controller_state in ('idle', 'fault') and (s is None or s.queued_end <= self.next_sequence):
+            self._jump_to = first     # an idle controller starts at the first setpoint it gets
+        v = (self._last_applied - self._prev_applied) * self.fs if self.controller_state == 'running' else 0.0
+        grant = StreamGrant(next(self._stream_ids), owner, first, self._last_applied, v)
+        self._stream = _Stream(grant, first, self._last_applied, v, self._clock())
+        self._event('info', f'stream {grant.stream_id} opened for {owner or "a local client"}: first setpoint '
+                            f'at sample {first}, from {grant.position * 1e3:.4f} mm')
+        return grant
+
+    def end_stream(self, stream_id: int):
+        """The owner's last batch is queued: running dry afterwards is the end of the program."""
+        s = self._stream
+        if s is not None and s.grant.stream_id == stream_id and not s.ended:
+            s.ended = True
+            self._event('info', f'stream {stream_id} ended by {s.grant.owner or "its owner"} at sample '
+                                f'{s.queued_end}')
+
+    def queue_setpoints(self, first_sequence: int, displacement, stream_id: int = None) -> bool:
+        """Stream setpoints [m] for samples first_sequence .. + n - 1 of stream `stream_id` (contiguous with its
+        previous batch). Without stream_id a local caller (ROS-free runner, tests) gets a stream opened for it at
+        first_sequence when none is open.
+
+        The whole batch is checked before anything is sent: displacement range, velocity from the true end of
+        the queue, and that every setpoint can still stop inside the range at deceleration_max; a violation
+        faults the rig (safe ramp) and returns False. A batch of another stream, or a discontinuous one, is
+        refused (False, counted, `refusal` says why) and changes nothing. Also False while faulted or
+        ramping."""
         x = np.asarray(displacement, dtype=float)
-        if self.faults or self._aborting:
+        s = self._stream
+        if stream_id is None and s is None and not self.why_not_ready():
+            s = self._local_stream(first_sequence)
+        why = self._refusal(s, first_sequence, stream_id, x.size)
+        if why:
+            self.refusal = why
+            self.counters['setpoints_refused'] += int(x.size)
             return False
-        if self._queued_end is not None and first_sequence != self._queued_end:
-            raise ValueError(f'queue_setpoints: first_sequence {first_sequence} is not contiguous with the '
-                             f'stream (next is {self._queued_end})')
+        s.last_rx_wall = self._clock()
         if x.size == 0:
             return True
         lim = self.limits
-        lo, hi = float(np.min(x)), float(np.max(x))
-        if not (np.all(np.isfinite(x)) and lim.displacement_min <= lo and hi <= lim.displacement_max):
+        lo, hi = (float(np.min(x)), float(np.max(x))) if np.all(np.isfinite(x)) else (math.nan, math.nan)
+        if not (lim.displacement_min <= lo and hi <= lim.displacement_max):
             self._fault(FAULT_DISPLACEMENT_LIMIT, f'setpoints {lo:.6g}..{hi:.6g} m outside the displacement '
                                                   f'limits {lim.displacement_min:g}..{lim.displacement_max:g} m')
             return False
-        # a new stream continues from where the controller is (its last applied command), never with a step
-        prev = self._last_queued if self._queued_end is not None else (
-            self._last_applied if self._last_applied is not None else x[0])
-        v = float(np.max(np.abs(np.diff(np.concatenate([[prev], x]))))) * self.fs
-        if v > lim.velocity_max * (1 + 1e-9):
-            self._fault(FAULT_VELOCITY_LIMIT, f'setpoint velocity {v:.6g} m/s above {lim.velocity_max:g} m/s')
+        v = np.diff(np.concatenate([[s.last_queued], x])) * self.fs
+        vmax = float(np.max(np.abs(v)))
+        if vmax > lim.velocity_max * (1 + 1e-9):
+            self._fault(FAULT_VELOCITY_LIMIT, f'setpoint velocity {vmax:.6g} m/s above {lim.velocity_max:g} m/s '
+                                              f'(continuing from {s.last_queued * 1e3:.4f} mm at sample '
+                                              f'{first_sequence})')
             return False
-        if self._queued_end is None or self._expected is not None and self._expected >= self._queued_end:
+        stop = stopping_positions(x, v, lim.deceleration_max, self.fs)
+        if float(np.min(stop)) < lim.displacement_min - 1e-9 or float(np.max(stop)) > lim.displacement_max + 1e-9:
+            k = int(np.argmax(np.maximum(lim.displacement_min - stop, stop - lim.displacement_max)))
+            self._fault(FAULT_DISPLACEMENT_LIMIT, f'setpoint {x[k] * 1e3:.4f} mm at {v[k]:.4g} m/s could not stop '
+                                                  f'inside the limits at deceleration_max '
+                                                  f'{lim.deceleration_max:g} m/s^2 (would stop at '
+                                                  f'{stop[k] * 1e3:.4f} mm)')
+            return False
+        if first_sequence <= self.controller_sequence:
+            self._fault(FAULT_STREAM, f'setpoints for sample {first_sequence} arrived after the rig passed it '
+                                      f'(at {self.controller_sequence}): the stream is late')
+            return False
+        if s.queued_end == s.grant.first_sequence and (self._expected is None or self._expected >= s.queued_end):
             self._last_fb_wall = self._clock()   # pipeline was empty: the feedback clock starts now
-        if self._next_hb_seq is None:
+        if self._next_hb_seq is None or self._next_hb_seq < first_sequence - self._hb_every:
             self._next_hb_seq = first_sequence
         encode, send = self.proto.encode, self.bus.send
         for i, value in enumerate(x.tolist()):
@@ -138,29 +280,90 @@ class RigDriver:
                 self._send_host_heartbeat()
                 self._next_hb_seq = seq + self._hb_every
             send(encode('Setpoint', {'SP_Sequence': seq % SEQ_MOD, 'SP_Displacement': value}))
-        self._queued_end = first_sequence + x.size
-        self._last_queued = float(x[-1])
+        s.queued_end = first_sequence + x.size
+        s.last_queued, s.last_velocity = float(x[-1]), float(v[-1])
         self.counters['setpoints_sent'] += int(x.size)
         return True
 
-    def abort(self, reason: str = 'abort requested', target: float = 0.0):
+    def _local_stream(self, first_sequence):
+        grant = self.open_stream('', 0)
+        grant.first_sequence = first_sequence
+        self._stream.queued_end = first_sequence
+        if self._jump_to is not None:
+            self._jump_to = first_sequence
+        return self._stream
+
+    def _refusal(self, s, first_sequence, stream_id, n) -> str:
+        if self.faults or self._aborting:
+            return 'the rig is faulted or ramping to rest'
+        if s is None:
+            return 'no stream is open (rig_driver/open_stream first)'
+        if stream_id is not None and stream_id != s.grant.stream_id:
+            return (f'stream {stream_id} is not the open stream {s.grant.stream_id} of '
+                    f'{s.grant.owner or "a local client"}')
+        if s.held or s.ended:
+            return f'stream {s.grant.stream_id} is {"held" if s.held else "ended"} (open it again to resume)'
+        if first_sequence != s.queued_end:
+            return (f'batch starts at sample {first_sequence}, the stream continues at {s.queued_end} '
+                    '(discontinuous streams are refused)')
+        return ''
+
+    def stop_stream(self, stream_id: int, target: float, reason: str, hold: bool = False) -> str:
+        """The owner stops now: flush and ramp to target [m] (clamped into the limits). hold: the owner keeps
+        the rig and resumes with open_stream. '' on success, else why not."""
+        s = self._stream
+        if s is None or s.grant.stream_id != stream_id:
+            return f'stream {stream_id} is not open'
+        if hold:
+            s.held = True
+            self._command_ramp(CMD_ABORT, target, f'hold: {reason}')
+        else:
+            self.abort(reason, target)
+        return ''
+
+    def abort(self, reason: str = 'abort requested', target: float = None):
         """Command the safe ramp: the controller flushes queued setpoints and ramps smoothly from where it is
-        to target [m] (clamped into the limits). Further setpoints are refused until reset()."""
-        target = self.limits.clamp_position(target)
-        # ramp at most half the velocity limit (and 50 mm/s), in whole mm/s as the frame carries it
-        ramp_v = max(0.001, math.floor(min(0.5 * self.limits.velocity_max, 0.05) * 1000) / 1000)
-        self.bus.send(self.proto.encode('HostCommand', {'CMD_Code': CMD_ABORT, 'CMD_Counter': 0,
+        to target [m] (default rest_position, clamped into the limits). The stream is released."""
+        self._command_ramp(CMD_ABORT, target, f'abort: {reason}')
+        self._release_stream()
+
+    def hold_here(self, reason: str):
+        """Stop the motion where it can stop (braking within the limits) and hold there; the stream is
+        released."""
+        self._command_ramp(CMD_HOLD, None, f'hold: {reason}')
+        self._release_stream()
+
+    def _command_ramp(self, code, target, text):
+        target = self.limits.clamp_position(self.cfg.rest_position if target is None else float(target))
+        lim = self.limits
+        # the travel speed: at most half the velocity limit (and 50 mm/s), in whole mm/s as the frame carries it
+        ramp_v = max(0.001, math.floor(min(0.5 * lim.velocity_max, 0.05) * 1000) / 1000)
+        self.bus.send(self.proto.encode('HostCommand', {'CMD_Code': code, 'CMD_Counter': 0,
                                                         'CMD_Argument': target, 'CMD_RampVelocity': ramp_v}))
         if not self._aborting:
-            self.fault_messages.append(f'abort: {reason}')
+            self._event('warn' if code == CMD_HOLD or 'hold' in text else 'warn',
+                        f'{text}; ramp to {"a stop" if code == CMD_HOLD else f"{target * 1e3:.4f} mm"} from '
+                        f'{self._last_applied * 1e3:.4f} mm')
         self._aborting = True
 
-    def reset(self):
-        """Clear faults (driver and controller) so a new stream can start."""
+    def _release_stream(self):
+        if self._stream is not None:
+            self._stream = None
+
+    def reset(self) -> str:
+        """Acknowledge and clear faults (driver and controller) so a new stream can open. '' on success, else
+        why not (the rig is still ramping)."""
+        if self.controller_state == 'ramping_down':
+            return 'the rig is still ramping to rest: reset when it is at rest'
         self.bus.send(self.proto.encode('HostCommand', {'CMD_Code': CMD_RESET, 'CMD_Counter': 0,
                                                         'CMD_Argument': 0, 'CMD_RampVelocity': 0}))
+        if self.faults or self.fault_messages:
+            self._event('info', 'reset: cleared ' + ('; '.join(self.fault_messages[-3:]) or 'faults'))
         self.faults, self.fault_messages, self._aborting = 0, [], False
-        self._queued_end = self._last_queued = None
+        self._stream = None
+        self._sensor.clear()
+        self.send_limits()
+        return ''
 
     def _send_host_heartbeat(self):
         self._host_hb_counter = (self._host_hb_counter + 1) % 256
@@ -171,6 +374,16 @@ class RigDriver:
     def poll(self):
         """Drain received frames (non-blocking), run the watchdog and checks; return the next SampleBlock of
         contiguous samples, or None if there is none."""
+        now = self._clock()
+        if now - self._last_poll_wall > 0.5 * self._wd_wall:
+            # this host was not scheduled (a loaded machine): silence is judged only over time it was awake,
+            # so a starved host never blames the controller for its own absence
+            late = now - self._last_poll_wall
+            self._last_fb_wall += late
+            self._last_hb_wall += late
+            if self._stream is not None:
+                self._stream.last_rx_wall += late
+        self._last_poll_wall = now
         if self.pump is not None:
             self.pump()
         recv = self.bus.recv
@@ -180,6 +393,7 @@ class RigDriver:
             msg = recv(0)
         self._flush_pending()
         self._watchdog()
+        self._check_stream()
         return self._ready.popleft() if self._ready else None
 
     def _receive(self, msg):
@@ -199,9 +413,13 @@ class RigDriver:
         handler(decoded[1], msg)
 
     def _on_feedback(self, sig, msg):
-        ref = self._expected if self._expected is not None else (
-            self._queued_end - 1 if self._queued_end is not None else 0)
+        ref = self._jump_to if self._jump_to is not None and self._expected is None else (
+            self._expected if self._expected is not None else max(self.controller_sequence, 0))
         seq = unwrap_sequence(int(sig['FB_Sequence']), ref)
+        if self._jump_to is not None and seq >= self._jump_to - 1:
+            if seq == self._jump_to and (self._expected is None or seq > self._expected):
+                self._expected = seq   # an idle rig started the new stream here: a jump, not a loss
+            self._jump_to = None
         if self._expected is None:
             self._expected = seq
         if seq < self._expected:
@@ -224,26 +442,42 @@ class RigDriver:
         px.append(x)
         pf.append(f)
         pu.append(u)
-        self._recent.append((u, x, f))
-        self._last_applied = u
+        self._prev_applied, self._last_applied = self._last_applied, u
         self._expected = seq + 1
         self.counters['samples_received'] += 1
         self._last_fb_wall = self._clock()
         self._check_measurement(x, f)
+        if self.controller_state in ('running', 'ramping_down') and not self.faults & FAULT_SENSOR:
+            why = self._sensor.add(u, x, f)
+            if why:
+                self._fault(FAULT_SENSOR, why)
 
     def _on_status(self, sig, msg):
         code = int(sig['ST_State'])
-        self.controller_state = STATES[code] if code < len(STATES) else 'fault'
+        self._set_controller_state(STATES[code] if code < len(STATES) else 'fault')
         self.controller_faults = int(sig['ST_Faults'])
         ref = self.controller_sequence if self.controller_sequence >= 0 else (self._expected or 0)
         self.controller_sequence = unwrap_sequence(int(sig['ST_LastSequence']), ref)
 
     def _on_heartbeat(self, sig, msg):
         code = int(sig['HB_State'])
-        self.controller_state = STATES[code] if code < len(STATES) else 'fault'
+        self._set_controller_state(STATES[code] if code < len(STATES) else 'fault')
         self.counters['heartbeats_received'] += 1
         self._last_hb_wall = self._clock()
         self._hb_sample = self._expected
+
+    def _set_controller_state(self, state):
+        old = self.controller_state
+        if state == old:
+            return
+        self.controller_state = state
+        if state == 'ramping_down':
+            self._event('warn', f'controller ramping to rest from {self._last_applied * 1e3:.4f} mm')
+        elif old == 'ramping_down' and state in ('idle', 'fault'):
+            self._aborting = False
+            self._event('info', f'rig at rest at {self._last_applied * 1e3:.4f} mm (controller {state})')
+        elif state == 'fault':
+            self._event('error', f'controller reports a fault: {", ".join(fault_names(self.controller_faults))}')
 
     def _on_temperature(self, sig, msg):
         self.temperature = float(sig['TEMP_Specimen'])
@@ -270,6 +504,10 @@ class RigDriver:
 
     def _check_measurement(self, x, f):
         lim = self.limits
+        if not (math.isfinite(x) and math.isfinite(f)):
+            if not self.faults & FAULT_SENSOR:
+                self._fault(FAULT_SENSOR, f'non-finite measurement (displacement {x}, force {f})')
+            return
         if abs(f) > lim.force_max and not self.faults & FAULT_FORCE_LIMIT:
             self._fault(FAULT_FORCE_LIMIT, f'measured force {f:.6g} N above force_max {lim.force_max:g} N')
         margin = 0.02 * (lim.displacement_max - lim.displacement_min)
@@ -284,7 +522,8 @@ class RigDriver:
             self._send_host_heartbeat()
         if self.faults & FAULT_WATCHDOG:
             return
-        streaming = self._queued_end is not None and (self._expected is None or self._expected < self._queued_end)
+        s = self._stream
+        streaming = s is not None and (self._expected is None or self._expected < s.queued_end)
         if streaming and not self._aborting and now - self._last_fb_wall > self._wd_wall:
             self._fault(FAULT_WATCHDOG, f'no feedback for {now - self._last_fb_wall:.3f} s with setpoints queued')
             return
@@ -298,28 +537,43 @@ class RigDriver:
             if silent > cfg.watchdog_timeout:
                 self._fault(FAULT_WATCHDOG, f'controller heartbeat silent for {silent:.3f} s of samples')
                 return
-        if cfg.paced and self.counters['heartbeats_received'] and now - self._last_hb_wall > cfg.watchdog_timeout:
+        if cfg.paced and self.counters['heartbeats_received'] and now - self._last_hb_wall > self._wd_wall:
             self._fault(FAULT_WATCHDOG, f'controller heartbeat silent for {now - self._last_hb_wall:.3f} s')
-            return
-        self._check_sensors()
 
-    def _check_sensors(self):
-        if len(self._recent) < self._recent.maxlen or self.controller_state != 'running' or self.faults & FAULT_SENSOR:
+    def _check_stream(self):
+        """A stream that stops without its last batch is lost: ramp to rest (or hold, stream_loss_action)."""
+        s = self._stream
+        if s is None or s.held or self.faults or self._aborting:
+            if s is not None and s.ended and self.controller_sequence + 1 >= s.queued_end:
+                self._release_stream()   # the owner's program has run to its end: the rig is free again
             return
-        arr = np.array(self._recent)
-        span = arr.max(axis=0) - arr.min(axis=0)
-        if span[0] > 20e-6 and span[1] < 2.5e-7:
-            self._fault(FAULT_SENSOR, f'displacement sensor stuck: command moved {span[0] * 1e3:.3f} mm, '
-                                      'measurement did not')
-        elif span[1] > 20e-6 and span[2] < 0.05:
-            self._fault(FAULT_SENSOR, f'force sensor stuck: displacement moved {span[1] * 1e3:.3f} mm, force '
-                                      'did not')
-        self._recent.clear()   # judge disjoint windows: cheap and enough
+        if s.ended:
+            if self.controller_sequence + 1 >= s.queued_end:
+                self._event('info', f'stream {s.grant.stream_id} of {s.grant.owner or "a local client"} '
+                                    f'completed at sample {s.queued_end}')
+                self._release_stream()
+            return
+        why = ''
+        silent = self._clock() - s.last_rx_wall
+        if self.cfg.paced and silent > self.cfg.stream_timeout:
+            why = f'no setpoints from {s.grant.owner or "the stream owner"} for {silent:.3f} s'
+        elif s.queued_end > s.grant.first_sequence and self.controller_sequence + 1 >= s.queued_end \
+                and self.controller_state == 'holding':
+            why = f'the rig ran out of setpoints at sample {s.queued_end} before the end of the stream'
+        if why:
+            self.faults |= FAULT_STREAM
+            self.fault_messages.append(f'setpoint stream lost: {why}')
+            self._event('error', f'fault stream: setpoint stream lost: {why}')
+            if self.cfg.stream_loss_action == 'hold':
+                self.hold_here('setpoint stream lost')
+            else:
+                self.abort('setpoint stream lost')
 
     def _fault(self, bit: int, message: str):
         """Record a fault and command the safe ramp."""
         self.faults |= bit
         self.fault_messages.append(message)
+        self._event('error', f'fault {fault_names(bit)[0]}: {message}')
         self.abort(message)
 
     # ---- status
@@ -333,17 +587,81 @@ class RigDriver:
         else:
             state = self.controller_state
         c = self.counters
+        s = self._stream
+        extra = {'heartbeats_received': c['heartbeats_received'], 'setpoints_refused': c['setpoints_refused'],
+                 'next_sequence': self.next_sequence, 'position': self._last_applied,
+                 'stream_owner': s.grant.owner if s else '', 'stream_id': s.grant.stream_id if s else 0,
+                 'stream_held': bool(s and s.held), 'last_event': self.last_event}
         return RigStatus(state, self.faults | self.controller_faults, list(self.fault_messages), self.fs,
                          c['samples_received'], c['frames_lost'], c['frames_late'], c['frames_malformed'],
                          c['frames_unknown'], self.temperature, self.controller_state, self.controller_faults,
-                         self.controller_sequence, c['setpoints_sent'], self.limits,
-                         {'heartbeats_received': c['heartbeats_received']})
+                         self.controller_sequence, c['setpoints_sent'], self.limits, extra)
 
     @property
     def next_sequence(self) -> int:
-        """Sequence the next queued setpoint must have (0 before the first)."""
-        return 0 if self._queued_end is None else self._queued_end
+        """The first sample index no setpoint or sample has used yet (where a new stream may start)."""
+        s = self._stream
+        return max(self._expected or 0, self.controller_sequence + 1, s.queued_end if s else 0,
+                   self._jump_to or 0)
 
-    def close(self):
-        """Shut the bus down (the caller decides whether to abort first)."""
+    def close(self, ramp: bool = True):
+        """Command the ramp to rest (unless ramp=False), then shut the bus down."""
+        if ramp and self.controller_state in ('running', 'holding'):
+            self.abort('driver shutting down')
         self.bus.shutdown()
+
+
+class _SensorCheck:
+    """Stuck-sensor detection from consistency, not from motion per window, so slow motion is covered too.
+
+    A live transducer never repeats the same reading for 0.1 s while what drives it moves: the displacement
+    is stuck when it repeats while the command moves >= 10 um, the load cell when it repeats while the
+    measured displacement moves >= 5 um. And over any stretch where the command spans >= 50 um, the measured
+    displacement must span at least 10 % of it (the actuator attenuates, it does not stop)."""
+
+    def __init__(self, fs):
+        self.n_same = max(10, int(round(0.1 * fs)))
+        self.window_max = max(10, int(round(2.0 * fs)))
+        self.clear()
+
+    def clear(self):
+        self.x_prev = self.f_prev = None
+        self.x_run = self.f_run = 0
+        self.u_lo = self.u_hi = self.x_lo = self.x_hi = None        # during the current repeated x / f
+        self.wu_lo = self.wu_hi = self.wx_lo = self.wx_hi = None    # consistency window
+        self.wn = 0
+
+    def add(self, u, x, f) -> str:
+        if x == self.x_prev:
+            self.x_run += 1
+            self.u_lo, self.u_hi = min(self.u_lo, u), max(self.u_hi, u)
+        else:
+            self.x_run, self.u_lo, self.u_hi = 0, u, u
+        if f == self.f_prev:
+            self.f_run += 1
+            self.x_lo, self.x_hi = min(self.x_lo, x), max(self.x_hi, x)
+        else:
+            self.f_run, self.x_lo, self.x_hi = 0, x, x
+        self.x_prev, self.f_prev = x, f
+        if self.x_run >= self.n_same and self.u_hi - self.u_lo >= 10e-6:
+            return (f'displacement sensor stuck at {x * 1e3:.4f} mm for {self.x_run} samples while the command '
+                    f'moved {(self.u_hi - self.u_lo) * 1e3:.4f} mm')
+        if self.f_run >= self.n_same and self.x_hi - self.x_lo >= 5e-6:
+            return (f'force sensor stuck at {f:.2f} N for {self.f_run} samples while the displacement moved '
+                    f'{(self.x_hi - self.x_lo) * 1e3:.4f} mm')
+        if self.wn == 0:
+            self.wu_lo = self.wu_hi = u
+            self.wx_lo = self.wx_hi = x
+        self.wn += 1
+        self.wu_lo, self.wu_hi = min(self.wu_lo, u), max(self.wu_hi, u)
+        self.wx_lo, self.wx_hi = min(self.wx_lo, x), max(self.wx_hi, x)
+        du = self.wu_hi - self.wu_lo
+        if du >= 50e-6:
+            dx = self.wx_hi - self.wx_lo
+            self.wn = 0
+            if dx < 0.1 * du:
+                return (f'displacement sensor stuck or disconnected: the command moved {du * 1e3:.4f} mm, the '
+                        f'measurement {dx * 1e3:.4f} mm')
+        elif self.wn >= self.window_max:
+            self.wn = 0
+        return ''

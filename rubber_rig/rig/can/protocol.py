@@ -16,16 +16,18 @@ FAULT_FORCE_LIMIT = 8
 FAULT_CONTROLLER = 16
 FAULT_SENSOR = 32
 FAULT_BUS = 64
+FAULT_STREAM = 128
 FAULT_NAMES = {FAULT_WATCHDOG: 'watchdog', FAULT_DISPLACEMENT_LIMIT: 'displacement_limit',
                FAULT_VELOCITY_LIMIT: 'velocity_limit', FAULT_FORCE_LIMIT: 'force_limit',
-               FAULT_CONTROLLER: 'controller', FAULT_SENSOR: 'sensor', FAULT_BUS: 'bus'}
+               FAULT_CONTROLLER: 'controller', FAULT_SENSOR: 'sensor', FAULT_BUS: 'bus',
+               FAULT_STREAM: 'stream'}
 
 # RigStatus STATE_* (index = value)
 STATES = ('unconfigured', 'idle', 'running', 'holding', 'ramping_down', 'fault')
 STATE_CODE = {name: i for i, name in enumerate(STATES)}
 
 # HostCommand codes
-CMD_NOP, CMD_ENABLE, CMD_ABORT, CMD_RESET, CMD_DISABLE = 0, 1, 2, 3, 4
+CMD_NOP, CMD_ENABLE, CMD_ABORT, CMD_RESET, CMD_DISABLE, CMD_HOLD = 0, 1, 2, 3, 4, 5
 
 SEQ_MOD = 1 << 16
 

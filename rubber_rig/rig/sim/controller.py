@@ -9,9 +9,11 @@ import time
 
 import numpy as np
 
-from ...excitation.ramp import SafeRamp
-from ..can.protocol import (CMD_ABORT, CMD_DISABLE, CMD_RESET, FAULT_WATCHDOG, SEQ_MOD, STATE_CODE,
-                            MalformedFrame, Protocol, unwrap_sequence)
+import math
+
+from ...excitation.ramp import DECEL_MAX, RAMP_ACCEL, SafeRamp, stopping_positions
+from ..can.protocol import (CMD_ABORT, CMD_DISABLE, CMD_HOLD, CMD_RESET, FAULT_SENSOR, FAULT_WATCHDOG, SEQ_MOD,
+                            STATE_CODE, MalformedFrame, Protocol, unwrap_sequence)
 from .faults import FaultInjector
 from .plant import Actuator, Sensor
 from .specimen import build_specimen
@@ -45,6 +47,8 @@ class SimController:
         self.u = self.u_prev = 0.0        # applied command [m]
         self.ramp = None
         self.last_host_hb = 0
+        # the host's limits for the controller's own ramps (HostLimits frame); until then: no bounds
+        self.lower, self.upper, self.decel_max = -math.inf, math.inf, DECEL_MAX
         self.counters = {'underruns': 0, 'setpoints_late': 0, 'frames_bad': 0, 'overruns': 0}
         self._held = []                   # (release_tick, message) for delayed frames
         self._hb = self._st = self._tc = 0
@@ -78,8 +82,18 @@ class SimController:
                 if self.state in STREAMING:
                     if deadline is None:
                         deadline = now
-                    # catch up on every tick that is due (deadline based: no drift from late wake-ups)
+                    # catch up on every tick that is due (deadline based: no drift from late wake-ups); frames
+                    # that arrived meanwhile are handled first
+                    msg = self.bus.recv(0)
+                    while msg is not None:
+                        self._handle(msg)
+                        msg = self.bus.recv(0)
                     n = 0
+                    due = int((now - deadline) * self.fs) + 1 if now >= deadline else 0
+                    if due > 1:
+                        # this process was not scheduled for `due` ticks: neither was the host in it, so the host
+                        # watchdog does not count that time (a real controller has its own CPU)
+                        self.last_host_hb += due - 1
                     while now >= deadline and self.state in STREAMING:
                         self._tick()
                         deadline += 1.0 / self.fs
@@ -156,24 +170,35 @@ class SimController:
                 self.buffer[seq] = float(sig['SP_Displacement'])
         elif name == 'HostHeartbeat':
             self.last_host_hb = self.ticks
+        elif name == 'HostLimits':
+            lo, hi = float(sig['HL_DisplacementMin']), float(sig['HL_DisplacementMax'])
+            if lo < hi:
+                self.lower, self.upper = lo, hi
+                self.decel_max = float(sig['HL_Deceleration']) or DECEL_MAX
         elif name == 'HostCommand':
             code = int(sig['CMD_Code'])
             if code in (CMD_ABORT, CMD_DISABLE):
                 self.abort(float(sig['CMD_Argument']), 0, float(sig['CMD_RampVelocity']) or None)
+            elif code == CMD_HOLD:
+                self.abort(None, 0, float(sig['CMD_RampVelocity']) or None)
             elif code == CMD_RESET and self.state in ('fault', 'idle'):
                 self.fault_bits = 0
                 self.state = 'idle'
                 self._housekeeping(force=True)
 
     def abort(self, target: float = 0.0, fault_bits: int = 0, velocity_max: float = None):
-        """Flush queued setpoints and ramp from the current command and velocity to target [m], at most
-        velocity_max [m/s] (default RAMP_VELOCITY_MAX; the host sends half its velocity limit)."""
+        """Flush queued setpoints and ramp from the current command and velocity to target [m] (None: stop
+        where the motion can stop, braking at the host's deceleration limit), at most velocity_max [m/s]
+        (default RAMP_VELOCITY_MAX; the host sends half its velocity limit), inside the host's limits."""
         self.fault_bits |= fault_bits
         self.buffer.clear()
         if self.state in ('running', 'holding', 'ramping_down'):
             v = (self.u - self.u_prev) * self.fs
+            if target is None:
+                target = float(stopping_positions(self.u, v, self.decel_max, self.fs))
             self.ramp = SafeRamp(self.u, v, target, self.fs,
-                                 velocity_max=min(velocity_max or self.RAMP_VELOCITY_MAX, self.RAMP_VELOCITY_MAX))
+                                 velocity_max=min(velocity_max or self.RAMP_VELOCITY_MAX, self.RAMP_VELOCITY_MAX),
+                                 accel_max=RAMP_ACCEL, decel_max=self.decel_max, lower=self.lower, upper=self.upper)
             self.state = 'ramping_down'
         elif self.fault_bits:
             self.state = 'fault'
@@ -198,15 +223,19 @@ class SimController:
         self.u_prev, self.u = self.u, u
         x = self.actuator.step(u)
         force = self.specimen.step(x)
+        if not math.isfinite(force) and not self.fault_bits & FAULT_SENSOR:
+            self.abort(0.0, FAULT_SENSOR)   # the load cell channel went invalid: a controller stops on that
         stuck = self.faults.stuck(t)
         for name, sensor in (('displacement', self.disp_sensor), ('force', self.force_sensor)):
             if name in stuck and sensor.stuck_value is None:
                 sensor.stuck_value = sensor.read(x if name == 'displacement' else force)
             elif name not in stuck:
                 sensor.stuck_value = None
+        xm, fm = self.disp_sensor.read(x), self.force_sensor.read(force)
+        # a frame cannot carry NaN: an invalid channel reads 0 and the status frame carries the sensor fault
         self._send('Feedback', {'FB_Sequence': self.next_seq % SEQ_MOD,
-                                'FB_Displacement': self.disp_sensor.read(x),
-                                'FB_Force': self.force_sensor.read(force), 'FB_Setpoint': u})
+                                'FB_Displacement': xm if math.isfinite(xm) else 0.0,
+                                'FB_Force': fm if math.isfinite(fm) else 0.0, 'FB_Setpoint': u})
         self.next_seq += 1
         self.ticks += 1
         if self.state == 'ramping_down' and self.ramp.done:
