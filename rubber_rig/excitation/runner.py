@@ -128,6 +128,25 @@ class ProgramRunner:
         self._start_ramp(blk.mean if blk.periodic else self._x)
         self.state, self._resume = 'holding', False
 
+    @property
+    def hold_target(self) -> float:
+        """Where hold() goes [m]: the current block's mean (periodic) or the current setpoint."""
+        blk = self.program.blocks[self.block_index]
+        return blk.mean if blk.periodic else self._x
+
+    def resume_at(self, sequence: int, position: float):
+        """Continue after hold() on a new stream: the held block restarts from its beginning at `sequence`,
+        approached smoothly from `position` [m] (where the rig holds) if that is not where the block starts."""
+        if self.state != 'holding':
+            return
+        target = self.hold_target
+        self._restart(self._hold_block)
+        self.sequence = int(sequence)
+        self._x = self._x_prev = float(position)
+        if abs(position - target) > 1e-7:
+            self._start_ramp(target)
+            self.state = 'approaching'
+
     def resume(self):
         """Continue after hold(): the held block restarts from its beginning (with its taper) once the hold
         ramp has settled."""

@@ -108,6 +108,8 @@ class ElementModelNode(Node):
 
     # -- data path --------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
+        if not len(msg.displacement):
+            return   # a keep-alive of the stream: no samples to map
         self.blocks.add(msg.first_sequence, len(msg.displacement), msg.block_index)
         self.process_cycles()
 

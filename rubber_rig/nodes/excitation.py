@@ -1,35 +1,44 @@
 """excitation: runs test programs on the rig, streaming setpoints ahead of the measured samples.
 
 Action:      run_program (msg_defs/action/RunProgram; feedback: block, cycle, achieved amplitude; result:
-             per-block summaries)
-Services:    ~/abort (std_srvs/Trigger: smooth ramp to rest), ~/hold (std_srvs/SetBool: true = hold,
-             false = resume), ~/load_program (msg_defs/srv/LoadProgram: validate without running)
+             per-block summaries and why it ended). Every goal is accepted and then either runs or ends at once
+             with the reason it cannot (busy, rig not ready, invalid program, no recording).
+Services:    ~/abort (std_srvs/Trigger: ramp to rest now), ~/hold (std_srvs/SetBool: true = hold, false = resume),
+             ~/load_program (msg_defs/srv/LoadProgram: validate without running)
 Subscribes:  samples (msg_defs/RigSampleBatch: amplitude control, progress), status (msg_defs/RigStatus,
-             latched: sample rate and limits of the rig, faults)
+             latched: sample rate, limits, faults, who owns the stream), recorder_status (msg_defs/RecorderStatus,
+             with require_recording)
 Publishes:   setpoints (msg_defs/SetpointBatch), program (std_msgs/String, latched: YAML of the running program)
+Calls:       <rig_driver>/open_stream, <rig_driver>/stop_stream
 
-Setpoints are generated from the sample index by rubber_rig.excitation.ProgramRunner (never from wall-clock
-time) and published ``lead_time`` ahead of the latest measured sample, so the driver always has setpoints
-queued. The sample rate and the limits come from the driver's latched status, so they cannot disagree.
+A program starts only on a stream the driver grants (one owner at a time), from wherever the rig holds (an
+approach ramp leads to the program's start). Setpoints are generated from the sample index by
+rubber_rig.excitation.ProgramRunner (never from wall-clock time) and published ``lead_time`` ahead of the
+latest measured sample. Abort, cancel and hold go to the driver directly (its controller ramps at once,
+instead of after the queued lead); a rig that stops the stream, faults or goes silent ends the goal with the
+reason. No callback lets an exception take the node down: it ends the running program and logs.
 """
 from __future__ import annotations
 
 import math
+import time
+import traceback
 
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
 from rclpy.task import Future
 
 from msg_defs.action import RunProgram
-from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
-from msg_defs.srv import LoadProgram
+from msg_defs.msg import RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
+from msg_defs.srv import LoadProgram, OpenStream, StopStream
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from rubber_rig.excitation import Program, ProgramRunner, program_source
+from rubber_rig.excitation.limits import element_force_model
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.params import declare
+from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.nodes.spin import spin_node
 
 READY_STATES = (RigStatus.STATE_IDLE, RigStatus.STATE_RUNNING, RigStatus.STATE_HOLDING)
@@ -63,23 +72,40 @@ class ExcitationNode(Node):
                                      range=(0.001, 0.5), units='s')
         self.feedback_period = declare(self, 'feedback_period', 0.2, 'period of action feedback',
                                        range=(0.01, 10.0), units='s')
+        self.rig_driver = declare(self, 'rig_driver', 'rig_driver', 'name of the rig_driver node whose '
+                                  'open_stream/stop_stream services this node calls (relative: same namespace)')
+        self.status_timeout = declare(self, 'status_timeout', 0.8, 'a rig_driver status older than this ends a '
+                                      'running program (the driver is gone)', range=(0.2, 10.0), units='s')
+        self.require_recording = declare(self, 'require_recording', False, 'start a program only while the '
+                                         "recorder reports recording this namespace's samples, and stop it if "
+                                         'the recording fails')
+        self.force_model_set = declare(self, 'force_model', 'seed000_20C', 'element-model parameter set that '
+                                       'predicts each block\'s peak force before start (refused above '
+                                       "limits.force_max); '' = no force prediction")
         if self.stream_period >= self.lead_time / 2:
-            from rubber_rig.nodes.params import ParameterError
             raise ParameterError(self.get_name(), 'stream_period', f'{self.stream_period} s must be below half '
                                  f'of lead_time ({self.lead_time} s) or the driver could starve')
+        try:
+            self.force_model = element_force_model(self.force_model_set) if self.force_model_set else None
+        except (ValueError, OSError) as exc:
+            raise ParameterError(self.get_name(), 'force_model', str(exc)) from None
+        self._pending = None
         if self.program_param:  # validate at start: a wrong name fails here, naming the parameter
             try:
                 self._pending = read_program(self.program_param)
-            except (ValueError, FileNotFoundError) as exc:
-                from rubber_rig.nodes.params import ParameterError
+            except (ValueError, OSError) as exc:
                 raise ParameterError(self.get_name(), 'program', str(exc)) from None
-        else:
-            self._pending = None
 
         self.status: RigStatus | None = None
+        self._status_wall = 0.0
+        self.recorder: RecorderStatus | None = None
         self.next_sample = None          # sequence after the latest measured sample
         self.runner: ProgramRunner | None = None
+        self.stream_id = 0               # the stream the driver granted us (0: none)
+        self.start_sequence = 0
         self.end_sequence = None         # sequence after the last setpoint of the finished runner
+        self.held = False                # stream held by the driver (hold); resume opens it again
+        self._opening = False            # an open_stream request is under way
         self.goal_handle = None
         self._done: Future | None = None
         self._last_feedback = 0.0
@@ -89,72 +115,152 @@ class ExcitationNode(Node):
         self.pub_program = self.create_publisher(String, topics.PROGRAM, topics.LATCHED_QOS)
         self.create_subscription(RigSampleBatch, topics.SAMPLES, self.on_samples, topics.STREAM_QOS)
         self.create_subscription(RigStatus, topics.STATUS, self.on_status, topics.LATCHED_QOS)
+        self.create_subscription(RecorderStatus, topics.RECORDER_STATUS, self.on_recorder_status,
+                                 topics.LATCHED_QOS)
+        self.open_client = self.create_client(OpenStream, f'{self.rig_driver}/open_stream')
+        self.stop_client = self.create_client(StopStream, f'{self.rig_driver}/stop_stream')
         self.create_service(Trigger, '~/abort', self.on_abort)
         self.create_service(SetBool, '~/hold', self.on_hold)
         self.create_service(LoadProgram, '~/load_program', self.on_load_program)
         self.action = ActionServer(self, RunProgram, 'run_program', execute_callback=self.execute,
-                                   goal_callback=self.on_goal, cancel_callback=lambda _: CancelResponse.ACCEPT)
+                                   goal_callback=lambda _: GoalResponse.ACCEPT,
+                                   cancel_callback=lambda _: CancelResponse.ACCEPT)
         self.create_timer(self.stream_period, self.stream)
+
+    @property
+    def samples_topic(self) -> str:
+        ns = self.get_namespace().rstrip('/')
+        return f'{ns}/{topics.SAMPLES}'
 
     # -- inputs -----------------------------------------------------------------------------------------------
     def on_status(self, msg: RigStatus) -> None:
-        self.status = msg
-        if self.runner is not None and msg.state == RigStatus.STATE_FAULT:
-            # the driver ramps the actuator down itself; stop commanding and report why
-            self.runner.abort('rig fault: ' + '; '.join(msg.fault_messages or conv.fault_names(msg.faults)))
-            self._finish(success=False)
+        self.status, self._status_wall = msg, time.monotonic()
+        if self.runner is None or not self.stream_id or self._opening:
+            return
+        if msg.state == RigStatus.STATE_FAULT:
+            self._end('rig fault: ' + '; '.join(msg.fault_messages or conv.fault_names(msg.faults)))
+        elif msg.stream_id != self.stream_id and self.end_sequence is None:
+            # the driver took the stream away (rig_driver/abort, deactivate, a limit change): say what it did
+            self._end(f'the rig stopped the program: {msg.last_event or msg.state_name}')
+
+    def on_recorder_status(self, msg: RecorderStatus) -> None:
+        self.recorder = msg
+        if self.require_recording and self.runner is not None and msg.state == RecorderStatus.STATE_ERROR:
+            self.abort_program(f'recording failed: {msg.error or "recorder error"}')
 
     def on_samples(self, msg: RigSampleBatch) -> None:
         n = len(msg.displacement)
         self.next_sample = msg.first_sequence + n
-        if self.runner is not None and n:
-            self.runner.feed_measurement(msg.first_sequence, conv.as_array(msg.displacement))
+        if self.runner is not None and n and not self.held:
+            try:
+                self.runner.feed_measurement(msg.first_sequence, conv.as_array(msg.displacement))
+            except Exception as exc:   # noqa: BLE001 - a bad batch must not take the node down
+                self.abort_program(f'internal error on a sample batch: {exc!r}')
 
     # -- starting programs ------------------------------------------------------------------------------------------
     def rig_ready(self) -> str:
         """'' when a program can start, else why not."""
         if self.status is None:
             return "no rig status received on 'status' yet (is rig_driver active?)"
+        if time.monotonic() - self._status_wall > self.status_timeout * 3:
+            return f'the rig status is {time.monotonic() - self._status_wall:.1f} s old (is rig_driver running?)'
         if self.status.state not in READY_STATES:
-            return f'rig is {self.status.state_name}'
-        if self.runner is not None:
+            why = '; '.join(self.status.fault_messages[-2:])
+            return f'rig is {self.status.state_name}' + (f': {why} (rig_driver/reset to acknowledge)' if why else '')
+        if self.status.stream_owner and self.status.stream_owner != self.get_fully_qualified_name():
+            return f'the rig is streaming for {self.status.stream_owner}'
+        if self.runner is not None or self._opening:
             return 'a program is already running'
+        return self.recording_ready()
+
+    def recording_ready(self) -> str:
+        if not self.require_recording:
+            return ''
+        r = self.recorder
+        if r is None:
+            return "require_recording: no recorder status on 'recorder_status' (is the recorder running?)"
+        if r.state != RecorderStatus.STATE_RECORDING:
+            return f'require_recording: the recorder is {r.state_name}' + (f': {r.error}' if r.error else '')
+        if self.samples_topic not in r.topics:
+            return f'require_recording: the recorder does not record {self.samples_topic} yet'
         return ''
 
-    def start(self, program: Program, text: str, amplitude_control: bool) -> None:
-        """Build the runner (limits checked against every setpoint before anything is sent)."""
+    def prepare(self, program: Program, amplitude_control: bool) -> None:
+        """Check the program against the rig's limits (and the force model) before anything is asked of the
+        driver; ValueError names the block and field."""
         limits = conv.limits_from_msg(self.status.limits)
-        lead = int(math.ceil(self.lead_time * self.status.sample_rate))
-        # An idle rig streams nothing and starts at the sequence of the first setpoint it gets; a streaming
-        # (holding) rig gets the program lead_time ahead of its latest sample.
-        start = 0 if self.next_sample is None else self.next_sample + lead
-        self.runner = ProgramRunner(program, self.status.sample_rate, limits, amplitude_control,
-                                    start_sequence=start, compensation_memory=self.compensation_memory)
-        self.start_sequence = self.runner.sequence
+        limits.force_model = self.force_model
+        limits.check_program(program, self.status.sample_rate)
+
+    async def open_and_start(self, program: Program, text: str, amplitude_control: bool) -> str:
+        """Ask the driver for the stream and start the runner on it. '' on success, else why not."""
+        self._opening = True
+        try:
+            grant = await self._call(self.open_client, OpenStream.Request(
+                owner=self.get_fully_qualified_name(), lead_time=self.lead_time), 2.0)
+        finally:
+            self._opening = False
+        if grant is None:
+            return f'{self.rig_driver}/open_stream did not answer within 2 s'
+        if not grant.success:
+            return f'the rig refused the stream: {grant.message}'
+        limits = conv.limits_from_msg(self.status.limits)
+        try:
+            self.runner = ProgramRunner(program, self.status.sample_rate, limits, amplitude_control,
+                                        start_sequence=grant.first_sequence,
+                                        compensation_memory=self.compensation_memory,
+                                        start_position=grant.position, start_velocity=grant.velocity)
+        except ValueError as exc:
+            self._stop_stream(StopStream.Request.ACTION_ABORT, f'program refused: {exc}')
+            return str(exc)
+        self.stream_id, self.held = grant.stream_id, False
+        self.start_sequence = grant.first_sequence
         self.end_sequence = None
         self.result = None
         self.pub_program.publish(String(data=text))
         self.get_logger().info(f"program '{program.name}': {len(program.blocks)} blocks, "
-                               f'{program.duration(self.status.sample_rate):.1f} s, starts at sample '
-                               f'{self.start_sequence}')
+                               f'{program.duration(self.status.sample_rate):.1f} s, stream {grant.stream_id} from '
+                               f'sample {grant.first_sequence}, rig at {grant.position * 1e3:.4f} mm')
+        return ''
 
     # -- streaming (timer) ------------------------------------------------------------------------------------------
     def stream(self) -> None:
+        try:
+            self._stream()
+        except Exception as exc:   # noqa: BLE001 - no callback may take the node down
+            self.get_logger().error(f'streaming failed: {exc!r}\n{traceback.format_exc()}')
+            self.abort_program(f'internal error while streaming: {exc!r}')
+
+    def _stream(self) -> None:
         if self.runner is None:
             if self._pending is not None and not self.rig_ready():
                 program, text = self._pending
                 self._pending = None
-                self.start(program, text, self.amplitude_control)
+                self.executor.create_task(self._start_pending(program, text))
+            return
+        if self.held or not self.stream_id:
+            return
+        if time.monotonic() - self._status_wall > self.status_timeout:
+            self.abort_program(f'{self.rig_driver} silent for {time.monotonic() - self._status_wall:.1f} s '
+                               '(status): the rig controller ramps to rest on its own host watchdog')
             return
         r = self.runner
+        fs = self.status.sample_rate
         measured = self.start_sequence if self.next_sample is None else max(self.next_sample, self.start_sequence)
-        target = measured + int(math.ceil(self.lead_time * self.status.sample_rate))
+        target = measured + int(math.ceil(self.lead_time * fs))
+        sent = False
         while not r.finished and r.sequence < target:
             first, block = r.sequence, (r.block_index if r.state == 'running' else -1)
             x = r.next_setpoints(self.batch_size)
-            self.pub_setpoints.publish(conv.setpoint_batch_msg(first, 1.0 / self.status.sample_rate, x, block))
+            self._publish(first, x, block, end=r.finished)
+            sent = True
         if r.finished and self.end_sequence is None:
             self.end_sequence = r.sequence
+            if not sent:
+                self._publish(r.sequence, [], -1, end=True)
+        elif not sent and not r.finished:
+            # keep-alive (no setpoints): the driver's stream_timeout watches for us
+            self._publish(r.sequence, [], r.block_index if r.state == 'running' else -1)
         now = self.get_clock().now().nanoseconds * 1e-9
         if self.goal_handle is not None and now - self._last_feedback >= self.feedback_period:
             self._last_feedback = now
@@ -162,11 +268,32 @@ class ExcitationNode(Node):
         if self.end_sequence is not None and self.next_sample is not None and self.next_sample >= self.end_sequence:
             self._finish(success=not r.aborted)   # measured to the end: the summaries are complete
 
+    def _publish(self, first, x, block, end=False):
+        self.pub_setpoints.publish(conv.setpoint_batch_msg(
+            first, 1.0 / self.status.sample_rate, x, block, stream_id=self.stream_id,
+            source=self.get_fully_qualified_name(), end_of_stream=end))
+
     def feedback(self) -> RunProgram.Feedback:
         p = self.runner.progress
         return RunProgram.Feedback(block_index=p.block_index, block_count=p.block_count, block_name=p.block_name,
                                    cycle=p.cycle, cycles_total=p.cycles_total, target_amplitude=p.target_amplitude,
                                    achieved_amplitude=p.achieved_amplitude, progress=p.fraction)
+
+    # -- ending programs --------------------------------------------------------------------------------------------
+    def abort_program(self, reason: str) -> bool:
+        """Stop the running program now: the driver's controller ramps to the program's rest position at once
+        (not after the queued lead); the goal ends with `reason`. False if nothing runs."""
+        if self.runner is None:
+            return False
+        self._stop_stream(StopStream.Request.ACTION_ABORT, reason, self.runner.program.rest_position)
+        self._end(reason)
+        return True
+
+    def _end(self, reason: str) -> None:
+        if self.runner is not None:
+            self.runner.abort(reason)
+        self.get_logger().warning(f'program stopped: {reason}')
+        self._finish(success=False)
 
     def _finish(self, success: bool) -> None:
         r = self.runner
@@ -176,32 +303,72 @@ class ExcitationNode(Node):
                                    message=r.abort_reason if r.aborted else 'completed',
                                    blocks=[conv.block_summary_msg(s) for s in r.block_summaries])
         self.result = result
-        self.runner = None
+        self.runner, self.stream_id, self.held = None, 0, False
         self.get_logger().info(f'program ended: {result.message}')
         if self._done is not None and not self._done.done():
             self._done.set_result(result)
 
-    # -- action -------------------------------------------------------------------------------------------------------
-    def on_goal(self, goal) -> GoalResponse:
-        busy = self.runner is not None or self._done is not None
-        return GoalResponse.REJECT if busy else GoalResponse.ACCEPT
+    def _stop_stream(self, action: int, reason: str, target: float = 0.0) -> None:
+        if self.stream_id and self.stop_client.service_is_ready():
+            self.stop_client.call_async(StopStream.Request(stream_id=self.stream_id, action=action,
+                                                           target=float(target), reason=reason))
 
+    async def _call(self, client, request, timeout: float):
+        """await a service response, or None after `timeout` seconds (or if the service is not there)."""
+        deadline = time.monotonic() + timeout
+        while not client.service_is_ready():
+            if time.monotonic() >= deadline:
+                return None
+            await self._sleep(0.05)
+        done = Future()
+        future = client.call_async(request)
+        future.add_done_callback(lambda f: done.done() or done.set_result(f.result()))
+        timer = self.create_timer(timeout, lambda: done.done() or done.set_result(None))
+        try:
+            return await done
+        finally:
+            self.destroy_timer(timer)
+
+    async def _sleep(self, seconds: float):
+        done = Future()
+        timer = self.create_timer(seconds, lambda: done.done() or done.set_result(True))
+        try:
+            await done
+        finally:
+            self.destroy_timer(timer)
+
+    async def _start_pending(self, program, text):
+        try:
+            self.prepare(program, self.amplitude_control)
+            why = await self.open_and_start(program, text, self.amplitude_control)
+        except ValueError as exc:
+            why = str(exc)
+        if why:
+            self.get_logger().error(f"program '{program.name}' not started: {why}")
+
+    # -- action -------------------------------------------------------------------------------------------------------
     async def execute(self, goal_handle) -> RunProgram.Result:
         goal = goal_handle.request
         try:
             program, text = read_program(goal.program_path, goal.program_yaml)
             why = self.rig_ready()
-            if why:
-                raise ValueError(why)
-            self.start(program, text, goal.amplitude_control)
-        except (ValueError, FileNotFoundError) as exc:   # ProgramError, LimitError: name block and field
+            if not why:
+                self.prepare(program, goal.amplitude_control)
+                why = await self.open_and_start(program, text, goal.amplitude_control)
+        except (ValueError, OSError) as exc:   # ProgramError, LimitError: name block and field
+            why = str(exc)
+        except Exception as exc:   # noqa: BLE001 - a goal must end with a reason, never take the node down
+            why = f'internal error: {exc!r}'
+        if why:
+            self.get_logger().warning(f'goal refused: {why}')
             goal_handle.abort()
-            return RunProgram.Result(success=False, message=str(exc))
+            return RunProgram.Result(success=False, message=why)
         self.goal_handle, self._done = goal_handle, Future()
+
         def check_cancel():
-            if goal_handle.is_cancel_requested and self.runner is not None and not self.runner.aborted:
-                self.runner.abort('goal cancelled')   # smooth ramp to rest; the goal ends when it is done
-        cancel_timer = self.create_timer(0.05, check_cancel)
+            if goal_handle.is_cancel_requested and self.runner is not None:
+                self.abort_program('goal cancelled')
+        cancel_timer = self.create_timer(0.01, check_cancel)
         try:
             result = await self._done
         finally:
@@ -217,34 +384,60 @@ class ExcitationNode(Node):
 
     # -- services ---------------------------------------------------------------------------------------------------------
     def on_abort(self, request, response):
-        if self.runner is None:
-            response.success, response.message = False, 'no program running'
+        if self.abort_program('operator abort (excitation/abort)'):
+            response.success, response.message = True, 'the rig ramps to the rest position'
         else:
-            self.runner.abort('operator abort')
-            response.success, response.message = True, 'ramping down to the rest position'
+            response.success, response.message = False, 'no program running'
         return response
 
     def on_hold(self, request, response):
-        if self.runner is None:
+        r = self.runner
+        if r is None:
             response.success, response.message = False, 'no program running'
         elif request.data:
-            self.runner.hold()
-            response.success, response.message = True, 'holding at the block mean'
+            if self.held or r.state != 'running':
+                response.success, response.message = False, f'cannot hold: the program is {r.state}'
+                return response
+            target = r.hold_target
+            self._stop_stream(StopStream.Request.ACTION_HOLD, 'operator hold (excitation/hold)', target)
+            r.hold()
+            self.held = True
+            response.success, response.message = True, f'holding at {target * 1e3:.4f} mm (the block mean)'
         else:
-            self.runner.resume()
+            if not self.held:
+                response.success, response.message = False, 'not holding'
+                return response
+            self.executor.create_task(self._resume())
             response.success, response.message = True, 'resuming the held block from its start'
         return response
+
+    async def _resume(self):
+        r = self.runner
+        grant = await self._call(self.open_client, OpenStream.Request(
+            owner=self.get_fully_qualified_name(), lead_time=self.lead_time), 2.0)
+        if self.runner is not r or r is None:
+            return
+        if grant is None or not grant.success:
+            self._end('resume refused: ' + (grant.message if grant is not None else 'rig_driver did not answer'))
+            return
+        self.stream_id, self.held = grant.stream_id, False
+        self.start_sequence = grant.first_sequence
+        r.resume_at(grant.first_sequence, grant.position)
 
     def on_load_program(self, request, response):
         try:
             program, _ = read_program(request.path, request.program_yaml)
             rate = self.status.sample_rate if self.status else 1000.0
             if self.status is not None:
-                conv.limits_from_msg(self.status.limits).check_program(program, rate)
+                limits = conv.limits_from_msg(self.status.limits)
+                limits.force_model = self.force_model
+                limits.check_program(program, rate)
             response.success, response.message = True, f"program '{program.name}' is valid"
             response.block_count, response.duration = len(program.blocks), program.duration(rate)
-        except (ValueError, FileNotFoundError) as exc:
+        except (ValueError, OSError) as exc:
             response.success, response.message = False, str(exc)
+        except Exception as exc:   # noqa: BLE001 - a bad request must never take the node down
+            response.success, response.message = False, f'internal error: {exc!r}'
         return response
 
 

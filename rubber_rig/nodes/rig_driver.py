@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 import time
 
+import numpy as np
 import yaml
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
@@ -415,7 +416,13 @@ class RigDriverNode(LifecycleNode):
         log = self.get_logger()
         while driver.events:
             level, text = driver.events.popleft()
-            {'info': log.info, 'warn': log.warning, 'error': log.error}[level](text)
+            # one call site per severity: rclpy refuses a call site whose severity changes
+            if level == 'error':
+                log.error(text)
+            elif level == 'warn':
+                log.warning(text)
+            else:
+                log.info(text)
 
 
 def _parameter_of(message: str) -> str:

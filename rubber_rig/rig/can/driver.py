@@ -202,7 +202,9 @@ class RigDriver:
                                     f'(stream {s.grant.stream_id})')
             if not (s.held or s.ended):
                 raise StreamRefused(f'{owner} already has stream {s.grant.stream_id} open (end it first)')
-        lead = max(0, min(int(lead_samples), self.MAX_LEAD_SAMPLES))
+        # a ticking (holding) controller needs the first setpoint `lead` ahead; an idle one starts on arrival
+        ticking = self.controller_state in ('running', 'holding')
+        lead = max(0, min(int(lead_samples), self.MAX_LEAD_SAMPLES)) if ticking else 0
         first = self.next_sequence + lead
         if self.controller_state in ('idle', 'fault') and (s is None or s.queued_end <= self.next_sequence):
             self._jump_to = first     # an idle controller starts at the first setpoint it gets
