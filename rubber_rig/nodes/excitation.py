@@ -79,6 +79,9 @@ class ExcitationNode(Node):
         self.require_recording = declare(self, 'require_recording', False, 'start a program only while the '
                                          "recorder reports recording this namespace's samples, and stop it if "
                                          'the recording fails')
+        self.recorder_timeout = declare(self, 'recorder_timeout', 2.0, 'with require_recording: a recorder status '
+                                        'older than this stops a running program (the recorder publishes it every '
+                                        '0.5 s)', range=(0.5, 60.0), units='s')
         self.force_model_set = declare(self, 'force_model', 'seed000_20C', 'element-model parameter set that '
                                        'predicts each block\'s peak force before start (refused above '
                                        "limits.force_max); '' = no force prediction")
@@ -99,6 +102,7 @@ class ExcitationNode(Node):
         self.status: RigStatus | None = None
         self._status_wall = 0.0
         self.recorder: RecorderStatus | None = None
+        self._recorder_wall = 0.0
         self.next_sample = None          # sequence after the latest measured sample
         self.runner: ProgramRunner | None = None
         self.stream_id = 0               # the stream the driver granted us (0: none)
@@ -144,7 +148,7 @@ class ExcitationNode(Node):
             self._end(f'the rig stopped the program: {msg.last_event or msg.state_name}')
 
     def on_recorder_status(self, msg: RecorderStatus) -> None:
-        self.recorder = msg
+        self.recorder, self._recorder_wall = msg, time.monotonic()
         if self.require_recording and self.runner is not None and msg.state == RecorderStatus.STATE_ERROR:
             self.abort_program(f'recording failed: {msg.error or "recorder error"}')
 
@@ -179,6 +183,8 @@ class ExcitationNode(Node):
         r = self.recorder
         if r is None:
             return "require_recording: no recorder status on 'recorder_status' (is the recorder running?)"
+        if time.monotonic() - self._recorder_wall > self.recorder_timeout:
+            return f'require_recording: no recorder status for {time.monotonic() - self._recorder_wall:.1f} s'
         if r.state != RecorderStatus.STATE_RECORDING:
             return f'require_recording: the recorder is {r.state_name}' + (f': {r.error}' if r.error else '')
         if self.samples_topic not in r.topics:
@@ -239,6 +245,10 @@ class ExcitationNode(Node):
                 self.executor.create_task(self._start_pending(program, text))
             return
         if self.held or not self.stream_id:
+            return
+        if self.require_recording and time.monotonic() - self._recorder_wall > self.recorder_timeout:
+            self.abort_program(f'recording lost: no recorder status for {time.monotonic() - self._recorder_wall:.1f}'
+                               ' s (the recorder is gone)')
             return
         if time.monotonic() - self._status_wall > self.status_timeout:
             self.abort_program(f'{self.rig_driver} silent for {time.monotonic() - self._status_wall:.1f} s '
@@ -413,8 +423,12 @@ class ExcitationNode(Node):
 
     async def _resume(self):
         r = self.runner
-        grant = await self._call(self.open_client, OpenStream.Request(
-            owner=self.get_fully_qualified_name(), lead_time=self.lead_time), 2.0)
+        self._opening = True
+        try:
+            grant = await self._call(self.open_client, OpenStream.Request(
+                owner=self.get_fully_qualified_name(), lead_time=self.lead_time), 2.0)
+        finally:
+            self._opening = False
         if self.runner is not r or r is None:
             return
         if grant is None or not grant.success:

@@ -294,7 +294,14 @@ class RigDriverNode(LifecycleNode):
         if self.rig is None or self._poll_timer is None:   # only an active driver moves the rig
             return
         driver = self.rig.driver
-        if driver.queue_setpoints(msg.first_sequence, conv.as_array(msg.displacement), msg.stream_id):
+        grant = driver.stream
+        if grant is not None and msg.source != grant.owner:   # a copied stream id alone does not make an owner
+            driver.counters['setpoints_refused'] += len(msg.displacement)
+            driver.refusal = f'sender {msg.source or "(unnamed)"} is not the stream owner {grant.owner}'
+            ok = False
+        else:
+            ok = driver.queue_setpoints(msg.first_sequence, conv.as_array(msg.displacement), msg.stream_id)
+        if ok:
             if msg.end_of_stream:
                 driver.end_stream(msg.stream_id)
         else:
