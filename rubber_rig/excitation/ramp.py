@@ -53,9 +53,14 @@ class SafeRamp:
                  tolerance: float = 5e-8):
         if not lower < upper:
             raise ValueError(f'SafeRamp: lower {lower} must be below upper {upper}')
-        self.lower, self.upper = float(lower), float(upper)
         self.x, self.v = float(x0), float(v0)
-        self.target = min(max(float(target), self.lower), self.upper)
+        self.target = min(max(float(target), float(lower)), float(upper))
+        self.lower, self.upper = float(lower), float(upper)
+        if not self.lower <= self.x <= self.upper:
+            # a start outside the bounds (limits tightened under a running rig) is never clamped with a step:
+            # the violated bound widens to where the motion can stop at decel_max; the ramp comes back inside
+            stop = float(stopping_positions(self.x, self.v, max(float(decel_max), float(accel_max)), sample_rate))
+            self.lower, self.upper = min(self.lower, self.x, stop), max(self.upper, self.x, stop)
         self.dt = 1.0 / float(sample_rate)
         self.v_max, self.tol = float(velocity_max), float(tolerance)
         self.dv_travel = float(accel_max) * self.dt

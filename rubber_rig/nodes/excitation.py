@@ -141,7 +141,7 @@ class ExcitationNode(Node):
         self.status, self._status_wall = msg, time.monotonic()
         if self.runner is None or not self.stream_id or self._opening:
             return
-        if msg.state == RigStatus.STATE_FAULT:
+        if msg.state == RigStatus.STATE_FAULT or msg.faults:   # (ramping_down while the fault's ramp runs)
             self._end('rig fault: ' + '; '.join(msg.fault_messages or conv.fault_names(msg.faults)))
         elif msg.stream_id != self.stream_id and self.end_sequence is None:
             # the driver took the stream away (rig_driver/abort, deactivate, a limit change): say what it did
@@ -361,6 +361,11 @@ class ExcitationNode(Node):
         goal = goal_handle.request
         try:
             program, text = read_program(goal.program_path, goal.program_yaml)
+            # a goal sent right after launch may arrive before the latched statuses: wait for them (bounded)
+            deadline = time.monotonic() + self.status_timeout * 3
+            while (self.status is None or (self.require_recording and self.recorder is None)) \
+                    and time.monotonic() < deadline:
+                await self._sleep(0.05)
             why = self.rig_ready()
             if not why:
                 self.prepare(program, goal.amplitude_control)

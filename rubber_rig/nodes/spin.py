@@ -5,6 +5,7 @@ process, rclpy's MultiThreadedExecutor collapses to tens of callbacks per second
 """
 from __future__ import annotations
 
+import os
 from typing import Callable
 
 import rclpy
@@ -25,6 +26,7 @@ def spin_node(node_factory: Callable[[], Node], args=None) -> None:
     try:
         node = node_factory()
         undeclared_overrides(node)   # a misspelt key in a parameter file must not pass silently
+        node.get_logger().info(f'ready (pid {os.getpid()})')   # launchers and the fault-matrix tests wait for it
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         executor.spin()

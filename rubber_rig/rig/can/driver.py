@@ -131,6 +131,7 @@ class RigDriver:
         self.controller_state, self.controller_faults, self.controller_sequence = 'unconfigured', 0, -1
         self.temperature = math.nan
         self._aborting = False           # a ramp commanded by the host is under way
+        self._ramp_pending = False       # commanded to a moving controller that has not yet reported the ramp
         now = clock()
         self._last_fb_wall = self._last_hb_wall = self._last_host_hb_wall = self._last_poll_wall = now
         self._hb_sample = None           # feedback position at the last controller heartbeat
@@ -342,8 +343,10 @@ class RigDriver:
         ramp_v = max(0.001, math.floor(min(0.5 * lim.velocity_max, 0.05) * 1000) / 1000)
         self.bus.send(self.proto.encode('HostCommand', {'CMD_Code': code, 'CMD_Counter': 0,
                                                         'CMD_Argument': target, 'CMD_RampVelocity': ramp_v}))
+        # until the controller reports its ramp, status says ramping_down (not idle/fault while still moving)
+        self._ramp_pending = self.controller_state in ('running', 'holding')
         if not self._aborting:
-            self._event('warn' if code == CMD_HOLD or 'hold' in text else 'warn',
+            self._event('warn',
                         f'{text}; ramp to {"a stop" if code == CMD_HOLD else f"{target * 1e3:.4f} mm"} from '
                         f'{self._last_applied * 1e3:.4f} mm')
         self._aborting = True
@@ -361,7 +364,7 @@ class RigDriver:
                                                         'CMD_Argument': 0, 'CMD_RampVelocity': 0}))
         if self.faults or self.fault_messages:
             self._event('info', 'reset: cleared ' + ('; '.join(self.fault_messages[-3:]) or 'faults'))
-        self.faults, self.fault_messages, self._aborting = 0, [], False
+        self.faults, self.fault_messages, self._aborting, self._ramp_pending = 0, [], False, False
         self._stream = None
         self._sensor.clear()
         self.send_limits()
@@ -421,6 +424,8 @@ class RigDriver:
         if self._jump_to is not None and seq >= self._jump_to - 1:
             if seq == self._jump_to and (self._expected is None or seq > self._expected):
                 self._expected = seq   # an idle rig started the new stream here: a jump, not a loss
+                if self._hb_sample is not None:   # nor heartbeat silence: no sample passed in between
+                    self._hb_sample = seq
             self._jump_to = None
         if self._expected is None:
             self._expected = seq
@@ -473,6 +478,7 @@ class RigDriver:
         if state == old:
             return
         self.controller_state = state
+        self._ramp_pending = False
         if state == 'ramping_down':
             self._event('warn', f'controller ramping to rest from {self._last_applied * 1e3:.4f} mm')
         elif old == 'ramping_down' and state in ('idle', 'fault'):
@@ -583,7 +589,7 @@ class RigDriver:
     @property
     def status(self) -> RigStatus:
         """Snapshot of state, faults and counters."""
-        if self.controller_state == 'ramping_down':
+        if self.controller_state == 'ramping_down' or (self._ramp_pending and not self.faults & FAULT_WATCHDOG):
             state = 'ramping_down'
         elif self.faults or self.controller_faults:
             state = 'fault'

@@ -1,0 +1,324 @@
+"""The rig driver as the one safety authority, ROS-free (issue 11 items 1, 2, 5, 6, 8, 11): the safe ramp at
+any phase, stream ownership and the true continuation of the command, stream loss, reset and the 16-bit
+sequence wrap, slow and small stuck sensors, limits changed at run time."""
+import time
+
+import numpy as np
+import pytest
+
+from rubber_rig.excitation import Limits, Program
+from rubber_rig.excitation.ramp import SafeRamp, stopping_positions
+from rubber_rig.rig import (FAULT_DISPLACEMENT_LIMIT, FAULT_SENSOR, FAULT_VELOCITY_LIMIT, FAULT_WATCHDOG, open_rig,
+                            run_program)
+from rubber_rig.rig.can.driver import StreamRefused
+from rubber_rig.rig.can.protocol import FAULT_STREAM, SEQ_MOD
+
+from test_rig_support import FAST, contiguous_diffs
+
+FS = 1000.0
+D_MAX = 2.5e-3            # the issue's limits: +-2.5 mm, 0.2 m/s
+V_MAX = 0.2
+QUANTUM = 1e-7            # setpoint resolution on the bus (0.1 um)
+A, F = 2.2e-3, 14.0       # the issue's 14 Hz x 2.2 mm sine
+
+
+def sine_program(f=F, a=A, cycles=14, taper=1):
+    return Program.from_yaml_text(f'name: s\nblocks:\n  - {{waveform: sine, frequency: {f} Hz, amplitude: {a * 1e3} mm, '
+                                  f'cycles: {cycles}, taper_cycles: {taper}}}\n')
+
+
+ISSUE_LIMITS = {'displacement_min': -D_MAX, 'displacement_max': D_MAX, 'velocity_max': V_MAX}
+
+
+# -- item 1: the ramp ----------------------------------------------------------------------------------------------
+@pytest.mark.parametrize('target', [0.0, None, 2.4e-3, -2.4e-3])
+def test_safe_ramp_from_every_phase_of_the_fast_sine_stays_inside_and_brakes_at_most_decel_max(target):
+    """200 phases of the 14 Hz x 2.2 mm sine (discrete state: the last two samples); target None = hold (stop
+    where the motion can stop). Never outside +-2.5 mm, never faster than the start, never a deceleration above
+    decel_max, at rest at the target."""
+    dt, decel = 1 / FS, 100.0
+    worst = 0.0
+    for phase in np.linspace(0, 2 * np.pi, 200, endpoint=False):
+        x_prev, x0 = A * np.sin(phase - 2 * np.pi * F * dt), A * np.sin(phase)
+        v0 = (x0 - x_prev) / dt
+        # the host only streams states that can stop inside the limits at decel_max: this one can
+        assert -D_MAX <= stopping_positions(x0, v0, decel, FS) <= D_MAX
+        goal = float(stopping_positions(x0, v0, decel, FS)) if target is None else target
+        ramp = SafeRamp(x0, v0, goal, FS, decel_max=decel, lower=-D_MAX, upper=D_MAX)
+        u = np.concatenate([[x_prev, x0], ramp.run(20000)])
+        assert ramp.done and u[-1] == pytest.approx(np.clip(goal, -D_MAX, D_MAX), abs=1e-12)
+        assert u.min() >= -D_MAX and u.max() <= D_MAX, (phase, u.min(), u.max())
+        v = np.diff(u) / dt
+        assert np.abs(v).max() <= max(abs(v0), 0.05) * (1 + 1e-9)
+        acc = np.abs(np.diff(v)) / dt
+        assert acc.max() <= decel * (1 + 1e-6), (phase, acc.max())
+        assert ramp.decel_exceeded == 0
+        worst = max(worst, np.abs(u).max())
+    assert worst <= A + 0.2e-3          # the braking overshoot of a 0.19 m/s sine at 20 m/s^2 is < 1 mm: bounded
+
+
+def test_safe_ramp_started_outside_what_the_host_allows_still_never_leaves_the_limits():
+    """A start state that cannot stop inside at decel_max (only a broken host could send it): the ramp brakes
+    harder rather than leave the range, and counts it."""
+    x0, v0 = 2.45e-3, 0.2          # 50 um from the limit at 0.2 m/s: needs 200 um at 100 m/s^2
+    ramp = SafeRamp(x0, v0, 0.0, FS, decel_max=100.0, lower=-D_MAX, upper=D_MAX)
+    u = ramp.run(5000)
+    assert u.max() <= D_MAX and ramp.decel_exceeded > 0 and ramp.done and u[-1] == 0.0
+
+
+@pytest.mark.parametrize('start', [0.1548] + [0.1 + k / (8 * F) for k in range(8)])
+def test_silent_controller_during_the_fast_sine_keeps_the_command_inside_the_limits(start):
+    """The issue's reproduction (silent controller at 0.1548 s reached 3.16 mm of command) and eight phases of
+    one period: the controller's own ramp stays in +-2.5 mm and under velocity_max and ends at rest."""
+    r = run_program(sine_program(), dict(FAST, limits=ISSUE_LIMITS,
+                                         sim={'faults': [{'type': 'silent_controller', 'start': start}]}))
+    st = r.final_status
+    assert not r.completed and st.faults & FAULT_WATCHDOG, st.fault_messages
+    assert r.setpoint.min() >= -D_MAX and r.setpoint.max() <= D_MAX, (r.setpoint.min(), r.setpoint.max())
+    v = np.abs(contiguous_diffs(r.sequence, r.setpoint)) * FS
+    assert v.max() <= V_MAX + QUANTUM * FS
+    assert r.setpoint[-1] == 0.0
+    ramp = np.nonzero(r.block_index == -1)[0]
+    assert ramp.size and r.time[ramp[0]] < start + 0.35       # watchdog 0.25 s + detection
+
+
+# -- item 2: who may command the rig ------------------------------------------------------------------------------
+def _at_rest(drv):
+    """Driver and controller both idle or faulted: no ramp under way."""
+    return drv.status.state in ('fault', 'idle') and drv.controller_state in ('fault', 'idle')
+
+
+def _poll_until(drv, condition, n=400000, blocks=None):
+    """Poll until condition() (at most n polls); the SampleBlocks polled are appended to `blocks`."""
+    for _ in range(n):
+        b = drv.poll()
+        if b is not None and blocks is not None:
+            blocks.append(b)
+        if condition():
+            return True
+    return condition()
+
+
+def test_only_the_stream_owner_commands_and_checks_continue_from_the_queue_end():
+    with open_rig(dict(FAST, limits=ISSUE_LIMITS)) as rig:
+        assert rig.wait_ready(5.0)
+        drv = rig.driver
+        grant = drv.open_stream('/rig1/excitation')
+        assert grant.position == 0.0 and grant.velocity == 0.0
+        with pytest.raises(StreamRefused, match='streaming for /rig1/excitation'):
+            drv.open_stream('/intruder')
+        with pytest.raises(StreamRefused, match='already has stream'):
+            drv.open_stream('/rig1/excitation')
+        ramp_in = np.linspace(0.0, 0.25e-3, 251)         # 1 mm/s to 0.25 mm
+        assert drv.queue_setpoints(grant.first_sequence, ramp_in, grant.stream_id)
+        # a foreign stream id, a batch ahead of the queue (the issue's takeover) and one that overlaps it are
+        # refused and counted; nothing is sent and the rig does not fault
+        sent = drv.status.setpoints_sent
+        end = grant.first_sequence + ramp_in.size
+        assert not drv.queue_setpoints(end, np.full(10, 0.25e-3), grant.stream_id + 1)
+        assert 'is not the open stream' in drv.refusal
+        assert not drv.queue_setpoints(end + int(FS) + 1, np.full(10, 3e-3), grant.stream_id)
+        assert 'discontinuous streams are refused' in drv.refusal
+        assert not drv.queue_setpoints(end - 5, np.zeros(10), grant.stream_id)
+        st = drv.status
+        assert st.faults == 0 and st.setpoints_sent == sent and st.extra['setpoints_refused'] == 30
+        assert st.extra['stream_owner'] == '/rig1/excitation'
+        # the velocity check continues from where the queue ends (0.25 mm), not from the last applied sample
+        # (still ~0: nothing polled yet): a step back to 0 is 0.25 m/s
+        assert abs(drv.status.extra['position']) < 1e-6
+        assert not drv.queue_setpoints(end, np.zeros(5), grant.stream_id)
+        st = drv.status
+        assert st.faults & FAULT_VELOCITY_LIMIT and 'continuing from 0.2500 mm' in st.fault_messages[-1]
+        assert st.setpoints_sent == sent
+        # the fault ramps the rig to rest from wherever the queue had taken it, and releases the stream
+        assert _poll_until(drv, lambda: _at_rest(drv))
+        assert drv.stream is None and drv.status.extra['position'] == 0.0
+
+
+def test_stream_must_stop_inside_the_limits_at_deceleration_max():
+    """A setpoint inside the range but too fast to stop before the limit is refused before it is sent."""
+    with open_rig(dict(FAST, limits=dict(ISSUE_LIMITS, deceleration_max=20.0))) as rig:
+        assert rig.wait_ready(5.0)
+        drv = rig.driver
+        g = drv.open_stream('/a')
+        v = np.minimum(np.arange(1, 2001) * 10.0 / FS, 0.198)  # 10 m/s^2 up to 0.198 m/s
+        x = np.cumsum(v) / FS
+        x = x[x < D_MAX]                                       # at 0.198 m/s it needs ~1 mm to stop at 20 m/s^2
+        k_ok = int(np.argmax(stopping_positions(x, v[:x.size], 20.0, FS) > D_MAX))
+        assert 0 < k_ok < x.size
+        assert drv.queue_setpoints(g.first_sequence, x[:k_ok], g.stream_id)
+        assert _poll_until(drv, lambda: drv.status.extra['next_sequence'] >= g.first_sequence + k_ok)
+        assert not drv.queue_setpoints(g.first_sequence + k_ok, x[k_ok:], g.stream_id)
+        assert drv.status.faults & FAULT_DISPLACEMENT_LIMIT
+        assert 'could not stop inside the limits at deceleration_max 20' in drv.status.fault_messages[-1]
+        assert drv.status.extra['setpoints_refused'] == 0 and drv.status.setpoints_sent == k_ok
+        seq, u = _poll_collect(drv)               # the controller's ramp from 0.198 m/s, braking at <= 20 m/s^2
+        assert u.max() <= D_MAX and u[-1] == 0.0
+        acc = np.abs(np.diff(contiguous_diffs(seq, u))) * FS * FS
+        assert acc.max() <= 20.0 + 2 * QUANTUM * FS * FS
+
+
+# -- item 6: stream loss --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize('action', ['ramp', 'hold'])
+def test_a_stream_that_runs_dry_before_its_end_is_lost_and_ends_in_a_ramp_or_hold(action):
+    """Paced: the owner keeps the stream alive (empty batches every 50 ms) but sends no more setpoints after
+    0.6 s: the rig runs dry, moving, before the owner's last batch. A real controller would hold there under
+    load; the driver calls it a lost stream and ramps to rest (or, stream_loss_action hold, stops and holds,
+    still a fault), says so in status and the events."""
+    with open_rig({'paced': True, 'limits': ISSUE_LIMITS, 'stream_loss_action': action}) as rig:
+        assert rig.wait_ready(5.0)
+        drv = rig.driver
+        g = drv.open_stream('/rig1/excitation')
+        t = np.arange(600) / FS
+        x = 1e-3 * np.sin(2 * np.pi * 5 * t) * np.minimum(t / 0.2, 1.0) ** 2   # ends at ~-0.95 mm, moving
+        assert drv.queue_setpoints(g.first_sequence, x, g.stream_id)
+        end = g.first_sequence + x.size
+        keep_alive = {'t': time.monotonic()}
+
+        def lost():
+            if time.monotonic() - keep_alive['t'] > 0.05:
+                keep_alive['t'] = time.monotonic()
+                drv.queue_setpoints(end, np.empty(0), g.stream_id)
+            return drv.status.faults & FAULT_STREAM
+        blocks = []
+        assert _poll_until(drv, lost, 10 ** 8, blocks)
+        st = drv.status
+        assert 'setpoint stream lost' in st.fault_messages[-1] and 'ran out of setpoints' in st.fault_messages[-1]
+        assert drv.controller_sequence - end < 50                   # detected within 50 ms of running dry
+        assert any('stream lost' in text for _, text in drv.events)
+        seq, u = _poll_collect(drv, 10 ** 8, blocks)
+        assert seq[0] == g.first_sequence and np.all(np.diff(seq) == 1)
+        v = np.abs(contiguous_diffs(seq, u)) * FS
+        assert v.max() <= V_MAX
+        final = drv.status.extra['position']
+        if action == 'ramp':
+            assert final == 0.0
+        else:   # hold: stops where the motion can stop (braking from its last velocity), then stays there
+            assert -D_MAX <= final < 0.0 and final == pytest.approx(x[-1], abs=0.3e-3)
+        assert drv.status.state == 'fault'
+        assert drv.reset() == '' and drv.status.faults == 0
+        # the next stream starts from wherever the rig is, at rest
+        g2 = drv.open_stream('/rig1/excitation')
+        assert g2.position == final and g2.velocity == 0.0
+
+
+def test_a_paced_stream_that_goes_silent_is_lost_after_stream_timeout():
+    """Paced at 1 kHz: setpoints for 2 s are queued, then the owner goes silent. The driver faults after
+    stream_timeout (0.3 s) of silence, long before the queue runs dry, and the rig ramps to rest."""
+    with open_rig({'paced': True, 'limits': ISSUE_LIMITS, 'stream_timeout': 0.3}) as rig:
+        assert rig.wait_ready(5.0)
+        drv = rig.driver
+        g = drv.open_stream('/rig1/excitation')
+        t = np.arange(2000) / FS
+        x = 1e-3 * np.sin(2 * np.pi * 2 * t) * np.minimum(t / 0.3, 1.0) ** 2
+        assert drv.queue_setpoints(g.first_sequence, x, g.stream_id)
+        assert _poll_until(drv, lambda: drv.status.faults & FAULT_STREAM, 10 ** 8)
+        at = drv.controller_sequence - g.first_sequence
+        assert 250 <= at <= 450, at                   # 0.3 s of silence (+ poll and bus latency)
+        assert 'no setpoints from /rig1/excitation for 0.3' in drv.status.fault_messages[-1]
+        assert _poll_until(drv, lambda: _at_rest(drv), 10 ** 8)
+        assert drv.status.extra['position'] == 0.0
+
+
+# -- item 5: reset, and the 16-bit sequence wrap ------------------------------------------------------------------
+def test_programs_after_a_fault_and_reset_and_across_the_sequence_wrap_complete():
+    """One open rig: a fault, reset, then programs until the sample sequence has passed 65536 twice (the 16-bit
+    frame sequence wraps). Every program completes with no lost frame and no fault."""
+    prog = sine_program(f=5.0, a=1e-3, cycles=100)              # 20 s = 20000 samples
+    with open_rig(dict(FAST, limits=ISSUE_LIMITS)) as rig:
+        assert rig.wait_ready(5.0)
+        drv = rig.driver
+        g = drv.open_stream('/a')
+        assert not drv.queue_setpoints(g.first_sequence, [0.0, 1e-3], g.stream_id)     # 1 m/s: a fault
+        assert drv.status.faults & FAULT_VELOCITY_LIMIT
+        assert _poll_until(drv, lambda: _at_rest(drv))
+        assert drv.reset() == ''
+        last = 0
+        while last < 2 * SEQ_MOD + 1000:
+            r = run_program(prog, dict(FAST, limits=ISSUE_LIMITS), rig=rig)
+            assert r.completed, (r.message, r.final_status.fault_messages)
+            assert r.final_status.frames_lost == 0 and r.final_status.faults == 0
+            assert np.all(np.diff(r.sequence) == 1)
+            last = int(r.sequence[-1])
+
+
+# -- item 11: stuck sensors on slow and small motion --------------------------------------------------------------
+def test_stuck_displacement_on_seed_001_slow_triangle_is_detected_by_consistency():
+    """0.1 mm/s triangle to 0.5 mm (seed 001), displacement frozen at 0.5 s: faulted before the command moved
+    0.1 mm away from the frozen reading."""
+    prog = Program.from_yaml_text('name: tri\nblocks:\n  - {waveform: triangle, frequency: 0.05 Hz, amplitude: 0.5 mm, '
+                                  'cycles: 1}\n')
+    r = run_program(prog, dict(FAST, sim={'faults': [{'type': 'stuck_sensor', 'start': 0.5,
+                                                       'sensor': 'displacement'}]}))
+    st = r.final_status
+    assert st.faults & FAULT_SENSOR and any('displacement sensor stuck' in m for m in st.fault_messages), \
+        st.fault_messages
+    ramp = np.nonzero(r.block_index == -1)[0]
+    assert ramp.size and abs(r.setpoint[ramp[0]]) < 0.15e-3      # the command was still near the frozen reading
+    assert r.setpoint[-1] == 0.0
+
+
+def test_stuck_force_on_a_small_fast_sine_is_detected():
+    """0.01 mm at 2 Hz (a small stiffness test) with the load cell frozen at 0.5 s."""
+    prog = Program.from_yaml_text('name: small\nblocks:\n  - {waveform: sine, frequency: 2 Hz, amplitude: 0.01 mm, '
+                                  'cycles: 10}\n')
+    r = run_program(prog, dict(FAST, sim={'faults': [{'type': 'stuck_sensor', 'start': 0.5, 'sensor': 'force'}]}))
+    st = r.final_status
+    assert not r.completed and st.faults & FAULT_SENSOR, st.fault_messages
+    assert any('force sensor stuck' in m for m in st.fault_messages)
+    ramp = np.nonzero(r.block_index == -1)[0]
+    assert ramp.size and r.time[ramp[0]] < 0.5 + 1.5
+
+
+def test_no_false_stuck_sensor_on_slow_and_small_healthy_motion():
+    for text in ('{waveform: triangle, frequency: 0.05 Hz, amplitude: 0.5 mm, cycles: 1}',
+                 '{waveform: sine, frequency: 2 Hz, amplitude: 0.01 mm, cycles: 10}'):
+        r = run_program(Program.from_yaml_text(f'name: ok\nblocks:\n  - {text}\n'), FAST)
+        assert r.completed and r.final_status.faults == 0, r.final_status.fault_messages
+
+
+# -- item 8: limits at run time ------------------------------------------------------------------------------------
+def _poll_collect(drv, n=400000, blocks=None):
+    """Poll until the rig is at rest and nothing more arrives; (sequence, applied command) of every sample
+    polled, after those already in `blocks`."""
+    blocks = [] if blocks is None else blocks
+    for _ in range(n):
+        b = drv.poll()
+        if b is not None:
+            blocks.append(b)
+        elif _at_rest(drv):
+            break
+    return np.concatenate([b.sequence for b in blocks]), np.concatenate([b.setpoint for b in blocks])
+
+
+def test_tighter_limits_at_run_time_apply_at_once():
+    with open_rig(dict(FAST, limits=ISSUE_LIMITS)) as rig:
+        assert rig.wait_ready(5.0)
+        drv = rig.driver
+        # idle: applied, and the next stream is checked against them
+        drv.set_limits(Limits(displacement_min=-0.2e-3, displacement_max=0.2e-3, velocity_max=V_MAX))
+        assert drv.status.faults == 0 and any('limits: displacement -0.2..0.2 mm' in t for _, t in drv.events)
+        g = drv.open_stream('/a')
+        x = 1e-3 * np.sin(2 * np.pi * 1.0 * np.arange(1000) / FS)       # 1 Hz, 1 mm
+        assert not drv.queue_setpoints(g.first_sequence, x, g.stream_id)
+        assert drv.status.faults & FAULT_DISPLACEMENT_LIMIT and drv.status.setpoints_sent == 0
+        assert 'outside the displacement limits' in drv.status.fault_messages[-1]
+        assert _poll_until(drv, lambda: _at_rest(drv))
+        assert drv.reset() == ''
+        # streaming at 0.95 mm when the limits shrink to +-0.6 mm: the setpoints queued under the old limits
+        # are dropped and the rig ramps back inside, without a step
+        drv.set_limits(Limits(**ISSUE_LIMITS))
+        g = drv.open_stream('/a')
+        assert drv.queue_setpoints(g.first_sequence, x[:200], g.stream_id)
+        assert _poll_until(drv, lambda: drv.status.extra['next_sequence'] >= g.first_sequence + 200)
+        assert drv.status.extra['position'] == pytest.approx(x[199], abs=1e-6)
+        assert drv.queue_setpoints(g.first_sequence + 200, x[200:400], g.stream_id)
+        drv.set_limits(Limits(displacement_min=-0.6e-3, displacement_max=0.6e-3, velocity_max=V_MAX))
+        assert drv.status.faults & FAULT_DISPLACEMENT_LIMIT
+        assert 'limits changed while streaming' in drv.status.fault_messages[-1]
+        seq, u = _poll_collect(drv)
+        assert drv.status.extra['position'] == 0.0 and u[-1] == 0.0
+        v = np.abs(contiguous_diffs(seq, u)) * FS
+        assert v.max() <= V_MAX / 2 + QUANTUM * FS        # the ramp travels at half velocity_max at most
+        assert u.max() <= x[199] + 0.2e-3                 # it braked the outward motion, then came back
+        assert np.all(u[np.argmax(u):] <= u.max()) and u[-1] == 0.0
