@@ -135,6 +135,7 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
     at least 'frequency' [Hz] and 'amplitude' [m] (e.g. the recorded test program's sine blocks), used
     to label blocks and to report blocks that are missing from the recording.
     """
+    where = f'{recording}: ' if recording else ''   # message prefix naming the recording
     x = np.asarray(displacement, float)
     f = np.asarray(force, float)
     if x.shape != f.shape:
@@ -166,7 +167,7 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
             # analyse the longest finite stretch; say what was lost
             bad = np.flatnonzero(~seg_ok)
             report.messages.append(
-                f'{recording}block {label if label is not None else "?"}: {bad.size} samples with missing '
+                f'{where}block {label if label is not None else "?"}: {bad.size} samples with missing '
                 f'values (NaN); only the longest complete stretch is analysed')
             edges = np.concatenate([[-1], bad, [e - s]])
             k = int(np.argmax(np.diff(edges)))
@@ -186,7 +187,7 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
             if n_steady < settle_cycles + min_cycles:
                 desc = f'{nf:g} Hz, {na * 1e3:g} mm' if nf and na else f'{n_steady} cycles'
                 report.messages.append(
-                    f'{recording}block {lab} ({desc}): only {n_steady} steady cycles, need '
+                    f'{where}block {lab} ({desc}): only {n_steady} steady cycles, need '
                     f'{settle_cycles + min_cycles} ({settle_cycles} settling + {min_cycles} analysed); skipped')
                 if label is None:
                     counter += 1
@@ -219,11 +220,11 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
             tail = [i for i in missing if i > last]
             if tail:
                 report.messages.append(
-                    f'{recording}recording ends before block {tail[0]} of {len(expected)} '
+                    f'{where}recording ends before block {tail[0]} of {len(expected)} '
                     f'(truncated): blocks {tail[0]}-{len(expected) - 1} missing')
             inner = [i for i in missing if i <= last]
             if inner:
-                report.messages.append(f'{recording}blocks {inner} of the program are not in the recording')
+                report.messages.append(f'{where}blocks {inner} of the program are not in the recording')
     if not report.blocks:
-        report.messages.append(f'{recording}no usable steady block found')
+        report.messages.append(f'{where}no usable steady block found')
     return report

@@ -177,6 +177,13 @@ class ExcitationNode(Node):
             return 'a program is already running'
         return self.recording_ready()
 
+    def _statuses_fresh(self) -> bool:
+        now = time.monotonic()
+        rig = self.status is not None and now - self._status_wall <= self.status_timeout
+        rec = not self.require_recording or (self.recorder is not None
+                                             and now - self._recorder_wall <= self.recorder_timeout)
+        return rig and rec
+
     def recording_ready(self) -> str:
         if not self.require_recording:
             return ''
@@ -361,10 +368,10 @@ class ExcitationNode(Node):
         goal = goal_handle.request
         try:
             program, text = read_program(goal.program_path, goal.program_yaml)
-            # a goal sent right after launch may arrive before the latched statuses: wait for them (bounded)
+            # a goal sent right after launch (or a restart of the driver or recorder) may arrive before their
+            # latched statuses: wait for them, bounded
             deadline = time.monotonic() + self.status_timeout * 3
-            while (self.status is None or (self.require_recording and self.recorder is None)) \
-                    and time.monotonic() < deadline:
+            while not self._statuses_fresh() and time.monotonic() < deadline:
                 await self._sleep(0.05)
             why = self.rig_ready()
             if not why:
