@@ -5,6 +5,12 @@ this process, one SingleThreadedExecutor thread per node, with the same node cla
 ``ros2 launch rubber_rig rig_sim.launch.py``. The program is sent to the excitation as a RunProgram goal;
 progress comes from the action feedback, the table from the element_model's cycle_metrics. At the end the
 recorder is stopped and a summary (JSON and markdown) is written next to the MCAP file.
+
+Recording is a precondition: the goal is only sent once the recorder reports RECORDING with every suite topic
+subscribed (an unwritable or uncreatable output directory stops the bench before anything moves, exit 1). A
+recorder that turns to ERROR during the run (disk full) stops the program (the excitation aborts; the bench
+also cancels its goal) and the bench reports it. The recorder is stopped only after the rig came to rest and
+the last published sample was recorded, and the summary compares the samples published with those recorded.
 """
 from __future__ import annotations
 
@@ -315,6 +321,7 @@ def refuse_if_another_suite_runs(launcher, namespace: str, discovery_time: float
 
 def run(args) -> int:
     os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+    from msg_defs.msg import RigStatus
     from msg_defs.srv import RecorderControl
     from rubber_rig.nodes.element_model import ElementModelNode
     from rubber_rig.nodes.excitation import ExcitationNode
@@ -325,8 +332,7 @@ def run(args) -> int:
 
     config = find_config(args.config)
     program, program_yaml = build_program(args)
-    out_dir = Path(args.output_dir).resolve()
-    out_dir.mkdir(parents=True, exist_ok=True)
+    out_dir = Path(args.output_dir).absolute()     # created by the recorder, which reports if it cannot
     driver_overrides = {'autostart': True}
     if args.rate:
         driver_overrides['sample_rate'] = float(args.rate)
@@ -341,6 +347,8 @@ def run(args) -> int:
         recorder = launcher.start(RecorderNode, {
             'output_dir': str(out_dir), 'metadata.test_program': program_yaml,
             'metadata.notes': f'rubber-rig bench --program {args.program}'})
+        if not recorder.core.recording:              # before any other node exists: nothing can move
+            raise CommandError(f'cannot record, nothing started: {recorder.core.error or "recorder not recording"}')
         model = launcher.start(ElementModelNode)
         excitation = launcher.start(ExcitationNode, {'program': ''})
         driver = launcher.start(RigDriverNode, driver_overrides)
@@ -365,16 +373,23 @@ def run(args) -> int:
         if args.foxglove:
             term.line(f'Foxglove: connect to ws://127.0.0.1:{args.foxglove_port}, import layout {LAYOUT_FILE}')
 
-        # the excitation must have seen the rig ready (not the driver's first, pre-configure status)
-        ready = launcher.wait_for(lambda: monitor.status is not None and monitor.action.server_is_ready()
-                                  and excitation.rig_ready() == ''
-                                  and monitor.recorder_subscribed('samples', 'prediction', 'setpoints',
-                                                                  'cycle_metrics', 'status'), 30.0)
+        # the excitation must have seen the rig ready (not the driver's first, pre-configure status), and the
+        # recorder must record every stream (matched with its publisher) before the first setpoint is sent
+        recorded_topics = ('samples', 'prediction', 'setpoints', 'cycle_metrics', 'status')
+
+        def recorder_failed():
+            st = monitor.recorder_status
+            return st is not None and st.state == st.STATE_ERROR
+
+        ready = launcher.wait_for(lambda: recorder_failed() or (
+            monitor.status is not None and monitor.action.server_is_ready() and excitation.rig_ready() == ''
+            and monitor.recording_ready(*recorded_topics) == ''), 30.0)
+        if recorder_failed():
+            raise CommandError(f'cannot record, nothing moved: {monitor.recording_ready()}')
         if not ready:
-            why = excitation.rig_ready() or 'status, run_program or recorder topics missing'
+            why = excitation.rig_ready() or monitor.recording_ready(*recorded_topics) or 'run_program missing'
             raise CommandError(f'the nodes did not connect within 30 s ({why})')
-        launcher.wait_for(lambda: False, 0.3)   # graph entries exist; let DDS finish matching the endpoints
-        term.line(f'recording to {recorder.core.current_file}')
+        term.line(f'recording to {monitor.recorder_status.path}')
         table = BlockTable(program)
         term.line(BlockTable.COLUMNS[0])
         term.line(BlockTable.COLUMNS[1])
@@ -388,9 +403,16 @@ def run(args) -> int:
         result_future = goal_handle.get_result_async()
         n_fb = n_cm = 0
         interrupted = False
+        recording_error = ''
         try:
             while not result_future.done():
                 launcher.check()
+                if recorder_failed() and not recording_error:
+                    # the excitation aborts on its own (require_recording); cancelling is the bench's safe ramp
+                    recording_error = monitor.recorder_status.error
+                    term.end_status()
+                    term.line(f'RECORDING FAILED: {recording_error}; stopping the program (smooth ramp to rest)')
+                    goal_handle.cancel_goal_async()
                 fb = monitor.feedback[n_fb:]
                 n_fb += len(fb)
                 if fb:
@@ -419,18 +441,34 @@ def run(args) -> int:
                     term.line(line)
         result = result_future.result().result if result_future.done() else None
 
+        # stop the recorder only once the rig is at rest and the last published sample has been recorded
+        # (a fault's ramp tail arrives after the goal ended)
+        samples_topic = monitor.resolve_topic_name('samples')
+        moving = (RigStatus.STATE_RUNNING, RigStatus.STATE_RAMPING_DOWN)
+        last = {'next': None, 't': time.monotonic()}
+
+        def tail_recorded():
+            mon = monitor.stats['samples']
+            if mon.next != last['next']:
+                last['next'], last['t'] = mon.next, time.monotonic()
+            at_rest = monitor.status is not None and monitor.status.state not in moving
+            quiet = time.monotonic() - last['t'] >= 2 * driver.max_batch_delay
+            recorded = recorder_failed() or mon.next is None \
+                or recorder.core.gaps.next_expected.get(samples_topic, -1) >= mon.next
+            return at_rest and quiet and recorded
+        if not launcher.wait_for(tail_recorded, 10.0):
+            term.line('warning: the rig did not come to rest or the recorder did not receive the last samples '
+                      'within 10 s; the summary counts what is missing')
+        if recorder_failed() and not recording_error:
+            recording_error = monitor.recorder_status.error
+
         stop = _wait(launcher, monitor.recorder(RecorderControl.Request.STOP), 30.0, 'the recorder to stop')
         if not stop.file:
             raise CommandError(f'the recorder did not report its file: {stop.message or "no message"}')
         mcap = Path(stop.file)
-        rec_loss = {}
-        try:
-            from rubber_rig.recording import load_recording
-            rec = load_recording(mcap)
-            rec_loss = {'samples': int(len(rec)), 'samples_lost': int(rec.samples_lost), 'gaps': len(rec.gaps),
-                        'complete': bool(rec.complete), 'topics': {t: v.get('count') for t, v in rec.topics.items()}}
-        except Exception as exc:   # the summary still says where the file is
-            rec_loss = {'error': str(exc)}
+        rec_loss = recording_loss(mcap, monitor.stats['samples'], recorder.core.stats())
+        if recording_error:
+            rec_loss['recorder_error'] = recording_error
         summary = {
             'program': program.name, 'recording': str(mcap), 'wall_time_s': wall, 'interrupted': interrupted,
             'rig': {'backend': cfg.backend, 'sample_rate': rate, 'paced': cfg.paced, 'specimen': specimen,
@@ -447,21 +485,59 @@ def run(args) -> int:
             'latency': monitor.latency_summary() if cfg.paced else {},
             'blocks': [r for b in sorted(table.rows) for r in table.rows[b]],
         }
-        jpath, mpath = write_summary(mcap, summary)
+        try:
+            jpath, mpath = write_summary(mcap, summary)
+            summary_error = ''
+        except OSError as exc:   # e.g. the disk that stopped the recording is full: print it instead
+            jpath = mpath = None
+            summary_error = f'cannot write the summary next to {mcap}: {exc.strerror or exc}'
+            print(json.dumps(summary, indent=2, default=float))
 
     live = summary['loss']['live']
     print(f"\nprogram: {summary['result']['message']} ({wall:.1f} s)")
     print(f"samples: {live['samples']['samples']} published, {live['samples']['gaps']} gaps; "
           f"predictions: {live['prediction']['samples']}, {live['prediction']['gaps']} gaps; "
-          f"recording: {rec_loss.get('samples_lost', 'n/a')} samples lost")
+          f"recording: {rec_loss.get('samples_lost', 'n/a')} samples lost"
+          + (f" ({rec_loss['samples_not_recorded']} published samples not recorded)"
+             if rec_loss.get('samples_not_recorded') else ''))
+    if recording_error:
+        print(f'RECORDING FAILED: {recording_error}')
     lat = summary['latency'].get('last_sample')
     if lat:
         print(f"latency sample -> prediction: median {lat['median_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms")
     elif not cfg.paced:
         print('latency: not measured with --fast (rig time runs ahead of the wall clock)')
-    print(f'MCAP recording: {mcap}')
-    print(f'summary:        {jpath}')
-    print(f'                {mpath}')
+    print(f'MCAP recording: {mcap}' + ('' if rec_loss.get('complete', True) else
+                                       ' (not closed: readable up to its last complete chunk)'))
+    if summary_error:
+        print(f'summary:        NOT WRITTEN ({summary_error}); printed above as JSON')
+    else:
+        print(f'summary:        {jpath}')
+        print(f'                {mpath}')
     if interrupted:
         return 130
-    return 0 if summary['result']['success'] else 1
+    return 0 if summary['result']['success'] and not recording_error else 1
+
+
+def recording_loss(mcap: Path, published, recorder_stats: dict) -> dict:
+    """Loss of the recording: what the file itself shows (sequence gaps that are real loss) plus every sample
+    published during the run (``published``: the monitor's StreamStats of ``samples``) that is not in the file.
+    ``samples_lost`` is the total; it is never 0 while a published sample is missing."""
+    from rubber_rig.recording import load_recording
+    try:
+        rec = load_recording(mcap, allow_truncated=True)
+    except Exception as exc:   # the summary still says where the file is and what is known missing
+        return {'error': str(exc), 'samples_lost': published.samples or 'unknown',
+                'samples_not_recorded': published.samples}
+    seq = np.asarray(rec.sequence, dtype=np.int64)
+    if published.first is not None:
+        in_run = int(np.count_nonzero((seq >= published.first) & (seq < published.next)))
+    else:
+        in_run = 0
+    not_recorded = max(0, published.samples - in_run)
+    return {'samples': int(len(rec)), 'samples_lost': int(rec.samples_lost) + not_recorded,
+            'samples_lost_in_file': int(rec.samples_lost), 'samples_not_recorded': not_recorded,
+            'samples_published': published.samples, 'gaps': len(rec.gaps), 'sequence_jumps': len(rec.jumps),
+            'complete': bool(rec.complete), 'unclosed': rec.unclosed,
+            'recorder_samples_lost': recorder_stats.get('samples_lost_total'),
+            'topics': {t: v.get('count') for t, v in rec.topics.items()}}

@@ -154,6 +154,8 @@ class ExcitationNode(Node):
 
     def on_samples(self, msg: RigSampleBatch) -> None:
         n = len(msg.displacement)
+        if self.runner is not None and msg.first_sequence + n <= self.start_sequence:
+            return                       # from before this program's stream
         self.next_sample = msg.first_sequence + n
         if self.runner is not None and n and not self.held:
             try:
@@ -180,8 +182,9 @@ class ExcitationNode(Node):
     def _statuses_fresh(self) -> bool:
         now = time.monotonic()
         rig = self.status is not None and now - self._status_wall <= self.status_timeout
-        rec = not self.require_recording or (self.recorder is not None
-                                             and now - self._recorder_wall <= self.recorder_timeout)
+        rec = not self.require_recording or (
+            self.recorder is not None and now - self._recorder_wall <= self.recorder_timeout
+            and (self.recorder.state == RecorderStatus.STATE_ERROR or self.recording_ready() == ''))
         return rig and rec
 
     def recording_ready(self) -> str:
@@ -228,6 +231,7 @@ class ExcitationNode(Node):
             return str(exc)
         self.stream_id, self.held = grant.stream_id, False
         self.start_sequence = grant.first_sequence
+        self.next_sample = None          # samples of an earlier rig (a restarted driver counts from 0) do not count
         self.end_sequence = None
         self.result = None
         self.pub_program.publish(String(data=text))
@@ -448,6 +452,7 @@ class ExcitationNode(Node):
             return
         self.stream_id, self.held = grant.stream_id, False
         self.start_sequence = grant.first_sequence
+        self.next_sample = None          # samples of an earlier rig (a restarted driver counts from 0) do not count
         r.resume_at(grant.first_sequence, grant.position)
 
     def on_load_program(self, request, response):

@@ -15,7 +15,8 @@ from rclpy.action import ActionClient
 from rclpy.node import Node
 
 from msg_defs.action import RunProgram
-from msg_defs.msg import CycleMetrics, ModelParameters, ModelPrediction, RigSampleBatch, RigStatus, SetpointBatch
+from msg_defs.msg import (CycleMetrics, ModelParameters, ModelPrediction, RecorderStatus, RigSampleBatch, RigStatus,
+                          SetpointBatch)
 from msg_defs.srv import RecorderControl
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
@@ -59,6 +60,7 @@ class SuiteMonitor(Node):
         self.cycle_metrics: list[CycleMetrics] = []
         self.feedback: list = []
         self.status: RigStatus | None = None
+        self.recorder_status: RecorderStatus | None = None
         self.model_parameters: ModelParameters | None = None
         self.program_yaml = ''
         self.temperature = float('nan')
@@ -70,6 +72,7 @@ class SuiteMonitor(Node):
         sub(RigStatus, topics.STATUS, self._on_status, topics.LATCHED_QOS)
         sub(ModelParameters, topics.MODEL_PARAMETERS, self._on_parameters, topics.LATCHED_QOS)
         sub(String, topics.PROGRAM, self._on_program, topics.LATCHED_QOS)
+        sub(RecorderStatus, topics.RECORDER_STATUS, self._on_recorder_status, topics.LATCHED_QOS)
         self.action = ActionClient(self, RunProgram, 'run_program')
         self.recorder_control = self.create_client(RecorderControl, f'{recorder}/control')
         self.excitation_abort = self.create_client(Trigger, f'{excitation}/abort')
@@ -113,6 +116,9 @@ class SuiteMonitor(Node):
     def _on_program(self, msg: String) -> None:
         self.program_yaml = msg.data
 
+    def _on_recorder_status(self, msg: RecorderStatus) -> None:
+        self.recorder_status = msg
+
     # -- clients --------------------------------------------------------------------------------------------------
     def send_program(self, program_yaml: str = '', program_path: str = '', amplitude_control: bool = True):
         """Send a RunProgram goal; returns the goal-handle future (feedback lands in ``self.feedback``)."""
@@ -131,6 +137,19 @@ class SuiteMonitor(Node):
             if not any(i.node_name == 'recorder' for i in infos):
                 return False
         return True
+
+    def recording_ready(self, *names: str) -> str:
+        """'' when the recorder reports RECORDING with every given topic subscribed and matched, else why
+        not (an ERROR status gives the recorder's own reason, which names the path)."""
+        st = self.recorder_status
+        if st is None:
+            return f"no recorder status on '{self.resolve_topic_name(topics.RECORDER_STATUS)}' yet"
+        if st.state == RecorderStatus.STATE_ERROR:
+            return f'recorder error: {st.error}'
+        if st.state != RecorderStatus.STATE_RECORDING:
+            return f'recorder is {st.state_name} (not recording)'
+        missing = [n for n in (self.resolve_topic_name(n) for n in names) if n not in st.topics]
+        return f"recorder not yet subscribed to {', '.join(missing)}" if missing else ''
 
     # -- reporting --------------------------------------------------------------------------------------------------
     def latency_summary(self) -> dict:

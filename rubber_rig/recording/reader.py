@@ -228,8 +228,8 @@ def _fill_samples(rec: Recording, samples, topic):
         if len(fo[-1]) != n or len(sp[-1]) != n:
             raise RecordingError(f'{topic}: batch at sequence {first} has arrays of different '
                                  f'lengths ({n}, {len(fo[-1])}, {len(sp[-1])})')
-        tracker.observe(topic, first, n, frames_lost=int(getattr(m, 'frames_lost', 0) or 0),
-                        publication_sequence=pubseq)
+        tracker.observe(topic, first, n, int(t[-1][0]) if n else 0,
+                        frames_lost=int(getattr(m, 'frames_lost', 0) or 0), publication_sequence=pubseq)
         if n:
             last_in_file[f] = first + n - 1
     rec.time_ns = _cat(t, np.int64)

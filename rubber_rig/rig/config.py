@@ -21,7 +21,9 @@ FRAME_NAMES = ('Feedback', 'ControllerStatus', 'Temperature', 'ControllerHeartbe
 
 @dataclass
 class FaultSpec:
-    """One injected fault of the simulated rig, active from `start` for `duration` seconds of rig time.
+    """One injected fault of the simulated rig, active from `start` for `duration` seconds of rig time
+    (samples / sample_rate; paced, the time the rig stands idle after its first sample counts too, so a
+    window also ends while the rig stands faulted).
 
     type: drop | delay | duplicate | corrupt (frames named in `frames`, each hit with `probability`),
     stuck_sensor (`sensor` displacement|force freezes), silent_controller (heartbeat and status stop).

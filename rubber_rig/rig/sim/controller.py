@@ -43,6 +43,10 @@ class SimController:
         self.state, self.fault_bits = 'idle', 0
         self.next_seq = 0                 # full sequence of the next tick
         self.ticks = 0                    # ticks since start = rig time * fs
+        # fault schedules run on rig time plus, paced, the wall time the rig stood idle after its first tick: a
+        # fault window ends in real time even while the rig stands faulted (first program: sample = time * fs)
+        self.idle_ticks = 0
+        self._idle_since = None
         self.buffer = {}                  # seq -> setpoint [m]
         self.u = self.u_prev = 0.0        # applied command [m]
         self.ramp = None
@@ -82,6 +86,9 @@ class SimController:
                 if self.state in STREAMING:
                     if deadline is None:
                         deadline = now
+                        if self._idle_since is not None:
+                            self.idle_ticks += int((now - self._idle_since) * self.fs)
+                            self._idle_since = None
                     # catch up on every tick that is due (deadline based: no drift from late wake-ups); frames
                     # that arrived meanwhile are handled first
                     msg = self.bus.recv(0)
@@ -104,6 +111,8 @@ class SimController:
                         else 0.0
                 else:
                     deadline = None
+                    if self._idle_since is None and self.ticks:
+                        self._idle_since = now
                     if now >= next_idle_hk:
                         self._housekeeping(force=True)
                         next_idle_hk = now + 0.05
@@ -206,7 +215,7 @@ class SimController:
 
     # ---- one sample
     def _tick(self):
-        t = self.ticks / self.fs
+        t = self.fault_time()
         self._release_held()
         if self.state == 'ramping_down':
             u = self.ramp.step()
@@ -248,6 +257,13 @@ class SimController:
         else:
             self._housekeeping()
 
+    def fault_time(self) -> float:
+        """Time [s] on the fault schedule: rig time, plus (paced) the wall time stood idle after the first tick."""
+        idle = self.idle_ticks
+        if self._idle_since is not None:
+            idle += int((time.monotonic() - self._idle_since) * self.fs)
+        return (self.ticks + idle) / self.fs
+
     def _housekeeping(self, force=False):
         """Status every 10 ms, heartbeat every 50 ms, temperature every 100 ms of rig time (or now if force)."""
         code = STATE_CODE[self.state]
@@ -267,7 +283,7 @@ class SimController:
 
     def _send(self, name, signals):
         msg = self.proto.encode(name, signals)
-        for delay, m in self.faults.transmit(name, msg, self.ticks / self.fs):
+        for delay, m in self.faults.transmit(name, msg, self.fault_time()):
             if delay:
                 self._held.append((self.ticks + delay, m))
             else:

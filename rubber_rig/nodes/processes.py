@@ -1,0 +1,349 @@
+"""The suite as separate processes, the way ``ros2 launch`` starts it, and an operator node driving it from
+outside through its ROS interfaces only (topics, services, the action). Used by the fault-matrix tests and
+the safety benchmarks.
+
+Every node runs ``python -m rubber_rig.nodes.<node> --ros-args -r __ns:=<ns> --params-file <file> [--params-file
+<overrides>]`` with the environment of a launch file (RMW, domain, LOCALHOST discovery unless set), its
+output in ``<log_dir>/<node>.log``. Waits are bounded waits on conditions, never fixed sleeps.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+import rclpy
+import yaml
+from rclpy.action import ActionClient
+from rclpy.context import Context
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
+
+from msg_defs.action import RunProgram
+from msg_defs.msg import RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
+from std_srvs.srv import SetBool, Trigger
+
+from . import conversions as conv
+from . import topics
+
+NODES = ('rig_driver', 'excitation', 'element_model', 'recorder')
+
+
+class SuiteProcesses:
+    """Start, kill and restart the suite's node processes in namespace `namespace` on DDS domain `domain_id`.
+
+    params_file: the shared ros2 parameter file (config/rig_sim.yaml); overrides: {node: {param: value}}
+    written to a second parameter file per node (the later file wins, as in launch_ros)."""
+
+    def __init__(self, params_file, namespace: str, domain_id: int, log_dir, overrides: dict | None = None):
+        self.params_file, self.namespace, self.domain_id = str(params_file), namespace, int(domain_id)
+        self.log_dir = Path(log_dir)
+        self.log_dir.mkdir(parents=True, exist_ok=True)
+        self.overrides = {k: dict(v) for k, v in (overrides or {}).items()}
+        self.procs: dict[str, subprocess.Popen] = {}
+        self._logs = {}
+        self.extra_args: dict[str, list[str]] = {}   # more --ros-args per node (remappings)
+        self._log_offset = {}
+        self.env = dict(os.environ, ROS_DOMAIN_ID=str(self.domain_id), PYTHONUNBUFFERED='1')
+        self.env.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+        if not self.env.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):
+            self.env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+
+    def command(self, node: str, overrides: dict | None = None) -> list[str]:
+        cmd = [sys.executable, '-m', f'rubber_rig.nodes.{node}', '--ros-args', '-r', f'__ns:={self.namespace}',
+               '--params-file', self.params_file]
+        cmd += self.extra_args.get(node, [])
+        params = dict(self.overrides.get(node, {}), **(overrides or {}))
+        if params:
+            path = self.log_dir / f'{node}.overrides.yaml'
+            path.write_text(yaml.safe_dump({'/**': {'ros__parameters': params}}))
+            cmd += ['--params-file', str(path)]
+        return cmd
+
+    def start(self, node: str, overrides: dict | None = None) -> subprocess.Popen:
+        """Start (or restart) one node process (wait_started() waits for it to say it is ready)."""
+        self.stop(node)
+        log = open(self.log_dir / f'{node}.log', 'ab')
+        self._log_offset[node] = log.tell()
+        self._logs[node] = log
+        self.procs[node] = subprocess.Popen(self.command(node, overrides), env=self.env, stdout=log,
+                                            stderr=subprocess.STDOUT, start_new_session=True)
+        return self.procs[node]
+
+    def start_all(self, nodes=NODES):
+        for node in nodes:
+            self.start(node)
+
+    def wait_started(self, node: str, timeout: float = 30.0) -> bool:
+        """Wait until the process started last for `node` logged its 'ready' line (spin_node logs it once the
+        node and its interfaces exist). False if it did not within `timeout` s or the process ended."""
+        path, offset = self.log_dir / f'{node}.log', self._log_offset.get(node, 0)
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            with open(path, 'rb') as f:
+                f.seek(offset)
+                if b']: ready (pid ' in f.read():
+                    return True
+            if not self.alive(node):
+                return False
+            time.sleep(0.02)
+        return False
+
+    def kill(self, node: str, sig: int = signal.SIGKILL):
+        """Send `sig` to a node process and wait for it to end (SIGKILL: no clean-up at all)."""
+        p = self.procs.get(node)
+        if p is not None and p.poll() is None:
+            p.send_signal(sig)
+            try:
+                p.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(timeout=5)
+
+    def stop(self, node: str, timeout: float = 10.0) -> int | None:
+        """SIGINT (as Ctrl-C / launch shutdown) and wait; SIGKILL after `timeout`. Returns the exit code."""
+        p = self.procs.pop(node, None)
+        if p is None:
+            return None
+        if p.poll() is None:
+            p.send_signal(signal.SIGINT)
+            try:
+                p.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                p.kill()
+                p.wait(timeout=5)
+        log = self._logs.pop(node, None)
+        if log is not None:
+            log.close()
+        return p.returncode
+
+    def alive(self, node: str) -> bool:
+        p = self.procs.get(node)
+        return p is not None and p.poll() is None
+
+    def log(self, node: str) -> str:
+        path = self.log_dir / f'{node}.log'
+        return path.read_text(errors='replace') if path.exists() else ''
+
+    def stop_all(self):
+        for node in list(self.procs):
+            self.stop(node)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.stop_all()
+
+
+class Operator:
+    """A node in this process that drives a suite from outside: the action, the services, a foreign setpoint
+    publisher, and everything the rig publishes (applied command, status, recorder status) collected.
+
+    Runs its own rclpy context and executor thread; use as a context manager."""
+
+    RETRY = 2.0      # [s] an unanswered goal or service request is sent again after this long
+
+    def __init__(self, namespace: str, domain_id: int, name: str = 'operator'):
+        self.ns = namespace.rstrip('/')
+        self.context = Context()
+        rclpy.init(args=[], context=self.context, domain_id=int(domain_id),
+                   signal_handler_options=SignalHandlerOptions.NO)
+        self.node = Node(name, namespace=namespace, context=self.context)
+        self.executor = SingleThreadedExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.lock = threading.Lock()
+        self.batches: list[RigSampleBatch] = []
+        self.statuses: list[tuple[float, RigStatus]] = []
+        self.status: RigStatus | None = None
+        self.recorder: RecorderStatus | None = None
+        self.setpoints_seen: list[SetpointBatch] = []
+        n = self.node
+        n.create_subscription(RigSampleBatch, topics.SAMPLES, self._on_samples, topics.STREAM_QOS)
+        n.create_subscription(RigStatus, topics.STATUS, self._on_status, topics.LATCHED_QOS)
+        n.create_subscription(RecorderStatus, topics.RECORDER_STATUS, self._on_recorder, topics.LATCHED_QOS)
+        n.create_subscription(SetpointBatch, topics.SETPOINTS, self._on_setpoints, topics.STREAM_QOS)
+        self.pub_setpoints = n.create_publisher(SetpointBatch, topics.SETPOINTS, topics.STREAM_QOS)
+        self.action = ActionClient(n, RunProgram, 'run_program')
+        self._clients = {}
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._spin, name='operator', daemon=True)
+        self._thread.start()
+
+    def _spin(self):
+        while not self._stop.is_set() and self.context.ok():
+            try:
+                self.executor.spin_once(timeout_sec=0.05)
+            except Exception:   # noqa: BLE001 - shutting down
+                if self._stop.is_set():
+                    return
+                raise
+
+    def close(self):
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self.executor.shutdown()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    # -- inputs
+    def _on_samples(self, msg):
+        with self.lock:
+            self.batches.append(msg)
+
+    def _on_status(self, msg):
+        with self.lock:
+            self.status = msg
+            self.statuses.append((time.monotonic(), msg))
+
+    def _on_recorder(self, msg):
+        self.recorder = msg
+
+    def _on_setpoints(self, msg):
+        with self.lock:
+            self.setpoints_seen.append(msg)
+
+    def clear_history(self):
+        """Forget the samples and setpoints received so far (a restarted rig numbers its samples from 0)."""
+        with self.lock:
+            self.batches.clear()
+            self.setpoints_seen.clear()
+
+    def first_departure(self, since: int, tolerance: float = 1e-6):
+        """The first sample (sequence >= since) whose applied command is not the setpoint streamed for it (by
+        more than `tolerance` [m]): where a ramp or hold took over from the program. Returns (sequence, wall
+        time of the sample [s, time.time() clock: its frame's bus timestamp]) or None."""
+        with self.lock:
+            sp = [(b.first_sequence, conv.as_array(b.displacement)) for b in self.setpoints_seen
+                  if b.first_sequence + len(b.displacement) > since]
+            bs = [b for b in self.batches if b.first_sequence + len(b.setpoint) > since]
+        queued = {}
+        for first, x in sp:
+            for i, v in enumerate(x.tolist()):
+                queued[first + i] = v
+        for b in sorted(bs, key=lambda b: b.first_sequence):
+            t0 = b.header.stamp.sec + b.header.stamp.nanosec * 1e-9
+            for i, u in enumerate(conv.as_array(b.setpoint).tolist()):
+                seq = b.first_sequence + i
+                if seq >= since and (seq not in queued or abs(u - queued[seq]) > tolerance):
+                    return seq, t0 + i * b.sample_period
+        return None
+
+    def applied(self, since: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(sequence, applied command [m], measured displacement [m]) of every sample received (sequence >= since),
+        sorted by sequence."""
+        with self.lock:
+            bs = [b for b in self.batches if b.first_sequence + len(b.setpoint) > since]
+        if not bs:
+            return np.empty(0, dtype=np.int64), np.empty(0), np.empty(0)
+        seq = np.concatenate([b.first_sequence + np.arange(len(b.setpoint)) for b in bs])
+        u = np.concatenate([conv.as_array(b.setpoint) for b in bs])
+        x = np.concatenate([conv.as_array(b.displacement) for b in bs])
+        order = np.argsort(seq, kind='stable')
+        keep = seq[order] >= since
+        return seq[order][keep], u[order][keep], x[order][keep]
+
+    @property
+    def last_sequence(self) -> int:
+        with self.lock:
+            if not self.batches:
+                return -1
+            b = self.batches[-1]
+            return b.first_sequence + len(b.setpoint) - 1
+
+    # -- waiting
+    @staticmethod
+    def wait_for(condition: Callable[[], bool], timeout: float, period: float = 0.01) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if condition():
+                return True
+            time.sleep(period)
+        return bool(condition())
+
+    def wait_status(self, condition: Callable[[RigStatus], bool], timeout: float) -> bool:
+        return self.wait_for(lambda: self.status is not None and condition(self.status), timeout)
+
+    def wait_ready(self, timeout: float = 30.0) -> bool:
+        """The driver is active and idle (or holding) with no stream, and the excitation answers."""
+        ok = self.wait_status(lambda s: s.state in (RigStatus.STATE_IDLE, RigStatus.STATE_HOLDING)
+                              and not s.stream_owner, timeout)
+        return ok and self.action.wait_for_server(timeout_sec=timeout)
+
+    # -- the action
+    def send_goal(self, program_yaml: str = '', program_path: str = '', amplitude_control: bool = False,
+                  timeout: float = 10.0, action: str = 'run_program'):
+        """Send a goal to the RunProgram action `action` (default: this namespace's run_program); returns the
+        goal handle (accepted or not) or None if nothing answered."""
+        deadline = time.monotonic() + timeout
+        client = self.action
+        if action != 'run_program':
+            client = self._clients.get(('action', action))
+            if client is None:
+                client = self._clients[('action', action)] = ActionClient(self.node, RunProgram, action)
+        if not client.wait_for_server(timeout_sec=timeout):
+            return None
+        goal = RunProgram.Goal(program_yaml=program_yaml, program_path=program_path,
+                               amplitude_control=amplitude_control)
+        # A request sent before DDS matched a just (re)started server is lost (services are volatile), and the
+        # graph still lists a killed server until its lease expires: resend until one answers.
+        while True:
+            fut = client.send_goal_async(goal)
+            if self.wait_for(fut.done, min(self.RETRY, max(0.0, deadline - time.monotonic()))):
+                return fut.result()
+            if time.monotonic() >= deadline:
+                return None
+
+    def result(self, handle, timeout: float):
+        """The goal's result (RunProgram.Result) or None if it did not end within `timeout` seconds."""
+        fut = handle.get_result_async()
+        return fut.result().result if self.wait_for(fut.done, timeout) else None
+
+    def run(self, program_yaml: str, timeout: float = 60.0, **kwargs):
+        handle = self.send_goal(program_yaml, **kwargs)
+        assert handle is not None and handle.accepted, 'run_program goal not accepted'
+        return self.result(handle, timeout)
+
+    def cancel(self, handle, timeout: float = 5.0) -> bool:
+        fut = handle.cancel_goal_async()
+        return self.wait_for(fut.done, timeout)
+
+    # -- services
+    def call(self, service: str, srv_type, request=None, timeout: float = 5.0):
+        """Call `service` (relative names resolve in the namespace); None if it did not answer in time."""
+        client = self._clients.get(service)
+        if client is None:
+            client = self._clients[service] = self.node.create_client(srv_type, service)
+        deadline = time.monotonic() + timeout
+        if not client.wait_for_service(timeout_sec=timeout):
+            return None
+        while True:   # resend a lost request, as send_goal does
+            fut = client.call_async(request if request is not None else srv_type.Request())
+            if self.wait_for(fut.done, min(self.RETRY, max(0.0, deadline - time.monotonic()))):
+                return fut.result()
+            if time.monotonic() >= deadline:
+                return None
+
+    def trigger(self, service: str, timeout: float = 5.0):
+        return self.call(service, Trigger, Trigger.Request(), timeout)
+
+    def hold(self, on: bool, timeout: float = 5.0):
+        return self.call('excitation/hold', SetBool, SetBool.Request(data=on), timeout)
+
+    def publish_setpoints(self, first_sequence: int, x, stream_id: int = 0, source: str = '/intruder',
+                          block_index: int = 0, sample_period: float = 1e-3):
+        self.pub_setpoints.publish(conv.setpoint_batch_msg(first_sequence, sample_period, x, block_index,
+                                                           stream_id=stream_id, source=source))
