@@ -120,7 +120,7 @@ class Bench:
         dep = self.departure_after(since)
         if path == 'excitation hold':   # held: wait for the hold to settle, then end the program
             op.wait_status(lambda s: s.state in (RigStatus.STATE_IDLE, RigStatus.STATE_HOLDING)
-                           and s.stream_held, 5.0)
+                           and s.stream_owner == f'{NS}/excitation', 5.0)
             op.trigger('excitation/abort')
         op.result(handle, 5.0)
         self.at_rest()

@@ -349,7 +349,9 @@ class RigDriver:
             self._event('warn',
                         f'{text}; ramp to {"a stop" if code == CMD_HOLD else f"{target * 1e3:.4f} mm"} from '
                         f'{self._last_applied * 1e3:.4f} mm')
-        self._aborting = True
+        # an idle controller has nothing to ramp (it ignores the command): waiting for its ramp to end would
+        # block every later stream
+        self._aborting = self._aborting or self.controller_state in ('running', 'holding', 'ramping_down')
 
     def _release_stream(self):
         if self._stream is not None:
