@@ -208,14 +208,18 @@ class ExcitationNode(Node):
         limits.force_model = self.force_model
         limits.check_program(program, self.status.sample_rate)
 
-    async def open_and_start(self, program: Program, text: str, amplitude_control: bool) -> str:
-        """Ask the driver for the stream and start the runner on it. '' on success, else why not."""
+    async def _open_stream(self):
+        """Ask the driver for the stream (new program or resume); the grant, or None if it did not answer."""
         self._opening = True
         try:
-            grant = await self._call(self.open_client, OpenStream.Request(
+            return await self._call(self.open_client, OpenStream.Request(
                 owner=self.get_fully_qualified_name(), lead_time=self.lead_time), 2.0)
         finally:
             self._opening = False
+
+    async def open_and_start(self, program: Program, text: str, amplitude_control: bool) -> str:
+        """Ask the driver for the stream and start the runner on it. '' on success, else why not."""
+        grant = await self._open_stream()
         if grant is None:
             return f'{self.rig_driver}/open_stream did not answer within 2 s'
         if not grant.success:
@@ -439,12 +443,7 @@ class ExcitationNode(Node):
 
     async def _resume(self):
         r = self.runner
-        self._opening = True
-        try:
-            grant = await self._call(self.open_client, OpenStream.Request(
-                owner=self.get_fully_qualified_name(), lead_time=self.lead_time), 2.0)
-        finally:
-            self._opening = False
+        grant = await self._open_stream()
         if self.runner is not r or r is None:
             return
         if grant is None or not grant.success:
