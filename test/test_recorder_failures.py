@@ -361,7 +361,8 @@ def test_program_to_program_jump_is_not_loss_but_the_drivers_frames_lost_is(cont
         assert spin_until(executor, lambda: mine()[-1].level == DiagnosticStatus.WARN)
         assert '5 samples lost' in mine()[-1].message
         assert client.call(executor, RecorderControl.Request.STOP).success
-    r = load_recording(tmp_path)
+    [bag] = tmp_path.glob('rubber_rig_*')
+    r = load_recording(bag)
     assert r.samples_lost == 5 and len(r.gaps) == 1 and r.gaps[0]['frames_lost'] == 5
     assert len(r.jumps) == 1 and r.jumps[0]['expected'] == 600 and r.jumps[0]['received'] == start2
     assert r.closing[0]['samples_lost'] == 5 and r.closing[0]['sequence_jumps'] == 1

@@ -146,7 +146,7 @@ class RecordingWriter:
         self._decoders = Decoders(self.path, lazy_fallback=True)
         self.gaps = gaps if gaps is not None else GapTracker()
         self._gaps_at_open = (self.gaps.gaps, self.gaps.samples_lost, self.gaps.restarts,
-                              len(self.gaps.events))
+                              self.gaps.jumps, self.gaps.samples_skipped, len(self.gaps.events))
         self.messages_written = 0
         self.messages_flushed = 0          # messages in complete chunks handed to the OS
         self.samples_written = 0           # samples of sequenced messages (RigSampleBatch, ...) written
@@ -328,7 +328,7 @@ class RecordingWriter:
             self._guard(self._file.fsync)
 
     def loss_report(self) -> dict:
-        g0, lost0, r0, e0 = self._gaps_at_open
+        g0, lost0, r0, j0, skipped0, e0 = self._gaps_at_open
         return {
             'messages_written': self.messages_written,
             'messages_by_topic': dict(self.messages_by_topic),
@@ -338,6 +338,8 @@ class RecordingWriter:
             'samples_lost': self.gaps.samples_lost - lost0,
             'samples_lost_unwritten': self.samples_lost_unwritten,
             'sequence_restarts': self.gaps.restarts - r0,
+            'sequence_jumps': self.gaps.jumps - j0,           # between programs: not loss
+            'samples_skipped': self.gaps.samples_skipped - skipped0,
             'gap_events': self.gaps.events[e0:],
             'total_sequence_gaps': self.gaps.gaps,
             'total_samples_lost': self.gaps.samples_lost,
