@@ -8,16 +8,13 @@ import signal
 import subprocess
 import sys
 import time
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import pytest
-import rclpy
 from mcap.reader import make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosbags.highlevel import AnyReader
@@ -29,6 +26,7 @@ from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.recorder import RecorderNode
+from ros_support import ros_context, spin_until, spinning
 from rubber_rig.recording import GapTracker, load_recording, recover
 
 REPO = Path(__file__).resolve().parents[1]
@@ -38,31 +36,8 @@ PERIOD = 1e-3
 
 @pytest.fixture
 def context():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx, domain_id=DOMAIN)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
-
-
-@contextmanager
-def spinning(context, *nodes):
-    executor = SingleThreadedExecutor(context=context)
-    for n in nodes:
-        executor.add_node(n)
-    try:
-        yield executor
-    finally:
-        for n in nodes:
-            executor.remove_node(n)
-            n.destroy_node()
-        executor.shutdown()
-
-
-def spin_until(executor, condition, timeout=20.0):
-    deadline = time.monotonic() + timeout
-    while not condition() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.01)
-    return condition()
+    with ros_context(DOMAIN) as ctx:
+        yield ctx
 
 
 def batch(first, n=20, frames_lost=0):

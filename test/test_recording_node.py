@@ -4,13 +4,10 @@ import signal
 import subprocess
 import sys
 import time
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import pytest
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rosbags.highlevel import AnyReader
@@ -22,6 +19,7 @@ from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.recorder import RecorderNode
+from ros_support import ros_context, spin_until, spinning
 from rubber_rig.recording import load_recording
 from rubber_rig.recording.qos import parse_offered_qos
 
@@ -32,33 +30,8 @@ PERIOD = 1e-3
 
 @pytest.fixture
 def context():
-    ctx = rclpy.Context()
-    rclpy.init(context=ctx)
-    yield ctx
-    rclpy.try_shutdown(context=ctx)
-
-
-@contextmanager
-def spinning(context, *nodes):
-    """A SingleThreadedExecutor with ``nodes`` added; on exit the nodes are removed and destroyed and the
-    executor shut down."""
-    executor = SingleThreadedExecutor(context=context)
-    for n in nodes:
-        executor.add_node(n)
-    try:
-        yield executor
-    finally:
-        for n in nodes:
-            executor.remove_node(n)
-            n.destroy_node()
-        executor.shutdown()
-
-
-def spin_until(executor, condition, timeout=20.0):
-    deadline = time.monotonic() + timeout
-    while not condition() and time.monotonic() < deadline:
-        executor.spin_once(timeout_sec=0.01)
-    return condition()
+    with ros_context() as ctx:
+        yield ctx
 
 
 def control_caller(executor, control):

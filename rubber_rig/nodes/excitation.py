@@ -74,8 +74,13 @@ class ExcitationNode(Node):
                                        range=(0.01, 10.0), units='s')
         self.rig_driver = declare(self, 'rig_driver', 'rig_driver', 'name of the rig_driver node whose '
                                   'open_stream/stop_stream services this node calls (relative: same namespace)')
-        self.status_timeout = declare(self, 'status_timeout', 0.8, 'a rig_driver status older than this ends a '
-                                      'running program (the driver is gone)', range=(0.2, 10.0), units='s')
+        self.status_timeout = declare(self, 'status_timeout', 0.8, 'neither a rig_driver status nor a sample batch '
+                                      'for this long ends a running program (the driver is gone)',
+                                      range=(0.2, 10.0), units='s')
+        self.start_timeout = declare(self, 'start_timeout', 5.0, 'a goal waits up to this long for fresh rig and '
+                                     'recorder statuses and for DDS to match our topics (after a launch or a '
+                                     'node restart discovery can take seconds) before it is refused',
+                                     range=(0.0, 60.0), units='s')
         self.require_recording = declare(self, 'require_recording', False, 'start a program only while the '
                                          "recorder reports recording this namespace's samples, and stop it if "
                                          'the recording fails')
@@ -101,6 +106,7 @@ class ExcitationNode(Node):
 
         self.status: RigStatus | None = None
         self._status_wall = 0.0
+        self._driver_wall = 0.0          # the latest status or sample batch: the driver is alive
         self.recorder: RecorderStatus | None = None
         self._recorder_wall = 0.0
         self.next_sample = None          # sequence after the latest measured sample
@@ -117,7 +123,8 @@ class ExcitationNode(Node):
 
         self.pub_setpoints = self.create_publisher(SetpointBatch, topics.SETPOINTS, topics.STREAM_QOS)
         self.pub_program = self.create_publisher(String, topics.PROGRAM, topics.LATCHED_QOS)
-        self.create_subscription(RigSampleBatch, topics.SAMPLES, self.on_samples, topics.STREAM_QOS)
+        self.sub_samples = self.create_subscription(RigSampleBatch, topics.SAMPLES, self.on_samples,
+                                                    topics.STREAM_QOS)
         self.create_subscription(RigStatus, topics.STATUS, self.on_status, topics.LATCHED_QOS)
         self.create_subscription(RecorderStatus, topics.RECORDER_STATUS, self.on_recorder_status,
                                  topics.LATCHED_QOS)
@@ -139,6 +146,7 @@ class ExcitationNode(Node):
     # -- inputs -----------------------------------------------------------------------------------------------
     def on_status(self, msg: RigStatus) -> None:
         self.status, self._status_wall = msg, time.monotonic()
+        self._driver_wall = self._status_wall
         if self.runner is None or not self.stream_id or self._opening:
             return
         if msg.state == RigStatus.STATE_FAULT or msg.faults:   # (ramping_down while the fault's ramp runs)
@@ -153,6 +161,9 @@ class ExcitationNode(Node):
             self.abort_program(f'recording failed: {msg.error or "recorder error"}')
 
     def on_samples(self, msg: RigSampleBatch) -> None:
+        # samples prove the driver alive as well as its status does: one late status message (DDS can hold a
+        # topic back for a second when a subscriber process dies) must not stop a running program
+        self._driver_wall = time.monotonic()
         n = len(msg.displacement)
         if self.runner is not None and msg.first_sequence + n <= self.start_sequence:
             return                       # from before this program's stream
@@ -177,15 +188,32 @@ class ExcitationNode(Node):
             return f'the rig is streaming for {self.status.stream_owner}'
         if self.runner is not None or self._opening:
             return 'a program is already running'
-        return self.recording_ready()
+        return self.links_ready() or self.recording_ready()
 
-    def _statuses_fresh(self) -> bool:
+    def links_ready(self) -> str:
+        """'' once our setpoints publisher and samples subscription are matched with every endpoint the graph
+        shows on those topics (the driver's among them). Right after a launch or a driver restart the status can
+        arrive before they are: a stream opened then would run dry (no samples pace it) or send to nobody."""
+        for what, matched, known in (
+                ('samples subscription', self.sub_samples.get_publisher_count(),
+                 self.count_publishers(self.samples_topic)),
+                ('setpoints publisher', self.pub_setpoints.get_subscription_count(),
+                 self.count_subscribers(self.pub_setpoints.topic_name))):
+            if matched < max(known, 1):
+                return f'waiting for discovery: our {what} is matched with {matched} of {max(known, 1)} endpoints'
+        return ''
+
+    def _statuses_fresh(self, since: float) -> bool:
+        """The rig status, the recorder status (with require_recording) and our topics are ready to judge a goal
+        that arrived at ``since`` (time.monotonic()). A recorder error counts only if reported since then: the
+        error of a recorder that was just replaced must not refuse a goal the new one would record."""
         now = time.monotonic()
         rig = self.status is not None and now - self._status_wall <= self.status_timeout
         rec = not self.require_recording or (
             self.recorder is not None and now - self._recorder_wall <= self.recorder_timeout
-            and (self.recorder.state == RecorderStatus.STATE_ERROR or self.recording_ready() == ''))
-        return rig and rec
+            and ((self.recorder.state == RecorderStatus.STATE_ERROR and self._recorder_wall >= since)
+                 or self.recording_ready() == ''))
+        return rig and rec and not self.links_ready()
 
     def recording_ready(self) -> str:
         if not self.require_recording:
@@ -199,6 +227,14 @@ class ExcitationNode(Node):
             return f'require_recording: the recorder is {r.state_name}' + (f': {r.error}' if r.error else '')
         if self.samples_topic not in r.topics:
             return f'require_recording: the recorder does not record {self.samples_topic} yet'
+        # a restarted rig_driver is a new publisher: until the recorder has matched it, its first samples
+        # would be published to nobody and not even counted lost (the recorder never sees them)
+        known = self.count_publishers(self.samples_topic)
+        matched = (r.topic_publishers[r.topics.index(self.samples_topic)]
+                   if len(r.topic_publishers) == len(r.topics) else known)
+        if matched < known:
+            return (f'require_recording: the recorder is matched with {matched} of the {known} publishers of '
+                    f'{self.samples_topic} (it has not discovered the restarted rig_driver yet)')
         return ''
 
     def prepare(self, program: Program, amplitude_control: bool) -> None:
@@ -265,9 +301,10 @@ class ExcitationNode(Node):
             self.abort_program(f'recording lost: no recorder status for {time.monotonic() - self._recorder_wall:.1f}'
                                ' s (the recorder is gone)')
             return
-        if time.monotonic() - self._status_wall > self.status_timeout:
-            self.abort_program(f'{self.rig_driver} silent for {time.monotonic() - self._status_wall:.1f} s '
-                               '(status): the rig controller ramps to rest on its own host watchdog')
+        if time.monotonic() - self._driver_wall > self.status_timeout:
+            self.abort_program(f'{self.rig_driver} silent for {time.monotonic() - self._driver_wall:.1f} s '
+                               '(no status, no samples): the rig controller ramps to rest on its own host '
+                               'watchdog')
             return
         r = self.runner
         fs = self.status.sample_rate
@@ -378,8 +415,9 @@ class ExcitationNode(Node):
             program, text = read_program(goal.program_path, goal.program_yaml)
             # a goal sent right after launch (or a restart of the driver or recorder) may arrive before their
             # latched statuses: wait for them, bounded
-            deadline = time.monotonic() + self.status_timeout * 3
-            while not self._statuses_fresh() and time.monotonic() < deadline:
+            since = time.monotonic()
+            deadline = since + self.start_timeout
+            while not self._statuses_fresh(since) and time.monotonic() < deadline:
                 await self._sleep(0.05)
             why = self.rig_ready()
             if not why:

@@ -255,14 +255,15 @@ class RecorderNode(Node):
 
     # -- status ------------------------------------------------------------------------------
     def subscribed_topics(self) -> list:
-        """Fully qualified topics subscribed and matched with at least one publisher."""
+        """(fully qualified topic, matched publishers) of the subscriptions matched with at least one publisher."""
         out = []
         for name, (sub, _) in sorted(self._subs.items()):
             try:
-                if sub.get_publisher_count() > 0:
-                    out.append(name)
+                count = sub.get_publisher_count()
             except Exception:  # noqa: BLE001 - a subscription being destroyed
-                pass
+                continue
+            if count > 0:
+                out.append((name, count))
         return out
 
     def status_message(self) -> RecorderStatus:
@@ -275,9 +276,11 @@ class RecorderNode(Node):
             state, name = RecorderStatus.STATE_IDLE, 'idle'
         path = core.current_file or (core.files[-1] if core.files else '')
         stats_written = core.messages_written + (core.writer.messages_written if core.writer else 0)
+        matched = self.subscribed_topics()
         msg = RecorderStatus(state=state, state_name=name, path=str(path),
                              error=str(core.error) if core.error is not None and not core.recording else '',
-                             topics=self.subscribed_topics(), messages_written=int(stats_written),
+                             topics=[name for name, _ in matched], topic_publishers=[n for _, n in matched],
+                             messages_written=int(stats_written),
                              samples_lost=int(core.samples_lost_total))
         msg.header.stamp = self.get_clock().now().to_msg()
         return msg
@@ -285,7 +288,7 @@ class RecorderNode(Node):
     def update_status(self, force: bool = False) -> None:
         """Publish recorder_status if anything but the counters changed, or status_period passed."""
         msg = self.status_message()
-        key = (msg.state, msg.path, msg.error, tuple(msg.topics), msg.samples_lost)
+        key = (msg.state, msg.path, msg.error, tuple(msg.topics), tuple(msg.topic_publishers), msg.samples_lost)
         now = time.monotonic()
         if not force and key == self._status_key and now - self._status_time < self.status_period:
             return
