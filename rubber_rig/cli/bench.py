@@ -451,7 +451,11 @@ def run(args) -> int:
             mon = monitor.stats['samples']
             if mon.next != last['next']:
                 last['next'], last['t'] = mon.next, time.monotonic()
-            at_rest = monitor.status is not None and monitor.status.state not in moving
+            st = monitor.status
+            # unpaced (--fast), the simulated controller only ticks while setpoints are queued: after the
+            # program it still says running, holding its last setpoint, but the driver has released the stream
+            at_rest = st is not None and (st.state not in moving
+                                          or (st.state == RigStatus.STATE_RUNNING and not st.stream_owner))
             quiet = time.monotonic() - last['t'] >= 2 * driver.max_batch_delay
             recorded = recorder_failed() or mon.next is None \
                 or recorder.core.gaps.next_expected.get(samples_topic, -1) >= mon.next
