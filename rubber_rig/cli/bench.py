@@ -15,6 +15,7 @@ the last published sample was recorded, and the summary compares the samples pub
 from __future__ import annotations
 
 import argparse
+import copy
 import json
 import math
 import os
@@ -441,25 +442,32 @@ def run(args) -> int:
                     term.line(line)
         result = result_future.result().result if result_future.done() else None
 
-        # stop the recorder only once the rig is at rest and the last published sample has been recorded
-        # (a fault's ramp tail arrives after the goal ended)
+        # stop the recorder only once the rig has been at rest for a while (a fault's ramp tail arrives after the
+        # goal ended) and every sample published so far has been recorded. A paced rig goes on sampling while it
+        # stands: the run's samples are those published up to that moment (the snapshot), not those that keep
+        # arriving until the recorder stops.
         samples_topic = monitor.resolve_topic_name('samples')
         moving = (RigStatus.STATE_RUNNING, RigStatus.STATE_RAMPING_DOWN)
-        last = {'next': None, 't': time.monotonic()}
+        rest = {'since': None, 'published': None}
 
         def tail_recorded():
             mon = monitor.stats['samples']
-            if mon.next != last['next']:
-                last['next'], last['t'] = mon.next, time.monotonic()
             st = monitor.status
             # unpaced (--fast), the simulated controller only ticks while setpoints are queued: after the
             # program it still says running, holding its last setpoint, but the driver has released the stream
             at_rest = st is not None and (st.state not in moving
                                           or (st.state == RigStatus.STATE_RUNNING and not st.stream_owner))
-            quiet = time.monotonic() - last['t'] >= 2 * driver.max_batch_delay
+            if not at_rest:
+                rest['since'] = None
+                return False
+            if rest['since'] is None:
+                rest['since'] = time.monotonic()
+            settled = time.monotonic() - rest['since'] >= 2 * driver.max_batch_delay
             recorded = recorder_failed() or mon.next is None \
                 or recorder.core.gaps.next_expected.get(samples_topic, -1) >= mon.next
-            return at_rest and quiet and recorded
+            if settled and recorded:
+                rest['published'] = copy.copy(mon)
+            return settled and recorded
         if not launcher.wait_for(tail_recorded, 10.0):
             term.line('warning: the rig did not come to rest or the recorder did not receive the last samples '
                       'within 10 s; the summary counts what is missing')
@@ -470,7 +478,8 @@ def run(args) -> int:
         if not stop.file:
             raise CommandError(f'the recorder did not report its file: {stop.message or "no message"}')
         mcap = Path(stop.file)
-        rec_loss = recording_loss(mcap, monitor.stats['samples'], recorder.core.stats())
+        published = rest['published'] or monitor.stats['samples']
+        rec_loss = recording_loss(mcap, published, recorder.core.stats())
         if recording_error:
             rec_loss['recorder_error'] = recording_error
         summary = {
