@@ -2,8 +2,11 @@
 import time
 from contextlib import contextmanager
 
+import numpy as np
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
+
+from msg_defs.msg import RigSampleBatch
 
 
 @contextmanager
@@ -42,3 +45,21 @@ def spin_until(executor, condition, timeout=20.0):
     while not condition() and time.monotonic() < deadline:
         executor.spin_once(timeout_sec=0.01)
     return condition()
+
+
+def sample_batch(first: int, n: int, *, period: float = 1e-3, frames_lost: int = 0, temperature: float = 23.0,
+                 status_flags: int = 0) -> RigSampleBatch:
+    """A RigSampleBatch of samples first..first+n-1 with deterministic signals (a function of the sequence
+    only, so a recording can be compared value by value) and the stamp of its first sample."""
+    m = RigSampleBatch()
+    m.first_sequence = first
+    m.sample_period = period
+    m.header.stamp.sec, m.header.stamp.nanosec = divmod(first * 1_000_000, 1_000_000_000)
+    k = np.arange(first, first + n)
+    m.displacement = 1e-3 * np.sin(k * 0.01)
+    m.force = 1e3 * np.cos(k * 0.01)
+    m.setpoint = 1e-3 * np.sin(k * 0.01 + 0.1)
+    m.temperature = temperature
+    m.status_flags = status_flags
+    m.frames_lost = frames_lost
+    return m

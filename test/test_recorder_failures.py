@@ -26,7 +26,7 @@ from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.recorder import RecorderNode
-from ros_support import ros_context, spin_until, spinning
+from ros_support import ros_context, sample_batch, spin_until, spinning
 from rubber_rig.recording import GapTracker, load_recording, recover
 
 REPO = Path(__file__).resolve().parents[1]
@@ -41,17 +41,7 @@ def context():
 
 
 def batch(first, n=20, frames_lost=0):
-    m = RigSampleBatch()
-    m.first_sequence = first
-    m.sample_period = PERIOD
-    m.header.stamp.sec, m.header.stamp.nanosec = divmod(first * 1_000_000, 1_000_000_000)
-    k = np.arange(first, first + n)
-    m.displacement = 1e-3 * np.sin(k * 0.01)
-    m.force = 1e3 * np.cos(k * 0.01)
-    m.setpoint = 1e-3 * np.sin(k * 0.01 + 0.1)
-    m.temperature = 23.0
-    m.frames_lost = frames_lost
-    return m
+    return sample_batch(first, n, period=PERIOD, frames_lost=frames_lost)
 
 
 class Client:

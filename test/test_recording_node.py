@@ -19,7 +19,7 @@ from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.recorder import RecorderNode
-from ros_support import ros_context, spin_until, spinning
+from ros_support import ros_context, sample_batch, spin_until, spinning
 from rubber_rig.recording import load_recording
 from rubber_rig.recording.qos import parse_offered_qos
 
@@ -44,19 +44,8 @@ def control_caller(executor, control):
 
 
 def batch(k, skip=0, frames_lost=0):
-    m = RigSampleBatch()
-    first = k * BATCH + skip
-    m.first_sequence = first
-    m.sample_period = PERIOD
-    m.header.stamp.sec, m.header.stamp.nanosec = divmod(first * 1_000_000, 1_000_000_000)
-    n = np.arange(first, first + BATCH)
-    m.displacement = 1e-3 * np.sin(n * 0.01)
-    m.force = 1e3 * np.cos(n * 0.01)
-    m.setpoint = 1e-3 * np.sin(n * 0.01 + 0.1)
-    m.temperature = 23.0 + k * 0.01
-    m.status_flags = k % 3
-    m.frames_lost = frames_lost
-    return m
+    return sample_batch(k * BATCH + skip, BATCH, period=PERIOD, frames_lost=frames_lost,
+                        temperature=23.0 + k * 0.01, status_flags=k % 3)
 
 
 def test_recorder_node_records_published_batches(context, tmp_path):

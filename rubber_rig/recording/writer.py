@@ -145,8 +145,9 @@ class RecordingWriter:
         # numpy decoder for the gap check (10 kHz), mcap_ros2's only if it fails (e.g. big-endian CDR)
         self._decoders = Decoders(self.path, lazy_fallback=True)
         self.gaps = gaps if gaps is not None else GapTracker()
-        self._gaps_at_open = (self.gaps.gaps, self.gaps.samples_lost, self.gaps.restarts,
-                              self.gaps.jumps, self.gaps.samples_skipped, len(self.gaps.events))
+        # the tracker may carry on from earlier files: this file reports what it added since it opened
+        self._gaps_at_open = self.gaps.summary()
+        self._events_at_open = len(self.gaps.events)
         self.messages_written = 0
         self.messages_flushed = 0          # messages in complete chunks handed to the OS
         self.samples_written = 0           # samples of sequenced messages (RigSampleBatch, ...) written
@@ -328,21 +329,19 @@ class RecordingWriter:
             self._guard(self._file.fsync)
 
     def loss_report(self) -> dict:
-        g0, lost0, r0, j0, skipped0, e0 = self._gaps_at_open
+        now, at_open = self.gaps.summary(), self._gaps_at_open
+        added = {key: now[key] - at_open[key] for key in
+                 ('sequence_gaps', 'samples_lost', 'sequence_restarts', 'sequence_jumps', 'samples_skipped')}
         return {
             'messages_written': self.messages_written,
             'messages_by_topic': dict(self.messages_by_topic),
             'messages_dropped': sum(self.dropped.values()),
             'dropped_by_reason': dict(self.dropped),
-            'sequence_gaps': self.gaps.gaps - g0,
-            'samples_lost': self.gaps.samples_lost - lost0,
+            **added,                                            # sequence jumps (between programs) are not loss
             'samples_lost_unwritten': self.samples_lost_unwritten,
-            'sequence_restarts': self.gaps.restarts - r0,
-            'sequence_jumps': self.gaps.jumps - j0,           # between programs: not loss
-            'samples_skipped': self.gaps.samples_skipped - skipped0,
-            'gap_events': self.gaps.events[e0:],
-            'total_sequence_gaps': self.gaps.gaps,
-            'total_samples_lost': self.gaps.samples_lost,
+            'gap_events': self.gaps.events[self._events_at_open:],
+            'total_sequence_gaps': now['sequence_gaps'],
+            'total_samples_lost': now['samples_lost'],
         }
 
     def bag_info(self) -> dict:
