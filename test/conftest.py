@@ -7,3 +7,14 @@ os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
 # before any test module imports rclpy; node processes the tests start inherit it.
 if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+
+
+import pytest  # noqa: E402
+
+
+@pytest.hookimpl(hookwrapper=True)
+def pytest_runtest_makereport(item, call):
+    """Keep each phase's report on the test item (rep_setup, rep_call): fixtures read it at teardown to add
+    diagnostics to a failure (the fault matrix prints its node logs)."""
+    outcome = yield
+    setattr(item, f'rep_{call.when}', outcome.get_result())

@@ -77,6 +77,25 @@ def suite(tmp_path_factory):
         procs.stop_all()
 
 
+@pytest.fixture(autouse=True)
+def from_a_ready_rig(suite, request):
+    """Each scenario starts from a ready rig, and one that fails shows why: the tail of every node's log.
+    A failed scenario can leave the rig faulted; acknowledging that here keeps one failure one failure (the
+    scenarios that pass leave the rig ready on their own, checked by next_program_completes)."""
+    procs, op, base = suite
+    for _ in range(5):
+        if op.status is None or op.status.state != RigStatus.STATE_FAULT:
+            break
+        print(f'rig faulted at the start of {request.node.name}: {list(op.status.fault_messages)}; reset')
+        op.trigger('rig_driver/reset')
+        op.wait_ready(2.0)
+    yield
+    rep = getattr(request.node, 'rep_call', None)
+    if rep is not None and rep.failed:
+        for name in ('rig_driver', 'excitation', 'recorder', 'element_model'):
+            print(f'--- {name} log (tail) ---\n' + procs.log(name)[-3000:])
+
+
 # -- the invariants -----------------------------------------------------------------------------------------
 def assert_applied_safe(op, since=0):
     """(a) the applied command stayed inside the limits and never stepped faster than velocity_max."""

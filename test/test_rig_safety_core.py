@@ -220,6 +220,28 @@ def test_a_paced_stream_that_goes_silent_is_lost_after_stream_timeout():
         assert drv.status.extra['position'] == 0.0
 
 
+def test_a_granted_stream_that_never_sends_is_withdrawn_without_a_fault():
+    """Paced: a client is granted the stream and sends nothing (it died, or is slow to hear the grant). Nothing
+    moved, so stream_timeout (for a stream that stops while moving the rig) does not fault it: after
+    FIRST_BATCH_TIMEOUT (2 s) it is withdrawn with an event, the rig idle and free for the next client."""
+    with open_rig({'paced': True, 'limits': ISSUE_LIMITS, 'stream_timeout': 0.3}) as rig:
+        assert rig.wait_ready(5.0)
+        drv = rig.driver
+        g = drv.open_stream('/rig1/excitation')
+        t0 = time.monotonic()
+        assert _poll_until(drv, lambda: time.monotonic() - t0 > 0.6, 10 ** 8)
+        assert drv.status.faults == 0 and drv.status.extra['stream_owner'] == '/rig1/excitation'   # past 0.3 s: no fault
+        assert _poll_until(drv, lambda: not drv.status.extra['stream_owner'], 10 ** 8)
+        waited = time.monotonic() - t0
+        assert drv.FIRST_BATCH_TIMEOUT <= waited <= drv.FIRST_BATCH_TIMEOUT + 0.5, waited
+        assert drv.status.faults == 0 and drv.status.state == 'idle'
+        assert 'withdrawn: no batch within 2.0' in drv.last_event and str(g.stream_id) in drv.last_event
+        assert drv.queue_setpoints(g.first_sequence, [0.0], g.stream_id) is False      # the old grant is gone
+        g2 = drv.open_stream('/rig1/other')                                            # the rig is free
+        x = np.zeros(100)
+        assert drv.queue_setpoints(g2.first_sequence, x, g2.stream_id)
+
+
 # -- item 5: reset, and the 16-bit sequence wrap ------------------------------------------------------------------
 def test_programs_after_a_fault_and_reset_and_across_the_sequence_wrap_complete():
     """One open rig: a fault, reset, then programs until the sample sequence has passed 65536 twice (the 16-bit

@@ -48,7 +48,8 @@ class ProgramRunner:
 
     Setpoint sequence numbers start at start_sequence; measurements fed back with the same numbering drive the
     amplitude loop and the achieved-amplitude report. The program is checked against `limits` on construction
-    (LimitError before anything is generated); every generated chunk is checked again, and a violation turns
+    (LimitError before anything is generated) unless check_program=False says the caller has just checked it
+    against these limits; every generated chunk is checked again, and a violation turns
     into an abort ramp instead of a setpoint outside the limits.
 
     Open loop, the setpoints depend on the sample index only. With amplitude_control the command of a cycle also
@@ -63,10 +64,11 @@ class ProgramRunner:
 
     def __init__(self, program, sample_rate: float, limits: Limits = None, amplitude_control: bool = False,
                  start_sequence: int = 0, compensation_memory: bool = True, start_position: float = None,
-                 start_velocity: float = 0.0):
+                 start_velocity: float = 0.0, check_program: bool = True):
         self.program, self.fs = program, float(sample_rate)
         self.limits = limits if limits is not None else Limits()
-        self.limits.check_program(program, self.fs)
+        if check_program:
+            self.limits.check_program(program, self.fs)
         self.amplitude_control = amplitude_control
         # what the amplitude loop learned per block (gain, offset vs frequency): the next block's starting point
         self.compensation = CompensationMemory() if amplitude_control and compensation_memory else None

@@ -262,10 +262,13 @@ class ExcitationNode(Node):
             return f'the rig refused the stream: {grant.message}'
         limits = conv.limits_from_msg(self.status.limits)
         try:
+            # prepare() checked the program against these limits (and the force model) before the stream was
+            # asked for; from the grant on, every moment before the first batch counts against the driver
             self.runner = ProgramRunner(program, self.status.sample_rate, limits, amplitude_control,
                                         start_sequence=grant.first_sequence,
                                         compensation_memory=self.compensation_memory,
-                                        start_position=grant.position, start_velocity=grant.velocity)
+                                        start_position=grant.position, start_velocity=grant.velocity,
+                                        check_program=False)
         except ValueError as exc:
             self._stop_stream(StopStream.Request.ACTION_ABORT, f'program refused: {exc}')
             return str(exc)
@@ -278,6 +281,7 @@ class ExcitationNode(Node):
         self.get_logger().info(f"program '{program.name}': {len(program.blocks)} blocks, "
                                f'{program.duration(self.status.sample_rate):.1f} s, stream {grant.stream_id} from '
                                f'sample {grant.first_sequence}, rig at {grant.position * 1e3:.4f} mm')
+        self.stream()                    # the first lead now, not a timer period later
         return ''
 
     # -- streaming (timer) ------------------------------------------------------------------------------------------

@@ -83,6 +83,7 @@ class _Stream:
     last_velocity: float        # velocity at the end of the queue [m/s]
     last_rx_wall: float         # wall time of the latest batch
     ended: bool = False         # the owner sent its last batch: running dry is the end, not a loss
+    batches: int = 0            # batches accepted (keep-alives included): 0 = granted, nothing sent yet
     held: bool = False          # stopped by a hold: the owner keeps the rig and re-opens to resume
 
 
@@ -100,6 +101,11 @@ class RigDriver:
     watchdog and returns the next block of contiguous samples or None."""
 
     MAX_LEAD_SAMPLES = 16384     # a stream may start at most this far ahead (16-bit sequences stay unambiguous)
+    # a granted stream whose owner has sent nothing yet has moved nothing: it is withdrawn (no fault, nothing to
+    # ramp) after this long, so a client that died or stalled between its grant and its first batch cannot fault
+    # the rig, and one that is merely slow to hear the grant (the first service reply on a fresh DDS link) is not
+    # judged by stream_timeout, which is for a stream that stops while it moves the rig
+    FIRST_BATCH_TIMEOUT = 2.0    # [s]
 
     def __init__(self, bus, config, protocol: Protocol = None, clock=time.monotonic):
         self.bus, self.cfg = bus, config
@@ -244,6 +250,7 @@ class RigDriver:
             self.counters['setpoints_refused'] += int(x.size)
             return False
         s.last_rx_wall = self._clock()
+        s.batches += 1
         if x.size == 0:
             return True
         lim = self.limits
@@ -566,6 +573,12 @@ class RigDriver:
             return
         why = ''
         silent = self._clock() - s.last_rx_wall
+        if s.batches == 0:
+            if silent > max(self.FIRST_BATCH_TIMEOUT, self.cfg.stream_timeout):
+                self._event('warn', f'stream {s.grant.stream_id} of {s.grant.owner or "a local client"} withdrawn: '
+                                    f'no batch within {silent:.3f} s of the grant (nothing was moved)')
+                self._release_stream()
+            return
         if self.cfg.paced and silent > self.cfg.stream_timeout:
             why = f'no setpoints from {s.grant.owner or "the stream owner"} for {silent:.3f} s'
         elif s.queued_end > s.grant.first_sequence and self.controller_sequence + 1 >= s.queued_end \
