@@ -87,7 +87,10 @@ def suite(tmp_path_factory):
     try:
         mon = nodes['monitor']
         result = run_program(launcher, mon, PROGRAM)
-        launcher.wait_for(lambda: False, 0.5)   # last predictions and cycle metrics
+        # the model (unpaced: it runs behind the rig) has predicted every sample the rig published
+        assert launcher.wait_for(lambda: mon.stats['prediction'].next is not None
+                                 and mon.stats['prediction'].next >= mon.stats['samples'].next, 10.0), \
+            (mon.stats['prediction'].as_dict(), mon.stats['samples'].as_dict())
         stop = mon.recorder(RecorderControl.Request.STOP)
         assert launcher.wait_for(stop.done, 30.0)
         nodes['result'] = result
@@ -195,10 +198,18 @@ def test_cycle_metrics_match_the_analytic_steady_state(suite):
     mon = suite['monitor']
     params = load_parameter_set('seed000_20C')
     checked = 0
-    for block, f, amp in ((0, 5.0, 0.5e-3), (1, 2.0, 1.0e-3)):
-        cycles = [c for c in mon.cycle_metrics if c.block_index == block
-                  and abs(c.amplitude - amp) < 0.02 * amp and abs(c.frequency - f) < 0.005 * f]
-        assert len(cycles) >= 4, f'block {block}: only {len(cycles)} steady cycles'
+    blocks = ((0, 5.0, 0.5e-3), (1, 2.0, 1.0e-3))
+
+    def steady(block, f, amp):
+        return [c for c in mon.cycle_metrics if c.block_index == block
+                and abs(c.amplitude - amp) < 0.02 * amp and abs(c.frequency - f) < 0.005 * f]
+    # each block has 4 cycles between its tapers; the last one's metrics follow the last prediction
+    suite['launcher'].wait_for(lambda: all(len(steady(*b)) >= 4 for b in blocks), 5.0)
+    for block, f, amp in blocks:
+        cycles = steady(block, f, amp)
+        assert len(cycles) >= 4, (f'block {block}: only {len(cycles)} steady cycles of (f [Hz], amplitude [mm]) '
+                                  + str([(round(c.frequency, 4), round(c.amplitude * 1e3, 4))
+                                         for c in mon.cycle_metrics if c.block_index == block]))
         for c in cycles:
             ref = steady_state_properties(params, c.frequency, c.amplitude)
             assert c.measured.k_dyn == pytest.approx(ref['k_dyn'], rel=0.006)

@@ -27,6 +27,7 @@ driver) restarts the model and the cycle detection with a log line.
 from __future__ import annotations
 
 import re
+import time
 from collections import deque
 
 import numpy as np
@@ -49,6 +50,7 @@ VALUE_UNITS = {'k0': 'N/m', 'k_inf': 'N/m', 'tau': 's', 'alpha': '-', 'x2': 'm',
 VALUE_RANGES = {'k0': (1e3, 1e11), 'k_inf': (1e3, 1e11), 'tau': (1e-7, 1e4), 'alpha': (1e-3, 1.0),
                 'x2': (1e-8, 1e-1), 'f_fmax': (1e-3, 1e7)}   # wide physical bounds; k_inf >= k0 is checked too
 WARN_EVERY = 5.0      # [s] throttle of the warnings about bad sample batches
+SETPOINT_WAIT = 1.0   # [s] a sample batch waits at most this long for the setpoints that say its block
 CHOICE_PARAMS = ('source', 'parameter_set', 'temperature', 'friction_reversal_threshold') + tuple(
     'values.' + n for n in VALUE_NAMES)
 
@@ -108,9 +110,9 @@ class ElementModelNode(Node):
 
     # -- data path --------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
-        if not len(msg.displacement):
-            return   # a keep-alive of the stream: no samples to map
-        self.blocks.add(msg.first_sequence, len(msg.displacement), msg.block_index)
+        if len(msg.displacement):        # (an empty batch is a keep-alive of the stream: no samples to map)
+            self.blocks.add(msg.first_sequence, len(msg.displacement), msg.block_index)
+        self.blocks.ended = msg.end_of_stream
         self.process_cycles()
 
     def on_samples(self, msg: RigSampleBatch) -> None:
@@ -144,17 +146,20 @@ class ElementModelNode(Node):
             msg, predicted, self.predictor.branch_names, branches if self.publish_branches else None))
         if self.cycle_metrics:
             self._cycle_queue.append((msg.first_sequence, msg.sample_period, x, f, predicted,
-                                      conv.to_seconds(msg.header.stamp)))
+                                      conv.to_seconds(msg.header.stamp), time.monotonic()))
             self.process_cycles()
 
     def process_cycles(self) -> None:
         """Cut cycles block by block and publish their metrics. Setpoints (which carry the block index) and
-        samples travel on different topics, so on a rig running faster than real time the setpoints of a batch
-        can arrive after its samples: a batch waits (up to one second of samples) until they are in."""
+        samples travel on different topics, so the setpoints of a batch can arrive after its samples: a batch
+        waits for them while a stream is open, at most SETPOINT_WAIT seconds (wall time: an unpaced rig runs
+        many seconds of samples per second). Samples after the stream's last batch (a rig holding or at rest)
+        belong to no block and go at once."""
         while self._cycle_queue:
-            first, dt, x, f, predicted, t0 = self._cycle_queue[0]
+            first, dt, x, f, predicted, t0, arrived = self._cycle_queue[0]
             end = first + len(x)
-            if not self.blocks.covered(end - 1) and self.predictor.next_sequence - end < 1.0 / dt:
+            if not self.blocks.covered(end - 1) and not self.blocks.ended \
+                    and time.monotonic() - arrived < SETPOINT_WAIT:
                 return
             self._cycle_queue.popleft()
             for lo, hi, block in self.blocks.segments(first, len(x)):

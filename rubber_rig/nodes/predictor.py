@@ -203,6 +203,7 @@ class BlockIndex:
 
     def __init__(self, keep: int = 4096):
         self._ranges: deque[tuple[int, int, int]] = deque(maxlen=keep)
+        self.ended = False             # the latest batch ended its stream: later samples belong to no block
 
     def add(self, first_sequence: int, n: int, block_index: int) -> None:
         if self._ranges and first_sequence < self._ranges[-1][0]:
