@@ -95,6 +95,7 @@ class ElementModelNode(Node):
         self.blocks = BlockIndex()
         self.cycles = CyclePairer(min_amplitude=min_amplitude)
         self._cycle_queue = deque()      # sample batches waiting for the setpoints that say their block
+        self._setpoints_wall = -1e9      # time.monotonic() of the latest setpoint batch
         self._validated = None           # (choice, resolved) of the parameter change being set
         self.batches_dropped = 0         # sample batches refused (batch_problem)
         self.cycle_errors = 0            # cycles the metrics could not evaluate
@@ -113,6 +114,7 @@ class ElementModelNode(Node):
         if len(msg.displacement):        # (an empty batch is a keep-alive of the stream: no samples to map)
             self.blocks.add(msg.first_sequence, len(msg.displacement), msg.block_index)
         self.blocks.ended = msg.end_of_stream
+        self._setpoints_wall = time.monotonic()
         self.process_cycles()
 
     def on_samples(self, msg: RigSampleBatch) -> None:
@@ -153,13 +155,15 @@ class ElementModelNode(Node):
         """Cut cycles block by block and publish their metrics. Setpoints (which carry the block index) and
         samples travel on different topics, so the setpoints of a batch can arrive after its samples: a batch
         waits for them while a stream is open, at most SETPOINT_WAIT seconds (wall time: an unpaced rig runs
-        many seconds of samples per second). Samples after the stream's last batch (a rig holding or at rest)
-        belong to no block and go at once."""
+        many seconds of samples per second). Samples after the stream's last batch (a rig holding or at rest),
+        or with no setpoints for SETPOINT_WAIT (a rig moved by something else), belong to no block and go at
+        once."""
         while self._cycle_queue:
             first, dt, x, f, predicted, t0, arrived = self._cycle_queue[0]
             end = first + len(x)
-            if not self.blocks.covered(end - 1) and not self.blocks.ended \
-                    and time.monotonic() - arrived < SETPOINT_WAIT:
+            now = time.monotonic()
+            if not self.blocks.covered(end - 1) and not self.blocks.ended and now - arrived < SETPOINT_WAIT \
+                    and now - self._setpoints_wall < SETPOINT_WAIT:
                 return
             self._cycle_queue.popleft()
             for lo, hi, block in self.blocks.segments(first, len(x)):

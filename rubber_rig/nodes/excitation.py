@@ -107,6 +107,7 @@ class ExcitationNode(Node):
         self.status: RigStatus | None = None
         self._status_wall = 0.0
         self._driver_wall = 0.0          # the latest status or sample batch: the driver is alive
+        self._samples_publishers, self._samples_publishers_wall = None, 0.0   # endpoint gids, when they changed
         self.recorder: RecorderStatus | None = None
         self._recorder_wall = 0.0
         self.next_sample = None          # sequence after the latest measured sample
@@ -228,8 +229,15 @@ class ExcitationNode(Node):
         if self.samples_topic not in r.topics:
             return f'require_recording: the recorder does not record {self.samples_topic} yet'
         # a restarted rig_driver is a new publisher: until the recorder has matched it, its first samples
-        # would be published to nobody and not even counted lost (the recorder never sees them)
-        known = self.count_publishers(self.samples_topic)
+        # would be published to nobody and not even counted lost (the recorder never sees them). A recorder
+        # status from before the publishers changed counts the old ones: wait for a newer one
+        gids = frozenset(bytes(i.endpoint_gid) for i in self.get_publishers_info_by_topic(self.samples_topic))
+        if gids != self._samples_publishers:
+            self._samples_publishers, self._samples_publishers_wall = gids, time.monotonic()
+        if self._recorder_wall <= self._samples_publishers_wall:
+            return (f'require_recording: waiting for a recorder status newer than the last change of '
+                    f'{self.samples_topic} publishers')
+        known = len(gids)
         matched = (r.topic_publishers[r.topics.index(self.samples_topic)]
                    if len(r.topic_publishers) == len(r.topics) else known)
         if matched < known:
