@@ -81,8 +81,17 @@ def test_bad_parameters_are_refused_with_errors_naming_them():
             launcher.start(RigDriverNode, {'autostart': False, 'limits.displacement_min': 0.01})
         with pytest.raises(ParameterError, match="'sample_rate'.*out of range"):
             launcher.start(RigDriverNode, {'autostart': False, 'sample_rate': 50000.0})
-        with pytest.raises(ParameterError, match="'sim.faults'"):
+        with pytest.raises(ParameterError, match="'sim.faults'.*sim.faults\\[0\\].type.*meteor"):
             launcher.start(RigDriverNode, {'autostart': False, 'sim.faults': '[{type: meteor}]'})
+        # every error of the core configuration names the parameter it is in (ConfigError.field -> parameter)
+        for params, name in (({'can.bus_options': '[1, 2]'}, 'can.bus_options'),
+                             ({'can.bus_options': '{a: [1'}, 'can.bus_options'),
+                             ({'heartbeat_period': 0.3}, 'heartbeat_period'),   # not below watchdog_timeout 0.25
+                             ({'rest_position': 0.009}, 'rest_position'),
+                             ({'sim.faults': '[{type: drop, probability: 2}]'}, 'sim.faults'),
+                             ({'limits.velocity_max': 0.0}, 'limits.velocity_max')):
+            with pytest.raises(ParameterError, match=f"^parameter '{name}' of node 'rig_driver'"):
+                launcher.start(RigDriverNode, dict(params, autostart=False))
         with pytest.raises(ParameterError, match="'program'.*no_such_program"):
             launcher.start(ExcitationNode, {'program': 'no_such_program'})
         with pytest.raises(ParameterError, match="'values.k_inf'"):

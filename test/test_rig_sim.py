@@ -202,3 +202,21 @@ def test_sensor_offset_resolution_and_noise_are_applied():
     np.testing.assert_allclose(r.force / 1.0, np.round(r.force), atol=1e-6)      # 1 N resolution
     assert np.mean(r.force - f) == pytest.approx(-50.0, abs=0.5)
     assert np.std(r.force - f) == pytest.approx(5.0, rel=0.1)
+
+
+def test_rig_config_settings_describe_every_parameter_once():
+    """RigConfig's fields carry their parameter description (rubber_rig.settings): names are unique, defaults
+    are the dataclass defaults, and every numeric default lies inside its declared range."""
+    from rubber_rig.rig.config import RigConfig
+    from rubber_rig.settings import nest, settings_of
+    settings = settings_of(RigConfig)
+    names = [s.name for s in settings]
+    assert len(names) == len(set(names))
+    assert {'can.bitrate', 'limits.velocity_max', 'sim.force_noise', 'sim.faults', 'stream_timeout'} <= set(names)
+    for s in settings:
+        assert s.doc, s.name
+        if s.range is not None:
+            assert s.range[0] <= s.default <= s.range[1], s.name
+    # the parameter defaults, read back through the settings, give the dataclass defaults
+    cfg = RigConfig.from_dict(nest({s.path: s.value(s.default) for s in settings}))
+    assert cfg == RigConfig()

@@ -19,6 +19,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
+from ..settings import setting
 from .ramp import stopping_positions
 
 from . import waveforms as wf
@@ -29,7 +30,12 @@ _CHUNK = 1 << 18
 
 
 class LimitError(ValueError):
-    """A program or setpoint would leave the safe envelope; the message names the limit and where."""
+    """A program or setpoint would leave the safe envelope; the message names the limit and where. `field`: the
+    Limits field a bad configuration value concerns ('' for a program or setpoint outside the envelope)."""
+
+    def __init__(self, message: str, field: str = ''):
+        super().__init__(message)
+        self.field = field
 
 
 @dataclass
@@ -41,11 +47,12 @@ class Limits:
     stiffness_estimate [N/m], if given, lets the pre-start check predict the peak force k * |x|; force_model, if
     given, is a callable block -> predicted peak |force| [N] that the pre-start check asks for every block
     (see element_force_model); check_program(force_model=...) overrides it for one check."""
-    displacement_min: float = -5e-3
-    displacement_max: float = 5e-3
-    velocity_max: float = 0.2
-    force_max: float = 60e3
-    deceleration_max: float = 100.0
+    displacement_min: float = setting(-5e-3, 'lowest allowed displacement', units='m', range=(-1.0, 1.0))
+    displacement_max: float = setting(5e-3, 'highest allowed displacement', units='m', range=(-1.0, 1.0))
+    velocity_max: float = setting(0.2, 'highest allowed velocity', units='m/s', range=(1e-6, 100.0))
+    force_max: float = setting(60e3, 'highest allowed absolute force', units='N', range=(1.0, 1e7))
+    deceleration_max: float = setting(100.0, 'hardest braking of a ramp; every setpoint must be able to stop inside '
+                                      'the displacement limits at it', units='m/s^2', range=(0.1, 500.0))
     stiffness_estimate: Optional[float] = None
     force_model: Optional[Callable] = field(default=None, repr=False, compare=False)
 
@@ -53,17 +60,18 @@ class Limits:
         for name in ('displacement_min', 'displacement_max', 'velocity_max', 'force_max', 'deceleration_max'):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise LimitError(f"limits: field '{name}': expected a finite number, got {v!r}")
+                raise LimitError(f"limits: field '{name}': expected a finite number, got {v!r}", name)
         if self.displacement_min >= self.displacement_max:
             raise LimitError(f"limits: field 'displacement_min': {self.displacement_min:g} m must be below "
-                             f"displacement_max {self.displacement_max:g} m")
+                             f"displacement_max {self.displacement_max:g} m", 'displacement_min')
         for name in ('velocity_max', 'force_max', 'deceleration_max'):
             if getattr(self, name) <= 0:
-                raise LimitError(f"limits: field '{name}': must be > 0")
+                raise LimitError(f"limits: field '{name}': must be > 0", name)
         k = self.stiffness_estimate
         if k is not None and (isinstance(k, bool) or not isinstance(k, (int, float)) or not math.isfinite(k)
                               or k < 0):
-            raise LimitError(f"limits: field 'stiffness_estimate': expected a finite stiffness >= 0 [N/m], got {k!r}")
+            raise LimitError(f"limits: field 'stiffness_estimate': expected a finite stiffness >= 0 [N/m], "
+                             f"got {k!r}", 'stiffness_estimate')
         if self.force_model is not None and not callable(self.force_model):
             raise LimitError(f"limits: field 'force_model': expected a callable block -> peak force [N], got "
                              f"{type(self.force_model).__name__}")
@@ -80,7 +88,7 @@ class Limits:
         known = set(cls.__dataclass_fields__)
         for key in data:
             if key not in known:
-                raise LimitError(f"limits: field '{key}': unknown (known: {', '.join(sorted(known))})")
+                raise LimitError(f"limits: field '{key}': unknown (known: {', '.join(sorted(known))})", key)
         return cls(**data)
 
     def to_dict(self) -> dict:

@@ -25,7 +25,6 @@ import math
 import time
 
 import numpy as np
-import yaml
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 
 from diagnostic_msgs.msg import DiagnosticArray
@@ -36,33 +35,23 @@ from std_srvs.srv import Trigger
 
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles, check, declare
+from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles, declare
 from rubber_rig.excitation import Limits
 from rubber_rig.excitation.limits import LimitError
 from rubber_rig.rig.can.driver import StreamRefused
-from rubber_rig.rig.config import RigConfig
+from rubber_rig.rig.config import ConfigError, RigConfig
 from rubber_rig.rig.session import open_rig
 from rubber_rig.nodes.spin import spin_node
+from rubber_rig.settings import nest, setting_for, settings_of
 
-LIMIT_FIELDS = ('displacement_min', 'displacement_max', 'velocity_max', 'force_max', 'deceleration_max')
+RIG_SETTINGS = settings_of(RigConfig)   # the core's configuration, described once (rubber_rig/rig/config.py)
 # parameters the running driver applies at once; every other one needs configure (refused while configured)
-LIVE_PARAMETERS = {'limits.' + k for k in LIMIT_FIELDS} | {'stream_timeout', 'stream_loss_action', 'rest_position',
-                                                          'batch_size', 'max_batch_delay', 'status_period',
-                                                          'diagnostics_period', 'autostart'}
-SIM_FLOATS = {  # sim.<name>: (default, description, range)
-    'actuator_frequency': (80.0, 'natural frequency of the actuator position loop [Hz]', (1.0, 2000.0)),
-    'actuator_damping': (0.8, 'damping ratio of the actuator position loop [-]', (0.05, 5.0)),
-    'actuator_velocity_max': (0.5, 'velocity limit of the actuator [m/s]', (1e-4, 10.0)),
-    'displacement_noise': (0.2e-6, 'displacement transducer noise, standard deviation [m]', (0.0, 1e-3)),
-    'displacement_offset': (0.0, 'displacement transducer offset [m]', (-1e-2, 1e-2)),
-    'displacement_resolution': (1e-7, 'displacement transducer resolution [m]', (1e-12, 1e-3)),
-    'force_noise': (2.0, 'load cell noise, standard deviation [N]', (0.0, 1e4)),
-    'force_offset': (0.0, 'load cell offset [N]', (-1e5, 1e5)),
-    'force_resolution': (0.01, 'load cell resolution [N]', (1e-9, 100.0)),
-    'temperature': (20.0, 'specimen temperature reported on the temperature channel [degC]', (-60.0, 150.0)),
-    'temperature_noise': (0.02, 'temperature channel noise [K]', (0.0, 10.0)),
-    'host_timeout': (0.5, 'host heartbeat silence after which the controller ramps to rest [s]', (0.01, 60.0)),
-}
+LIVE_PARAMETERS = {s.name for s in RIG_SETTINGS if s.name.startswith('limits.')} | {
+    'stream_timeout', 'stream_loss_action', 'rest_position', 'batch_size', 'max_batch_delay', 'status_period',
+    'diagnostics_period', 'autostart'}
+# the simulated specimen: node parameters built into SimOptions.specimen (a model spec mapping)
+SPECIMEN_PARAMETERS = ('sim.specimen.parameter_set', 'sim.specimen.temperature',
+                       'sim.specimen.friction_reversal_threshold')
 
 
 class RigDriverNode(LifecycleNode):
@@ -70,51 +59,21 @@ class RigDriverNode(LifecycleNode):
     def __init__(self, node_name: str = 'rig_driver', **kwargs):
         super().__init__(node_name, **kwargs)
         self.autostart = declare(self, 'autostart', True, 'configure and activate at start')
-        declare(self, 'backend', 'sim', "'sim' (simulated rig on python-can's virtual bus) or a python-can "
-                'interface name (socketcan, pcan, vector, kvaser, virtual, udp_multicast, ...)')
-        declare(self, 'can.channel', '', 'python-can channel (e.g. can0, PCAN_USBBUS1); empty: interface default')
-        declare(self, 'can.bitrate', 1_000_000, 'CAN (arbitration) bitrate', range=(10_000, 1_000_000), units='bit/s')
-        declare(self, 'can.data_bitrate', 5_000_000, 'CAN FD data bitrate', range=(10_000, 12_000_000), units='bit/s')
-        declare(self, 'can.fd', True, 'use CAN FD frames')
-        declare(self, 'can.bus_options', '{}', 'extra keyword arguments for can.Bus (YAML/JSON mapping)')
-        declare(self, 'spawn_sim', False, 'with a python-can interface: also run the simulated rig as a '
-                'separate process on that bus')
-        declare(self, 'sample_rate', 1000.0, 'rig sample rate', range=(10.0, 20000.0), units='Hz')
+        for setting in RIG_SETTINGS:
+            declare(self, setting.name, setting.default, setting.description(), range=setting.range,
+                    choices=setting.choices)
         self.batch_size = declare(self, 'batch_size', 50, 'samples per RigSampleBatch message (at least; whole bus reads are '
                                  'never split, so the stamp is the bus time of the first sample)', range=(1, 10000))
         self.max_batch_delay = declare(self, 'max_batch_delay', 0.1, 'a partial batch is published when its '
                                        'first sample has waited this long (the stream paused or ended)',
                                        range=(0.001, 10.0), units='s')
         declare(self, 'poll_period', 0.01, 'how often the bus is read', range=(0.0005, 0.5), units='s')
-        declare(self, 'watchdog_timeout', 0.1, 'feedback/heartbeat silence that faults the rig',
-                range=(0.005, 10.0), units='s')
-        declare(self, 'heartbeat_period', 0.05, 'host heartbeat period', range=(0.001, 5.0), units='s')
-        declare(self, 'bus_error_max', 20, 'bad frames per second of samples that fault the bus', range=(0, 100000))
-        declare(self, 'lost_burst_max', 0.02, 'longest run of lost samples tolerated', range=(1e-4, 10.0), units='s')
-        declare(self, 'stream_timeout', 0.3, "a running program's setpoint stream silent this long is lost (the "
-                'rig ramps to rest, or holds: stream_loss_action)', range=(0.01, 10.0), units='s')
-        declare(self, 'stream_loss_action', 'ramp', "what a lost stream does: 'ramp' to rest_position or 'hold' "
-                'where the motion can stop (a stream fault either way)', choices=('ramp', 'hold'))
-        declare(self, 'rest_position', 0.0, 'where aborts and faults ramp to', range=(-1.0, 1.0), units='m')
-        declare(self, 'paced', True, 'simulated rig runs in real time (false: as fast as setpoints arrive)')
-        declare(self, 'limits.displacement_min', -5e-3, 'lowest allowed displacement', range=(-1.0, 1.0), units='m')
-        declare(self, 'limits.displacement_max', 5e-3, 'highest allowed displacement', range=(-1.0, 1.0), units='m')
-        declare(self, 'limits.velocity_max', 0.2, 'highest allowed velocity', range=(1e-6, 100.0), units='m/s')
-        declare(self, 'limits.force_max', 60e3, 'highest allowed absolute force', range=(1.0, 1e7), units='N')
-        declare(self, 'limits.deceleration_max', 100.0, 'hardest braking of a ramp; every setpoint must be able to '
-                'stop inside the displacement limits at it', range=(0.1, 500.0), units='m/s^2')
         declare(self, 'sim.specimen.parameter_set', '', 'simulated specimen: seed000 parameter set '
                 '(empty: use sim.specimen.temperature)')
         declare(self, 'sim.specimen.temperature', 20.0, 'simulated specimen: seed000 parameters at this '
                 'temperature', range=(-40.0, 20.0), units='degC')
         declare(self, 'sim.specimen.friction_reversal_threshold', 0.0, "simulated specimen: Berg reversal deadband "
                 "on its true displacement (0 = the paper's rule)", range=(0.0, 1e-4), units='m')
-        for name, (default, text, rng) in SIM_FLOATS.items():
-            declare(self, f'sim.{name}', default, text, range=rng)
-        declare(self, 'sim.seed', 0, 'random seed of the simulated sensors', range=(0, 2**31 - 1))
-        declare(self, 'sim.faults', '[]', 'injected faults of the simulated rig (YAML list, e.g. '
-                "[{type: silent_controller, start: 2.0}]; types: drop, delay, duplicate, corrupt, "
-                'stuck_sensor, silent_controller)')
         self.status_period = declare(self, 'status_period', 0.1, 'status publishing period', range=(0.01, 10.0),
                                      units='s')
         self.diagnostics_period = declare(self, 'diagnostics_period', 1.0, 'diagnostics period',
@@ -153,37 +112,26 @@ class RigDriverNode(LifecycleNode):
 
     # -- parameters -> core configuration ---------------------------------------------------------------
     def rig_config(self) -> RigConfig:
-        p = {name: self.get_parameter(name).value for name in self.list_parameters([], 0).names}
-        for name in ('can.bus_options', 'sim.faults'):
+        """The core configuration from the parameters; ParameterError names the parameter a bad value is in."""
+        values = {}
+        for setting in RIG_SETTINGS:
             try:
-                p[name] = yaml.safe_load(p[name])
-            except yaml.YAMLError as exc:
-                raise ParameterError(self.get_name(), name, f'not valid YAML: {exc}') from None
-        check(self, isinstance(p['can.bus_options'], dict), 'can.bus_options', 'expected a mapping')
-        check(self, isinstance(p['sim.faults'], list), 'sim.faults', 'expected a list of faults')
-        check(self, p['limits.displacement_min'] < p['limits.displacement_max'], 'limits.displacement_min',
-              f"{p['limits.displacement_min']} m must be below limits.displacement_max "
-              f"({p['limits.displacement_max']} m)")
+                values[setting.path] = setting.value(self.get_parameter(setting.name).value)
+            except ValueError as exc:
+                raise ParameterError(self.get_name(), setting.name, str(exc)) from None
+        p = {name: self.get_parameter(name).value for name in SPECIMEN_PARAMETERS}
         specimen = ({'model': 'seed000', 'parameter_set': p['sim.specimen.parameter_set']}
                     if p['sim.specimen.parameter_set'] else
                     {'model': 'seed000', 'temperature': p['sim.specimen.temperature']})
         specimen['friction_reversal_threshold'] = p['sim.specimen.friction_reversal_threshold']
-        data = {
-            'backend': p['backend'], 'channel': p['can.channel'] or None, 'bitrate': p['can.bitrate'],
-            'data_bitrate': p['can.data_bitrate'], 'fd': p['can.fd'], 'bus_options': p['can.bus_options'],
-            'sample_rate': p['sample_rate'], 'watchdog_timeout': p['watchdog_timeout'],
-            'heartbeat_period': p['heartbeat_period'], 'bus_error_max': p['bus_error_max'],
-            'lost_burst_max': p['lost_burst_max'], 'paced': p['paced'], 'spawn_sim': p['spawn_sim'],
-            'stream_timeout': p['stream_timeout'], 'stream_loss_action': p['stream_loss_action'],
-            'rest_position': p['rest_position'],
-            'limits': {k: p['limits.' + k] for k in LIMIT_FIELDS},
-            'sim': dict({k: p['sim.' + k] for k in SIM_FLOATS}, specimen=specimen, seed=p['sim.seed'],
-                        faults=p['sim.faults']),
-        }
+        values['sim.specimen'] = specimen
         try:
-            return RigConfig.from_dict(data)
-        except ValueError as exc:   # ConfigError names the field: map it back to the parameter
-            raise ParameterError(self.get_name(), _parameter_of(str(exc)), str(exc)) from None
+            return RigConfig.from_dict(nest(values))
+        except ConfigError as exc:   # names the field: the parameter is the setting it belongs to
+            setting = setting_for(RIG_SETTINGS, exc.field)
+            name = setting.name if setting else (
+                'sim.specimen.parameter_set' if exc.field.startswith('sim.specimen') else exc.field)
+            raise ParameterError(self.get_name(), name, str(exc)) from None
 
     # -- lifecycle ----------------------------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -430,19 +378,6 @@ class RigDriverNode(LifecycleNode):
                 log.warning(text)
             else:
                 log.info(text)
-
-
-def _parameter_of(message: str) -> str:
-    """Node parameter for a core ConfigError ("rig config: field 'sim.faults[0].type': ...")."""
-    import re
-    m = re.search(r"field '([\w.\[\]]+)'", message)
-    if not m:
-        return 'backend'
-    field = re.sub(r'\[\d+\].*$', '', m.group(1))
-    renames = {'channel': 'can.channel', 'bitrate': 'can.bitrate', 'data_bitrate': 'can.data_bitrate',
-               'fd': 'can.fd', 'bus_options': 'can.bus_options', 'limits': 'limits.displacement_min',
-               'sim.specimen': 'sim.specimen.parameter_set'}
-    return renames.get(field, field)
 
 
 def main(args=None):

@@ -9,10 +9,16 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import List, Optional
 
 from ..excitation.limits import LimitError, Limits
+from ..settings import setting
 
 
 class ConfigError(ValueError):
-    """Invalid rig configuration; the message names the field."""
+    """Invalid rig configuration. `field` is the dotted path of the field it concerns ('sim.faults[1].type'),
+    which the message names too: "rig config: field 'sim.faults[1].type': unknown fault 'x' (...)"."""
+
+    def __init__(self, field: str, why: str):
+        super().__init__(f"rig config: field '{field}': {why}")
+        self.field = field
 
 
 FAULT_TYPES = ('drop', 'delay', 'duplicate', 'corrupt', 'stuck_sensor', 'silent_controller')
@@ -38,20 +44,20 @@ class FaultSpec:
 
     def check(self, path):
         if self.type not in FAULT_TYPES:
-            raise ConfigError(f"rig config: field '{path}.type': unknown fault {self.type!r} "
+            raise ConfigError(f'{path}.type', f"unknown fault {self.type!r} "
                               f"(one of: {', '.join(FAULT_TYPES)})")
         if self.start < 0 or self.duration <= 0:
-            raise ConfigError(f"rig config: field '{path}.start/duration': start >= 0 and duration > 0 needed")
+            raise ConfigError(f'{path}.start/duration', "start >= 0 and duration > 0 needed")
         if not 0 <= self.probability <= 1:
-            raise ConfigError(f"rig config: field '{path}.probability': must be within 0..1")
+            raise ConfigError(f'{path}.probability', "must be within 0..1")
         for i, name in enumerate(self.frames):
             if name not in FRAME_NAMES:
-                raise ConfigError(f"rig config: field '{path}.frames[{i}]': unknown frame {name!r} "
+                raise ConfigError(f'{path}.frames[{i}]', f"unknown frame {name!r} "
                                   f"(one of: {', '.join(FRAME_NAMES)})")
         if self.delay <= 0:
-            raise ConfigError(f"rig config: field '{path}.delay': must be > 0")
+            raise ConfigError(f'{path}.delay', "must be > 0")
         if self.sensor not in ('displacement', 'force'):
-            raise ConfigError(f"rig config: field '{path}.sensor': displacement or force")
+            raise ConfigError(f'{path}.sensor', "displacement or force")
 
     def active(self, t: float) -> bool:
         """True while the fault is active at rig time t [s]."""
@@ -68,33 +74,41 @@ class SimOptions:
     resolution; temperature [degC]. host_timeout [s]: host heartbeat silence after which the controller ramps
     to rest on its own."""
     specimen: dict = field(default_factory=lambda: {'model': 'seed000', 'temperature': 20.0})
-    actuator_frequency: float = 80.0
-    actuator_damping: float = 0.8
-    actuator_velocity_max: float = 0.5
-    displacement_noise: float = 0.2e-6
-    displacement_offset: float = 0.0
-    displacement_resolution: float = 1e-7
-    force_noise: float = 2.0
-    force_offset: float = 0.0
-    force_resolution: float = 0.01
-    temperature: float = 20.0
-    temperature_noise: float = 0.02
-    host_timeout: float = 0.5
-    seed: int = 0
-    faults: List[FaultSpec] = field(default_factory=list)
+    actuator_frequency: float = setting(80.0, 'natural frequency of the actuator position loop', units='Hz',
+                                        range=(1.0, 2000.0))
+    actuator_damping: float = setting(0.8, 'damping ratio of the actuator position loop', units='-',
+                                      range=(0.05, 5.0))
+    actuator_velocity_max: float = setting(0.5, 'velocity limit of the actuator', units='m/s', range=(1e-4, 10.0))
+    displacement_noise: float = setting(0.2e-6, 'displacement transducer noise, standard deviation', units='m',
+                                        range=(0.0, 1e-3))
+    displacement_offset: float = setting(0.0, 'displacement transducer offset', units='m', range=(-1e-2, 1e-2))
+    displacement_resolution: float = setting(1e-7, 'displacement transducer resolution', units='m',
+                                             range=(1e-12, 1e-3))
+    force_noise: float = setting(2.0, 'load cell noise, standard deviation', units='N', range=(0.0, 1e4))
+    force_offset: float = setting(0.0, 'load cell offset', units='N', range=(-1e5, 1e5))
+    force_resolution: float = setting(0.01, 'load cell resolution', units='N', range=(1e-9, 100.0))
+    temperature: float = setting(20.0, 'specimen temperature reported on the temperature channel', units='degC',
+                                 range=(-60.0, 150.0))
+    temperature_noise: float = setting(0.02, 'temperature channel noise', units='K', range=(0.0, 10.0))
+    host_timeout: float = setting(0.5, 'host heartbeat silence after which the controller ramps to rest',
+                                  units='s', range=(0.01, 60.0))
+    seed: int = setting(0, 'random seed of the simulated sensors', range=(0, 2**31 - 1))
+    faults: List[FaultSpec] = setting(
+        doc='injected faults of the simulated rig (YAML list, e.g. [{type: silent_controller, start: 2.0}]; types: '
+            + ', '.join(FAULT_TYPES) + ')', yaml_text=True, default_factory=list)
 
     def check(self, path='sim'):
         if not isinstance(self.specimen, dict):
-            raise ConfigError(f"rig config: field '{path}.specimen': expected a mapping like "
+            raise ConfigError(f'{path}.specimen', "expected a mapping like "
                               "{model: seed000, temperature: 20.0}")
         positive = ('actuator_frequency', 'actuator_damping', 'actuator_velocity_max', 'displacement_resolution',
                     'force_resolution', 'host_timeout')
         for name in positive:
             if getattr(self, name) <= 0:
-                raise ConfigError(f"rig config: field '{path}.{name}': must be > 0")
+                raise ConfigError(f'{path}.{name}', "must be > 0")
         for name in ('displacement_noise', 'force_noise', 'temperature_noise'):
             if getattr(self, name) < 0:
-                raise ConfigError(f"rig config: field '{path}.{name}': must be >= 0")
+                raise ConfigError(f'{path}.{name}', "must be >= 0")
         for i, f in enumerate(self.faults):
             f.check(f'{path}.faults[{i}]')
 
@@ -114,24 +128,33 @@ class RigConfig:
     ('hold'), with a stream fault either way. paced: the simulated
     rig runs in real time (True) or as fast as setpoints arrive (False) - identical waveform and physics.
     """
-    backend: str = 'sim'
-    channel: Optional[str] = None
-    bitrate: int = 1_000_000
-    data_bitrate: int = 5_000_000
-    fd: bool = True
-    bus_options: dict = field(default_factory=dict)
-    sample_rate: float = 1000.0
-    watchdog_timeout: float = 0.1
-    heartbeat_period: float = 0.05
-    bus_error_max: int = 20
-    lost_burst_max: float = 0.02
-    stream_timeout: float = 0.3
-    stream_loss_action: str = 'ramp'
-    rest_position: float = 0.0
-    limits: Limits = field(default_factory=Limits)
-    paced: bool = True
-    spawn_sim: bool = False
-    sim: SimOptions = field(default_factory=SimOptions)
+    backend: str = setting('sim', "'sim' (simulated rig on python-can's virtual bus) or a python-can interface "
+                           'name (socketcan, pcan, vector, kvaser, virtual, udp_multicast, ...)')
+    channel: Optional[str] = setting(None, 'python-can channel (e.g. can0, PCAN_USBBUS1); empty: interface default',
+                                     name='can.channel', empty_is_none=True)
+    bitrate: int = setting(1_000_000, 'CAN (arbitration) bitrate', units='bit/s', range=(10_000, 1_000_000),
+                           name='can.bitrate')
+    data_bitrate: int = setting(5_000_000, 'CAN FD data bitrate', units='bit/s', range=(10_000, 12_000_000),
+                                name='can.data_bitrate')
+    fd: bool = setting(True, 'use CAN FD frames', name='can.fd')
+    bus_options: dict = setting(doc='extra keyword arguments for can.Bus (YAML/JSON mapping)', name='can.bus_options',
+                                yaml_text=True, default_factory=dict)
+    sample_rate: float = setting(1000.0, 'rig sample rate', units='Hz', range=(10.0, 20000.0))
+    watchdog_timeout: float = setting(0.1, 'feedback/heartbeat silence that faults the rig', units='s',
+                                      range=(0.005, 10.0))
+    heartbeat_period: float = setting(0.05, 'host heartbeat period', units='s', range=(0.001, 5.0))
+    bus_error_max: int = setting(20, 'bad frames per second of samples that fault the bus', range=(0, 100000))
+    lost_burst_max: float = setting(0.02, 'longest run of lost samples tolerated', units='s', range=(1e-4, 10.0))
+    stream_timeout: float = setting(0.3, "a running program's setpoint stream silent this long is lost (the rig "
+                                    'ramps to rest, or holds: stream_loss_action)', units='s', range=(0.01, 10.0))
+    stream_loss_action: str = setting('ramp', "what a lost stream does: 'ramp' to rest_position or 'hold' where the "
+                                      'motion can stop (a stream fault either way)', choices=('ramp', 'hold'))
+    rest_position: float = setting(0.0, 'where aborts and faults ramp to', units='m', range=(-1.0, 1.0))
+    limits: Limits = setting(doc='safe envelope', nested=Limits, default_factory=Limits)
+    paced: bool = setting(True, 'simulated rig runs in real time (false: as fast as setpoints arrive)')
+    spawn_sim: bool = setting(False, 'with a python-can interface: also run the simulated rig as a separate '
+                              'process on that bus')
+    sim: SimOptions = setting(doc='simulated rig', nested=SimOptions, default_factory=SimOptions)
 
     @classmethod
     def from_dict(cls, data) -> 'RigConfig':
@@ -149,29 +172,29 @@ class RigConfig:
     def check(self):
         """Validate value ranges; raise ConfigError naming the field."""
         if not isinstance(self.backend, str) or not self.backend:
-            raise ConfigError("rig config: field 'backend': 'sim' or a python-can interface name")
+            raise ConfigError('backend', "'sim' or a python-can interface name")
         if self.backend != 'sim':
             import can
             if self.backend not in can.interfaces.VALID_INTERFACES:
-                raise ConfigError(f"rig config: field 'backend': unknown python-can interface {self.backend!r} "
+                raise ConfigError('backend', f"unknown python-can interface {self.backend!r} "
                                   f"(use 'sim' or one of: {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
         if not 10 <= self.sample_rate <= 20000:
-            raise ConfigError(f"rig config: field 'sample_rate': {self.sample_rate!r} Hz outside 10..20000")
+            raise ConfigError('sample_rate', f"{self.sample_rate!r} Hz outside 10..20000")
         for name in ('watchdog_timeout', 'heartbeat_period', 'lost_burst_max'):
             if not getattr(self, name) > 0:
-                raise ConfigError(f"rig config: field '{name}': must be > 0")
+                raise ConfigError(name, "must be > 0")
         if self.heartbeat_period >= self.watchdog_timeout:
-            raise ConfigError("rig config: field 'heartbeat_period': must be shorter than watchdog_timeout")
+            raise ConfigError('heartbeat_period', "must be shorter than watchdog_timeout")
         if not self.stream_timeout > 0:
-            raise ConfigError("rig config: field 'stream_timeout': must be > 0")
+            raise ConfigError('stream_timeout', "must be > 0")
         if self.stream_loss_action not in ('ramp', 'hold'):
-            raise ConfigError(f"rig config: field 'stream_loss_action': 'ramp' or 'hold', got "
+            raise ConfigError('stream_loss_action', "'ramp' or 'hold', got "
                               f"{self.stream_loss_action!r}")
         if not self.limits.displacement_min <= self.rest_position <= self.limits.displacement_max:
-            raise ConfigError(f"rig config: field 'rest_position': {self.rest_position:g} m outside the "
+            raise ConfigError('rest_position', f"{self.rest_position:g} m outside the "
                               "displacement limits")
         if self.bus_error_max < 0:
-            raise ConfigError("rig config: field 'bus_error_max': must be >= 0")
+            raise ConfigError('bus_error_max', "must be >= 0")
         self.sim.check()
 
 
@@ -179,25 +202,25 @@ def _build(cls, data, path):
     """Dataclass `cls` from mapping `data`, type-checked field by field (errors name the dotted path)."""
     where = path or 'rig config'
     if not isinstance(data, dict):
-        raise ConfigError(f"rig config: field '{where}': expected a mapping, got {type(data).__name__}")
+        raise ConfigError(where, f"expected a mapping, got {type(data).__name__}")
     known = {f.name: f for f in fields(cls)}
     kwargs = {}
     for key, value in data.items():
         fpath = f'{path}.{key}' if path else key
         if key not in known:
-            raise ConfigError(f"rig config: field '{fpath}': unknown (known: {', '.join(sorted(known))})")
+            raise ConfigError(fpath, f"unknown (known: {', '.join(sorted(known))})")
         kwargs[key] = _convert(known[key].type, value, fpath)
     return cls(**kwargs)
 
 
 def _convert(typ, value, fpath):
     typ = typ if isinstance(typ, str) else getattr(typ, '__name__', str(typ))
-    bad = ConfigError(f"rig config: field '{fpath}': expected {typ}, got {value!r}")
+    bad = ConfigError(fpath, f"expected {typ}, got {value!r}")
     if typ == 'Limits':
         try:
             return Limits.from_dict(value)
         except LimitError as exc:
-            raise ConfigError(f"rig config: field '{fpath}': {exc}") from None
+            raise ConfigError(f'{fpath}.{exc.field}' if exc.field else fpath, str(exc)) from None
     if typ == 'SimOptions':
         return _build(SimOptions, value, fpath)
     if typ == 'List[FaultSpec]':

@@ -84,6 +84,6 @@ def open_rig(config) -> Rig:
         rig = Rig(cfg, RigDriver(bus, cfg, proto), process=process)
         if process is not None and not rig.wait_ready(20.0):
             rig.close()
-            raise ConfigError('rig config: field \'spawn_sim\': the simulated rig process did not answer on '
+            raise ConfigError('spawn_sim', 'the simulated rig process did not answer on '
                               f'{cfg.backend} {cfg.channel or ""} within 20 s')
     return rig

@@ -23,7 +23,7 @@ def main(argv=None) -> int:
             json.load(open(args.config)) if args.config else {})
         cfg = RigConfig.from_dict(data)
         if cfg.backend == 'sim':
-            raise ConfigError("rig config: field 'backend': a separate-process rig needs a process-crossing "
+            raise ConfigError('backend', "a separate-process rig needs a process-crossing "
                               "python-can interface (udp_multicast, socketcan vcan0, ...), not 'sim'")
     except (ValueError, OSError) as exc:
         print(f'rubber_rig.rig.sim: error: {exc}', file=sys.stderr)

@@ -32,15 +32,15 @@ def build_specimen(spec: dict, dt: float):
     if spec.get('model') == 'linear':
         unknown = set(spec) - {'model', 'stiffness', 'damping'}
         if unknown:
-            raise ConfigError(f"rig config: field 'sim.specimen.{sorted(unknown)[0]}': unknown for the linear "
+            raise ConfigError(f'sim.specimen.{sorted(unknown)[0]}', "unknown for the linear "
                               "specimen (stiffness, damping)")
         return LinearSpecimen(spec.get('stiffness', 1.3e7), spec.get('damping', 2.0e4), dt)
     try:
         from rubber_rig.models import build_model
     except ImportError as exc:
-        raise ConfigError(f"rig config: field 'sim.specimen': rubber_rig.models is not available ({exc}); "
+        raise ConfigError('sim.specimen', f"rubber_rig.models is not available ({exc}); "
                           "use {model: linear, stiffness: ..., damping: ...}") from None
     try:
         return build_model(spec, dt)
     except (KeyError, ValueError) as exc:
-        raise ConfigError(f"rig config: field 'sim.specimen': {exc}") from None
+        raise ConfigError('sim.specimen', str(exc)) from None

@@ -1,0 +1,103 @@
+"""Settings described once: a dataclass field says its default, meaning, unit and range, and a node declares
+its parameters from that description instead of repeating it.
+
+    @dataclass
+    class RigConfig:
+        sample_rate: float = setting(1000.0, 'rig sample rate', units='Hz', range=(10.0, 20000.0))
+
+settings_of(RigConfig) lists every such field (nested dataclasses marked with ``nested=`` included, with
+dotted names); a field without ``setting()`` is not a parameter (a mapping built in code, a callable).
+"""
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass
+from typing import Any, Optional
+
+import yaml
+
+
+def setting(default: Any = dataclasses.MISSING, doc: str = '', *, units: str = '', range: Optional[tuple] = None,
+            choices: Optional[tuple] = None, name: str = '', yaml_text: bool = False, empty_is_none: bool = False,
+            nested: Optional[type] = None, default_factory: Any = dataclasses.MISSING):
+    """A dataclass field with its description. name: the parameter's dotted name where it differs from the
+    field path (e.g. field 'channel' is parameter 'can.channel'); yaml_text: the parameter is a YAML string
+    (a mapping or a list); empty_is_none: the parameter '' means None; nested: the field is a dataclass whose
+    own settings are parameters '<field>.<name>'."""
+    meta = {'doc': doc, 'units': units, 'range': range, 'choices': choices, 'name': name,
+            'yaml_text': yaml_text, 'empty_is_none': empty_is_none, 'nested': nested}
+    if default_factory is not dataclasses.MISSING:
+        return dataclasses.field(default_factory=default_factory, metadata=meta)
+    return dataclasses.field(default=default, metadata=meta)
+
+
+@dataclass(frozen=True)
+class Setting:
+    """One parameter: its dotted name, the field path in the dataclass tree, default (as a parameter value:
+    YAML text for yaml_text settings, '' for None), description, units, range and choices."""
+    name: str
+    path: str
+    default: Any
+    doc: str
+    units: str = ''
+    range: Optional[tuple] = None
+    choices: Optional[tuple] = None
+    yaml_text: bool = False
+    empty_is_none: bool = False
+
+    def description(self) -> str:
+        return self.doc + (f' [{self.units}]' if self.units else '')
+
+    def value(self, parameter_value: Any) -> Any:
+        """The field value for a parameter value (YAML parsed, '' -> None). ValueError names the setting."""
+        if self.yaml_text:
+            try:
+                return yaml.safe_load(parameter_value)
+            except yaml.YAMLError as exc:
+                raise ValueError(f"'{self.name}': not valid YAML: {exc}") from None
+        if self.empty_is_none and parameter_value == '':
+            return None
+        return parameter_value
+
+
+def settings_of(cls: type, prefix: str = '', path: str = '') -> list[Setting]:
+    """Every field of dataclass `cls` declared with setting(), depth first, nested dataclasses included."""
+    out = []
+    for f in dataclasses.fields(cls):
+        meta = f.metadata
+        if 'doc' not in meta:
+            continue
+        fpath = f'{path}{f.name}'
+        if meta['nested'] is not None:
+            out += settings_of(meta['nested'], f'{prefix}{meta["name"] or f.name}.', f'{fpath}.')
+            continue
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()
+        if meta['yaml_text']:
+            default = yaml.safe_dump(default, default_flow_style=True).strip()
+        elif meta['empty_is_none'] and default is None:
+            default = ''
+        out.append(Setting(meta['name'] or f'{prefix}{f.name}', fpath, default, meta['doc'], meta['units'],
+                           meta['range'], meta['choices'], meta['yaml_text'], meta['empty_is_none']))
+    return out
+
+
+def nest(values: dict) -> dict:
+    """{'a.b': 1, 'c': 2} -> {'a': {'b': 1}, 'c': 2}: field paths to the mapping from_dict() takes."""
+    out: dict = {}
+    for key, value in values.items():
+        *parents, leaf = key.split('.')
+        d = out
+        for p in parents:
+            d = d.setdefault(p, {})
+        d[leaf] = value
+    return out
+
+
+def setting_for(settings: list[Setting], field_path: str) -> Optional[Setting]:
+    """The setting a (possibly deeper, e.g. 'sim.faults[1].type') field path belongs to, or None."""
+    best = None
+    for s in settings:
+        if field_path == s.path or field_path.startswith(s.path + '.') or field_path.startswith(s.path + '['):
+            if best is None or len(s.path) > len(best.path):
+                best = s
+    return best
