@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from rubber_rig.cli.main import main
-from rubber_rig.cli.units import parse_quantity
+from rubber_rig.units import to_si
 from rubber_rig.models import load_parameter_set, parameters_at_temperature, steady_state_properties
 
 
@@ -13,16 +13,19 @@ from rubber_rig.models import load_parameter_set, parameters_at_temperature, ste
     ('1mm', 'length', 1e-3), ('0.5 mm', 'length', 5e-4), ('4.57kN', 'force', 4570.0), ('10Hz', 'frequency', 10.0),
     ('1kHz', 'frequency', 1000.0), ('14kN/mm', 'stiffness', 14e6), ('243kN*s/m', 'damping', 243e3),
     ('2.5', 'length', 2.5), ('-10degC', 'temperature', -10.0), ('263.15K', 'temperature', -10.0),
-    ('1e-3m', 'length', 1e-3), ('250us', 'time', 250e-6)])
-def test_parse_quantity(text, dim, value):
-    assert parse_quantity(text, dim) == pytest.approx(value, rel=1e-12, abs=1e-12)
+    ('1e-3m', 'length', 1e-3), ('250us', 'time', 250e-6), ('2 cm', 'length', 0.02), ('5 mm/s', 'velocity', 5e-3),
+    (3, 'number', 3.0), (0.5e-3, 'length', 5e-4)])
+def test_to_si(text, dim, value):
+    assert to_si(text, dim) == pytest.approx(value, rel=1e-12, abs=1e-12)
 
 
 @pytest.mark.parametrize('text,dim,match', [('1kN', 'length', 'force'), ('1 parsec', 'length', 'unit'),
-                                            ('abc', 'length', 'number'), ('inf', 'length', 'number')])
-def test_parse_quantity_errors(text, dim, match):
+                                            ('abc', 'length', 'number'), ('inf', 'length', 'number'),
+                                            (float('nan'), 'length', 'finite'), ('1e400 mm', 'length', 'finite'),
+                                            (True, 'length', 'expected a length'), ('3 Hz', 'number', 'bare number')])
+def test_to_si_errors(text, dim, match):
     with pytest.raises(ValueError, match=match):
-        parse_quantity(text, dim)
+        to_si(text, dim)
 
 
 def run_json(capsys, *argv):

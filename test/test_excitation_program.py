@@ -69,6 +69,14 @@ def test_bad_programs_name_block_and_field(blocks, where, fld):
     assert msg.startswith(where) and f"field '{fld}'" in msg, msg
 
 
+def test_programs_take_the_units_of_the_command_line():
+    """One units table: what `rubber-rig props` reads (cm, us, mHz) a program reads too, into the same SI."""
+    p = Program.from_yaml_text('name: u\nblocks:\n  - {name: a, waveform: sine, frequency: 500 mHz, '
+                               'amplitude: 0.1 cm, cycles: 2}\n  - {name: b, waveform: hold, duration: 250000 us}\n')
+    assert p.blocks[0].frequency == pytest.approx(0.5) and p.blocks[0].amplitude == pytest.approx(1e-3)
+    assert p.blocks[1].duration == pytest.approx(0.25)
+
+
 def test_bad_program_structure():
     for text, fld in [('blocks: []', 'blocks'), ('name: x\nspeed: 3\nblocks: []', 'speed'),
                       ('blocks: [1, 2]', None), ('[', None)]:

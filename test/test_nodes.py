@@ -190,6 +190,25 @@ def test_online_predictor_friction_deadband_keeps_the_loop_on_noisy_displacement
         ModelChoice(friction_reversal_threshold=-1e-6).resolve()
 
 
+@pytest.mark.parametrize('choice, field', [
+    (dict(source='values', values=dict(load_parameter_set('seed000_20C').as_dict(), alpha=1.5)), 'values.alpha'),
+    (dict(source='values', values=dict(load_parameter_set('seed000_20C').as_dict(), k_inf=1.0)), 'values.k_inf'),
+    (dict(source='values', values=dict(load_parameter_set('seed000_20C').as_dict(), tau=float('nan'))),
+     'values.tau'),
+    (dict(source='parameter_set', parameter_set='/nonexistent.yaml:fit_20C'), 'parameter_set'),
+    (dict(source='parameter_set', parameter_set='seed000_nope'), 'parameter_set'),
+    (dict(source='temperature', temperature=35.0), 'temperature'),
+    (dict(source='telepathy'), 'source'),
+    (dict(friction_reversal_threshold=float('inf')), 'friction_reversal_threshold'),
+])
+def test_an_invalid_model_choice_names_the_field_at_fault(choice, field):
+    """ROS-free: the error carries the element_model parameter it concerns (no parsing of its message)."""
+    from rubber_rig.nodes.predictor import ChoiceError, ModelChoice
+    with pytest.raises(ChoiceError) as err:
+        ModelChoice(**choice).resolve()
+    assert err.value.field == field, str(err.value)
+
+
 def test_cycle_metrics_match_the_analytic_steady_state(suite):
     """Steady full-amplitude cycles vs seed 000 Eq. 17-27. Tolerances: the model library's time-domain steady
     state is within 0.5 % of the analytic storage stiffness (its documented bound), so K_dyn within 0.6 %,

@@ -14,7 +14,7 @@ import sys
 
 import numpy as np
 
-from .units import parse_quantity
+from rubber_rig.units import to_si
 
 KEYS = ('frequency', 'amplitude', 'k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy', 'r_k', 'r_e')
 
@@ -55,13 +55,13 @@ def add_arguments(parser):
 
 def _spec(args):
     if args.temperature is not None:
-        return {'model': 'seed000', 'temperature': parse_quantity(args.temperature, 'temperature')}
+        return {'model': 'seed000', 'temperature': to_si(args.temperature, 'temperature')}
     return {'parameter_set': args.parameter_set or 'seed000_20C'}
 
 
 def _frequencies(args):
     if args.frequency_grid is not None:
-        lo, hi = (parse_quantity(v, 'frequency') for v in args.frequency_grid[:2])
+        lo, hi = (to_si(v, 'frequency') for v in args.frequency_grid[:2])
         try:
             n = int(args.frequency_grid[2])
         except ValueError:
@@ -72,7 +72,7 @@ def _frequencies(args):
             _check_range('--frequency-grid', v, FREQUENCY_RANGE, 'Hz', text)
         return list(np.geomspace(lo, hi, n))
     values = args.frequency or ['0.5Hz', '1Hz', '2Hz', '4Hz', '8Hz', '14Hz']
-    freqs = [parse_quantity(v, 'frequency') for v in values]
+    freqs = [to_si(v, 'frequency') for v in values]
     for v, text in zip(freqs, values):
         _check_range('--frequency', v, FREQUENCY_RANGE, 'Hz', text)
     return freqs
@@ -113,7 +113,7 @@ def compute(args) -> list:
     from ..models import build_model, steady_state_properties, time_domain_properties
     spec = _spec(args)
     freqs = _frequencies(args)
-    amps = [parse_quantity(v, 'length') for v in args.amplitude]
+    amps = [to_si(v, 'length') for v in args.amplitude]
     for a, text in zip(amps, args.amplitude):
         _check_range('--amplitude', a, AMPLITUDE_RANGE, 'm', text)
     rows = []
@@ -124,7 +124,7 @@ def compute(args) -> list:
                 r = steady_state_properties(model, f, a)
                 rows.append({k: _clean(r[k]) for k in KEYS})
     else:
-        rate = parse_quantity(args.rate, 'frequency')
+        rate = to_si(args.rate, 'frequency')
         _check_range('--rate', rate, RATE_RANGE, 'Hz', args.rate)
         if not CYCLES_RANGE[0] <= args.cycles <= CYCLES_RANGE[1]:
             raise ValueError(f'--cycles {args.cycles} is outside the allowed range {CYCLES_RANGE[0]} .. '

@@ -5,7 +5,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import waveforms as wf
-from .units import to_si
+from rubber_rig.units import to_si
 
 
 class ProgramError(ValueError):

@@ -15,7 +15,7 @@ import yaml
 
 from .blocks import (MAX_FREQUENCY_FRACTION, MAX_PROGRAM_DURATION, MIN_FREQUENCY, Block,  # noqa: F401
                      ProgramError, parse_block)
-from .units import to_si
+from rubber_rig.units import to_si
 
 PROGRAM_DIR = Path(__file__).with_name('programs')
 # The most blocks a program may have (after grid expansion): far above any real test plan (seed000_grid has

@@ -30,27 +30,36 @@ import yaml
 DATA_DIR = Path(__file__).resolve().parent / 'data'
 
 
+class ParameterValueError(ValueError):
+    """A model parameter with an invalid value; ``parameter`` is its name ('alpha', 'temperature'), so a
+    caller can point at the setting it came from without parsing the message."""
+
+    def __init__(self, parameter: str, why: str):
+        super().__init__(f'parameter {parameter} {why}')
+        self.parameter = parameter
+
+
 def _check_finite(name: str, value) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f'parameter {name} must be a number, got {value!r}') from None
+        raise ParameterValueError(name, f'must be a number, got {value!r}') from None
     if not math.isfinite(v):
-        raise ValueError(f'parameter {name} must be finite, got {v}')
+        raise ParameterValueError(name, f'must be finite, got {v}')
     return v
 
 
 def _check_positive(name: str, value) -> float:
     v = _check_finite(name, value)
     if v <= 0.0:
-        raise ValueError(f'parameter {name} must be > 0, got {v}')
+        raise ParameterValueError(name, f'must be > 0, got {v}')
     return v
 
 
 def _check_order(name: str, value) -> float:
     v = _check_finite(name, value)
     if not 0.0 < v <= 1.0:
-        raise ValueError(f'parameter {name} (fractional order) must be in (0, 1], got {v}')
+        raise ParameterValueError(name, f'(fractional order) must be in (0, 1], got {v}')
     return v
 
 
@@ -97,7 +106,7 @@ class Seed000Params(_Params):
             _check_positive(n, getattr(self, n))
         _check_order('alpha', self.alpha)
         if self.k_inf < self.k0:
-            raise ValueError(f'parameter k_inf ({self.k_inf:g} N/m) must be >= k0 ({self.k0:g} N/m)')
+            raise ParameterValueError('k_inf', f'({self.k_inf:g} N/m) must be >= k0 ({self.k0:g} N/m)')
         return self
 
 
@@ -111,7 +120,7 @@ class KelvinVoigtParams(_Params):
         _check_positive('k', self.k)
         v = _check_finite('c', self.c)
         if v < 0:
-            raise ValueError(f'parameter c must be >= 0, got {v}')
+            raise ParameterValueError('c', f'must be >= 0, got {v}')
         return self
 
 
@@ -238,8 +247,8 @@ def parameters_at_temperature(t_degC: float) -> Seed000Params:
     t = _check_finite('temperature', t_degC)
     temps, f = _temperature_interpolants()
     if not temps[0] <= t <= temps[-1]:
-        raise ValueError(f'temperature {t:g} degC is outside the identified range '
-                         f'[{temps[0]:g}, {temps[-1]:g}] degC of seed 000 Table 1')
+        raise ParameterValueError('temperature', f'{t:g} degC is outside the identified range '
+                                  f'[{temps[0]:g}, {temps[-1]:g}] degC of seed 000 Table 1')
     k0 = float(f['k0'](t))
     p = Seed000Params(k0=k0, k_inf=k0 + float(np.exp(f['log_dk'](t))), tau=float(np.exp(f['log_tau'](t))),
                       alpha=float(f['alpha'](t)), x2=float(np.exp(f['log_x2'](t))),

@@ -26,7 +26,6 @@ driver) restarts the model and the cycle detection with a log line.
 """
 from __future__ import annotations
 
-import re
 import time
 from collections import deque
 
@@ -41,8 +40,8 @@ from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.cycles import CyclePairer
 from rubber_rig.nodes.params import ParameterError, declare
-from rubber_rig.nodes.predictor import (DEFAULT_REVERSAL_THRESHOLD, SOURCES, BlockIndex, ModelChoice,
-                                        OnlinePredictor, batch_problem)
+from rubber_rig.nodes.predictor import (DEFAULT_REVERSAL_THRESHOLD, SOURCES, BlockIndex, ChoiceError,
+                                        ModelChoice, OnlinePredictor, batch_problem)
 from rubber_rig.nodes.spin import spin_node
 
 VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
@@ -87,8 +86,8 @@ class ElementModelNode(Node):
             self._validate(self._choice(), CHOICE_PARAMS)
             self.predictor = OnlinePredictor(self._choice(), self.get_parameter('warmup_time').value,
                                              self.get_parameter('temperature_hysteresis').value)
-        except ValueError as exc:
-            raise ParameterError(self.get_name(), self._blame(str(exc)), str(exc)) from None
+        except ChoiceError as exc:
+            raise ParameterError(self.get_name(), exc.field, str(exc)) from None
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
 
@@ -201,26 +200,12 @@ class ElementModelNode(Node):
                            friction_reversal_threshold=value('friction_reversal_threshold'))
 
     @staticmethod
-    def _blame(message: str) -> str:
-        """Which node parameter an error of the model library is about ("parameter alpha must be ...")."""
-        m = re.search(r'parameter (\w+)', message)
-        if m and m.group(1) in VALUE_NAMES:
-            return 'values.' + m.group(1)
-        if m and m.group(1) == 'friction_reversal_threshold':
-            return m.group(1)
-        if 'parameter set' in message:
-            return 'parameter_set'
-        if 'temperature' in message:
-            return 'temperature'
-        return 'source'
-
-    @staticmethod
     def _validate(choice: ModelChoice, changed) -> tuple:
         """Check every model parameter that changed, used by the current source or not (a later switch of
         ``source`` must never meet an invalid value), then the resulting choice; returns ``choice.resolve()``.
         Raises ValueError (also for a parameter file that is missing or unreadable)."""
         if choice.source not in SOURCES:
-            raise ValueError(f"source '{choice.source}' is not one of {', '.join(SOURCES)}")
+            raise ChoiceError('source', f"source '{choice.source}' is not one of {', '.join(SOURCES)}")
         if any(name.startswith('values.') for name in changed):
             ModelChoice(source='values', values=choice.values).resolve()
         if 'parameter_set' in changed and choice.source != 'parameter_set':
@@ -239,7 +224,7 @@ class ElementModelNode(Node):
         except Exception as exc:   # noqa: BLE001 - whatever goes wrong, refuse the change; never raise from here
             self._validated = None
             what = str(exc) if isinstance(exc, ValueError) else f'{type(exc).__name__}: {exc}'
-            return SetParametersResult(successful=False, reason=f'{self._blame(what)}: {what}')
+            return SetParametersResult(successful=False, reason=f'{getattr(exc, "field", "source")}: {what}')
         return SetParametersResult(successful=True)
 
     def _after_set_parameters(self, params) -> None:

@@ -29,11 +29,20 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from rubber_rig.models import build_model, load_parameter_set, parameters_at_temperature, Seed000Params
+from rubber_rig.models.params import ParameterValueError
 
 SOURCES = ('parameter_set', 'temperature', 'rig_temperature', 'values')
 # [m] 10x the simulated rig's default displacement noise (rig.config.SimOptions.displacement_noise = 0.2 um);
 # 5x is too little for quasi-static motion (see rubber_rig.models.friction)
 DEFAULT_REVERSAL_THRESHOLD = 2e-6
+
+
+class ChoiceError(ValueError):
+    """An invalid :class:`ModelChoice`; ``field`` names the field (and so the element_model parameter) at fault."""
+
+    def __init__(self, field: str, why: str):
+        super().__init__(why)
+        self.field = field
 
 
 @dataclass(frozen=True)
@@ -47,27 +56,38 @@ class ModelChoice:
     friction_reversal_threshold: float = DEFAULT_REVERSAL_THRESHOLD   # [m] Berg reversal deadband, 0 = paper's rule
 
     def resolve(self, temperature: float | None = None) -> tuple[Seed000Params, str, float]:
-        """(validated parameters, parameter-set name or '', temperature [degC] or NaN). Raises ValueError."""
+        """(validated parameters, parameter-set name or '', temperature [degC] or NaN).
+
+        Raises :class:`ChoiceError` whose ``field`` is the field of this choice that is wrong
+        ('values.alpha', 'parameter_set', 'temperature', 'source', 'friction_reversal_threshold').
+        """
         if self.model != 'seed000':
-            raise ValueError(f"model {self.model!r} is not available online (only 'seed000')")
+            raise ChoiceError('model', f"model {self.model!r} is not available online (only 'seed000')")
         d = self.friction_reversal_threshold
         if not (isinstance(d, (int, float)) and math.isfinite(d) and d >= 0.0):
-            raise ValueError(f'parameter friction_reversal_threshold must be a finite displacement >= 0 [m], got {d!r}')
+            raise ChoiceError('friction_reversal_threshold', 'parameter friction_reversal_threshold must be a '
+                              f'finite displacement >= 0 [m], got {d!r}')
         if self.source == 'parameter_set':
             try:   # a file set may be missing, unreadable, not YAML or hold bad values: all are a ValueError here
                 p = load_parameter_set(self.parameter_set)
             except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
-                raise ValueError(f'parameter set {self.parameter_set!r}: {exc}') from None
+                raise ChoiceError('parameter_set', f'parameter set {self.parameter_set!r}: {exc}') from None
             if not isinstance(p, Seed000Params):
-                raise ValueError(f'parameter set {self.parameter_set!r} is not a seed000 parameter set')
-            t = _set_temperature(self.parameter_set)
-            return p, self.parameter_set, t
+                raise ChoiceError('parameter_set', f'parameter set {self.parameter_set!r} is not a seed000 '
+                                  'parameter set')
+            return p, self.parameter_set, _set_temperature(self.parameter_set)
         if self.source in ('temperature', 'rig_temperature'):
             t = self.temperature if temperature is None else float(temperature)
-            return parameters_at_temperature(t), '', t
+            try:
+                return parameters_at_temperature(t), '', t
+            except ValueError as exc:
+                raise ChoiceError('temperature', str(exc)) from None
         if self.source == 'values':
-            return Seed000Params.from_dict(dict(self.values)), '', math.nan
-        raise ValueError(f'source {self.source!r} is not one of {", ".join(SOURCES)}')
+            try:
+                return Seed000Params.from_dict(dict(self.values)), '', math.nan
+            except ParameterValueError as exc:
+                raise ChoiceError('values.' + exc.parameter, str(exc)) from None
+        raise ChoiceError('source', f'source {self.source!r} is not one of {", ".join(SOURCES)}')
 
 
 def _set_temperature(name: str) -> float:
