@@ -1,13 +1,18 @@
 """ament_python package rubber_rig (also installable with pip for the no-ROS path of the README)."""
+import re
 from glob import glob
+from pathlib import Path
 
 from setuptools import find_packages, setup
 
 package_name = 'rubber_rig'
+# package.xml is the one place the version is written (colcon and bloom read it there)
+version = re.search(r'<version>\s*([^<\s]+)\s*</version>',
+                    (Path(__file__).resolve().parent / 'package.xml').read_text(encoding='utf-8')).group(1)
 
 setup(
     name=package_name,
-    version='0.1.0',
+    version=version,
     packages=find_packages(exclude=['test', 'test.*']),
     package_data={package_name: ['**/*.yaml', '**/*.dbc', '**/*.json']},
     include_package_data=True,

@@ -2,4 +2,19 @@
 
 The core (models, excitation, rig, recording, fitting) imports no rclpy; rubber_rig.nodes wires it to ROS 2.
 """
-__version__ = '0.1.0'
+import re
+from importlib.metadata import PackageNotFoundError, version
+from pathlib import Path
+
+
+def _version() -> str:
+    """The version package.xml states (the one source: setup.py reads it too); '+source' when run from a tree
+    that is not installed."""
+    try:
+        return version('rubber_rig')
+    except PackageNotFoundError:
+        xml = (Path(__file__).resolve().parents[1] / 'package.xml').read_text(encoding='utf-8')
+        return re.search(r'<version>\s*([^<\s]+)\s*</version>', xml).group(1) + '+source'
+
+
+__version__ = _version()

@@ -43,3 +43,35 @@ def test_ament_index_marker_and_data_files():
     setup_text = (ROOT / 'setup.py').read_text()
     for needle in ("'share/ament_index/resource_index/packages'", "'/launch'", "'/config'"):
         assert needle in setup_text
+
+
+def test_the_version_is_written_once_in_package_xml(capsys):
+    """package.xml states the version; setup.py, rubber_rig.__version__, MCAP metadata and --version follow it,
+    and the interface package is released with it."""
+    import pytest
+    import rubber_rig
+    from rubber_rig.cli.main import main
+    version = parse_package(str(ROOT / 'package.xml')).version
+    assert parse_package(str(ROOT / 'msg_defs' / 'package.xml')).version == version
+    assert rubber_rig.__version__.split('+')[0] == version
+    import re
+    assert not re.search(r'version\s*=\s*[\'"]', (ROOT / 'setup.py').read_text()), 'setup.py writes a version'
+    with pytest.raises(SystemExit):
+        main(['--version'])
+    assert capsys.readouterr().out.strip() == f'rubber-rig {rubber_rig.__version__}'
+
+
+def test_shipped_config_is_found_in_a_checkout_and_in_an_install_prefix(tmp_path, monkeypatch):
+    """A colcon install puts config/ in <prefix>/share/rubber_rig/config (found through AMENT_PREFIX_PATH)."""
+    import pytest
+    from rubber_rig.paths import config_dirs, config_file, find_config
+    assert find_config('rig_sim.yaml') == ROOT / 'config' / 'rig_sim.yaml'
+    assert config_file('foxglove_layout.json') == ROOT / 'config' / 'foxglove_layout.json'
+    share = tmp_path / 'install' / 'share' / 'rubber_rig' / 'config'
+    share.mkdir(parents=True)
+    (share / 'site_rig.yaml').write_text('rig_driver: {}\n')
+    monkeypatch.setenv('AMENT_PREFIX_PATH', str(tmp_path / 'install'))
+    assert share in config_dirs() and config_dirs()[0] == ROOT / 'config'
+    assert find_config('site_rig.yaml') == share / 'site_rig.yaml'
+    with pytest.raises(FileNotFoundError, match=str(share)):
+        find_config('no_such_rig.yaml')

@@ -28,27 +28,8 @@ import numpy as np
 import yaml
 
 from rubber_rig.cli.main import CommandError
+from rubber_rig.paths import find_config
 from rubber_rig.excitation.waveforms import PERIODIC, SWEEPS
-
-CONFIG_DIR = Path(__file__).resolve().parents[2] / 'config'
-
-
-def find_config(name: str) -> Path:
-    """A shipped config file: the checkout's config/ (editable install) or the ROS package share directory."""
-    path = Path(name)
-    if path.exists():
-        return path
-    if (CONFIG_DIR / name).exists():
-        return CONFIG_DIR / name
-    try:
-        from ament_index_python.packages import get_package_share_directory
-        share = Path(get_package_share_directory('rubber_rig')) / 'config' / name
-        if share.exists():
-            return share
-    except Exception:
-        pass
-    raise FileNotFoundError(f'config file {name!r} not found (looked in {CONFIG_DIR})')
-
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--program', default='seed000_grid',

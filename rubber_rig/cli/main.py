@@ -4,6 +4,8 @@ import importlib
 import os
 import sys
 
+from rubber_rig import __version__
+
 # DDS discovery stays on this machine unless the user opens it (README "Networking"): set before any
 # sub-command imports rclpy, and inherited by the node processes the bench starts.
 DISCOVERY_RANGE_VARIABLE = 'ROS_AUTOMATIC_DISCOVERY_RANGE'
@@ -42,6 +44,7 @@ def _os_error_text(exc: OSError) -> str:
 def main(argv=None) -> int:
     keep_discovery_local()
     parser = argparse.ArgumentParser(prog='rubber-rig', description=__doc__)
+    parser.add_argument('--version', action='version', version=f'%(prog)s {__version__}')
     sub = parser.add_subparsers(dest='command', required=True)
     available, parsers = {}, {}
     for name, module_name in COMMANDS.items():

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 from collections import deque
-from pathlib import Path
 
 import numpy as np
 from rclpy.node import Node
@@ -27,8 +26,9 @@ from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import declare
 from rubber_rig.nodes.spin import spin_node
+from rubber_rig.paths import config_file
 
-LAYOUT_FILE = Path(__file__).resolve().parents[2] / 'config' / 'foxglove_layout.json'
+LAYOUT_FILE = config_file('foxglove_layout.json')
 
 
 def _time(t: float) -> dict:

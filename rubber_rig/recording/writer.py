@@ -22,6 +22,8 @@ from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 from mcap_ros2._dynamic import serialize_dynamic
 
+from rubber_rig import __version__
+
 from . import bagmeta
 from .errors import RecordingError, RecordingWriteError
 from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
@@ -36,14 +38,6 @@ SEQUENCE_SOURCE_KEY = 'rubber_rig.sequence'
 CLOSE_METADATA_NAME = 'rubber_rig.close'  # loss accounting written when a file is closed
 COMPRESSION = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE,
                '': CompressionType.NONE}
-
-
-def software_version() -> str:
-    try:
-        from importlib.metadata import version
-        return version('rubber_rig')
-    except Exception:  # not installed as a distribution (source tree): say so
-        return '0.1.0+source'
 
 
 def encode_metadata(values: dict) -> dict:
@@ -164,12 +158,12 @@ class RecordingWriter:
         self.closed = False
         start_time_ns = time.time_ns()
         self.metadata = dict(metadata or {})
-        self.metadata.setdefault('software_version', software_version())
+        self.metadata.setdefault('software_version', __version__)
         self.metadata.setdefault('start_time', datetime.fromtimestamp(
             start_time_ns / 1e9, tz=timezone.utc).isoformat())
         self.metadata.setdefault('start_time_ns', str(start_time_ns))
         try:
-            self._guard(self._mcap.start, 'ros2', f'rubber_rig {software_version()}')
+            self._guard(self._mcap.start, 'ros2', f'rubber_rig {__version__}')
             self._guard(self._mcap.add_metadata, METADATA_NAME, encode_metadata(self.metadata))
         except RecordingWriteError:
             self._file.close()
