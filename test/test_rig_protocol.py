@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from rubber_rig.excitation import LimitError, Program, ProgramError
-from rubber_rig.rig import ConfigError, RigConfig, open_rig, run_program
+from rubber_rig.rig import ConfigError, RigConfig, SimOptions, open_rig, run_program
 from rubber_rig.rig.can.driver import RigDriver
 from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, Protocol, crc8, unwrap_sequence
 
@@ -22,6 +22,42 @@ def test_dbc_defines_the_rig_frames_with_units_and_counters():
     assert db.get_message_by_name('Temperature').get_signal_by_name('TEMP_Specimen').unit == 'degC'
     assert db.get_message_by_name('Setpoint').get_signal_by_name('SP_Sequence').length == 16
     assert db.get_message_by_name('ControllerStatus').get_signal_by_name('ST_Faults').length == 16
+
+
+def test_dbc_protocol_module_and_rig_status_msg_agree():
+    """The DBC is the one definition: protocol's states, fault bits, commands and periods are read from it, and
+    msg_defs/msg/RigStatus.msg (which rosidl needs as constants) states the same codes."""
+    import re
+    from pathlib import Path
+    from rubber_rig.rig.can import protocol
+    from rubber_rig.rig.sim.controller import SimController
+    db = cantools.database.load_file(str(DBC_PATH))
+    status = db.get_message_by_name('ControllerStatus')
+    states = status.get_signal_by_name('ST_State').choices
+    assert {int(k): str(v) for k, v in states.items()} == dict(enumerate(protocol.STATES))
+    heartbeat_states = db.get_message_by_name('ControllerHeartbeat').get_signal_by_name('HB_State').choices
+    assert {int(k): str(v) for k, v in heartbeat_states.items()} == dict(enumerate(protocol.STATES))
+    faults = {int(k): str(v) for k, v in status.get_signal_by_name('ST_Faults').choices.items()}
+    assert faults == protocol.FAULT_NAMES and all(bit & (bit - 1) == 0 for bit in faults), 'one bit per fault'
+    commands = db.get_message_by_name('HostCommand').get_signal_by_name('CMD_Code').choices
+    assert {str(v): int(k) for k, v in commands.items()} == {
+        'NOP': protocol.CMD_NOP, 'ENABLE': protocol.CMD_ENABLE, 'ABORT': protocol.CMD_ABORT,
+        'RESET': protocol.CMD_RESET, 'DISABLE': protocol.CMD_DISABLE, 'HOLD': protocol.CMD_HOLD}
+
+    msg = (Path(__file__).resolve().parents[1] / 'msg_defs' / 'msg' / 'RigStatus.msg').read_text()
+    constants = {m[1]: int(m[2]) for m in re.finditer(r'^uint\d+\s+((?:STATE|FAULT)_\w+)\s*=\s*(\d+)', msg, re.M)}
+    assert {k[6:].lower(): v for k, v in constants.items() if k.startswith('STATE_')} == protocol.STATE_CODE
+    assert {v: k[6:].lower() for k, v in constants.items() if k.startswith('FAULT_') and v} == protocol.FAULT_NAMES
+
+    fs = 2000.0
+    with can.Bus(interface='virtual', channel='dbc_periods', receive_own_messages=False) as bus:
+        rig = SimController(bus, fs, SimOptions(), paced=False)
+        ticks = (rig._hb_every, rig._st_every, rig._tc_every)
+    assert ticks == tuple(round(db.get_message_by_name(n).cycle_time / 1000 * fs)
+                          for n in ('ControllerHeartbeat', 'ControllerStatus', 'Temperature')) == (100, 20, 200)
+    assert RigConfig().heartbeat_period == db.get_message_by_name('HostHeartbeat').cycle_time / 1000
+    with pytest.raises(ValueError, match='Setpoint has no GenMsgCycleTime'):
+        protocol.cycle_time('Setpoint')
 
 
 def test_encode_decode_round_trip_and_resolution():

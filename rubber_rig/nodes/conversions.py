@@ -12,16 +12,16 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 
 from rubber_rig.excitation import Limits
+from rubber_rig.rig.can.protocol import STATE_CODE, STATES, fault_names
 
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from msg_defs.msg import (BlockSummary, BranchForce, CycleMetrics, CycleProperties, ModelParameters,
                           ModelPrediction, RigLimits, RigSampleBatch, RigStatus, SetpointBatch)
 
-STATE_NAMES = {RigStatus.STATE_UNCONFIGURED: 'unconfigured', RigStatus.STATE_IDLE: 'idle',
-               RigStatus.STATE_RUNNING: 'running', RigStatus.STATE_HOLDING: 'holding',
-               RigStatus.STATE_RAMPING_DOWN: 'ramping_down', RigStatus.STATE_FAULT: 'fault'}
-STATE_BY_NAME = {v: k for k, v in STATE_NAMES.items()}
+# RigStatus.STATE_* and FAULT_* equal the DBC's codes (test_rig_protocol checks it): one table serves both
+STATE_NAMES = dict(enumerate(STATES))
+STATE_BY_NAME = STATE_CODE
 
 
 # -- time --------------------------------------------------------------------------------------------------
@@ -144,11 +144,6 @@ def status_msg(snapshot: Any, limits: Any, sample_rate: float, t: float) -> RigS
     msg.setpoints_refused = int(extra.get('setpoints_refused', 0))
     msg.last_event = str(extra.get('last_event', ''))
     return msg
-
-
-def fault_names(faults: int) -> list[str]:
-    names = [n for n in dir(RigStatus) if n.startswith('FAULT_') and n != 'FAULT_NONE']
-    return sorted(n[6:].lower() for n in names if faults & getattr(RigStatus, n))
 
 
 def diagnostics_msg(status: RigStatus, hardware_id: str, extra: Mapping[str, Any] | None = None,

@@ -8,8 +8,11 @@ import math
 from dataclasses import asdict, dataclass, field, fields
 from typing import List, Optional
 
+import can
+
 from ..excitation.limits import LimitError, Limits
 from ..settings import setting
+from .can.protocol import cycle_time
 
 
 class ConfigError(ValueError):
@@ -142,7 +145,8 @@ class RigConfig:
     sample_rate: float = setting(1000.0, 'rig sample rate', units='Hz', range=(10.0, 20000.0))
     watchdog_timeout: float = setting(0.1, 'feedback/heartbeat silence that faults the rig', units='s',
                                       range=(0.005, 10.0))
-    heartbeat_period: float = setting(0.05, 'host heartbeat period', units='s', range=(0.001, 5.0))
+    heartbeat_period: float = setting(cycle_time('HostHeartbeat'), 'host heartbeat period (default: the DBC cycle '
+                                      'time of HostHeartbeat)', units='s', range=(0.001, 5.0))
     bus_error_max: int = setting(20, 'bad frames per second of samples that fault the bus', range=(0, 100000))
     lost_burst_max: float = setting(0.02, 'longest run of lost samples tolerated', units='s', range=(1e-4, 10.0))
     stream_timeout: float = setting(0.3, "a running program's setpoint stream silent this long is lost (the rig "
@@ -174,7 +178,6 @@ class RigConfig:
         if not isinstance(self.backend, str) or not self.backend:
             raise ConfigError('backend', "'sim' or a python-can interface name")
         if self.backend != 'sim':
-            import can
             if self.backend not in can.interfaces.VALID_INTERFACES:
                 raise ConfigError('backend', f"unknown python-can interface {self.backend!r} "
                                   f"(use 'sim' or one of: {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")

@@ -6,35 +6,53 @@ import can
 import cantools
 
 DBC_PATH = Path(__file__).with_name('rubber_rig.dbc')
+# The DBC is the one definition of the protocol: states, command codes, fault bits and frame periods are read
+# from its VAL_ tables and GenMsgCycleTime attributes here (test_rig_protocol checks RigStatus.msg agrees).
+_DBC = cantools.database.load_file(str(DBC_PATH))
 
-# RigStatus FAULT_* bits (msg_defs/msg/RigStatus.msg)
-FAULT_NONE = 0
-FAULT_WATCHDOG = 1
-FAULT_DISPLACEMENT_LIMIT = 2
-FAULT_VELOCITY_LIMIT = 4
-FAULT_FORCE_LIMIT = 8
-FAULT_CONTROLLER = 16
-FAULT_SENSOR = 32
-FAULT_BUS = 64
-FAULT_STREAM = 128
-FAULT_NAMES = {FAULT_WATCHDOG: 'watchdog', FAULT_DISPLACEMENT_LIMIT: 'displacement_limit',
-               FAULT_VELOCITY_LIMIT: 'velocity_limit', FAULT_FORCE_LIMIT: 'force_limit',
-               FAULT_CONTROLLER: 'controller', FAULT_SENSOR: 'sensor', FAULT_BUS: 'bus',
-               FAULT_STREAM: 'stream'}
 
-# RigStatus STATE_* (index = value)
-STATES = ('unconfigured', 'idle', 'running', 'holding', 'ramping_down', 'fault')
+def _choices(message: str, signal: str) -> dict[int, str]:
+    return {int(value): str(name) for value, name in _DBC.get_message_by_name(message).get_signal_by_name(signal)
+            .choices.items()}
+
+
+def cycle_time(message: str) -> float:
+    """Transmission period [s] of a periodic DBC message (GenMsgCycleTime); ValueError if it has none."""
+    ms = _DBC.get_message_by_name(message).cycle_time
+    if not ms:
+        raise ValueError(f'{DBC_PATH.name}: message {message} has no GenMsgCycleTime')
+    return ms / 1000.0
+
+
+# RigStatus STATE_* (index = value), from VAL_ ST_State (HB_State repeats it)
+STATES = tuple(name for _, name in sorted(_choices('ControllerStatus', 'ST_State').items()))
 STATE_CODE = {name: i for i, name in enumerate(STATES)}
 
-# HostCommand codes
-CMD_NOP, CMD_ENABLE, CMD_ABORT, CMD_RESET, CMD_DISABLE, CMD_HOLD = 0, 1, 2, 3, 4, 5
+# RigStatus FAULT_* bits, from VAL_ ST_Faults (one entry per bit)
+FAULT_NAMES = _choices('ControllerStatus', 'ST_Faults')
+_FAULT_BIT = {name: bit for bit, name in FAULT_NAMES.items()}
+FAULT_NONE = 0
+FAULT_WATCHDOG = _FAULT_BIT['watchdog']
+FAULT_DISPLACEMENT_LIMIT = _FAULT_BIT['displacement_limit']
+FAULT_VELOCITY_LIMIT = _FAULT_BIT['velocity_limit']
+FAULT_FORCE_LIMIT = _FAULT_BIT['force_limit']
+FAULT_CONTROLLER = _FAULT_BIT['controller']
+FAULT_SENSOR = _FAULT_BIT['sensor']
+FAULT_BUS = _FAULT_BIT['bus']
+FAULT_STREAM = _FAULT_BIT['stream']
 
-SEQ_MOD = 1 << 16
+# HostCommand codes, from VAL_ CMD_Code
+_CMD = {name: code for code, name in _choices('HostCommand', 'CMD_Code').items()}
+CMD_NOP, CMD_ENABLE, CMD_ABORT = _CMD['NOP'], _CMD['ENABLE'], _CMD['ABORT']
+CMD_RESET, CMD_DISABLE, CMD_HOLD = _CMD['RESET'], _CMD['DISABLE'], _CMD['HOLD']
+
+# sequence numbers are the sample index modulo 2**bits of SP_Sequence
+SEQ_MOD = 1 << _DBC.get_message_by_name('Setpoint').get_signal_by_name('SP_Sequence').length
 
 
-def fault_names(mask: int):
-    """Names of the fault bits set in mask."""
-    return [name for bit, name in FAULT_NAMES.items() if mask & bit]
+def fault_names(mask: int) -> list[str]:
+    """Names of the fault bits set in mask, lowest bit first."""
+    return [name for bit, name in sorted(FAULT_NAMES.items()) if mask & bit]
 
 
 def _crc8_table():
@@ -79,7 +97,7 @@ class Protocol:
     verifies."""
 
     def __init__(self, dbc_path=DBC_PATH):
-        self.db = cantools.database.load_file(str(dbc_path))
+        self.db = _DBC if Path(dbc_path) == DBC_PATH else cantools.database.load_file(str(dbc_path))
         self.by_name = {m.name: m for m in self.db.messages}
         self.by_id = {m.frame_id: m for m in self.db.messages}
         for m in self.db.messages:

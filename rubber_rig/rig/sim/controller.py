@@ -13,7 +13,7 @@ import math
 
 from ...excitation.ramp import DECEL_MAX, RAMP_ACCEL, SafeRamp, stopping_positions
 from ..can.protocol import (CMD_ABORT, CMD_DISABLE, CMD_HOLD, CMD_RESET, FAULT_SENSOR, FAULT_WATCHDOG, SEQ_MOD,
-                            STATE_CODE, MalformedFrame, Protocol, unwrap_sequence)
+                            STATE_CODE, MalformedFrame, Protocol, cycle_time, unwrap_sequence)
 from .faults import FaultInjector
 from .plant import Actuator, Sensor
 from .specimen import build_specimen
@@ -57,7 +57,8 @@ class SimController:
         self._held = []                   # (release_tick, message) for delayed frames
         self._hb = self._st = self._tc = 0
         per = lambda s: max(1, round(s * self.fs))  # noqa: E731
-        self._hb_every, self._st_every, self._tc_every = per(0.05), per(0.01), per(0.1)
+        self._hb_every, self._st_every, self._tc_every = (per(cycle_time(name)) for name in
+                                                         ('ControllerHeartbeat', 'ControllerStatus', 'Temperature'))
         self._stop = threading.Event()
         self._announced = False
         self._thread = None
@@ -265,7 +266,7 @@ class SimController:
         return (self.ticks + idle) / self.fs
 
     def _housekeeping(self, force=False):
-        """Status every 10 ms, heartbeat every 50 ms, temperature every 100 ms of rig time (or now if force)."""
+        """Status, heartbeat and temperature at their DBC cycle times of rig time (or now if force)."""
         code = STATE_CODE[self.state]
         if force or self.ticks % self._st_every == 0:
             self._st = (self._st + 1) % 16
