@@ -155,3 +155,21 @@ def test_cycle_detector_with_several_force_channels_equals_one_detector_per_chan
         assert c['k_dyn'] == ra['k_dyn']
     with pytest.raises(ValueError, match='force channels'):
         both.update(x[:10], force[:10])
+
+
+def test_one_cycle_cut_serves_the_stream_and_the_recording():
+    """CycleDetector (online, chunked) and cut_cycles (a whole recording) are one cutter: once both have closed
+    a common cycle their cuts are identical, across changes of amplitude and frequency."""
+    from rubber_rig.analysis import cut_cycles
+    dt, rng = 1e-3, np.random.default_rng(4)
+    t = np.arange(12000) * dt
+    x = np.where(t < 6, 1e-3 * np.sin(2 * np.pi * 2 * t), 0.4e-3 * np.sin(2 * np.pi * 5 * t)) + 0.2e-6 * \
+        rng.standard_normal(t.size)
+    det = CycleDetector(dt, min_amplitude=1e-5)
+    stream = [(c['start'], c['end']) for i in range(0, x.size, 37) for c in det.update(x[i:i + 37], x[i:i + 37])]
+    batch = [(c.start, c.end) for c in cut_cycles(x, min_amplitude=1e-5, adapt=True)]
+    common = stream[0]
+    assert common in batch and batch[batch.index(common):] == stream
+    assert len(stream) >= 11 + 29, len(stream)          # 12 cycles at 2 Hz, 30 at 5 Hz, a start-up cycle less
+    periods = np.array([c.end_at - c.start_at for c in cut_cycles(x, min_amplitude=1e-5)])   # fixed levels
+    assert np.sum(abs(periods - 500) < 0.5) >= 11 and np.sum(abs(periods - 200) < 0.5) >= 29, periods

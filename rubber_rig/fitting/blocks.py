@@ -2,8 +2,8 @@
 
 A block is one harmonic excitation (frequency, amplitude, mean). Boundaries come from, in order:
 1. the recorded block index channel (the rig stamps every sample with its program block),
-2. otherwise detection of steady periodic segments: cycles are cut at upward zero crossings of the
-   displacement (with hysteresis against noise), and consecutive cycles with the same period and
+2. otherwise detection of steady periodic segments: cycles are cut as the online cycle metrics cut them
+   (:func:`rubber_rig.analysis.cut_cycles`: upward mean crossings with hysteresis), and consecutive cycles with the same period and
    amplitude (within `tolerance`) form a segment. Taper-in/out cycles change amplitude and therefore
    fall outside the segments.
 The recorded program (if any) then labels blocks with their nominal frequency and amplitude.
@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..analysis import cut_cycles
 from .metrics import window_properties
 
 
@@ -59,55 +60,37 @@ def _noise_level(x):
     return float(1.4826 * np.median(np.abs(d3 - np.median(d3))) / np.sqrt(20.0))
 
 
-def _cycles(x):
-    """(crossings, median): upward zero crossings (sample index just after the crossing) of x about
-    its median, and that median."""
+def _cycles(x) -> list:
+    """The cycles of x, cut as everywhere else (:func:`rubber_rig.analysis.cut_cycles`) about the levels of the
+    whole segment. The hysteresis band is 2 % of the largest amplitude but at least 5 noise sigmas, so that
+    small-amplitude blocks of a recording without block index still cross it, and motion within 5 noise
+    sigmas of standing still makes no cycle."""
     x = np.asarray(x, float)
     if x.size < 4:
-        return np.zeros(0, int), float('nan')
-    med = np.median(x)
-    xc = x - med
-    peak = np.percentile(np.abs(xc), 99)
-    h = max(5.0 * _noise_level(x), 0.02 * peak)
-    below = xc < -h
-    above = xc > h
-    idx = np.flatnonzero(below | above)
-    state = above[idx]
-    rising = np.flatnonzero(~state[:-1] & state[1:])   # last 'below' sample, then first 'above'
-    crossings = []
-    for r in rising:
-        lo, hi = idx[r], idx[r + 1]
-        # first sample above zero after the last one below -h: the crossing to within one sample
-        crossings.append(lo + 1 + int(np.argmax(xc[lo + 1:hi + 1] > 0)))
-    return np.asarray(crossings, int), med
+        return []
+    noise = _noise_level(x)
+    half = float(np.percentile(np.abs(x - np.median(x)), 99))
+    if not half > 5.0 * noise:
+        return []
+    return cut_cycles(x, hysteresis=max(0.02, 5.0 * noise / half), min_amplitude=5.0 * noise)
 
 
-def _frac_crossing(x, j, med):
-    """Sub-sample position of the upward crossing about ``med`` (the median of x, from `_cycles`)
-    just before sample j (linear interpolation)."""
-    if j < 1:
-        return float(j)
-    xc0, xc1 = x[j - 1] - med, x[j] - med
-    if xc1 == xc0:
-        return float(j)
-    return (j - 1) + float(np.clip(-xc0 / (xc1 - xc0), 0.0, 1.0))
-
-
-def _steady_runs(x, crossings, tolerance):
-    """Runs of consecutive cycles with the same period and amplitude: list of (c_first, c_last)."""
-    n = len(crossings) - 1
+def _steady_runs(x, cycles, tolerance):
+    """Runs of consecutive, adjoining cycles with the same period and amplitude: list of (c_first, c_last)."""
+    n = len(cycles)
     if n < 1:
         return []
-    periods = np.diff(crossings).astype(float)
-    amps = np.array([0.5 * np.ptp(x[crossings[c]:crossings[c + 1]]) for c in range(n)])
-    means = np.array([np.mean(x[crossings[c]:crossings[c + 1]]) for c in range(n)])
+    periods = np.array([c.end_at - c.start_at for c in cycles])
+    amps = np.array([0.5 * np.ptp(x[c.start:c.end]) for c in cycles])
+    means = np.array([np.mean(x[c.start:c.end]) for c in cycles])
     runs = []
     start = 0
     for c in range(1, n + 1):
         if c < n:
             p_ref = np.median(periods[start:c])
             a_ref = np.median(amps[start:c])
-            same = (abs(periods[c] - p_ref) <= tolerance * p_ref + 1.5
+            same = (cycles[c].start == cycles[c - 1].end
+                    and abs(periods[c] - p_ref) <= tolerance * p_ref + 1.5
                     and abs(amps[c] - a_ref) <= tolerance * a_ref
                     and abs(means[c] - np.median(means[start:c])) <= tolerance * a_ref)
             if same:
@@ -173,8 +156,8 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
             k = int(np.argmax(np.diff(edges)))
             s, e = s + edges[k] + 1, s + edges[k + 1]
         xs = x[s:e]
-        crossings, med = _cycles(xs)
-        runs = _steady_runs(xs, crossings, tolerance)
+        cycles = _cycles(xs)
+        runs = _steady_runs(xs, cycles, tolerance)
         if label is not None:
             runs = [max(runs, key=lambda r: r[1] - r[0])] if runs else []
         for c0, c1 in runs:
@@ -193,11 +176,10 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
                     counter += 1
                 seen_labels.add(lab)
                 continue
-            a0 = s + crossings[c0 + settle_cycles]
-            a1 = s + crossings[c1 + 1]
+            first, last = cycles[c0 + settle_cycles], cycles[c1]
+            a0, a1 = s + first.start, s + last.end
             ncyc = n_steady - settle_cycles
-            freq = ncyc / ((_frac_crossing(xs, crossings[c1 + 1], med)
-                            - _frac_crossing(xs, crossings[c0 + settle_cycles], med)) * dt)
+            freq = ncyc / ((last.end_at - first.start_at) * dt)
             if nf and abs(freq / nf - 1) < 0.005:
                 freq = nf      # the program's frequency is exact (setpoints come from the sample index)
             props = window_properties(x, f, dt, a0, a1, freq)
@@ -208,7 +190,7 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
                 k_dyn=float(props['k_dyn']), loss_angle=float(props['loss_angle']),
                 damping=float(props['damping']), energy=float(props['energy_loop']),
                 c_eq=float(props['c_eq']), nominal_frequency=nf, nominal_amplitude=na,
-                segment=(int(s + crossings[c0]), int(s + crossings[c1 + 1])), recording=recording))
+                segment=(int(s + cycles[c0].start), int(s + last.end)), recording=recording))
             seen_labels.add(lab)
             if label is None:
                 counter += 1
