@@ -12,7 +12,7 @@ from rubber_rig.models import build_model, load_parameter_set
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes.element_model import ElementModelNode
 from rubber_rig.nodes.params import ParameterError
-from rubber_rig.nodes.predictor import ModelChoice, OnlinePredictor, batch_problem
+from rubber_rig.online.predictor import ModelChoice, OnlinePredictor, batch_problem
 from rubber_rig.rig.sim.plant import Sensor
 
 DT, BATCH = 1e-3, 100

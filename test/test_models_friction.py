@@ -201,7 +201,7 @@ def test_deadband_of_10x_the_noise_holds_on_a_quasi_static_triangle(fs):
     """Seed 001's 0.05 mm/s triangle (0.2 mm): 10 to 50 nm per sample under 0.2 um noise, so the running
     extreme collects many noise peaks. 5x the RMS lets dips through (friction energy >10 % low); the node
     default, 10x, keeps it within 1 % of the loop of the clean displacement."""
-    from rubber_rig.nodes.predictor import DEFAULT_REVERSAL_THRESHOLD
+    from rubber_rig.online.predictor import DEFAULT_REVERSAL_THRESHOLD
     dt, amp, rate = 1.0 / fs, 0.2e-3, 0.05e-3
     period = 4 * amp / rate                                  # 16 s
     per_cycle = int(round(period * fs))

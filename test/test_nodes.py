@@ -170,7 +170,7 @@ def test_online_predictor_friction_deadband_keeps_the_loop_on_noisy_displacement
     default reversal deadband (10x the noise) the friction branch dissipates what it does on the true
     displacement; with the paper's rule (0) noise reversals cut the loop by ~10 %."""
     from rubber_rig.models import build_model
-    from rubber_rig.nodes.predictor import DEFAULT_REVERSAL_THRESHOLD, ModelChoice, OnlinePredictor
+    from rubber_rig.online.predictor import DEFAULT_REVERSAL_THRESHOLD, ModelChoice, OnlinePredictor
     from test_models_friction import cycle_energy, noisy_sine
     dt, per_cycle = 1e-3, 2000
     x, noisy = noisy_sine(seed=5, cycles=8, dt=dt, frequency=0.5, amplitude=0.5e-3, noise=DISP_NOISE)
@@ -203,7 +203,7 @@ def test_online_predictor_friction_deadband_keeps_the_loop_on_noisy_displacement
 ])
 def test_an_invalid_model_choice_names_the_field_at_fault(choice, field):
     """ROS-free: the error carries the element_model parameter it concerns (no parsing of its message)."""
-    from rubber_rig.nodes.predictor import ChoiceError, ModelChoice
+    from rubber_rig.online.predictor import ChoiceError, ModelChoice
     with pytest.raises(ChoiceError) as err:
         ModelChoice(**choice).resolve()
     assert err.value.field == field, str(err.value)

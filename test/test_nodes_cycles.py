@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from rubber_rig.models import build_model
-from rubber_rig.nodes.cycles import CyclePairer
-from rubber_rig.nodes.predictor import BlockIndex
+from rubber_rig.online.cycles import CyclePairer
+from rubber_rig.online.predictor import BlockIndex
 
 
 def test_block_index_splits_a_batch_by_block():

@@ -94,8 +94,7 @@ def _parse_blocks(spec: str, n: int) -> list[int]:
 
 def build_program(args) -> tuple:
     """(Program, YAML text) after the command-line overrides; validated like any program."""
-    from rubber_rig.excitation import Program, load_program
-    from rubber_rig.nodes.excitation import read_program
+    from rubber_rig.excitation import Program, load_program, read_program
     overrides = (args.cycles, args.duration_scale, args.blocks, args.taper_cycles)
     if all(v is None for v in overrides):
         return read_program(args.program)

@@ -4,10 +4,11 @@ Everything is generated from the sample index at a fixed rate, never from wall-c
 """
 from .blocks import Block, ProgramError
 from .limits import LimitError, Limits
-from .program import PROGRAM_DIR, Program, load_program, program_source, shipped_programs
+from .program import PROGRAM_DIR, Program, load_program, program_source, read_program, shipped_programs
 from .ramp import SafeRamp
 from .runner import BlockSummary, ProgramRunner, Progress
 from .waveforms import WAVEFORMS
 
 __all__ = ['Block', 'BlockSummary', 'LimitError', 'Limits', 'PROGRAM_DIR', 'Program', 'ProgramError',
-           'ProgramRunner', 'Progress', 'SafeRamp', 'WAVEFORMS', 'load_program', 'program_source', 'shipped_programs']
+           'ProgramRunner', 'Progress', 'SafeRamp', 'WAVEFORMS', 'load_program', 'program_source', 'read_program',
+           'shipped_programs']

@@ -23,6 +23,9 @@ from ..settings import setting
 from .ramp import stopping_positions
 
 from . import waveforms as wf
+from rubber_rig.models import Seed000Params, load_parameter_set
+from rubber_rig.models.fractional import zener_complex_stiffness
+from rubber_rig.models.friction import berg_peak_force
 
 # setpoints the pre-start check generates at most per program (about 0.1 s of numpy); the rest is bounded
 EXACT_SAMPLES = 1 << 21
@@ -277,9 +280,6 @@ def element_force_model(params='seed000_20C', harmonics: int = 256) -> Callable:
     transient), well inside the margin force_max should keep anyway. Hold and ramp blocks: k0 |x| + F_fmax
     (quasi-static).
     """
-    from rubber_rig.models import Seed000Params, load_parameter_set
-    from rubber_rig.models.fractional import zener_complex_stiffness
-    from rubber_rig.models.friction import berg_peak_force
 
     if isinstance(params, str):
         p = load_parameter_set(params)

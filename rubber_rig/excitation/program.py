@@ -185,6 +185,17 @@ def program_source(path_or_name) -> tuple[str, str]:
     return path.read_text(), path.stem
 
 
+def read_program(path: str = '', yaml_text: str = '') -> tuple[Program, str]:
+    """(validated Program, its YAML text) from a file path or shipped name, or else from YAML text (a goal's
+    or a service request's two ways of giving a program)."""
+    if path:
+        text, name = program_source(path)
+        return Program.from_yaml_text(text, name=name), text
+    if not yaml_text.strip():
+        raise ValueError('no program: give program_path or program_yaml')
+    return Program.from_yaml_text(yaml_text, name='goal'), yaml_text
+
+
 def load_program(path_or_name) -> Program:
     """Load a program from a YAML path, or by name from the shipped programs (e.g. "seed000_grid")."""
     text, name = program_source(path_or_name)

@@ -12,6 +12,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from rubber_rig.excitation.program import Program
+from rubber_rig.recording import RecordingError, load_recording
+import yaml
+from rubber_rig.models import load_parameter_set
 
 
 @dataclass
@@ -51,7 +55,6 @@ def _program_blocks(program):
         return None
     if isinstance(program, (str, dict)):
         try:
-            from rubber_rig.excitation.program import Program
             program = (Program.from_yaml_text(program) if isinstance(program, str)
                        else Program.from_dict(program))
         except Exception:   # noqa: BLE001 - without a readable program the blocks are detected
@@ -126,7 +129,6 @@ def from_run_result(result, program=None, name='run', temperature=None, true_par
 
 def load_run(path) -> RunData:
     """Read an MCAP recording with rubber_rig.recording and keep what fitting needs."""
-    from rubber_rig.recording import RecordingError, load_recording
     path = Path(path)
     if not path.exists():
         raise FileNotFoundError(f'no such recording: {path}')
@@ -201,7 +203,6 @@ def _meta_program(meta):
 def _meta_true_params(meta):
     spec = meta.get('specimen')
     if isinstance(spec, str):
-        import yaml
         try:
             spec = yaml.safe_load(spec)
         except yaml.YAMLError:
@@ -213,7 +214,6 @@ def _meta_true_params(meta):
         name = spec.get('parameter_set')
         if name:
             try:
-                from rubber_rig.models import load_parameter_set
                 return load_parameter_set(name).as_dict()
             except Exception:   # noqa: BLE001 - only used to print the truth next to the fit
                 return None

@@ -18,6 +18,8 @@ from .blocks import split_blocks
 from .identify import PARAM_NAMES, Targets, fit_harmonic, objective, params_to_z
 from .metrics import window_properties
 from .properties import measured_style_properties
+from .timefit import model_force
+from .timefit import TimeDomainProblem, fit_time_domain
 
 METHODS = ('harmonic', 'time')
 
@@ -85,7 +87,6 @@ def block_quality(params, blocks, runs_by_name, simulate_blocks=True, forces=Non
                          'r_k': float(pr['r_k'][i]), 'r_e': float(pr['r_e'][i])},
         })
     if simulate_blocks:
-        from .timefit import model_force
         forces = forces or {}
         by_run = {}
         for i, b in enumerate(blocks):
@@ -144,7 +145,6 @@ def fit_runs(runs, method='time', w_k=100.0, w_c=1.0, settle_cycles=3, min_cycle
         stages = dict(h.stages)
         timings = dict(h.timings)
         if method == 'time':
-            from .timefit import TimeDomainProblem, fit_time_domain
             problem = TimeDomainProblem([(run, split[run.name]) for run in group])
             td = fit_time_domain(problem, h.params, h.bounds,
                                  progress=lambda f, w: stage_progress(0.5 + 0.5 * f, w))

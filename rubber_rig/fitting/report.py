@@ -21,6 +21,9 @@ import numpy as np
 
 from .identify import PARAM_NAMES
 from .properties import measured_style_properties
+from rubber_rig.models import Seed000Params, steady_state_properties
+from .timefit import model_force as run_model
+from .pipeline import block_quality
 
 FIGURES = ('loops', 'kdyn_ceq', 'ratios', 'traces', 'errors')
 PAPER = {'k0': (1e-6, 'kN/mm'), 'k_inf': (1e-6, 'kN/mm'), 'tau': (1.0, 's'), 'alpha': (1.0, '-'),
@@ -95,7 +98,6 @@ def fig_kdyn_ceq(blocks, params, plt):
 
 
 def fig_ratios(blocks, params, plt):
-    from rubber_rig.models import Seed000Params, steady_state_properties
     fig, (ak, ae) = plt.subplots(1, 2, figsize=(11, 4.2))
     groups = _amp_groups(blocks)
     fgrid = np.geomspace(min(b.frequency for b in blocks) * 0.8, max(b.frequency for b in blocks) * 1.2, 120)
@@ -168,10 +170,8 @@ def make_report(run, blocks, params, outdir, quality=None, title=None, param_inf
         raise ValueError(f'{run.name}: no usable block to report on')
     model_force = None
     if params is not None:
-        from .timefit import model_force as run_model
         _, model_force = run_model(params, run, blocks)
     if quality is None and params is not None:
-        from .pipeline import block_quality
         quality = block_quality(params, blocks, {run.name: run}, forces={run.name: model_force})
     figs = {'loops': fig_loops(blocks, run, model_force, plt),
             'kdyn_ceq': fig_kdyn_ceq(blocks, params, plt)}

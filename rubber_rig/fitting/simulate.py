@@ -12,6 +12,10 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from rubber_rig.excitation.program import program_source
+from rubber_rig.excitation.program import Program
+from rubber_rig.rig import run_program
+from rubber_rig.recording import RecordingWriter
 
 SAMPLES_TOPIC = '/rubber_rig/samples'
 SETPOINTS_TOPIC = '/rubber_rig/setpoints'
@@ -23,7 +27,6 @@ def _program_text(program) -> str:
         return yaml.safe_dump(program, sort_keys=False)
     if isinstance(program, str) and '\n' in program:
         return program
-    from rubber_rig.excitation.program import program_source
     return program_source(program)[0]
 
 
@@ -32,8 +35,6 @@ def run_simulated(program, specimen: dict, temperature: float, *, force_noise=10
     """Run `program` (name, path, YAML text or mapping) on the simulated rig, unpaced.
 
     Returns (RunResult, program YAML text, rig configuration dict)."""
-    from rubber_rig.excitation.program import Program
-    from rubber_rig.rig import run_program
     text = _program_text(program)
     prog = Program.from_yaml_text(text, name='program')
     sim = {'specimen': dict(specimen), 'force_noise': float(force_noise),
@@ -47,7 +48,6 @@ def write_recording(path, result, program_text: str, specimen: dict, temperature
                     batch: int = 100, channels=('displacement', 'force', 'setpoint')):
     """Write a RunResult as an MCAP recording. `channels` chooses which sample arrays are real; a
     left-out channel is written as NaN (how a missing transducer shows up), for fault tests."""
-    from rubber_rig.recording import RecordingWriter
     path = Path(path)
     meta = {'specimen': dict(specimen), 'temperature': float(temperature), 'program': program_text,
             'rig_config': config or {}, 'source': 'rubber_rig.fitting.simulate'}

@@ -32,12 +32,13 @@ from scipy.optimize import least_squares
 from scipy.signal import butter, sosfiltfilt
 
 from .identify import PARAM_NAMES, FitResult, _z_bounds, jacobian_uncertainty, params_to_z, z_to_params
+from rubber_rig.models import Seed000Params, build_model
+from .blocks import _noise_level
 
 
 def simulate(params: dict, x, dt, reversal_threshold: float = 0.0):
     """Force [N] of the seed-000 model (rubber_rig.models, default scheme) for displacement x [m];
     ``reversal_threshold`` [m] is Berg's reversal deadband (rubber_rig.models.friction), 0 = the paper's rule."""
-    from rubber_rig.models import Seed000Params, build_model
     model = build_model(Seed000Params(**{k: float(params[k]) for k in PARAM_NAMES}), dt,
                         friction_reversal_threshold=reversal_threshold)
     return np.asarray(model.run(np.asarray(x, float)), float)
@@ -47,7 +48,6 @@ def model_input(x, dt, f_max):
     """(displacement [m], reversal threshold [m]) to run the model on for a measured displacement ``x``:
     zero-phase low-pass, and Berg's reversal deadband at the noise-sized reversals of x (5x its noise
     level, at least 2e-4 of its amplitude)."""
-    from .blocks import _noise_level
     x = np.asarray(x, float)
     fs = 1.0 / dt
     fc = min(8.0 * f_max, 0.4 * fs)

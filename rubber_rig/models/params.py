@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from scipy.interpolate import PchipInterpolator
 
 DATA_DIR = Path(__file__).resolve().parent / 'data'
 
@@ -224,7 +225,6 @@ def load_parameter_set(name: str):
 
 @lru_cache(maxsize=None)
 def _temperature_interpolants():
-    from scipy.interpolate import PchipInterpolator
     rows = sorted(_load_yaml('seed000.yaml')['table1'], key=lambda r: r['temperature'])
     t = np.array([r['temperature'] for r in rows])
     col = {k: np.array([float(r[k]) for r in rows]) for k in Seed000Params.names()}

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import numpy as np
+from ..analysis import harmonic_properties
 
 
 def sine_displacement(frequency: float, amplitude: float, dt: float, cycles: float, offset: float = 0.0):
@@ -23,7 +24,6 @@ def time_domain_properties(model, frequency: float, amplitude: float, cycles: in
     give R_K (seed 000 Eq. 30; the friction amplitude is the peak force of Eq. 17/19).
     Returns the keys of ``steady_state_properties`` (values as floats).
     """
-    from ..analysis import harmonic_properties
     model.reset(offset)
     x = sine_displacement(frequency, amplitude, model.dt, cycles, offset)
     total, branches = model.run(x, return_branches=True)

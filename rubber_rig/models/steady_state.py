@@ -9,10 +9,10 @@ viscous branches| and K_df = |sum of the friction branches|.
 from __future__ import annotations
 
 import numpy as np
+from .composite import ParallelModel, build_model
 
 
 def _model_for(params):
-    from .composite import ParallelModel, build_model
     if isinstance(params, ParallelModel):
         return params
     # the analytic forms are the continuous ones whatever the scheme: pick the cheapest to build

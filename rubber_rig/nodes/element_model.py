@@ -13,7 +13,7 @@ naming the parameter, so a running model is never replaced by an invalid one.
 
 ``friction_reversal_threshold`` [m] is the Berg friction element's reversal deadband: the model runs on the
 measured displacement, whose noise would otherwise reset the friction reference state at every wiggle and
-collapse the friction loop (see rubber_rig.nodes.predictor). Set it to a few times the displacement noise RMS;
+collapse the friction loop (see rubber_rig.online.predictor). Set it to a few times the displacement noise RMS;
 0 is the paper's rule. Changing it rebuilds the model (warmed up on the recent history) like a parameter change.
 
 No callback takes the node down: a parameter change that cannot be resolved (a missing or malformed parameter
@@ -21,7 +21,7 @@ file, values out of range) is refused through the SetParametersResult with a rea
 parameter set is read in that validating callback, and what it read is what the post-set callback installs. A
 sample batch the node cannot use (array lengths differ, a sample period that is not finite and positive) is
 dropped with a throttled warning; non-finite samples are skipped by the model and predicted as NaN (see
-rubber_rig.nodes.predictor) and kept out of the cycle metrics; a sequence that goes backwards (a restarted
+rubber_rig.online.predictor) and kept out of the cycle metrics; a sequence that goes backwards (a restarted
 driver) restarts the model and the cycle detection with a log line.
 """
 from __future__ import annotations
@@ -38,10 +38,9 @@ from msg_defs.msg import CycleMetrics, ModelParameters, ModelPrediction, RigSamp
 from rubber_rig.models import load_parameter_set
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.cycles import CyclePairer
 from rubber_rig.nodes.params import ParameterError, declare
-from rubber_rig.nodes.predictor import (DEFAULT_REVERSAL_THRESHOLD, SOURCES, BlockIndex, ChoiceError,
-                                        ModelChoice, OnlinePredictor, batch_problem)
+from rubber_rig.online import (DEFAULT_REVERSAL_THRESHOLD, SOURCES, BlockIndex, ChoiceError, CyclePairer,
+                               ModelChoice, OnlinePredictor, batch_problem)
 from rubber_rig.nodes.spin import spin_node
 
 VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')

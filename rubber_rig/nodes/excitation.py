@@ -34,7 +34,7 @@ from msg_defs.srv import LoadProgram, OpenStream, StopStream
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
-from rubber_rig.excitation import Program, ProgramRunner, program_source
+from rubber_rig.excitation import Program, ProgramRunner, read_program
 from rubber_rig.excitation.limits import element_force_model
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
@@ -42,16 +42,6 @@ from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.nodes.spin import spin_node
 
 READY_STATES = (RigStatus.STATE_IDLE, RigStatus.STATE_RUNNING, RigStatus.STATE_HOLDING)
-
-
-def read_program(path: str = '', yaml_text: str = '') -> tuple[Program, str]:
-    """(validated Program, its YAML text) from a file path / shipped name, or from YAML text."""
-    if path:
-        text, name = program_source(path)
-        return Program.from_yaml_text(text, name=name), text
-    if not yaml_text.strip():
-        raise ValueError('no program: give program_path or program_yaml')
-    return Program.from_yaml_text(yaml_text, name='goal'), yaml_text
 
 
 class ExcitationNode(Node):

@@ -24,6 +24,7 @@ from .gaps import GapTracker, sequence_span
 from .mcapio import Decoders
 from .msgdefs import full_definition, normalize_type
 from .writer import RecordingWriter
+from mcap.records import Schema
 
 
 def _stamp(ns: int) -> str:
@@ -216,7 +217,6 @@ class Recorder:
         try:
             msg_type = normalize_type(msg_type)
             if isinstance(msg, (bytes, bytearray, memoryview)):
-                from mcap.records import Schema
                 if self._decoders is None:
                     self._decoders = Decoders('(not recorded)', lazy_fallback=True)
                 schema = Schema(0, full_definition(msg_type).encode(), 'ros2msg', msg_type)

@@ -1,6 +1,7 @@
 """The specimen of the simulated rig: an element model from rubber_rig.models (default seed 000 at 20 degC),
 or a plain linear spring + dashpot for quick checks."""
 from ..config import ConfigError
+from rubber_rig.models import build_model
 
 
 class LinearSpecimen:
@@ -35,11 +36,6 @@ def build_specimen(spec: dict, dt: float):
             raise ConfigError(f'sim.specimen.{sorted(unknown)[0]}', "unknown for the linear "
                               "specimen (stiffness, damping)")
         return LinearSpecimen(spec.get('stiffness', 1.3e7), spec.get('damping', 2.0e4), dt)
-    try:
-        from rubber_rig.models import build_model
-    except ImportError as exc:
-        raise ConfigError('sim.specimen', f"rubber_rig.models is not available ({exc}); "
-                          "use {model: linear, stiffness: ..., damping: ...}") from None
     try:
         return build_model(spec, dt)
     except (KeyError, ValueError) as exc:

@@ -1,4 +1,4 @@
-"""Per-cycle metrics of measurement and model side by side (ROS-free glue of the element_model node).
+"""Per-cycle metrics of measurement and model side by side (what the element_model node publishes as CycleMetrics).
 
 Both forces (measured and model) belong to the measured displacement, so one CycleDetector cuts the cycles on x
 and evaluates both force channels over exactly the same samples; the pairer maps detector sample indices back

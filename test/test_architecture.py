@@ -1,0 +1,93 @@
+"""The layer rules of the package, written down as a test (an AST scan of every module, no imports).
+
+* ROS (rclpy, the interface packages) is used only by the nodes/ wiring and the cli/ that starts nodes.
+* The core subpackages import one another only along the edges in ALLOWED: what a newcomer reads in the
+  layout of the README (models at the bottom; excitation, rig, recording and fitting above).
+* No function-local imports in the core, except optional heavy ones (matplotlib, only needed for reports).
+"""
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / 'rubber_rig'
+ROS_MODULES = {'rclpy', 'msg_defs', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'std_srvs',
+               'diagnostic_msgs', 'lifecycle_msgs', 'launch', 'launch_ros', 'ament_index_python'}
+ROS_LAYERS = {'nodes', 'cli'}
+# subpackage (or top-level module) -> the parts of rubber_rig it may import
+ALLOWED = {
+    'settings': set(),
+    'units': set(),
+    'paths': set(),
+    'analysis': set(),
+    'models': {'analysis'},
+    'excitation': {'models', 'settings', 'units'},
+    'recording': {'__init__'},
+    'rig': {'excitation', 'models', 'settings'},
+    'online': {'analysis', 'models'},
+    'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig'},
+    'nodes': {'analysis', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'settings'},
+    'cli': {'__init__', 'analysis', 'excitation', 'fitting', 'models', 'nodes', 'paths', 'recording', 'rig',
+            'units'},
+}
+OPTIONAL_HEAVY = {'matplotlib'}
+
+
+def _modules():
+    for path in sorted(PACKAGE.rglob('*.py')):
+        parts = path.relative_to(PACKAGE).parts
+        layer = parts[0] if len(parts) > 1 else parts[0][:-3]
+        yield path, layer, ast.parse(path.read_text(encoding='utf-8'), str(path))
+
+
+def _imported(node, path):
+    """Absolute names a node imports."""
+    if isinstance(node, ast.Import):
+        return [a.name for a in node.names]
+    if node.level:
+        package = ('rubber_rig',) + path.relative_to(PACKAGE).parts[:-1]
+        base = package[:len(package) - node.level + 1]
+        return ['.'.join(base + ((node.module,) if node.module else ()))]
+    return [node.module]
+
+
+MODULES = list(_modules())
+
+
+def test_every_layer_is_known():
+    assert {layer for _, layer, _ in MODULES} - {'__init__'} <= set(ALLOWED)
+
+
+@pytest.mark.parametrize('path, layer, tree', MODULES, ids=[str(p.relative_to(PACKAGE)) for p, _, _ in MODULES])
+def test_layer_rules(path, layer, tree):
+    where = path.relative_to(PACKAGE.parent)
+    for node in ast.walk(tree):
+        if not isinstance(node, (ast.Import, ast.ImportFrom)):
+            continue
+        for name in _imported(node, path):
+            top = name.split('.')[0]
+            if top in ROS_MODULES:
+                assert layer in ROS_LAYERS, f'{where}:{node.lineno} imports {name}: ROS belongs in nodes/ or cli/'
+            if top == 'rubber_rig' and layer != '__init__':
+                target = name.split('.')[1] if '.' in name else '__init__'
+                assert target == layer or target in ALLOWED[layer], \
+                    f'{where}:{node.lineno}: {layer} may not import rubber_rig.{target}'
+    if layer in ROS_LAYERS:
+        return
+    for fn in ast.walk(tree):
+        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            for node in ast.walk(fn):
+                if isinstance(node, (ast.Import, ast.ImportFrom)):
+                    names = _imported(node, path)
+                    assert all(n.split('.')[0] in OPTIONAL_HEAVY for n in names), \
+                        f'{where}:{node.lineno}: function-local import of {", ".join(names)} (import at the top)'
+
+
+def test_the_scan_catches_a_violation():
+    """The rules bite: a core module importing rclpy, a function-local import, a forbidden edge."""
+    with pytest.raises(AssertionError, match='ROS belongs'):
+        test_layer_rules(PACKAGE / 'models' / 'bad.py', 'models', ast.parse('import rclpy\n'))
+    with pytest.raises(AssertionError, match='function-local import of numpy'):
+        test_layer_rules(PACKAGE / 'models' / 'bad.py', 'models', ast.parse('def f():\n    import numpy\n'))
+    with pytest.raises(AssertionError, match='models may not import rubber_rig.rig'):
+        test_layer_rules(PACKAGE / 'models' / 'bad.py', 'models', ast.parse('from rubber_rig.rig import x\n'))
