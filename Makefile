@@ -9,6 +9,7 @@ bench: setup
 	.venv/bin/rubber-rig bench $(ARGS)
 
 test: setup
+	.venv/bin/ruff check .
 	.venv/bin/python -m pytest $(PYTEST_ARGS)
 
 clean:

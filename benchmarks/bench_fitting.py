@@ -16,6 +16,7 @@ Targets: K0, K_inf within 2 %; tau, alpha, x2, F_fmax within 10 %; K_dyn within 
 from __future__ import annotations
 
 import os
+
 if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse

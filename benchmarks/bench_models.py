@@ -15,6 +15,7 @@ Run: .venv/bin/python benchmarks/bench_models.py [--quick]
 from __future__ import annotations
 
 import os
+
 if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse
@@ -44,7 +45,7 @@ def streaming(n, repeats):
     for scheme in ('default', 'paper'):
         m = build_model(P, 1e-3, scheme=scheme)
 
-        def loop():
+        def loop(m=m):
             m.reset()
             step = m.step
             for v in xs:
@@ -68,7 +69,7 @@ def batch(n, repeats):
                 continue
             m.run(x[:1000])   # warm-up
 
-            def go():
+            def go(m=m, x=x):
                 m.reset()
                 m.run(x)
             best, med = best_of(go, repeats)

@@ -13,6 +13,7 @@
    and a check that every batch was recorded.
 """
 import os
+
 if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse
@@ -101,10 +102,10 @@ def proc_cpu_seconds(pid):
 
 def node_cpu(tmp, rate, n, duration):
     import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
 
-    from diagnostic_msgs.msg import DiagnosticArray
     from msg_defs.msg import RigSampleBatch
     from rubber_rig.nodes import topics
 

@@ -9,6 +9,7 @@ specimen). Reports samples, lost frames, achieved rate and per-sample cost.
 Exit status 1 if any run lost a frame or did not complete.
 """
 import os
+
 if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse

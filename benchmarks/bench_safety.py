@@ -13,7 +13,8 @@
    applied command is not the setpoint the program streamed for it, timed by the bus timestamp of its feedback
    frame (the same clock, this machine). For stream loss and the watchdog the driver must first notice the
    silence: their latency is reported in total and beyond the configured detection time (stream_timeout from
-   the last batch, watchdog_timeout from the last heartbeat); --stream-timeout/--watchdog-timeout measure other settings (and their false trips).
+   the last batch, watchdog_timeout from the last heartbeat); --stream-timeout/--watchdog-timeout measure other
+   settings (and their false trips).
 2. False watchdog trips: programs run while two busy processes load both cores; every fault is counted.
 
 The program is a 5 Hz, 1 mm sine (0.031 m/s peak) started at a random phase for each trial. Figures are printed
@@ -22,6 +23,7 @@ as markdown tables (and JSON with --json).
 from __future__ import annotations
 
 import os
+
 if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse
@@ -153,7 +155,8 @@ class Bench:
         program after the restart (the fault clock counts idle time only after the first tick, so the silence
         begins at sample start * FS). Returns (latency from the silence, latency beyond the detection time) [s]:
         the driver detects `timeout` after the last heartbeat, which the controller sends every 50 samples, so
-        0-50 ms before the silence."""
+        0-50 ms before the silence.
+        """
         op, procs = self.op, self.procs
         procs.stop('rig_driver')
         op.clear_history()          # the restarted rig counts samples from 0 again
@@ -194,7 +197,7 @@ def latency_table(results):
 
 
 def load_cores(n=2):
-    """n busy processes (one per core) at normal priority."""
+    """N busy processes (one per core) at normal priority."""
     return [subprocess.Popen([sys.executable, '-c', 'while True: pass']) for _ in range(n)]
 
 

@@ -19,6 +19,7 @@ pipeline delay alone; when the simulated rig catches up late ticks in a burst, t
 from __future__ import annotations
 
 import os
+
 if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse
@@ -70,8 +71,8 @@ def start_processes(args, rate, batch, out_dir, domain):
 def run_once(args, rate: float, out_dir: Path) -> dict:
     from msg_defs.srv import RecorderControl
     from rubber_rig.excitation import Program
-    from rubber_rig.nodes.launcher import InProcessLauncher
     from rubber_rig.nodes.excitation import READY_STATES
+    from rubber_rig.nodes.launcher import InProcessLauncher
     from rubber_rig.nodes.monitor import SuiteMonitor
     from rubber_rig.recording import load_recording
 
@@ -153,7 +154,8 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         'samples_expected': len(expected), 'samples_recorded': int(len(rec)),
         'recording_samples_lost': int(rec.samples_lost), 'recording_gaps': len(rec.gaps),
         'recording_prediction_gaps': len(pred_gaps), 'program_samples_missing': missing_in_program,
-        'starved_samples': starved, 'starved_runs': starved_runs, 'predictions_recorded': int(np.sum(np.isfinite(rec.prediction))),
+        'starved_samples': starved, 'starved_runs': starved_runs,
+        'predictions_recorded': int(np.sum(np.isfinite(rec.prediction))),
         'program_samples_without_prediction': int(np.sum(~np.isfinite(rec.prediction[inside]))),
         'first_sequences_without_prediction': rec.sequence[inside][~np.isfinite(rec.prediction[inside])][:5].tolist(),
         'live': live, 'frames_lost': int(status.frames_lost), 'frames_late': int(status.frames_late),
@@ -192,11 +194,13 @@ def main(argv=None) -> int:
             print(f"    {r['program']}; {r['samples_recorded']} samples recorded of {r['samples_expected']} "
                   f"in the program; lost: recording {r['recording_samples_lost']} ({r['recording_gaps']} gaps), "
                   f"live gaps samples/prediction/setpoints {r['live']['samples']['gaps']}/"
-                  f"{r['live']['prediction']['gaps']}/{r['live']['setpoints']['gaps']}, starved {r['starved_samples']}, "
+                  f"{r['live']['prediction']['gaps']}/{r['live']['setpoints']['gaps']}, "
+                  f"starved {r['starved_samples']}, "
                   f"bus frames lost {r['frames_lost']}"
                   + (f" (starved runs [first sequence, length]: {r['starved_runs']})" if r['starved_runs'] else ''),
                   flush=True)
-            print(f"    latency sample->prediction: last sample of batch median {lat.get('median_ms', float('nan')):.1f}"
+            print("    latency sample->prediction: last sample of batch median "
+                  f"{lat.get('median_ms', float('nan')):.1f}"
                   f" ms, p99 {lat.get('p99_ms', float('nan')):.1f} ms; first sample median "
                   f"{lat1.get('median_ms', float('nan')):.1f} ms, p99 {lat1.get('p99_ms', float('nan')):.1f} ms; "
                   f"CPU {r['cpu_cores']:.2f} cores; "

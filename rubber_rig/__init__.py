@@ -9,7 +9,8 @@ from pathlib import Path
 
 def _version() -> str:
     """The version package.xml states (the one source: setup.py reads it too); '+source' when run from a tree
-    that is not installed."""
+    that is not installed.
+    """
     try:
         return version('rubber_rig')
     except PackageNotFoundError:

@@ -26,7 +26,8 @@ def config_dirs() -> list[Path]:
 
 def find_config(name: str | os.PathLike) -> Path:
     """A file given by path, or a shipped config file by name ('rig_sim.yaml'). Raises FileNotFoundError
-    naming every place it looked."""
+    naming every place it looked.
+    """
     path = Path(name)
     if path.exists():
         return path

@@ -23,7 +23,8 @@ def setting(default: Any = dataclasses.MISSING, doc: str = '', *, units: str = '
     """A dataclass field with its description. name: the parameter's dotted name where it differs from the
     field path (e.g. field 'channel' is parameter 'can.channel'); yaml_text: the parameter is a YAML string
     (a mapping or a list); empty_is_none: the parameter '' means None; nested: the field is a dataclass whose
-    own settings are parameters '<field>.<name>'."""
+    own settings are parameters '<field>.<name>'.
+    """
     meta = {'doc': doc, 'units': units, 'range': range, 'choices': choices, 'name': name,
             'yaml_text': yaml_text, 'empty_is_none': empty_is_none, 'nested': nested}
     if default_factory is not dataclasses.MISSING:
@@ -34,7 +35,9 @@ def setting(default: Any = dataclasses.MISSING, doc: str = '', *, units: str = '
 @dataclass(frozen=True)
 class Setting:
     """One parameter: its dotted name, the field path in the dataclass tree, default (as a parameter value:
-    YAML text for yaml_text settings, '' for None), description, units, range and choices."""
+    YAML text for yaml_text settings, '' for None), description, units, range and choices.
+    """
+
     name: str
     path: str
     default: Any

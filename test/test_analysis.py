@@ -149,7 +149,7 @@ def test_cycle_detector_with_several_force_channels_equals_one_detector_per_chan
         a += one.update(x[s], force[s])
         b += two.update(x[s], other[s])
     assert len(got) == len(a) == len(b) >= 8
-    for c, ra, rb in zip(got, a, b):
+    for c, ra, rb in zip(got, a, b, strict=False):
         assert (c['start'], c['end']) == (ra['start'], ra['end'])
         assert c['channels'][0] == ra['channels'][0] and c['channels'][1] == rb['channels'][0]
         assert c['k_dyn'] == ra['k_dyn']

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from rubber_rig.cli.main import main
-from rubber_rig.units import to_si
 from rubber_rig.models import load_parameter_set, parameters_at_temperature, steady_state_properties
+from rubber_rig.units import to_si
 
 
 @pytest.mark.parametrize('text,dim,value', [

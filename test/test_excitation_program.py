@@ -5,8 +5,15 @@ import math
 import numpy as np
 import pytest
 
-from rubber_rig.excitation import (LimitError, Limits, Program, ProgramError, ProgramRunner, load_program,
-                                   shipped_programs)
+from rubber_rig.excitation import (
+    LimitError,
+    Limits,
+    Program,
+    ProgramError,
+    ProgramRunner,
+    load_program,
+    shipped_programs,
+)
 
 FS = 1000.0
 

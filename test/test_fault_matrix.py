@@ -21,14 +21,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from lifecycle_msgs.msg import Transition
 from lifecycle_msgs.srv import ChangeState
-from msg_defs.msg import RecorderStatus, RigStatus
-from msg_defs.srv import LoadProgram, StopStream
-from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType, ParameterValue
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import SetParameters
 
+from msg_defs.msg import RecorderStatus, RigStatus
+from msg_defs.srv import LoadProgram
 from rubber_rig.nodes.processes import Operator, SuiteProcesses
 from rubber_rig.recording import load_recording
 
@@ -405,7 +405,6 @@ def test_nan_batches_and_bad_parameters_do_not_take_nodes_down(suite):
 
 def test_limits_tightened_at_run_time_apply_at_once(suite):
     procs, op, base = suite
-    since = op.last_sequence + 1
     handle = start_fast_sine(op, 0.5)
     t = time.monotonic()
     r = op.call('rig_driver/set_parameters', SetParameters, SetParameters.Request(parameters=[ParameterMsg(
@@ -414,7 +413,7 @@ def test_limits_tightened_at_run_time_apply_at_once(suite):
     assert r is not None and r.results[0].successful
     result = goal_ends_within(op, handle, t)
     assert 'limit' in result.message, result.message
-    st = wait_at_rest(op)
+    wait_at_rest(op)
     seq, u, _ = op.applied(op.last_sequence - 100)
     assert u[-1] <= 1.0e-3 + 1e-9                                # at rest inside the new limit
     # a program beyond the new limit is refused before anything moves; back to the old limits, it runs

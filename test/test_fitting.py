@@ -9,8 +9,12 @@ from rubber_rig.fitting.blocks import split_blocks
 from rubber_rig.fitting.data import from_arrays, load_run
 from rubber_rig.fitting.identify import PARAM_NAMES, Targets, fit_harmonic
 from rubber_rig.fitting.pipeline import fit_runs
-from rubber_rig.fitting.properties import berg_energy, berg_peak_force, friction_first_harmonic, \
-    measured_style_properties
+from rubber_rig.fitting.properties import (
+    berg_energy,
+    berg_peak_force,
+    friction_first_harmonic,
+    measured_style_properties,
+)
 from rubber_rig.models import build_model, load_parameter_set
 
 # A short version of the shipped seed000_grid program: 4 frequencies x 2 amplitudes, 6 cycles.
@@ -126,7 +130,7 @@ def test_blocks_from_block_index_skip_settling_cycles():
     x, force, bi, _ = model_run('seed000_20C', blocks, noise_f=5.0, noise_x=0.2e-6)
     rep = split_blocks(x, force, 1e-3, block_index=bi, settle_cycles=3)
     assert [b.index for b in rep.blocks] == [0, 1, 2]
-    for b, (f, a, _) in zip(rep.blocks, blocks):
+    for b, (f, a, _) in zip(rep.blocks, blocks, strict=False):
         assert b.frequency == pytest.approx(f, rel=5e-3)
         assert b.amplitude == pytest.approx(a, rel=5e-3)
         assert b.cycles == 8 - 3          # 8 steady cycles, 3 skipped for settling
@@ -141,7 +145,7 @@ def test_blocks_detected_without_metadata_match_the_indexed_ones():
     indexed = split_blocks(x, force, 1e-3, block_index=bi).blocks
     detected = split_blocks(x, force, 1e-3).blocks
     assert len(detected) == len(indexed) == 4
-    for d, i in zip(detected, indexed):
+    for d, i in zip(detected, indexed, strict=False):
         assert d.frequency == pytest.approx(i.frequency, rel=2e-3)
         assert d.amplitude == pytest.approx(i.amplitude, rel=2e-3)
         assert d.k_dyn == pytest.approx(i.k_dyn, rel=2e-3)
@@ -214,7 +218,7 @@ def test_two_temperatures_give_a_table_loadable_as_parameter_sets(recordings, tm
     data = yaml.safe_load(path.read_text())
     assert [r['temperature'] for r in data['table1']] == [20.0, -40.0]
     assert set(data['sets']) == {'fit_20C', 'fit_m40C'}
-    for name, s in data['sets'].items():
+    for s in data['sets'].values():
         assert s['model'] == 'seed000'
         Seed000Params.from_dict(s['values'])          # the models library accepts it as is
     back = load_fit_file(path)

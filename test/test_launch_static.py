@@ -11,9 +11,8 @@ import inspect
 from pathlib import Path
 
 import pytest
-import yaml
-
 import rclpy
+import yaml
 from rclpy.node import Node
 from test_support_package import console_scripts_specs
 

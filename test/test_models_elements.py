@@ -5,8 +5,17 @@ import numpy as np
 import pytest
 
 from rubber_rig.analysis import harmonic_properties
-from rubber_rig.models import (Dashpot, Maxwell, PolynomialSpring, Seed001Params, TangentSpring,
-                               build_model, load_parameter_set, sine_displacement, steady_state_properties)
+from rubber_rig.models import (
+    Dashpot,
+    Maxwell,
+    PolynomialSpring,
+    Seed001Params,
+    TangentSpring,
+    build_model,
+    load_parameter_set,
+    sine_displacement,
+    steady_state_properties,
+)
 
 P20 = load_parameter_set('seed000_20C')
 S001 = Seed001Params(k_t=2.0e6, d_t=6e-3, k1=1.0e6, c1=2.0e4, k2=0.5e6, c2=1.0e3, f_fmax=300.0, x2=0.3e-3)

@@ -3,9 +3,20 @@ import numpy as np
 import pytest
 
 from rubber_rig.analysis import harmonic_properties
-from rubber_rig.models import (FractionalZener, FractionalZenerGL, Maxwell, Seed000Params, TwoOrderFractional,
-                               build_model, gl_complex_stiffness, load_parameter_set, sine_displacement,
-                               two_order_complex_stiffness, zener_complex_stiffness, zener_storage_loss)
+from rubber_rig.models import (
+    FractionalZener,
+    FractionalZenerGL,
+    Maxwell,
+    Seed000Params,
+    TwoOrderFractional,
+    build_model,
+    gl_complex_stiffness,
+    load_parameter_set,
+    sine_displacement,
+    two_order_complex_stiffness,
+    zener_complex_stiffness,
+    zener_storage_loss,
+)
 
 P20 = load_parameter_set('seed000_20C')
 TABLE1 = [load_parameter_set(n) for n in ('seed000_20C', 'seed000_0C', 'seed000_m20C', 'seed000_m40C')]
@@ -29,10 +40,10 @@ def steady_k(element, f, amplitude=1e-3, cycles=6, analysed=2):
 def test_eq12_eq13_are_real_and_imaginary_parts_of_eq11():
     for p in TABLE1:
         w = 2 * np.pi * BAND
-        s, l = zener_storage_loss(w, p.k0, p.k_inf, p.tau, p.alpha)
+        s, loss = zener_storage_loss(w, p.k0, p.k_inf, p.tau, p.alpha)
         k = zk(p, BAND)
         np.testing.assert_allclose(s, k.real, rtol=1e-12)
-        np.testing.assert_allclose(l, k.imag, rtol=1e-12)
+        np.testing.assert_allclose(loss, k.imag, rtol=1e-12)
     # limits: K(0) = K0, K(inf) = K_inf
     assert abs(zk(P20, 1e-12) - P20.k0) < 1e-6 * P20.k0
     assert abs(zk(P20, 1e12) - P20.k_inf) < 1e-3 * P20.k_inf

@@ -2,8 +2,17 @@
 import numpy as np
 import pytest
 
-from rubber_rig.models import (BergFriction, Seed001Params, SmoothCoulomb, berg_force, berg_steady_state, build_model,
-                               load_parameter_set, sine_displacement, steady_state_properties)
+from rubber_rig.models import (
+    BergFriction,
+    Seed001Params,
+    SmoothCoulomb,
+    berg_force,
+    berg_steady_state,
+    build_model,
+    load_parameter_set,
+    sine_displacement,
+    steady_state_properties,
+)
 
 P20 = load_parameter_set('seed000_20C')
 FM, X2 = P20.f_fmax, P20.x2

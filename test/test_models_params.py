@@ -4,8 +4,14 @@ import dataclasses
 import numpy as np
 import pytest
 
-from rubber_rig.models import (KelvinVoigtParams, Seed000Params, build_model, list_parameter_sets,
-                               load_parameter_set, parameters_at_temperature)
+from rubber_rig.models import (
+    KelvinVoigtParams,
+    Seed000Params,
+    build_model,
+    list_parameter_sets,
+    load_parameter_set,
+    parameters_at_temperature,
+)
 
 TABLE1 = {  # paper units: kN/mm, kN/mm, s, -, mm, kN
     'seed000_20C': (20, 12.29, 14.01, 0.043, 0.659, 1.41, 4.57),
@@ -106,7 +112,8 @@ def test_temperature_interpolation_monotone_smooth_and_valid():
     # C1: one-sided slopes agree across the interior table temperatures (10 mK steps)
     for t in (-20.0, 0.0):
         for field in ('k0', 'k_inf', 'tau', 'alpha'):
-            f = lambda tt: getattr(parameters_at_temperature(tt), field)
+            def f(tt, field=field):
+                return getattr(parameters_at_temperature(tt), field)
             left, right = (f(t) - f(t - 0.01)) / 0.01, (f(t + 0.01) - f(t)) / 0.01
             scale = abs(f(t + 10) - f(t - 10)) / 20 + 1e-300
             assert abs(left - right) <= 0.02 * scale + 1e-12 * abs(f(t)), (field, t)

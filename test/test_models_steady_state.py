@@ -2,8 +2,14 @@
 import numpy as np
 import pytest
 
-from rubber_rig.models import (berg_steady_state, build_model, load_parameter_set, steady_state_properties,
-                               time_domain_properties, zener_complex_stiffness)
+from rubber_rig.models import (
+    berg_steady_state,
+    build_model,
+    load_parameter_set,
+    steady_state_properties,
+    time_domain_properties,
+    zener_complex_stiffness,
+)
 
 P20, P40 = load_parameter_set('seed000_20C'), load_parameter_set('seed000_m40C')
 KEYS = ('frequency', 'amplitude', 'k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy', 'r_k', 'r_e')

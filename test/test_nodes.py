@@ -11,12 +11,11 @@ import os
 
 import numpy as np
 import pytest
-
-from msg_defs.msg import ModelParameters, RigStatus
-from msg_defs.srv import RecorderControl
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 
+from msg_defs.msg import ModelParameters, RigStatus
+from msg_defs.srv import RecorderControl
 from rubber_rig.excitation import Program
 from rubber_rig.models import load_parameter_set, parameters_at_temperature, steady_state_properties
 from rubber_rig.nodes import conversions as conv
@@ -105,7 +104,7 @@ def test_program_completes_with_block_summaries(suite):
     result = suite['result']
     assert result.success, result.message
     assert [b.name for b in result.blocks] == ['a', 'b']
-    for b, target in zip(result.blocks, (0.5e-3, 1.0e-3)):
+    for b, target in zip(result.blocks, (0.5e-3, 1.0e-3), strict=False):
         assert b.completed
         assert b.target_amplitude == pytest.approx(target)
         # open loop through the 80 Hz actuator: amplitude error at 2-5 Hz well below 1 %
@@ -169,9 +168,10 @@ def test_online_predictor_friction_deadband_keeps_the_loop_on_noisy_displacement
     """ROS-free: the predictor runs on the measured displacement (0.2 um noise) in 50-sample batches. With the
     default reversal deadband (10x the noise) the friction branch dissipates what it does on the true
     displacement; with the paper's rule (0) noise reversals cut the loop by ~10 %."""
+    from test_models_friction import cycle_energy, noisy_sine
+
     from rubber_rig.models import build_model
     from rubber_rig.online.predictor import DEFAULT_REVERSAL_THRESHOLD, ModelChoice, OnlinePredictor
-    from test_models_friction import cycle_energy, noisy_sine
     dt, per_cycle = 1e-3, 2000
     x, noisy = noisy_sine(seed=5, cycles=8, dt=dt, frequency=0.5, amplitude=0.5e-3, noise=DISP_NOISE)
     assert DEFAULT_REVERSAL_THRESHOLD == pytest.approx(10 * DISP_NOISE)
@@ -262,12 +262,13 @@ def test_model_parameters_are_latched_and_follow_run_time_changes(suite):
     launcher.spin(late)
     assert launcher.wait_for(lambda: got, 15.0), 'latched model_parameters not delivered to a late joiner'
     assert got[-1].parameter_set == 'seed000_20C'
-    assert dict(zip(got[-1].names, got[-1].values))['k0'] == pytest.approx(load_parameter_set('seed000_20C').k0)
+    values = dict(zip(got[-1].names, got[-1].values, strict=True))
+    assert values['k0'] == pytest.approx(load_parameter_set('seed000_20C').k0)
     result = model.set_parameters_atomically([Parameter('source', value='temperature'),
                                               Parameter('temperature', value=-20.0)])
     assert result.successful, result.reason
     assert launcher.wait_for(lambda: got and got[-1].temperature == -20.0, 15.0)
-    values = dict(zip(got[-1].names, got[-1].values))
+    values = dict(zip(got[-1].names, got[-1].values, strict=False))
     assert values['k0'] == pytest.approx(parameters_at_temperature(-20.0).k0)
     model.set_parameters_atomically([Parameter('source', value='parameter_set')])
 

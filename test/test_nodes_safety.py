@@ -3,17 +3,16 @@ import math
 
 import numpy as np
 import pytest
+from rclpy.parameter import Parameter
+from test_nodes import CONFIG, RATE, by_sequence, domain_id, run_program, start_suite
 
 from msg_defs.msg import RigStatus
-from rclpy.parameter import Parameter
-
 from rubber_rig.nodes.element_model import ElementModelNode
 from rubber_rig.nodes.excitation import ExcitationNode
 from rubber_rig.nodes.launcher import InProcessLauncher
 from rubber_rig.nodes.params import ParameterError, undeclared_overrides
 from rubber_rig.nodes.recorder import RecorderNode
 from rubber_rig.nodes.rig_driver import RigDriverNode
-from test_nodes import CONFIG, RATE, by_sequence, domain_id, run_program, start_suite
 
 LONG_SINE = """
 name: long_sine
@@ -150,8 +149,9 @@ def test_rig_driver_lifecycle(tmp_path):
 def test_model_follows_the_rig_temperature_channel(tmp_path):
     """A 0 degC specimen, the model told to follow the rig's temperature channel (starting from 20 degC): it
     re-evaluates its parameters at the measured temperature and then predicts the cold specimen."""
-    from rubber_rig.models import parameters_at_temperature
     from test_nodes import by_sequence
+
+    from rubber_rig.models import parameters_at_temperature
     launcher, nodes = start_suite(tmp_path, recorder=False, driver={
         'sim.specimen.parameter_set': '', 'sim.specimen.temperature': 0.0, 'sim.temperature': 0.0})
     with launcher:
@@ -162,7 +162,7 @@ def test_model_follows_the_rig_temperature_channel(tmp_path):
         assert result.success, result.message
         assert launcher.wait_for(lambda: mon.model_parameters is not None
                                  and abs(mon.model_parameters.temperature) < 0.5, 15.0)
-        values = dict(zip(mon.model_parameters.names, mon.model_parameters.values))
+        values = dict(zip(mon.model_parameters.names, mon.model_parameters.values, strict=False))
         cold = parameters_at_temperature(mon.model_parameters.temperature)
         assert values['k0'] == pytest.approx(cold.k0) and values['f_fmax'] == pytest.approx(cold.f_fmax)
         assert mon.model_parameters.parameter_set == ''
@@ -187,5 +187,5 @@ blocks:
         result = run_program(launcher, nodes['monitor'], program, amplitude_control=True)
         assert result.success, result.message
         assert nodes['excitation'].compensation_memory is False
-        for block, target in zip(result.blocks, (0.5e-3, 0.3e-3)):
+        for block, target in zip(result.blocks, (0.5e-3, 0.3e-3), strict=False):
             assert block.achieved_amplitude == pytest.approx(target, rel=0.01), block.name

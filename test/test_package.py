@@ -49,6 +49,7 @@ def test_the_version_is_written_once_in_package_xml(capsys):
     """package.xml states the version; setup.py, rubber_rig.__version__, MCAP metadata and --version follow it,
     and the interface package is released with it."""
     import pytest
+
     import rubber_rig
     from rubber_rig.cli.main import main
     version = parse_package(str(ROOT / 'package.xml')).version
@@ -64,6 +65,7 @@ def test_the_version_is_written_once_in_package_xml(capsys):
 def test_shipped_config_is_found_in_a_checkout_and_in_an_install_prefix(tmp_path, monkeypatch):
     """A colcon install puts config/ in <prefix>/share/rubber_rig/config (found through AMENT_PREFIX_PATH)."""
     import pytest
+
     from rubber_rig.paths import config_dirs, config_file, find_config
     assert find_config('rig_sim.yaml') == ROOT / 'config' / 'rig_sim.yaml'
     assert config_file('foxglove_layout.json') == ROOT / 'config' / 'foxglove_layout.json'

@@ -12,21 +12,21 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from mcap.reader import make_reader
 from mcap.records import Message
 from mcap.stream_reader import StreamReader
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from ros_support import ros_context, sample_batch, spin_until, spinning
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from msg_defs.msg import RecorderStatus, RigSampleBatch
 from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.recorder import RecorderNode
-from ros_support import ros_context, sample_batch, spin_until, spinning
 from rubber_rig.recording import GapTracker, load_recording, recover
 
 REPO = Path(__file__).resolve().parents[1]

@@ -16,8 +16,15 @@ from mcap.reader import make_reader
 from mcap_ros2.writer import Writer as Ros2Writer
 
 from rubber_rig.cli.main import main as cli
-from rubber_rig.recording import (Recorder, RecordingError, RecordingWriteError, RecordingWriter,
-                                  full_definition, load_recording, recover)
+from rubber_rig.recording import (
+    Recorder,
+    RecordingError,
+    RecordingWriteError,
+    RecordingWriter,
+    full_definition,
+    load_recording,
+    recover,
+)
 
 REPO = Path(__file__).resolve().parents[1]
 BATCH_T = 'msg_defs/msg/RigSampleBatch'

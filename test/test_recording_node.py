@@ -8,18 +8,18 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+from ros_support import ros_context, sample_batch, spin_until, spinning
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from msg_defs.msg import RigSampleBatch, RigStatus
 from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.recorder import RecorderNode
-from ros_support import ros_context, sample_batch, spin_until, spinning
 from rubber_rig.recording import load_recording
 from rubber_rig.recording.qos import parse_offered_qos
 
@@ -222,7 +222,8 @@ def test_unwritable_output_dir_is_reported_not_fatal(context, tmp_path):
     levels = []
     with spinning(context, rec, client_node) as executor:
         client_node.create_subscription(DiagnosticArray, topics.DIAGNOSTICS, lambda m: levels.extend(
-            (s.level, s.message) for s in m.status if s.name == '/unwritable/recorder: recording'), 10)   # fully qualified: no collision
+            # fully qualified name: no collision
+            (s.level, s.message) for s in m.status if s.name == '/unwritable/recorder: recording'), 10)
         assert not rec.core.recording
         assert spin_until(executor, lambda: levels)
         level, message = levels[0]

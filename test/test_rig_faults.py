@@ -2,12 +2,19 @@
 (the controller's applied command moves smoothly back to rest). Limits and bad frames too."""
 import numpy as np
 import pytest
+from test_rig_support import FAST, contiguous_diffs, contiguous_second_diffs
 
 from rubber_rig.excitation import Program
-from rubber_rig.rig import (FAULT_BUS, FAULT_DISPLACEMENT_LIMIT, FAULT_FORCE_LIMIT, FAULT_SENSOR,
-                            FAULT_VELOCITY_LIMIT, FAULT_WATCHDOG, open_rig, run_program)
-
-from test_rig_support import FAST, contiguous_diffs, contiguous_second_diffs
+from rubber_rig.rig import (
+    FAULT_BUS,
+    FAULT_DISPLACEMENT_LIMIT,
+    FAULT_FORCE_LIMIT,
+    FAULT_SENSOR,
+    FAULT_VELOCITY_LIMIT,
+    FAULT_WATCHDOG,
+    open_rig,
+    run_program,
+)
 
 PROG = Program.from_yaml_text('name: f\nblocks:\n  - {waveform: sine, frequency: 5 Hz, amplitude: 1 mm, '
                               'cycles: 10}\n')

@@ -29,6 +29,7 @@ def test_dbc_protocol_module_and_rig_status_msg_agree():
     msg_defs/msg/RigStatus.msg (which rosidl needs as constants) states the same codes."""
     import re
     from pathlib import Path
+
     from rubber_rig.rig.can import protocol
     from rubber_rig.rig.sim.controller import SimController
     db = cantools.database.load_file(str(DBC_PATH))

@@ -5,15 +5,20 @@ import time
 
 import numpy as np
 import pytest
+from test_rig_support import FAST, contiguous_diffs
 
 from rubber_rig.excitation import Limits, Program
 from rubber_rig.excitation.ramp import SafeRamp, stopping_positions
-from rubber_rig.rig import (FAULT_DISPLACEMENT_LIMIT, FAULT_SENSOR, FAULT_VELOCITY_LIMIT, FAULT_WATCHDOG, open_rig,
-                            run_program)
+from rubber_rig.rig import (
+    FAULT_DISPLACEMENT_LIMIT,
+    FAULT_SENSOR,
+    FAULT_VELOCITY_LIMIT,
+    FAULT_WATCHDOG,
+    open_rig,
+    run_program,
+)
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.can.protocol import FAULT_STREAM, SEQ_MOD
-
-from test_rig_support import FAST, contiguous_diffs
 
 FS = 1000.0
 D_MAX = 2.5e-3            # the issue's limits: +-2.5 mm, 0.2 m/s
@@ -23,8 +28,8 @@ A, F = 2.2e-3, 14.0       # the issue's 14 Hz x 2.2 mm sine
 
 
 def sine_program(f=F, a=A, cycles=14, taper=1):
-    return Program.from_yaml_text(f'name: s\nblocks:\n  - {{waveform: sine, frequency: {f} Hz, amplitude: {a * 1e3} mm, '
-                                  f'cycles: {cycles}, taper_cycles: {taper}}}\n')
+    return Program.from_yaml_text(f'name: s\nblocks:\n  - {{waveform: sine, frequency: {f} Hz, '
+                                  f'amplitude: {a * 1e3} mm, cycles: {cycles}, taper_cycles: {taper}}}\n')
 
 
 ISSUE_LIMITS = {'displacement_min': -D_MAX, 'displacement_max': D_MAX, 'velocity_max': V_MAX}
@@ -230,7 +235,8 @@ def test_a_granted_stream_that_never_sends_is_withdrawn_without_a_fault():
         g = drv.open_stream('/rig1/excitation')
         t0 = time.monotonic()
         assert _poll_until(drv, lambda: time.monotonic() - t0 > 0.6, 10 ** 8)
-        assert drv.status.faults == 0 and drv.status.extra['stream_owner'] == '/rig1/excitation'   # past 0.3 s: no fault
+        # past 0.3 s: no fault
+        assert drv.status.faults == 0 and drv.status.extra['stream_owner'] == '/rig1/excitation'
         assert _poll_until(drv, lambda: not drv.status.extra['stream_owner'], 10 ** 8)
         waited = time.monotonic() - t0
         assert drv.FIRST_BATCH_TIMEOUT <= waited <= drv.FIRST_BATCH_TIMEOUT + 0.5, waited

@@ -10,7 +10,7 @@ def console_scripts_specs() -> list:
     tree = ast.parse((ROOT / 'setup.py').read_text())
     for node in ast.walk(tree):
         if isinstance(node, ast.Dict):
-            for key, value in zip(node.keys, node.values):
+            for key, value in zip(node.keys, node.values, strict=False):
                 if isinstance(key, ast.Constant) and key.value == 'console_scripts':
                     return [ast.literal_eval(v) for v in value.elts]
     raise AssertionError('setup.py declares no console_scripts')

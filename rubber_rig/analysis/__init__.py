@@ -8,4 +8,5 @@
 from .cycles import Cycle, CycleCutter, CycleDetector, cut_cycles
 from .harmonic import HarmonicProperties, estimate_frequency, harmonic_properties
 
-__all__ = ['Cycle', 'CycleCutter', 'CycleDetector', 'cut_cycles', 'HarmonicProperties', 'estimate_frequency', 'harmonic_properties']
+__all__ = ['Cycle', 'CycleCutter', 'CycleDetector', 'HarmonicProperties', 'cut_cycles', 'estimate_frequency',
+           'harmonic_properties']

@@ -15,7 +15,9 @@ from .harmonic import harmonic_properties
 
 class Cycle(NamedTuple):
     """One cycle: samples [start, end) of the stream, and the mean crossings that bound it interpolated
-    between samples (start_at, end_at, in samples; end_at - start_at is the period in samples)."""
+    between samples (start_at, end_at, in samples; end_at - start_at is the period in samples).
+    """
+
     start: int
     end: int
     start_at: float
@@ -114,7 +116,8 @@ class CycleCutter:
 
     def _boundary(self, at, at_interpolated):
         """Confirmed upward crossing at absolute sample ``at``: close the running cycle, start the next.
-        Returns the closed cycle if it counts."""
+        Returns the closed cycle if it counts.
+        """
         start, start_at = self._start, self._start_at
         self._start, self._start_at = at, at_interpolated
         cx = np.array(self._x[start - self._x0:at - self._x0]) if start is not None else None
@@ -191,7 +194,7 @@ class CycleDetector:
             self._buffers = [np.zeros(0) for _ in range(1 + len(forces))]
         elif len(forces) + 1 != len(self._buffers):
             raise ValueError(f'{len(self._buffers) - 1} force channels so far, got {len(forces)}')
-        self._buffers = [np.concatenate([b, c]) for b, c in zip(self._buffers, [x] + forces)]
+        self._buffers = [np.concatenate([b, c]) for b, c in zip(self._buffers, [x] + forces, strict=False)]
         out = []
         for cycle in self.cutter.feed(x):
             # the loop closes on the next cycle's first sample

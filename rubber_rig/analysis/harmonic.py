@@ -9,6 +9,7 @@ import numpy as np
 @dataclasses.dataclass(frozen=True)
 class HarmonicProperties:
     """Properties over ``cycles`` whole cycles. SI units; loss_angle in rad."""
+
     frequency: float        # [Hz]
     amplitude: float        # [m] first-harmonic displacement amplitude x1
     mean: float             # [m] mean displacement

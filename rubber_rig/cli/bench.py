@@ -28,8 +28,9 @@ import numpy as np
 import yaml
 
 from rubber_rig.cli.main import CommandError
-from rubber_rig.paths import find_config
 from rubber_rig.excitation.waveforms import PERIODIC, SWEEPS
+from rubber_rig.paths import find_config
+
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--program', default='seed000_grid',
@@ -256,7 +257,8 @@ def write_summary(mcap: Path, summary: dict) -> tuple[Path, Path]:
              f"- result: {summary['result']['message']} in {summary['wall_time_s']:.1f} s wall time",
              f"- samples: {summary['loss']['live']['samples']['samples']} published, "
              f"{summary['loss']['live']['samples']['gaps']} gaps; predictions "
-             f"{summary['loss']['live']['prediction']['samples']}, {summary['loss']['live']['prediction']['gaps']} gaps;"
+             f"{summary['loss']['live']['prediction']['samples']}, "
+             f"{summary['loss']['live']['prediction']['gaps']} gaps;"
              f" recording: {summary['loss']['recording'].get('samples_lost', 'n/a')} samples lost",
              ]
     lat = summary.get('latency', {}).get('last_sample')
@@ -286,7 +288,8 @@ def _wait(launcher, future, timeout: float, what: str):
 def refuse_if_another_suite_runs(launcher, namespace: str, discovery_time: float = 1.5) -> None:
     """Two suites with the same topics on one ROS domain would command one rig from two excitations (and
     record each other): wait for DDS discovery, and refuse to start if a rig_driver or excitation node
-    already runs in this namespace."""
+    already runs in this namespace.
+    """
     from rclpy.node import Node
     probe = launcher.spin(Node('rubber_rig_bench_probe', context=launcher.context, namespace=namespace or None))
     ns = '/' + namespace.strip('/') if namespace.strip('/') else '/'
@@ -515,7 +518,8 @@ def run(args) -> int:
 def recording_loss(mcap: Path, published, recorder_stats: dict) -> dict:
     """Loss of the recording: what the file itself shows (sequence gaps that are real loss) plus every sample
     published during the run (``published``: the monitor's StreamStats of ``samples``) that is not in the file.
-    ``samples_lost`` is the total; it is never 0 while a published sample is missing."""
+    ``samples_lost`` is the total; it is never 0 while a published sample is missing.
+    """
     from rubber_rig.recording import load_recording
     try:
         rec = load_recording(mcap, allow_truncated=True)

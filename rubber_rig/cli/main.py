@@ -29,7 +29,8 @@ COMMANDS = {
 
 def keep_discovery_local(environ=os.environ) -> str:
     """Default ROS_AUTOMATIC_DISCOVERY_RANGE to LOCALHOST when unset (an empty value counts as unset:
-    rcl reads it as the network-wide default). Returns the range in effect."""
+    rcl reads it as the network-wide default). Returns the range in effect.
+    """
     if not environ.get(DISCOVERY_RANGE_VARIABLE):
         environ[DISCOVERY_RANGE_VARIABLE] = DISCOVERY_RANGE_DEFAULT
     return environ[DISCOVERY_RANGE_VARIABLE]

@@ -68,12 +68,12 @@ def _frequencies(args):
             raise ValueError(f'--frequency-grid N must be a whole number, not {args.frequency_grid[2]!r}') from None
         if not 1 <= n <= MAX_GRID_POINTS:
             raise ValueError(f'--frequency-grid N = {n} is outside the allowed range 1 .. {MAX_GRID_POINTS}')
-        for v, text in zip((lo, hi), args.frequency_grid[:2]):
+        for v, text in zip((lo, hi), args.frequency_grid[:2], strict=False):
             _check_range('--frequency-grid', v, FREQUENCY_RANGE, 'Hz', text)
         return list(np.geomspace(lo, hi, n))
     values = args.frequency or ['0.5Hz', '1Hz', '2Hz', '4Hz', '8Hz', '14Hz']
     freqs = [to_si(v, 'frequency') for v in values]
-    for v, text in zip(freqs, values):
+    for v, text in zip(freqs, values, strict=False):
         _check_range('--frequency', v, FREQUENCY_RANGE, 'Hz', text)
     return freqs
 
@@ -81,7 +81,9 @@ def _frequencies(args):
 def _check_range(option, value, allowed, unit, text=None):
     lo, hi = allowed
     if not lo <= value <= hi:
-        given = f'{text} (= {value:g} {unit})' if text is not None and str(text) != f'{value:g}' else f'{value:g} {unit}'
+        given = f'{value:g} {unit}'
+        if text is not None and str(text) != f'{value:g}':
+            given = f'{text} (= {given})'
         raise ValueError(f'{option} {given} is outside the allowed range {lo:g} .. {hi:g} {unit}')
 
 
@@ -114,7 +116,7 @@ def compute(args) -> list:
     spec = _spec(args)
     freqs = _frequencies(args)
     amps = [to_si(v, 'length') for v in args.amplitude]
-    for a, text in zip(amps, args.amplitude):
+    for a, text in zip(amps, args.amplitude, strict=False):
         _check_range('--amplitude', a, AMPLITUDE_RANGE, 'm', text)
     rows = []
     if args.method == 'analytic':

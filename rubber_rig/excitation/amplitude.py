@@ -17,7 +17,7 @@ GAIN_MIN, GAIN_MAX = 0.5, 2.0
 
 
 def _clamp_gain(gain: float) -> float:
-    """gain limited to GAIN_MIN..GAIN_MAX."""
+    """Gain limited to GAIN_MIN..GAIN_MAX."""
     return min(max(gain, GAIN_MIN), GAIN_MAX)
 
 
@@ -25,7 +25,8 @@ def fit_cycle(waveform: str, phase: np.ndarray, x: np.ndarray):
     """Amplitude [m] and mean [m] of one measured cycle.
 
     Sine-like waveforms: least-squares fit of mean + a sin + b cos at the commanded phases (exact for any
-    samples per cycle, robust to noise); triangle/square: half the peak-valley range."""
+    samples per cycle, robust to noise); triangle/square: half the peak-valley range.
+    """
     if waveform in ('triangle', 'square'):
         return 0.5 * float(x.max() - x.min()), 0.5 * float(x.max() + x.min())
     w = 2 * math.pi * phase
@@ -37,7 +38,8 @@ def fit_cycle(waveform: str, phase: np.ndarray, x: np.ndarray):
 class BlockLoop:
     """Cycle bookkeeping of one run of one periodic block: command gain per cycle, measured cycles.
 
-    Gain changes are blended over one whole cycle with a raised cosine, so the command never steps."""
+    Gain changes are blended over one whole cycle with a raised cosine, so the command never steps.
+    """
 
     def __init__(self, block, sample_rate: float, limits, control: bool):
         self.block, self.fs, self.limits, self.control = block, sample_rate, limits, control
@@ -56,7 +58,8 @@ class BlockLoop:
 
     def start_from(self, gain: float, offset: float) -> None:
         """Start the block's command at `gain` and mean `offset` [m] (e.g. from the run's compensation memory)
-        instead of 1 and 0; the gain is capped like every correction. Call before the first command()."""
+        instead of 1 and 0; the gain is capped like every correction. Call before the first command().
+        """
         if self._committed:
             raise RuntimeError('start_from() after the block has started')
         self.offset = float(offset)
@@ -130,7 +133,8 @@ class BlockLoop:
 
     def learned(self):
         """(gain, offset [m]) the block needs - 1 / plant gain and the mean correction - averaged over the last
-        half of the cycles judged so far (uncapped by the limits), or None before the first."""
+        half of the cycles judged so far (uncapped by the limits), or None before the first.
+        """
         if not self.estimates:
             return None
         tail = self.estimates[len(self.estimates) // 2:]

@@ -4,8 +4,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import waveforms as wf
 from rubber_rig.units import to_si
+
+from . import waveforms as wf
 
 
 class ProgramError(ValueError):
@@ -51,6 +52,7 @@ class Block:
     add `taper_cycles` each. For sweeps, `frequency` is the start and `frequency_end` the end frequency and
     `duration` the sweep time at full amplitude. `start_level` is where the block starts (previous block's end).
     """
+
     index: int
     name: str
     waveform: str
@@ -130,7 +132,8 @@ class Block:
         """Setpoint [m] at local times t [s] (array).
 
         gain scales the amplitude and offset shifts the mean (amplitude control); start_level overrides
-        where a ramp starts (resume after hold)."""
+        where a ramp starts (resume after hold).
+        """
         t = np.asarray(t, dtype=float)
         if self.periodic:
             return self.evaluate_phase(self.phase(t), gain, offset)

@@ -36,6 +36,7 @@ SAME_FREQUENCY = 0.01        # |ln(f1 / f2)| below this: one column of the table
 @dataclass(frozen=True)
 class Learned:
     """One entry: what the loop learned in one block. SI units."""
+
     waveform: str
     frequency: float         # [Hz]
     amplitude: float         # [m] target amplitude of the block
@@ -59,7 +60,7 @@ def _interpolate(points, x):
     elif x >= points[-1][0]:
         (xa, va), (xb, vb) = points[-1], points[-2]
     else:
-        for (x0, v0), (x1, v1) in zip(points, points[1:]):
+        for (x0, v0), (x1, v1) in zip(points, points[1:], strict=False):
             if x0 <= x <= x1:
                 return v0 + (v1 - v0) * (x - x0) / (x1 - x0)
     span = abs(xa - xb)
@@ -90,7 +91,8 @@ class CompensationMemory:
     def lookup(self, block, exclude: int = None):
         """(gain, offset [m]) to start `block` with, or None when nothing applicable was learned.
 
-        exclude: a block index whose entry is ignored."""
+        exclude: a block index whose entry is ignored.
+        """
         if block.waveform not in PERIODIC or block.frequency <= 0 or block.amplitude <= 0:
             return None
         key = _key(block)

@@ -19,13 +19,13 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..settings import setting
-from .ramp import stopping_positions
-
-from . import waveforms as wf
 from rubber_rig.models import Seed000Params, load_parameter_set
 from rubber_rig.models.fractional import zener_complex_stiffness
 from rubber_rig.models.friction import berg_peak_force
+
+from ..settings import setting
+from . import waveforms as wf
+from .ramp import stopping_positions
 
 # setpoints the pre-start check generates at most per program (about 0.1 s of numpy); the rest is bounded
 EXACT_SAMPLES = 1 << 21
@@ -34,7 +34,8 @@ _CHUNK = 1 << 18
 
 class LimitError(ValueError):
     """A program or setpoint would leave the safe envelope; the message names the limit and where. `field`: the
-    Limits field a bad configuration value concerns ('' for a program or setpoint outside the envelope)."""
+    Limits field a bad configuration value concerns ('' for a program or setpoint outside the envelope).
+    """
 
     def __init__(self, message: str, field: str = ''):
         super().__init__(message)
@@ -49,7 +50,9 @@ class Limits:
 
     stiffness_estimate [N/m], if given, lets the pre-start check predict the peak force k * |x|; force_model, if
     given, is a callable block -> predicted peak |force| [N] that the pre-start check asks for every block
-    (see element_force_model); check_program(force_model=...) overrides it for one check."""
+    (see element_force_model); check_program(force_model=...) overrides it for one check.
+    """
+
     displacement_min: float = setting(-5e-3, 'lowest allowed displacement', units='m', range=(-1.0, 1.0))
     displacement_max: float = setting(5e-3, 'highest allowed displacement', units='m', range=(-1.0, 1.0))
     velocity_max: float = setting(0.2, 'highest allowed velocity', units='m/s', range=(1e-6, 100.0))
@@ -99,12 +102,13 @@ class Limits:
         return {f.name: getattr(self, f.name) for f in fields(self) if f.name != 'force_model'}
 
     def clamp_position(self, x: float) -> float:
-        """x [m] moved inside the displacement range."""
+        """X [m] moved inside the displacement range."""
         return min(max(x, self.displacement_min), self.displacement_max)
 
     def check_setpoints(self, x, sample_rate: float, previous: Optional[float] = None, where: str = 'setpoint'):
         """Raise LimitError if setpoints x [m] (shape (n,)) leave the displacement range or their velocity
-        (finite difference at sample_rate [Hz], starting from `previous` if given) exceeds velocity_max."""
+        (finite difference at sample_rate [Hz], starting from `previous` if given) exceeds velocity_max.
+        """
         x = np.asarray(x, dtype=float)
         if x.size == 0:
             return
@@ -144,7 +148,8 @@ class Limits:
         """Check `program` (open loop) at sample_rate [Hz] before it starts, block by block, so the error names
         the block: the sample-rate rule (ProgramError, see Program.check_sample_rate), displacement, velocity,
         and the peak force predicted by stiffness_estimate and by `force_model` (default: self.force_model), a
-        callable block -> predicted peak |force| [N]. Bounded cost (module docstring)."""
+        callable block -> predicted peak |force| [N]. Bounded cost (module docstring).
+        """
         program.check_sample_rate(sample_rate)
         fs = float(sample_rate)
         model = force_model if force_model is not None else self.force_model
@@ -191,7 +196,8 @@ class Limits:
         """Check a block of n samples (more than the exact budget) from closed-form bounds on its samples.
 
         Returns (its last setpoint, the budget left). The taper in and out (and the step from `prev` into the
-        block) are generated exactly if they fit the budget; the rest is bounded by the supremum of its samples."""
+        block) are generated exactly if they fit the budget; the rest is bounded by the supremum of its samples.
+        """
         first = blk.start_level if not blk.periodic else blk.mean          # every block starts at its level
         self.check_setpoints([first], fs, prev, where)                    # the step into the block
         last = None
@@ -247,7 +253,8 @@ def _taper_slope(blk) -> float:
     In the taper env = (1 - cos(pi u)) / 2 with u = phase / taper_cycles, so |env'| = pi sin(pi u) / (2 T);
     with |shape| <= 1 and |shape'| <= s (2 pi sine, 4 triangle, 4 square_slope): |env' shape + env shape'| <=
     |env'| + s env, and for a sine sqrt(env'^2 + (2 pi env)^2) (Cauchy-Schwarz on sin, cos). Maximised over u on
-    a fine grid (+1e-4 for the grid); 0.8 % above 2 pi for a sine with one taper cycle."""
+    a fine grid (+1e-4 for the grid); 0.8 % above 2 pi for a sine with one taper cycle.
+    """
     env = 0.5 - 0.5 * np.cos(np.pi * _U)
     d_env = 0.5 * np.pi * np.sin(np.pi * _U) / blk.taper_cycles
     if blk.waveform in ('triangle', 'square'):
@@ -280,7 +287,6 @@ def element_force_model(params='seed000_20C', harmonics: int = 256) -> Callable:
     transient), well inside the margin force_max should keep anyway. Hold and ramp blocks: k0 |x| + F_fmax
     (quasi-static).
     """
-
     if isinstance(params, str):
         p = load_parameter_set(params)
     elif isinstance(params, dict):

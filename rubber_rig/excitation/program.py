@@ -3,7 +3,8 @@
 Bounded by construction, so no request can occupy the excitation for long: at most MAX_BLOCKS blocks (grids
 included) and MAX_PROGRAM_DURATION (24 h) of rig time, every number finite, every block frequency at least
 MIN_FREQUENCY; the sample-rate rule (f <= MAX_FREQUENCY_FRACTION * fs, i.e. fs/10) is checked by
-Program.check_sample_rate where the rate is known (Limits.check_program, ProgramRunner)."""
+Program.check_sample_rate where the rate is known (Limits.check_program, ProgramRunner).
+"""
 import itertools
 import math
 from dataclasses import dataclass, field
@@ -13,9 +14,9 @@ from typing import List
 import numpy as np
 import yaml
 
-from .blocks import (MAX_FREQUENCY_FRACTION, MAX_PROGRAM_DURATION, MIN_FREQUENCY, Block,  # noqa: F401
-                     ProgramError, parse_block)
 from rubber_rig.units import to_si
+
+from .blocks import MAX_FREQUENCY_FRACTION, MAX_PROGRAM_DURATION, MIN_FREQUENCY, Block, ProgramError, parse_block  # noqa: F401
 
 PROGRAM_DIR = Path(__file__).with_name('programs')
 # The most blocks a program may have (after grid expansion): far above any real test plan (seed000_grid has
@@ -27,6 +28,7 @@ _TOP_FIELDS = {'name', 'description', 'source', 'initial_position', 'rest_positi
 @dataclass
 class Program:
     """A validated test program. `blocks` are in run order; positions are SI [m]."""
+
     name: str
     blocks: List[Block]
     description: str = ''
@@ -82,7 +84,8 @@ class Program:
     def check_sample_rate(self, sample_rate: float) -> None:
         """Raise ProgramError unless the program can run at sample_rate [Hz]: a finite positive rate, every
         periodic block's highest frequency at most MAX_FREQUENCY_FRACTION * sample_rate (fs/10, see blocks.py)
-        and at most MAX_PROGRAM_DURATION of samples. Cost: one pass over the blocks."""
+        and at most MAX_PROGRAM_DURATION of samples. Cost: one pass over the blocks.
+        """
         fs = sample_rate
         if isinstance(fs, bool) or not isinstance(fs, (int, float)) or not math.isfinite(fs) or fs <= 0:
             raise ProgramError(f'program {self.name!r}: sample rate {fs!r} Hz must be a finite number > 0')
@@ -131,7 +134,8 @@ class Program:
 
 def _expand_grid(raw, first_index):
     """A block whose 'amplitude' and/or 'frequency' is a list stands for the grid of all combinations
-    (amplitude outer, frequency inner), named <name>_<A>mm_<f>Hz."""
+    (amplitude outer, frequency inner), named <name>_<A>mm_<f>Hz.
+    """
     if first_index >= MAX_BLOCKS:
         raise ProgramError(f'block {first_index}: the program has more than {MAX_BLOCKS} blocks')
     if not isinstance(raw, dict):
@@ -152,9 +156,9 @@ def _expand_grid(raw, first_index):
     base = raw.get('name') or raw.get('waveform', 'block')
     for combo in itertools.product(*(raw[k] for k in grid_keys)):
         blk = dict(raw)
-        blk.update(zip(grid_keys, combo))
+        blk.update(zip(grid_keys, combo, strict=False))
         parts = []
-        for k, v in zip(grid_keys, combo):
+        for k, v in zip(grid_keys, combo, strict=False):
             try:
                 si = to_si(v, 'length' if k == 'amplitude' else 'frequency')
                 parts.append(f'{si * 1e3:g}mm' if k == 'amplitude' else f'{si:g}Hz')
@@ -187,7 +191,8 @@ def program_source(path_or_name) -> tuple[str, str]:
 
 def read_program(path: str = '', yaml_text: str = '') -> tuple[Program, str]:
     """(validated Program, its YAML text) from a file path or shipped name, or else from YAML text (a goal's
-    or a service request's two ways of giving a program)."""
+    or a service request's two ways of giving a program).
+    """
     if path:
         text, name = program_source(path)
         return Program.from_yaml_text(text, name=name), text

@@ -5,7 +5,8 @@ Why a velocity-from-distance law and not a linear follower: a follower (second-o
 target) overshoots when it starts fast (aborting a 14 Hz sine near its peak) and has no notion of the limits;
 the braking curve below is the discrete-time stopping distance, so the ramp provably stops inside
 [lower, upper] whenever the starting state can stop there at ``decel_max`` (which is what
-``stopping_positions`` lets the host check on every streamed setpoint before it is sent)."""
+``stopping_positions`` lets the host check on every streamed setpoint before it is sent).
+"""
 import math
 
 import numpy as np
@@ -20,7 +21,8 @@ DECEL_MAX = 100.0          # hardest braking, only where the displacement limits
 def braking_velocity(distance, dv: float, dt: float):
     """Largest speed [m/s] from which a motion that loses at most dv [m/s] per sample of dt [s] still stops
     within `distance` [m] (>= 0): the positive root of dt * v * (v / dv + 1) / 2 = distance, the distance
-    covered by v, v - dv, v - 2 dv, ... Works on scalars and arrays."""
+    covered by v, v - dv, v - 2 dv, ... Works on scalars and arrays.
+    """
     d = np.maximum(distance, 0.0)
     return 0.5 * (-dv + np.sqrt(dv * dv + 8.0 * dv * d / dt))
 
@@ -28,7 +30,8 @@ def braking_velocity(distance, dv: float, dt: float):
 def stopping_positions(x, v, decel: float, sample_rate: float):
     """Where a motion that reached positions x [m] with velocities v [m/s] (the last step's; arrays of the same
     shape) comes to rest when it brakes at `decel` [m/s^2] from the next step on: the steps v - dv, v - 2 dv,
-    ... (dv = decel / sample_rate) cover dt * |v| * (|v| / dv - 1) / 2 - the distance SafeRamp needs."""
+    ... (dv = decel / sample_rate) cover dt * |v| * (|v| / dv - 1) / 2 - the distance SafeRamp needs.
+    """
     dt = 1.0 / sample_rate
     v = np.asarray(v, dtype=float)
     speed = np.abs(v)
@@ -45,7 +48,8 @@ class SafeRamp:
     even that cannot keep it inside (a start state the host did not check), it brakes harder still and counts
     the samples in ``decel_exceeded`` rather than leave the limits. Position and velocity are continuous at the
     start (no step); the last move is below ``tolerance`` (0.05 um). Used by the program runner (abort, hold,
-    approach) and the simulated controller (abort, hold, host watchdog)."""
+    approach) and the simulated controller (abort, hold, host watchdog).
+    """
 
     def __init__(self, x0: float, v0: float, target: float, sample_rate: float, *,
                  velocity_max: float = RAMP_VELOCITY, accel_max: float = RAMP_ACCEL, brake_decel: float = BRAKE_DECEL,
@@ -65,7 +69,8 @@ class SafeRamp:
         self.v_max, self.tol = float(velocity_max), float(tolerance)
         self.dv_travel = float(accel_max) * self.dt
         self.dv_limit = max(float(decel_max), float(accel_max)) * self.dt
-        self.dv_brake = min(max(float(brake_decel), float(accel_max)), max(float(decel_max), float(accel_max))) * self.dt
+        accel_max = float(accel_max)
+        self.dv_brake = min(max(float(brake_decel), accel_max), max(float(decel_max), accel_max)) * self.dt
         self.decel_exceeded = 0      # samples where staying inside [lower, upper] needed more than decel_max
         self.done = False
 

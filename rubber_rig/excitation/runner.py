@@ -1,5 +1,6 @@
 """ProgramRunner: turns a program into setpoint chunks from the sample index, with amplitude control,
-limit enforcement on every setpoint, hold/resume and the abort ramp."""
+limit enforcement on every setpoint, hold/resume and the abort ramp.
+"""
 import bisect
 import math
 from dataclasses import dataclass
@@ -15,6 +16,7 @@ from .ramp import RAMP_VELOCITY, SafeRamp
 @dataclass
 class Progress:
     """Where the runner is (generation side) and the latest measured amplitude. SI units."""
+
     block_index: int
     block_name: str
     block_count: int
@@ -29,6 +31,7 @@ class Progress:
 @dataclass
 class BlockSummary:
     """Result of one executed block (fields as msg_defs/BlockSummary)."""
+
     block_index: int
     name: str
     waveform: str
@@ -112,7 +115,8 @@ class ProgramRunner:
     # ---- commands
     def abort(self, reason: str = 'abort', target: float = None):
         """Stop the program: the following setpoints are a smooth ramp from the current setpoint and velocity to
-        `target` [m] (default: the program's rest_position, normally zero), inside the limits."""
+        `target` [m] (default: the program's rest_position, normally zero), inside the limits.
+        """
         if self.state == 'finished' and self.aborted:
             return
         target = self.program.rest_position if target is None else target
@@ -138,7 +142,8 @@ class ProgramRunner:
 
     def resume_at(self, sequence: int, position: float):
         """Continue after hold() on a new stream: the held block restarts from its beginning at `sequence`,
-        approached smoothly from `position` [m] (where the rig holds) if that is not where the block starts."""
+        approached smoothly from `position` [m] (where the rig holds) if that is not where the block starts.
+        """
         if self.state != 'holding':
             return
         target = self.hold_target
@@ -151,7 +156,8 @@ class ProgramRunner:
 
     def resume(self):
         """Continue after hold(): the held block restarts from its beginning (with its taper) once the hold
-        ramp has settled."""
+        ramp has settled.
+        """
         if self.state == 'holding':
             self._resume = True
 
@@ -165,7 +171,8 @@ class ProgramRunner:
     # ---- generation
     def next_setpoints(self, n: int) -> np.ndarray:
         """The next n setpoints [m], shape (n,); their sequence numbers are self.sequence .. + n - 1 (before the
-        call). After the end the last value is held."""
+        call). After the end the last value is held.
+        """
         out = np.empty(int(n))
         blocks = np.full(int(n), -1, dtype=np.int32)
         i = 0
@@ -272,7 +279,8 @@ class ProgramRunner:
         """Measured displacement [m] for sequences first_seq .. + len - 1 (gaps allowed between calls).
 
         Drives the amplitude loop and the achieved-amplitude report; samples outside program blocks (ramps
-        after abort) are ignored."""
+        after abort) are ignored.
+        """
         x = np.asarray(displacement, dtype=float)
         if x.size == 0:
             return

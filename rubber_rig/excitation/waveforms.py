@@ -25,7 +25,8 @@ def shape(waveform: str, phase, square_slope: float = 1.0):
     """Unit shape (-1..1) of a periodic waveform at `phase` [cycles].
 
     square_slope: for 'square' (trapezoid), the edge slope relative to the triangle's (>= 1); the edges then
-    take 1/square_slope of a quarter period each, which realises a set transition rate."""
+    take 1/square_slope of a quarter period each, which realises a set transition rate.
+    """
     if waveform in ('sine',) + SWEEPS:
         return np.sin(2.0 * np.pi * phase)
     if waveform == 'triangle':
@@ -44,7 +45,8 @@ def envelope(phase, total_cycles: float, taper_cycles: float):
 
 def sweep_phase(t, f0: float, f1: float, taper_cycles: float, duration: float, log: bool):
     """Phase [cycles] of a sweep block at times t [s]: taper_cycles at f0, a linear or logarithmic sweep
-    f0 -> f1 over `duration` s, then taper_cycles at f1. Returns (phase, total_cycles)."""
+    f0 -> f1 over `duration` s, then taper_cycles at f1. Returns (phase, total_cycles).
+    """
     t_in = taper_cycles / f0
     tau = np.clip(t - t_in, 0.0, duration)
     if log and f1 != f0:

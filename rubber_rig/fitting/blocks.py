@@ -3,7 +3,8 @@
 A block is one harmonic excitation (frequency, amplitude, mean). Boundaries come from, in order:
 1. the recorded block index channel (the rig stamps every sample with its program block),
 2. otherwise detection of steady periodic segments: cycles are cut as the online cycle metrics cut them
-   (:func:`rubber_rig.analysis.cut_cycles`: upward mean crossings with hysteresis), and consecutive cycles with the same period and
+   (:func:`rubber_rig.analysis.cut_cycles`: upward mean crossings with hysteresis), and consecutive cycles
+   with the same period and
    amplitude (within `tolerance`) form a segment. Taper-in/out cycles change amplitude and therefore
    fall outside the segments.
 The recorded program (if any) then labels blocks with their nominal frequency and amplitude.
@@ -24,6 +25,7 @@ from .metrics import window_properties
 @dataclass
 class BlockResult:
     """Measured properties of one block (SI units)."""
+
     index: int                 # block number in the recording (program order when known)
     start: int                 # first analysed sample
     stop: int                  # one past the last analysed sample
@@ -64,7 +66,8 @@ def _cycles(x) -> list:
     """The cycles of x, cut as everywhere else (:func:`rubber_rig.analysis.cut_cycles`) about the levels of the
     whole segment. The hysteresis band is 2 % of the largest amplitude but at least 5 noise sigmas, so that
     small-amplitude blocks of a recording without block index still cross it, and motion within 5 noise
-    sigmas of standing still makes no cycle."""
+    sigmas of standing still makes no cycle.
+    """
     x = np.asarray(x, float)
     if x.size < 4:
         return []
@@ -131,7 +134,7 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
         bi = np.asarray(block_index)
         change = np.flatnonzero(np.diff(bi) != 0) + 1
         bounds = np.concatenate([[0], change, [bi.size]])
-        for s, e in zip(bounds[:-1], bounds[1:]):
+        for s, e in zip(bounds[:-1], bounds[1:], strict=False):
             if bi[s] >= 0:
                 segments.append((int(bi[s]), int(s), int(e)))
     else:

@@ -12,10 +12,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from rubber_rig.excitation.program import Program
-from rubber_rig.recording import RecordingError, load_recording
 import yaml
+
+from rubber_rig.excitation.program import Program
 from rubber_rig.models import load_parameter_set
+from rubber_rig.recording import RecordingError, load_recording
 
 
 @dataclass

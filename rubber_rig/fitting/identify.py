@@ -49,6 +49,7 @@ def params_to_z(p):
 @dataclass
 class Targets:
     """Measured block properties as arrays (SI)."""
+
     frequency: np.ndarray
     amplitude: np.ndarray
     k_dyn: np.ndarray
@@ -120,9 +121,9 @@ def jacobian_uncertainty(residual_fn, p: dict, eps=1e-4):
             down = max(down, p['k0'])
         step = base.copy()
         step[i] = up
-        rp = residual_fn(dict(zip(names, step)))
+        rp = residual_fn(dict(zip(names, step, strict=False)))
         step[i] = down
-        rm = residual_fn(dict(zip(names, step)))
+        rm = residual_fn(dict(zip(names, step, strict=False)))
         cols.append((rp - rm) / np.log(up / down))
     jac = np.column_stack(cols)
     m, n = jac.shape
@@ -138,9 +139,9 @@ def jacobian_uncertainty(residual_fn, p: dict, eps=1e-4):
         corr = cov / np.outer(sd, sd)
     sens = np.linalg.norm(jac, axis=0)
     return {
-        'relative_sigma': {n: float(v) for n, v in zip(names, sd)},
-        'sigma': {n: float(v * p[n]) for n, v in zip(names, sd)},
-        'sensitivity': {n: float(v) for n, v in zip(names, sens)},
+        'relative_sigma': {n: float(v) for n, v in zip(names, sd, strict=False)},
+        'sigma': {n: float(v * p[n]) for n, v in zip(names, sd, strict=False)},
+        'sensitivity': {n: float(v) for n, v in zip(names, sens, strict=False)},
         'correlation': [[float(c) for c in row] for row in corr],
         'condition_number': float(np.linalg.cond(jtj)),
         'residual_rms': float(np.sqrt(np.mean(r0 * r0))),
@@ -176,7 +177,7 @@ def fit_harmonic(t: Targets, w_k=100.0, w_c=1.0, seed=0, maxiter=400, popsize=20
             progress(min(calls['n'] / maxiter, max(convergence, 0.0)), 'global search')
         return False
 
-    de = differential_evolution(objective, list(zip(lo, hi)), args=(t, w_k, w_c), seed=seed,
+    de = differential_evolution(objective, list(zip(lo, hi, strict=False)), args=(t, w_k, w_c), seed=seed,
                                 maxiter=maxiter, popsize=popsize, tol=1e-10, atol=0,
                                 mutation=(0.5, 1.0), recombination=0.9, init='sobol',
                                 polish=False, vectorized=True, updating='deferred',
@@ -197,7 +198,8 @@ def fit_harmonic(t: Targets, w_k=100.0, w_c=1.0, seed=0, maxiter=400, popsize=20
                     timings={'global_s': t1 - t0, 'polish_s': t2 - t1},
                     stages={'global': {k: float(v) for k, v in z_to_params(de.x).items()},
                             'polish': dict(p)})
-    at_bound = [n for n, z, l, h in zip(_Z_NAMES, ls.x, lo, hi) if min(z - l, h - z) < 1e-6 * (h - l)]
+    at_bound = [n for n, z, low, high in zip(_Z_NAMES, ls.x, lo, hi, strict=True)
+                if min(z - low, high - z) < 1e-6 * (high - low)]
     if at_bound:
         res.messages.append(f'parameters at a search bound: {at_bound}; the data do not constrain them')
     return res

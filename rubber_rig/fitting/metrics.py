@@ -8,6 +8,7 @@ inclusive), so that the loop closes on itself and all its cycles are used.
 from __future__ import annotations
 
 import numpy as np
+
 from rubber_rig.analysis import harmonic_properties as _shared
 
 

@@ -18,8 +18,7 @@ from .blocks import split_blocks
 from .identify import PARAM_NAMES, Targets, fit_harmonic, objective, params_to_z
 from .metrics import window_properties
 from .properties import measured_style_properties
-from .timefit import model_force
-from .timefit import TimeDomainProblem, fit_time_domain
+from .timefit import TimeDomainProblem, fit_time_domain, model_force
 
 METHODS = ('harmonic', 'time')
 
@@ -128,7 +127,7 @@ def fit_runs(runs, method='time', w_k=100.0, w_c=1.0, settle_cycles=3, min_cycle
         raise ValueError('no usable blocks in any recording: ' + '; '.join(messages))
     fits = []
     for n_group, (temp, group) in enumerate(sorted(groups.items(), key=lambda kv: (kv[0] is None, kv[0] or 0))):
-        def stage_progress(frac, what, n_group=n_group):
+        def stage_progress(frac, what, n_group=n_group, temp=temp):
             if progress is not None:
                 progress((n_group + frac) / len(groups), f'{_label(temp)}: {what}')
 

@@ -23,7 +23,7 @@ from __future__ import annotations
 import numpy as np
 
 from rubber_rig.models.fractional import zener_complex_stiffness
-from rubber_rig.models.friction import berg_energy, berg_peak_force   # noqa: F401  (re-exported)
+from rubber_rig.models.friction import berg_energy, berg_peak_force  # noqa: F401  (re-exported)
 
 # Gauss-Legendre nodes on [-pi/2, pi/2] for the ascending branch x = x0 sin(theta).
 # The integrand is smooth (analytic in theta for x0 > 0), so 48 nodes give ~1e-12 relative error.

@@ -19,11 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from .identify import PARAM_NAMES
-from .properties import measured_style_properties
 from rubber_rig.models import Seed000Params, steady_state_properties
-from .timefit import model_force as run_model
+
+from .identify import PARAM_NAMES
 from .pipeline import block_quality
+from .properties import measured_style_properties
+from .timefit import model_force as run_model
 
 FIGURES = ('loops', 'kdyn_ceq', 'ratios', 'traces', 'errors')
 PAPER = {'k0': (1e-6, 'kN/mm'), 'k_inf': (1e-6, 'kN/mm'), 'tau': (1.0, 's'), 'alpha': (1.0, '-'),
@@ -53,7 +54,7 @@ def fig_loops(blocks, run, model_force, plt):
     fig, axes = plt.subplots(nrow, ncol, figsize=(2.6 * ncol, 2.3 * nrow), squeeze=False)
     for ax in axes.flat[n:]:
         ax.set_visible(False)
-    for ax, b in zip(axes.flat, blocks):
+    for ax, b in zip(axes.flat, blocks, strict=False):
         sl = slice(b.start, b.stop + 1)
         x = run.displacement[sl] * 1e3
         ax.plot(x, run.force[sl] * 1e-3, color='0.55', lw=0.8, label='measured')

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 import yaml
-from rubber_rig.excitation.program import program_source
-from rubber_rig.excitation.program import Program
-from rubber_rig.rig import run_program
+
+from rubber_rig.excitation.program import Program, program_source
 from rubber_rig.recording import RecordingWriter
+from rubber_rig.rig import run_program
 
 SAMPLES_TOPIC = '/rubber_rig/samples'
 SETPOINTS_TOPIC = '/rubber_rig/setpoints'
@@ -34,7 +34,8 @@ def run_simulated(program, specimen: dict, temperature: float, *, force_noise=10
                   sample_rate=1000.0, seed=0, sim_options: dict = None):
     """Run `program` (name, path, YAML text or mapping) on the simulated rig, unpaced.
 
-    Returns (RunResult, program YAML text, rig configuration dict)."""
+    Returns (RunResult, program YAML text, rig configuration dict).
+    """
     text = _program_text(program)
     prog = Program.from_yaml_text(text, name='program')
     sim = {'specimen': dict(specimen), 'force_noise': float(force_noise),
@@ -47,7 +48,8 @@ def run_simulated(program, specimen: dict, temperature: float, *, force_noise=10
 def write_recording(path, result, program_text: str, specimen: dict, temperature: float, config: dict = None,
                     batch: int = 100, channels=('displacement', 'force', 'setpoint')):
     """Write a RunResult as an MCAP recording. `channels` chooses which sample arrays are real; a
-    left-out channel is written as NaN (how a missing transducer shows up), for fault tests."""
+    left-out channel is written as NaN (how a missing transducer shows up), for fault tests.
+    """
     path = Path(path)
     meta = {'specimen': dict(specimen), 'temperature': float(temperature), 'program': program_text,
             'rig_config': config or {}, 'source': 'rubber_rig.fitting.simulate'}
@@ -65,7 +67,7 @@ def write_recording(path, result, program_text: str, specimen: dict, temperature
     change = np.flatnonzero(np.diff(bi) != 0) + 1
     bounds = sorted(set(np.concatenate([[0], change, np.arange(0, n, batch), [n]]).tolist()))
     with RecordingWriter(path, meta, overwrite=True) as w:
-        for a, b in zip(bounds[:-1], bounds[1:]):
+        for a, b in zip(bounds[:-1], bounds[1:], strict=False):
             stamp_ns = t0_ns + int(round(a * period * 1e9))
             header = {'stamp': {'sec': stamp_ns // 1_000_000_000, 'nanosec': stamp_ns % 1_000_000_000},
                       'frame_id': 'rig'}

@@ -31,14 +31,16 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import butter, sosfiltfilt
 
-from .identify import PARAM_NAMES, FitResult, _z_bounds, jacobian_uncertainty, params_to_z, z_to_params
 from rubber_rig.models import Seed000Params, build_model
+
 from .blocks import _noise_level
+from .identify import PARAM_NAMES, FitResult, _z_bounds, jacobian_uncertainty, params_to_z, z_to_params
 
 
 def simulate(params: dict, x, dt, reversal_threshold: float = 0.0):
     """Force [N] of the seed-000 model (rubber_rig.models, default scheme) for displacement x [m];
-    ``reversal_threshold`` [m] is Berg's reversal deadband (rubber_rig.models.friction), 0 = the paper's rule."""
+    ``reversal_threshold`` [m] is Berg's reversal deadband (rubber_rig.models.friction), 0 = the paper's rule.
+    """
     model = build_model(Seed000Params(**{k: float(params[k]) for k in PARAM_NAMES}), dt,
                         friction_reversal_threshold=reversal_threshold)
     return np.asarray(model.run(np.asarray(x, float)), float)
@@ -47,7 +49,8 @@ def simulate(params: dict, x, dt, reversal_threshold: float = 0.0):
 def model_input(x, dt, f_max):
     """(displacement [m], reversal threshold [m]) to run the model on for a measured displacement ``x``:
     zero-phase low-pass, and Berg's reversal deadband at the noise-sized reversals of x (5x its noise
-    level, at least 2e-4 of its amplitude)."""
+    level, at least 2e-4 of its amplitude).
+    """
     x = np.asarray(x, float)
     fs = 1.0 / dt
     fc = min(8.0 * f_max, 0.4 * fs)
@@ -61,7 +64,8 @@ def model_input(x, dt, f_max):
 def run_input(run, blocks):
     """(end, x, h): the model input (`model_input`, at the blocks' highest frequency) for the measured
     displacement of ``run`` (RunData) up to the closing sample of the last of its ``blocks``,
-    i.e. samples [0, end)."""
+    i.e. samples [0, end).
+    """
     end = min(max(b.stop for b in blocks) + 1, run.displacement.size)
     x, h = model_input(run.displacement[:end], run.dt, max(b.frequency for b in blocks))
     return end, x, h
@@ -69,7 +73,8 @@ def run_input(run, blocks):
 
 def model_force(params: dict, run, blocks):
     """(end, force [N] over samples [0, end)): the model with ``params`` run over the measured
-    displacement of ``run`` as `run_input` prepares it."""
+    displacement of ``run`` as `run_input` prepares it.
+    """
     end, x, h = run_input(run, blocks)
     return end, simulate(params, x, run.dt, h)
 
@@ -98,7 +103,7 @@ class TimeDomainProblem:
 
     def residuals_from(self, predictions):
         out = []
-        for (run, x, _, force, windows), pred in zip(self.items, predictions):
+        for (_, _, _, force, windows), pred in zip(self.items, predictions, strict=False):
             for idx, scale in windows:
                 e = pred[idx] - force[idx]
                 out.append((e - e.mean()) * scale)

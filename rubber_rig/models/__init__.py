@@ -9,13 +9,28 @@
 The fractional operator's default scheme and its error bound are documented in :mod:`.fractional`.
 """
 from .composite import ParallelModel, build_model, resolve_params, seed000_model, seed001_model
-from .elements import (Dashpot, FractionalZener, FractionalZenerGL, LinearSpring, Maxwell, PolynomialSpring,
-                       TangentSpring, TwoOrderFractional, Zener)
-from .fractional import (gl_complex_stiffness, two_order_complex_stiffness, zener_complex_stiffness,
-                         zener_storage_loss)
+from .elements import (
+                       Dashpot,
+                       FractionalZener,
+                       FractionalZenerGL,
+                       LinearSpring,
+                       Maxwell,
+                       PolynomialSpring,
+                       TangentSpring,
+                       TwoOrderFractional,
+                       Zener,
+)
+from .fractional import gl_complex_stiffness, two_order_complex_stiffness, zener_complex_stiffness, zener_storage_loss
 from .friction import BergFriction, SmoothCoulomb, berg_force, berg_steady_state
-from .params import (KelvinVoigtParams, Seed000Params, Seed001Params, list_parameter_sets, load_parameter_set,
-                     parameters_at_temperature, read_parameter_file)
+from .params import (
+                       KelvinVoigtParams,
+                       Seed000Params,
+                       Seed001Params,
+                       list_parameter_sets,
+                       load_parameter_set,
+                       parameters_at_temperature,
+                       read_parameter_file,
+)
 from .simulate import sine_displacement, time_domain_properties
 from .steady_state import steady_state_properties
 

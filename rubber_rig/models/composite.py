@@ -8,9 +8,14 @@ import numpy as np
 
 from . import elements as el
 from .friction import BergFriction, SmoothCoulomb, check_reversal_threshold
-from .params import (KelvinVoigtParams, Seed000Params, Seed001Params, load_parameter_set,
-                     parameters_at_temperature, PARAM_CLASSES)
-
+from .params import (
+    PARAM_CLASSES,
+    KelvinVoigtParams,
+    Seed000Params,
+    Seed001Params,
+    load_parameter_set,
+    parameters_at_temperature,
+)
 
 _BLOCK = 32768
 
@@ -90,7 +95,7 @@ class ParallelModel:
 
     def set_state(self, state):
         states, last = copy.deepcopy(state)
-        for e, s in zip(self.elements, states):
+        for e, s in zip(self.elements, states, strict=False):
             e.set_state(s)
         self._last = [float(v) for v in last]
 
@@ -127,7 +132,10 @@ def seed000_model(params: Seed000Params, dt: float, scheme='default',
 
 
 def seed001_model(params: Seed001Params, dt: float, friction_reversal_threshold: float = 0.0) -> ParallelModel:
-    """Seed 001 combined model: tangent spring + 2 Maxwell + Berg; branches ('elastic', 'viscous_1', 'viscous_2', 'friction')."""
+    """Seed 001 combined model: tangent spring + 2 Maxwell + Berg.
+
+    Branches ('elastic', 'viscous_1', 'viscous_2', 'friction').
+    """
     params.validate()
     return ParallelModel([el.TangentSpring(params.k_t, params.d_t), el.Maxwell(params.k1, params.c1, dt),
                           el.Maxwell(params.k2, params.c2, dt),

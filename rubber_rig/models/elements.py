@@ -1,5 +1,7 @@
-"""Elastic and viscoelastic elements. Every element with memory works at a fixed sample period ``dt`` [s]
-(the elastic, stateless ones take none); all offer
+"""Elastic and viscoelastic elements.
+
+Every element with memory works at a fixed sample period ``dt`` [s] (the elastic, stateless ones take none);
+all offer
 
 * ``step(x) -> tuple`` of branch forces [N] (streaming), ``run(x) -> array (n_branch, n)`` (batch,
   continuing from and updating the same state), ``reset(x0)``, ``get_state()``/``set_state()``;
@@ -11,14 +13,15 @@ from __future__ import annotations
 import math
 
 import numpy as np
-
-from .fractional import (gl_coefficients, two_order_complex_stiffness, zener_complex_stiffness)
-from .modes import ModeBank, discrete_response, fit_modes, relaxation_times
 from scipy.signal import lfilter, lfiltic
+
+from .fractional import gl_coefficients, two_order_complex_stiffness, zener_complex_stiffness
+from .modes import ModeBank, discrete_response, fit_modes, relaxation_times
 
 
 class _Stateless:
     """Elastic elements: no memory."""
+
     kinds = ('elastic',)
     branch_names = ('elastic',)
 
@@ -95,7 +98,8 @@ class TangentSpring(_Stateless):
 
     def force(self, x):
         if np.any(np.abs(x) >= self.d_t):
-            raise ValueError(f'displacement {np.max(np.abs(x)):g} m reaches the tangent spring asymptote d_t = {self.d_t:g} m')
+            raise ValueError(f'displacement {np.max(np.abs(x)):g} m reaches the tangent spring asymptote '
+                             f'd_t = {self.d_t:g} m')
         if np.ndim(x) == 0:
             return 2 * self.k_t * self.d_t / math.pi * math.tan(math.pi * x / (2 * self.d_t))
         return 2 * self.k_t * self.d_t / math.pi * np.tan(math.pi * x / (2 * self.d_t))
@@ -104,7 +108,8 @@ class TangentSpring(_Stateless):
 class VelocityElement:
     """Base of elements whose force depends on the velocity alone, v[n] = (x[n] - x[n-1]) / dt (backward
     difference); the state is the previous displacement. Subclasses define ``force_of_velocity(v)`` for
-    scalars and arrays alike, so streaming and batch run the same arithmetic."""
+    scalars and arrays alike, so streaming and batch run the same arithmetic.
+    """
 
     def __init__(self, dt: float):
         self.dt = float(dt)
@@ -135,6 +140,7 @@ class VelocityElement:
 
 class Dashpot(VelocityElement):
     """Kelvin-Voigt dashpot F = c v, c [N s/m]; v = (x[n] - x[n-1]) / dt (backward difference). Branch 'viscous'."""
+
     kinds = ('viscous',)
     branch_names = ('viscous',)
 
@@ -152,6 +158,7 @@ class Dashpot(VelocityElement):
 
 class _ModeElement:
     """Linear element K_e x + sum of FOH-discretised relaxation modes; branches ('elastic', 'viscous')."""
+
     kinds = ('elastic', 'viscous')
     branch_names = ('elastic', 'viscous')
 
@@ -189,6 +196,7 @@ class _ModeElement:
 
 class Maxwell(_ModeElement):
     """Maxwell branch: spring k [N/m] in series with dashpot c [N s/m] (relaxation time c/k). Branch 'viscous'."""
+
     kinds = ('viscous',)
     branch_names = ('viscous',)
 
@@ -235,7 +243,7 @@ class FractionalZener(_ModeElement):
         return self._split(self.continuous(2 * np.pi * np.asarray(frequency, dtype=float)), amplitude)
 
 
-def Zener(k0, k_inf, tau, dt):
+def Zener(k0, k_inf, tau, dt):  # noqa: N802 - named like the element classes it builds
     """Ordinary (three-parameter) Zener model: K0 parallel to a Maxwell branch (K_inf - K0, tau)."""
     return FractionalZener(k0, k_inf, tau, 1.0, dt)
 
@@ -273,6 +281,7 @@ class FractionalZenerGL:
     = K0 x[n] + K_inf c sum_{i>=0} A_{i+1} x[n - i m], c = tau^alpha h^-alpha, m = h/dt; batch runs
     it as one IIR filter (scipy lfilter) from the same history. Branches ('elastic', 'viscous').
     """
+
     kinds = ('elastic', 'viscous')
     branch_names = ('elastic', 'viscous')
 

@@ -104,7 +104,8 @@ def berg_steady_state(amplitude, f_fmax: float, x2: float):
 
 def check_reversal_threshold(d: float, given, name: str = 'reversal_threshold') -> float:
     """``d``, the reversal deadband [m] converted from the ``given`` value of parameter ``name``, if it
-    is finite and >= 0; else ValueError naming the parameter and the given value."""
+    is finite and >= 0; else ValueError naming the parameter and the given value.
+    """
     if not (math.isfinite(d) and d >= 0.0):
         raise ValueError(f'parameter {name} must be a finite displacement >= 0 [m], got {given!r}')
     return d
@@ -120,6 +121,7 @@ class BergFriction:
     ``reversal_threshold`` [m] (>= 0): the reversal deadband d of the module docstring; 0 is the
     paper's rule. It is a setting of the element, not part of its state.
     """
+
     branch_names = ('friction',)
     kinds = ('friction',)
 
@@ -136,7 +138,8 @@ class BergFriction:
     def get_state(self):
         """(x_prev, direction, x_s, f_s, f_prev, x_ext, f_ext): last sample, accepted direction (0 =
         virgin), reference state, and the extreme reached in that direction with its force (with
-        d = 0 the extreme is always the last sample)."""
+        d = 0 the extreme is always the last sample).
+        """
         return (self.x_prev, self.direction, self.x_s, self.f_s, self.f_prev, self.x_ext, self.f_ext)
 
     def set_state(self, state):
@@ -229,7 +232,8 @@ class BergFriction:
         extreme is a running max (min), taken over a window sized from the previous stretch (doubled
         until the next reversal shows up); the force is Eq. 16 from (x_s, F_fs) at new extremes and from
         the candidate reference (x_ext, F(x_ext)) inside the band. Stretches shorter than a few samples
-        (noise larger than d) are cheaper sample by sample, so they go through ``_step_deadband``."""
+        (noise larger than d) are cheaper sample by sample, so they go through ``_step_deadband``.
+        """
         fm, x2, thr = self.f_fmax, self.x2, self.reversal_threshold
         n = x.size
         f = np.empty(n)
@@ -285,6 +289,7 @@ class SmoothCoulomb(VelocityElement):
 
     f_c [N] friction force level, a [s/m] steepness. Branch 'friction'.
     """
+
     branch_names = ('friction',)
     kinds = ('friction',)
 

@@ -33,7 +33,8 @@ DATA_DIR = Path(__file__).resolve().parent / 'data'
 
 class ParameterValueError(ValueError):
     """A model parameter with an invalid value; ``parameter`` is its name ('alpha', 'temperature'), so a
-    caller can point at the setting it came from without parsing the message."""
+    caller can point at the setting it came from without parsing the message.
+    """
 
     def __init__(self, parameter: str, why: str):
         super().__init__(f'parameter {parameter} {why}')
@@ -95,6 +96,7 @@ class Seed000Params(_Params):
     time, alpha [-] fractional order in (0, 1], x2 [m] displacement to reach F_fmax/2 from the
     virgin state, f_fmax [N] maximum friction force.
     """
+
     k0: float
     k_inf: float
     tau: float
@@ -114,6 +116,7 @@ class Seed000Params(_Params):
 @dataclasses.dataclass(frozen=True)
 class KelvinVoigtParams(_Params):
     """Kelvin-Voigt element: k [N/m] spring parallel to c [N s/m] dashpot (seed 000 Table 2 case 1)."""
+
     k: float
     c: float
 
@@ -134,6 +137,7 @@ class Seed001Params(_Params):
     Berg friction. (The paper's 10 parameters count the p, q, r sub-parameters of an
     amplitude-dependent k_t fitted to static tests; the time-domain model uses k_t itself.)
     """
+
     k_t: float
     d_t: float
     k1: float
@@ -172,7 +176,8 @@ def list_parameter_sets() -> list:
 
 def read_parameter_file(path) -> dict:
     """The YAML of a parameter file in the shipped layout (``sets:`` name -> {model, values}; optional
-    ``table1:`` rows), e.g. the output of ``rubber-rig fit``. Errors name the file and what is wrong."""
+    ``table1:`` rows), e.g. the output of ``rubber-rig fit``. Errors name the file and what is wrong.
+    """
     path = Path(path).expanduser()
     if not path.is_file():
         raise FileNotFoundError(f'no such parameter file: {path}')
@@ -204,7 +209,8 @@ def _resolve_set(name: str) -> tuple:
     if set_part not in sets:
         raise ValueError(f'unknown parameter set {set_part!r} in {origin}; known: {", ".join(sorted(sets))}')
     entry = sets[set_part]
-    if not isinstance(entry, dict) or entry.get('model') not in PARAM_CLASSES or not isinstance(entry.get('values'), dict):
+    if not isinstance(entry, dict) or entry.get('model') not in PARAM_CLASSES \
+            or not isinstance(entry.get('values'), dict):
         raise ValueError(f'parameter set {set_part!r} in {origin} needs "model" (one of '
                          f'{", ".join(PARAM_CLASSES)}) and a "values" mapping')
     return set_part, entry
@@ -238,7 +244,7 @@ def _temperature_interpolants():
     }
 
 
-def parameters_at_temperature(t_degC: float) -> Seed000Params:
+def parameters_at_temperature(t_degC: float) -> Seed000Params:  # noqa: N803 - the unit is part of the name
     """Seed 000 parameters at temperature ``t_degC`` [degC], interpolated from Table 1.
 
     Exact at 20, 0, -20, -40 degC; monotone PCHIP in between (see the module docstring).

@@ -9,6 +9,7 @@ viscous branches| and K_df = |sum of the friction branches|.
 from __future__ import annotations
 
 import numpy as np
+
 from .composite import ParallelModel, build_model
 
 
@@ -56,7 +57,7 @@ def steady_state_properties(params, frequency, amplitude) -> dict:
     }
     if f.ndim == 0:
         out = {key: float(v) for key, v in out.items()}
-        out['branches'] = {n: complex(v) for n, v in zip(model.branch_names, kb)}
+        out['branches'] = {n: complex(v) for n, v in zip(model.branch_names, kb, strict=False)}
     else:
-        out['branches'] = dict(zip(model.branch_names, kb))
+        out['branches'] = dict(zip(model.branch_names, kb, strict=False))
     return out

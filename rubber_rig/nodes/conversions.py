@@ -10,14 +10,23 @@ import math
 from typing import Any, Iterable, Mapping
 
 import numpy as np
-
-from rubber_rig.excitation import Limits
-from rubber_rig.rig.can.protocol import STATE_CODE, STATES, fault_names
-
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
-from msg_defs.msg import (BlockSummary, BranchForce, CycleMetrics, CycleProperties, ModelParameters,
-                          ModelPrediction, RigLimits, RigSampleBatch, RigStatus, SetpointBatch)
+
+from msg_defs.msg import (
+    BlockSummary,
+    BranchForce,
+    CycleMetrics,
+    CycleProperties,
+    ModelParameters,
+    ModelPrediction,
+    RigLimits,
+    RigSampleBatch,
+    RigStatus,
+    SetpointBatch,
+)
+from rubber_rig.excitation import Limits
+from rubber_rig.rig.can.protocol import STATE_CODE, STATES, fault_names
 
 # RigStatus.STATE_* and FAULT_* equal the DBC's codes (test_rig_protocol checks it): one table serves both
 STATE_NAMES = dict(enumerate(STATES))
@@ -37,7 +46,8 @@ def to_seconds(t: Time) -> float:
 
 def f64(values) -> array.array:
     """Any float sequence -> array.array('d'): the setter of a rosidl float64[] field takes it without a
-    per-element Python check (about 10x cheaper than assigning a numpy array directly)."""
+    per-element Python check (about 10x cheaper than assigning a numpy array directly).
+    """
     out = array.array('d')
     out.frombytes(np.ascontiguousarray(values, dtype=np.float64).tobytes())
     return out
@@ -179,7 +189,8 @@ def diagnostics_msg(status: RigStatus, hardware_id: str, extra: Mapping[str, Any
 
 
 # -- element model -------------------------------------------------------------------------------------------------
-def prediction_msg(batch: RigSampleBatch, predicted, branch_names: Iterable[str] = (), branches=None) -> ModelPrediction:
+def prediction_msg(batch: RigSampleBatch, predicted, branch_names: Iterable[str] = (),
+                   branches=None) -> ModelPrediction:
     msg = ModelPrediction()
     msg.header = batch.header
     msg.first_sequence = batch.first_sequence
@@ -192,7 +203,7 @@ def prediction_msg(batch: RigSampleBatch, predicted, branch_names: Iterable[str]
     msg.residual = f64(f - predicted)
     if branches is not None:
         msg.branches = [BranchForce(name=str(n), force=f64(b))
-                        for n, b in zip(branch_names, branches)]
+                        for n, b in zip(branch_names, branches, strict=False)]
     return msg
 
 

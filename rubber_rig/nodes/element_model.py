@@ -30,7 +30,6 @@ import time
 from collections import deque
 
 import numpy as np
-
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 
@@ -39,9 +38,17 @@ from rubber_rig.models import load_parameter_set
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import ParameterError, declare
-from rubber_rig.online import (DEFAULT_REVERSAL_THRESHOLD, SOURCES, BlockIndex, ChoiceError, CyclePairer,
-                               ModelChoice, OnlinePredictor, batch_problem)
 from rubber_rig.nodes.spin import spin_node
+from rubber_rig.online import (
+    DEFAULT_REVERSAL_THRESHOLD,
+    SOURCES,
+    BlockIndex,
+    ChoiceError,
+    CyclePairer,
+    ModelChoice,
+    OnlinePredictor,
+    batch_problem,
+)
 
 VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
 VALUE_UNITS = {'k0': 'N/m', 'k_inf': 'N/m', 'tau': 's', 'alpha': '-', 'x2': 'm', 'f_fmax': 'N'}
@@ -155,7 +162,8 @@ class ElementModelNode(Node):
         waits for them while a stream is open, at most SETPOINT_WAIT seconds (wall time: an unpaced rig runs
         many seconds of samples per second). Samples after the stream's last batch (a rig holding or at rest),
         or with no setpoints for SETPOINT_WAIT (a rig moved by something else), belong to no block and go at
-        once."""
+        once.
+        """
         while self._cycle_queue:
             first, dt, x, f, predicted, t0, arrived = self._cycle_queue[0]
             end = first + len(x)
@@ -185,8 +193,9 @@ class ElementModelNode(Node):
 
     def publish_parameters(self) -> None:
         p = self.predictor
+        now = self.get_clock().now().nanoseconds * 1e-9
         self.pub_params.publish(conv.model_parameters_msg('seed000', p.parameter_set, p.temperature,
-                                                          p.params.as_dict(), self.get_clock().now().nanoseconds * 1e-9))
+                                                          p.params.as_dict(), now))
         self._published_params = p.params
 
     # -- run-time parameter changes -------------------------------------------------------------------------------
@@ -202,7 +211,8 @@ class ElementModelNode(Node):
     def _validate(choice: ModelChoice, changed) -> tuple:
         """Check every model parameter that changed, used by the current source or not (a later switch of
         ``source`` must never meet an invalid value), then the resulting choice; returns ``choice.resolve()``.
-        Raises ValueError (also for a parameter file that is missing or unreadable)."""
+        Raises ValueError (also for a parameter file that is missing or unreadable).
+        """
         if choice.source not in SOURCES:
             raise ChoiceError('source', f"source '{choice.source}' is not one of {', '.join(SOURCES)}")
         if any(name.startswith('values.') for name in changed):
@@ -238,8 +248,9 @@ class ElementModelNode(Node):
                                         f'model keeps {self.predictor.params}')
                 return
             self.publish_parameters()
+            threshold = self.predictor.choice.friction_reversal_threshold
             self.get_logger().info(f'model parameters changed ({", ".join(sorted(names))}): {self.predictor.params}, '
-                                   f'friction reversal threshold {self.predictor.choice.friction_reversal_threshold:g} m')
+                                   f'friction reversal threshold {threshold:g} m')
         if 'publish_branches' in names:
             self.publish_branches = self.get_parameter('publish_branches').value
         if 'cycle_metrics' in names:
@@ -252,7 +263,7 @@ def _finite_runs(*arrays) -> list[tuple[int, int]]:
     if good.all():
         return [(0, len(good))] if len(good) else []
     edges = np.flatnonzero(np.diff(np.concatenate([[False], good, [False]]).astype(np.int8)))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=False))
 
 
 def main(args=None):

@@ -27,13 +27,12 @@ import traceback
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
 from rclpy.task import Future
+from std_msgs.msg import String
+from std_srvs.srv import SetBool, Trigger
 
 from msg_defs.action import RunProgram
 from msg_defs.msg import RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import LoadProgram, OpenStream, StopStream
-from std_msgs.msg import String
-from std_srvs.srv import SetBool, Trigger
-
 from rubber_rig.excitation import Program, ProgramRunner, read_program
 from rubber_rig.excitation.limits import element_force_model
 from rubber_rig.nodes import conversions as conv
@@ -184,7 +183,8 @@ class ExcitationNode(Node):
     def links_ready(self) -> str:
         """'' once our setpoints publisher and samples subscription are matched with every endpoint the graph
         shows on those topics (the driver's among them). Right after a launch or a driver restart the status can
-        arrive before they are: a stream opened then would run dry (no samples pace it) or send to nobody."""
+        arrive before they are: a stream opened then would run dry (no samples pace it) or send to nobody.
+        """
         for what, matched, known in (
                 ('samples subscription', self.sub_samples.get_publisher_count(),
                  self.count_publishers(self.samples_topic)),
@@ -197,7 +197,8 @@ class ExcitationNode(Node):
     def _statuses_fresh(self, since: float) -> bool:
         """The rig status, the recorder status (with require_recording) and our topics are ready to judge a goal
         that arrived at ``since`` (time.monotonic()). A recorder error counts only if reported since then: the
-        error of a recorder that was just replaced must not refuse a goal the new one would record."""
+        error of a recorder that was just replaced must not refuse a goal the new one would record.
+        """
         now = time.monotonic()
         rig = self.status is not None and now - self._status_wall <= self.status_timeout
         rec = not self.require_recording or (
@@ -237,7 +238,8 @@ class ExcitationNode(Node):
 
     def prepare(self, program: Program, amplitude_control: bool) -> None:
         """Check the program against the rig's limits (and the force model) before anything is asked of the
-        driver; ValueError names the block and field."""
+        driver; ValueError names the block and field.
+        """
         limits = conv.limits_from_msg(self.status.limits)
         limits.force_model = self.force_model
         limits.check_program(program, self.status.sample_rate)
@@ -346,7 +348,8 @@ class ExcitationNode(Node):
     # -- ending programs --------------------------------------------------------------------------------------------
     def abort_program(self, reason: str) -> bool:
         """Stop the running program now: the driver's controller ramps to the program's rest position at once
-        (not after the queued lead); the goal ends with `reason`. False if nothing runs."""
+        (not after the queued lead); the goal ends with `reason`. False if nothing runs.
+        """
         if self.runner is None:
             return False
         self._stop_stream(StopStream.Request.ACTION_ABORT, reason, self.runner.program.rest_position)
@@ -378,7 +381,7 @@ class ExcitationNode(Node):
                                                            target=float(target), reason=reason))
 
     async def _call(self, client, request, timeout: float):
-        """await a service response, or None after `timeout` seconds (or if the service is not there)."""
+        """Await a service response, or None after `timeout` seconds (or if the service is not there)."""
         deadline = time.monotonic() + timeout
         while not client.service_is_ready():
             if time.monotonic() >= deadline:
@@ -452,7 +455,7 @@ class ExcitationNode(Node):
             goal_handle.abort()
         return result
 
-    # -- services ---------------------------------------------------------------------------------------------------------
+    # -- services ---------------------------------------------------------------------------------------------
     def on_abort(self, request, response):
         if self.abort_program('operator abort (excitation/abort)'):
             response.success, response.message = True, 'the rig ramps to the rest position'

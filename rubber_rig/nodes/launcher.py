@@ -99,7 +99,7 @@ class InProcessLauncher:
     # -- shutting down ----------------------------------------------------------------------------------
     def shutdown(self) -> None:
         # Nodes first (reverse start order: the driver, started first, ramps down last), then executors.
-        for node, executor, thread in reversed(self._entries):
+        for node, _, _ in reversed(self._entries):
             close = getattr(node, 'close', None)
             if callable(close):
                 try:

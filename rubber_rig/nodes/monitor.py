@@ -13,14 +13,20 @@ from collections import defaultdict
 import numpy as np
 from rclpy.action import ActionClient
 from rclpy.node import Node
-
-from msg_defs.action import RunProgram
-from msg_defs.msg import (CycleMetrics, ModelParameters, ModelPrediction, RecorderStatus, RigSampleBatch, RigStatus,
-                          SetpointBatch)
-from msg_defs.srv import RecorderControl
 from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
+from msg_defs.action import RunProgram
+from msg_defs.msg import (
+    CycleMetrics,
+    ModelParameters,
+    ModelPrediction,
+    RecorderStatus,
+    RigSampleBatch,
+    RigStatus,
+    SetpointBatch,
+)
+from msg_defs.srv import RecorderControl
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 
@@ -140,7 +146,8 @@ class SuiteMonitor(Node):
 
     def recording_ready(self, *names: str) -> str:
         """'' when the recorder reports RECORDING with every given topic subscribed and matched, else why
-        not (an ERROR status gives the recorder's own reason, which names the path)."""
+        not (an ERROR status gives the recorder's own reason, which names the path).
+        """
         st = self.recorder_status
         if st is None:
             return f"no recorder status on '{self.resolve_topic_name(topics.RECORDER_STATUS)}' yet"

@@ -42,7 +42,8 @@ def declare(node: Node, name: str, default: Any, description: str, *, range: tup
     _promote_int_override(node, name, default)
     try:
         value = node.declare_parameter(name, default, d).value
-    except (InvalidParameterValueException, InvalidParameterTypeException) as exc:  # rclpy's range check: re-raise naming node and field
+    # rclpy's range check: re-raise naming node and field
+    except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
         raise ParameterError(node.get_name(), name, str(exc)) from None
     if choices is not None and value not in choices:
         raise ParameterError(node.get_name(), name, f'{value!r} is not one of {", ".join(choices)}')
@@ -88,7 +89,8 @@ def undeclared_overrides(node: Node) -> list[str]:
 
 def accept_integers_for_doubles(node: Node) -> None:
     """``ros2 param set /rig_driver limits.force_max 5`` sends an integer; for a double parameter that is what
-    the user meant. rclpy's public pre-set hook converts it before the type check refuses it."""
+    the user meant. rclpy's public pre-set hook converts it before the type check refuses it.
+    """
     def promote(parameters):
         out = []
         for p in parameters:

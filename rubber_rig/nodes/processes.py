@@ -25,10 +25,10 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
+from std_srvs.srv import SetBool, Trigger
 
 from msg_defs.action import RunProgram
 from msg_defs.msg import RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
-from std_srvs.srv import SetBool, Trigger
 
 from . import conversions as conv
 from . import topics
@@ -40,7 +40,8 @@ class SuiteProcesses:
     """Start, kill and restart the suite's node processes in namespace `namespace` on DDS domain `domain_id`.
 
     params_file: the shared ros2 parameter file (config/rig_sim.yaml); overrides: {node: {param: value}}
-    written to a second parameter file per node (the later file wins, as in launch_ros)."""
+    written to a second parameter file per node (the later file wins, as in launch_ros).
+    """
 
     def __init__(self, params_file, namespace: str, domain_id: int, log_dir, overrides: dict | None = None):
         self.params_file, self.namespace, self.domain_id = str(params_file), namespace, int(domain_id)
@@ -83,7 +84,8 @@ class SuiteProcesses:
 
     def wait_started(self, node: str, timeout: float = 30.0) -> bool:
         """Wait until the process started last for `node` logged its 'ready' line (spin_node logs it once the
-        node and its interfaces exist). False if it did not within `timeout` s or the process ended."""
+        node and its interfaces exist). False if it did not within `timeout` s or the process ended.
+        """
         path, offset = self.log_dir / f'{node}.log', self._log_offset.get(node, 0)
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
@@ -147,7 +149,8 @@ class Operator:
     """A node in this process that drives a suite from outside: the action, the services, a foreign setpoint
     publisher, and everything the rig publishes (applied command, status, recorder status) collected.
 
-    Runs its own rclpy context and executor thread; use as a context manager."""
+    Runs its own rclpy context and executor thread; use as a context manager.
+    """
 
     RETRY = 2.0      # [s] an unanswered goal or service request is sent again after this long
 
@@ -225,7 +228,8 @@ class Operator:
     def first_departure(self, since: int, tolerance: float = 1e-6):
         """The first sample (sequence >= since) whose applied command is not the setpoint streamed for it (by
         more than `tolerance` [m]): where a ramp or hold took over from the program. Returns (sequence, wall
-        time of the sample [s, time.time() clock: its frame's bus timestamp]) or None."""
+        time of the sample [s, time.time() clock: its frame's bus timestamp]) or None.
+        """
         with self.lock:
             sp = [(b.first_sequence, conv.as_array(b.displacement)) for b in self.setpoints_seen
                   if b.first_sequence + len(b.displacement) > since]
@@ -244,7 +248,8 @@ class Operator:
 
     def applied(self, since: int = 0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(sequence, applied command [m], measured displacement [m]) of every sample received (sequence >= since),
-        sorted by sequence."""
+        sorted by sequence.
+        """
         with self.lock:
             bs = [b for b in self.batches if b.first_sequence + len(b.setpoint) > since]
         if not bs:
@@ -287,7 +292,8 @@ class Operator:
     def send_goal(self, program_yaml: str = '', program_path: str = '', amplitude_control: bool = False,
                   timeout: float = 10.0, action: str = 'run_program'):
         """Send a goal to the RunProgram action `action` (default: this namespace's run_program); returns the
-        goal handle (accepted or not) or None if nothing answered."""
+        goal handle (accepted or not) or None if nothing answered.
+        """
         deadline = time.monotonic() + timeout
         client = self.action
         if action != 'run_program':

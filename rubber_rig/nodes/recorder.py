@@ -37,9 +37,9 @@ from msg_defs.msg import RecorderStatus
 from msg_defs.srv import RecorderControl
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import declare
+from rubber_rig.nodes.spin import spin_node
 from rubber_rig.recording import Recorder, RecordingError, full_definition
 from rubber_rig.recording.qos import qos_entry
-from rubber_rig.nodes.spin import spin_node
 
 UNSUPPORTED_SEQUENCE = 2**63   # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED is UINT64_MAX
 IGNORED_TOPICS = ('/rosout', '/parameter_events')
@@ -66,7 +66,7 @@ def _ns(duration) -> int:
 
 
 def offered_qos(info) -> dict:
-    """rclpy TopicEndpointInfo -> the rosbag2 offered_qos_profiles entry."""
+    """Rclpy TopicEndpointInfo -> the rosbag2 offered_qos_profiles entry."""
     q = info.qos_profile
     return qos_entry(history=q.history, depth=q.depth, reliability=q.reliability, durability=q.durability,
                      deadline_ns=_ns(q.deadline), lifespan_ns=_ns(q.lifespan), liveliness=q.liveliness,
@@ -144,7 +144,8 @@ class RecorderNode(Node):
 
     def start_recording(self, path=None):
         """Start (or keep) recording; returns the file, or None on failure (then the status is ERROR with
-        the reason naming the path, and the reason is logged once, without a traceback)."""
+        the reason naming the path, and the reason is logged once, without a traceback).
+        """
         try:
             file = self.core.start(path)
         except (RecordingError, OSError) as exc:   # unwritable / uncreatable directory, disk full

@@ -25,23 +25,22 @@ import math
 import time
 
 import numpy as np
-from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
-
 from diagnostic_msgs.msg import DiagnosticArray
-from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
-from msg_defs.srv import OpenStream, StopStream
 from rcl_interfaces.msg import SetParametersResult
+from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from std_srvs.srv import Trigger
 
+from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
+from msg_defs.srv import OpenStream, StopStream
+from rubber_rig.excitation import Limits
+from rubber_rig.excitation.limits import LimitError
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles, declare
-from rubber_rig.excitation import Limits
-from rubber_rig.excitation.limits import LimitError
+from rubber_rig.nodes.spin import spin_node
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.config import ConfigError, RigConfig
 from rubber_rig.rig.session import open_rig
-from rubber_rig.nodes.spin import spin_node
 from rubber_rig.settings import nest, setting_for, settings_of
 
 RIG_SETTINGS = settings_of(RigConfig)   # the core's configuration, described once (rubber_rig/rig/config.py)
@@ -62,8 +61,9 @@ class RigDriverNode(LifecycleNode):
         for setting in RIG_SETTINGS:
             declare(self, setting.name, setting.default, setting.description(), range=setting.range,
                     choices=setting.choices)
-        self.batch_size = declare(self, 'batch_size', 50, 'samples per RigSampleBatch message (at least; whole bus reads are '
-                                 'never split, so the stamp is the bus time of the first sample)', range=(1, 10000))
+        self.batch_size = declare(self, 'batch_size', 50, 'samples per RigSampleBatch message (at least; whole bus '
+                                  'reads are never split, so the stamp is the bus time of the first sample)',
+                                  range=(1, 10000))
         self.max_batch_delay = declare(self, 'max_batch_delay', 0.1, 'a partial batch is published when its '
                                        'first sample has waited this long (the stream paused or ended)',
                                        range=(0.001, 10.0), units='s')
@@ -174,7 +174,8 @@ class RigDriverNode(LifecycleNode):
 
     def close(self) -> None:
         """Ramp to rest, then close the bus (also called by the in-process launcher at shutdown). A hardware
-        controller finishes its ramp on its own; the simulated one is polled until it is at rest (<= 5 s)."""
+        controller finishes its ramp on its own; the simulated one is polled until it is at rest (<= 5 s).
+        """
         self._stop_polling()
         if self.rig is not None:
             rig, self.rig = self.rig, None
@@ -201,7 +202,8 @@ class RigDriverNode(LifecycleNode):
     # -- parameters at run time -------------------------------------------------------------------------------
     def on_set_parameters(self, params) -> SetParametersResult:
         """Limits and stream settings apply at once (tighter limits: the rig ramps into them if it must);
-        everything else needs configure, so it is refused while the rig is configured, with the reason."""
+        everything else needs configure, so it is refused while the rig is configured, with the reason.
+        """
         changed = {p.name: p.value for p in params}
         fixed = sorted(n for n in changed if n not in LIVE_PARAMETERS)
         if fixed and self.rig is not None:
@@ -238,7 +240,8 @@ class RigDriverNode(LifecycleNode):
     # -- data path ------------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
         """Queue setpoints on the bus - only the open stream's, exactly continuing it (the core refuses the rest
-        and counts them; the first refusal per second is logged with the sender)."""
+        and counts them; the first refusal per second is logged with the sender).
+        """
         if self.rig is None or self._poll_timer is None:   # only an active driver moves the rig
             return
         driver = self.rig.driver
@@ -262,7 +265,8 @@ class RigDriverNode(LifecycleNode):
 
     def poll(self) -> None:
         """Move every sample the bus delivered into batches of at least ``batch_size`` samples. Blocks from the
-        core are never split: the stamp of a batch is the real bus time of its first sample."""
+        core are never split: the stamp of a batch is the real bus time of its first sample.
+        """
         driver = self.rig.driver if self.rig is not None else None
         while driver is not None:
             block = driver.poll()

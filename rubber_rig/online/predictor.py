@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rubber_rig.models import build_model, load_parameter_set, parameters_at_temperature, Seed000Params
+from rubber_rig.models import Seed000Params, build_model, load_parameter_set, parameters_at_temperature
 from rubber_rig.models.params import ParameterValueError
 
 SOURCES = ('parameter_set', 'temperature', 'rig_temperature', 'values')
@@ -48,6 +48,7 @@ class ChoiceError(ValueError):
 @dataclass(frozen=True)
 class ModelChoice:
     """Which parameters the model runs with (what the element_model node's parameters select)."""
+
     source: str = 'parameter_set'                 # one of SOURCES
     parameter_set: str = 'seed000_20C'
     temperature: float = 20.0                     # [degC] for source 'temperature' (start value for 'rig_temperature')
@@ -122,7 +123,8 @@ class OnlinePredictor:
     def set_choice(self, choice: ModelChoice, resolved: tuple | None = None) -> None:
         """Switch to ``choice``; the model is rebuilt and warmed up on the next batch. ``resolved``: what
         ``choice.resolve()`` returned when the choice was validated (so a parameter file is read once, in the
-        validating callback); otherwise it is resolved here (raises ValueError, nothing changes then)."""
+        validating callback); otherwise it is resolved here (raises ValueError, nothing changes then).
+        """
         if resolved is None:
             resolved = choice.resolve()
         self.choice = choice
@@ -131,7 +133,8 @@ class OnlinePredictor:
 
     def goes_back(self, first_sequence: int) -> bool:
         """True if a batch starting at ``first_sequence`` does not follow the last one (sequence backwards or
-        repeated: a restarted driver, or a replayed recording)."""
+        repeated: a restarted driver, or a replayed recording).
+        """
         return self.next_sequence is not None and first_sequence < self.next_sequence
 
     def restart(self) -> None:
@@ -151,13 +154,15 @@ class OnlinePredictor:
         """Predicted force and branch forces [n_branch, n] for one batch of measured displacement.
 
         Samples whose displacement is not finite are skipped by the model and predicted as NaN (module doc); a
-        batch whose sequence goes backwards restarts the model (``restart``)."""
+        batch whose sequence goes backwards restarts the model (``restart``).
+        """
         if self.goes_back(first_sequence):
             self.restart()
         x = np.asarray(x, dtype=np.float64)
         self.next_sequence = first_sequence + len(x)
         if self.choice.source == 'rig_temperature' and temperature is not None and math.isfinite(temperature):
-            if not math.isfinite(self.temperature) or abs(temperature - self.temperature) >= self.temperature_hysteresis:
+            moved = abs(temperature - self.temperature) >= self.temperature_hysteresis
+            if not math.isfinite(self.temperature) or moved:
                 try:
                     self.params, self.parameter_set, self.temperature = self.choice.resolve(temperature)
                     self._dirty = True
@@ -236,7 +241,8 @@ class BlockIndex:
 
     def segments(self, first_sequence: int, n: int) -> list[tuple[int, int, int]]:
         """Split the samples [first_sequence, first_sequence + n) by block: [(start, stop, block)], offsets
-        into the batch, stop exclusive; samples no setpoint batch covers get block -1."""
+        into the batch, stop exclusive; samples no setpoint batch covers get block -1.
+        """
         end = first_sequence + n
         marks = []                                   # (first, end, block) of ranges overlapping the samples
         for r in reversed(self._ranges):

@@ -20,15 +20,15 @@ Modules: msgdefs (ros2msg schema texts), qos (rosbag2 QoS YAML), gaps (sequence-
 writer, session (Recorder), reader, mcapio (checked file access), cdr (numpy CDR decoder), recover,
 bagmeta (rosbag2 metadata.yaml).
 """
+from .bagmeta import write_bag_metadata
 from .errors import RecordingError, RecordingWriteError
 from .gaps import GapTracker
 from .msgdefs import full_definition, normalize_type, register_definition, type_hash
 from .qos import offered_qos_yaml, qos_entry
-from .writer import CLOSE_METADATA_NAME, METADATA_NAME, RecordingWriter
 from .reader import SIGNALS, Recording, load_recording
-from .session import Recorder
 from .recover import RecoverResult, recover
-from .bagmeta import write_bag_metadata
+from .session import Recorder
+from .writer import CLOSE_METADATA_NAME, METADATA_NAME, RecordingWriter
 
 __all__ = ['RecordingError', 'RecordingWriteError', 'GapTracker', 'full_definition', 'normalize_type',
            'register_definition', 'type_hash', 'offered_qos_yaml', 'qos_entry', 'CLOSE_METADATA_NAME',

@@ -11,8 +11,8 @@ from pathlib import Path
 import yaml
 from mcap.reader import make_reader
 
-from .qos import parse_offered_qos
 from .mcapio import check_file, recording_files
+from .qos import parse_offered_qos
 
 VERSION = 9
 METADATA_FILE = 'metadata.yaml'
@@ -73,7 +73,8 @@ def write_bag_metadata(directory, files=None, summaries: dict = None) -> Path:
     """Write ``directory/metadata.yaml`` for its complete .mcap files (in split order).
 
     ``summaries``: {Path: file_summary(path)} of closed files read before; a complete file not in it
-    is read and added (the Recorder keeps one, so each split reads only the file just closed)."""
+    is read and added (the Recorder keeps one, so each split reads only the file just closed).
+    """
     directory = Path(directory)
     files = recording_files(directory) if files is None else [Path(f) for f in files]
     entries, topics = [], {}

@@ -106,7 +106,7 @@ def _message_reader(name, msgdefs, cache):
 
 
 def make_decoder(schema_name: str, schema_text: str):
-    """bytes -> SimpleNamespace (numeric arrays as numpy arrays), or None for unsupported schemas."""
+    """Bytes -> SimpleNamespace (numeric arrays as numpy arrays), or None for unsupported schemas."""
     msgdefs = {}
 
     def collect(full, short, msgdef):

@@ -62,6 +62,7 @@ def frames_lost_of(msg_type: str, msg) -> int:
 @dataclass
 class GapTracker:
     """Per-topic continuity of sequence numbers across messages (and across split files)."""
+
     next_expected: dict = field(default_factory=dict)
     last_pubseq: dict = field(default_factory=dict)
     events: list = field(default_factory=list)
@@ -83,7 +84,8 @@ class GapTracker:
         """Account one message; returns the event dict if it revealed a gap, a jump or a restart.
 
         ``frames_lost``: samples the publisher reports lost before this message (always counted);
-        ``publication_sequence``: the DDS publication sequence number (None or 0: unknown)."""
+        ``publication_sequence``: the DDS publication sequence number (None or 0: unknown).
+        """
         self.samples_seen += count
         expected = self.next_expected.get(topic)
         self.next_expected[topic] = first + count

@@ -1,5 +1,6 @@
 """Checked low-level access to MCAP files: every failure becomes a RecordingError naming the file and
-the problem (bad magic, truncated, corrupt chunk, undecodable schema), never a library traceback."""
+the problem (bad magic, truncated, corrupt chunk, undecodable schema), never a library traceback.
+"""
 import json
 import re
 import struct
@@ -37,7 +38,8 @@ def recording_files(path) -> list:
 
 def check_file(path: Path) -> bool:
     """Raise RecordingError if ``path`` is not an MCAP file; return True if it is complete (has its
-    footer and closing magic), False if it ends early (writer killed: recover it)."""
+    footer and closing magic), False if it ends early (writer killed: recover it).
+    """
     if not path.exists():
         raise RecordingError(f'{path}: no such file')
     if path.is_dir():
@@ -71,7 +73,8 @@ def _wrap(path, exc) -> RecordingError:
 
 def iter_records(path: Path, allow_truncated: bool):
     """All records in file order (chunks broken up). A truncated tail ends the iteration if
-    ``allow_truncated``; otherwise it raises."""
+    ``allow_truncated``; otherwise it raises.
+    """
     with open(path, 'rb') as f:
         reader = StreamReader(f, skip_magic=False, validate_crcs=True, record_size_limit=1 << 31)
         it = reader.records
@@ -89,7 +92,8 @@ def iter_records(path: Path, allow_truncated: bool):
 
 def read_file(path: Path, allow_truncated: bool = False):
     """(schemas, channels, messages, metadata, complete) of one file; messages as
-    (channel_id, log_time, publish_time, sequence, data) in log-time order."""
+    (channel_id, log_time, publish_time, sequence, data) in log-time order.
+    """
     complete = check_file(path)
     if not complete and not allow_truncated:
         raise RecordingError(truncated_message(path))
@@ -146,7 +150,8 @@ class Decoders:
     where it does not or fails (big-endian, damaged).
 
     ``lazy_fallback`` (the writer's gap check): build the reference decoder only when it is first
-    needed; by default it is built up front, which also rejects a schema it cannot parse."""
+    needed; by default it is built up front, which also rejects a schema it cannot parse.
+    """
 
     def __init__(self, path, lazy_fallback: bool = False):
         self.path = path
@@ -161,7 +166,7 @@ class Decoders:
                                  f'{exc}') from None
 
     def get(self, schema: Schema):
-        """[numpy decoder or None, reference decoder or None (lazy_fallback: not built yet)]"""
+        """Decoders of a schema: [numpy decoder or None, reference decoder or None (lazy_fallback: not built yet)]."""
         key = (schema.name, schema.data)
         fns = self._cache.get(key)
         if fns is None:

@@ -38,7 +38,8 @@ def qos_entry(history=None, depth=0, reliability=None, durability=None, deadline
               lifespan_ns=None, liveliness=None, liveliness_lease_duration_ns=None,
               avoid_ros_namespace_conventions=False) -> dict:
     """One profile in rosbag2's layout; policies as rmw ints, names or enum members, durations in ns
-    (None = infinite)."""
+    (None = infinite).
+    """
     return {
         'history': _policy(history, _HISTORY, 'keep_last'),
         'depth': int(depth),
@@ -54,7 +55,8 @@ def qos_entry(history=None, depth=0, reliability=None, durability=None, deadline
 
 def offered_qos_yaml(profiles) -> str:
     """YAML string for the channel metadata; ``profiles`` is a list of :func:`qos_entry` dicts
-    (or keyword dicts for it). An empty list gives '' (rosbag2 then falls back to its defaults)."""
+    (or keyword dicts for it). An empty list gives '' (rosbag2 then falls back to its defaults).
+    """
     if isinstance(profiles, str):
         return profiles
     entries = [p if 'deadline' in p and isinstance(p['deadline'], dict) else qos_entry(**p)

@@ -78,7 +78,8 @@ class Recording:
     @property
     def tail_unaccounted(self) -> bool:
         """True if a file was not closed: samples after its last intact chunk are missing, how many is
-        unknown (the recorder that knew was killed or could not write)."""
+        unknown (the recorder that knew was killed or could not write).
+        """
         return bool(self.unclosed)
 
     def loss_text(self) -> str:
@@ -112,7 +113,8 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
     """Load a recording (file, directory of split files, or list of files) into arrays.
 
     A truncated file (writer killed) raises RecordingError suggesting ``rubber-rig recover``, unless
-    ``allow_truncated`` (then everything up to the last complete chunk is read)."""
+    ``allow_truncated`` (then everything up to the last complete chunk is read).
+    """
     files = recording_files(path)
     rec = Recording(files=[str(f) for f in files])
     raw = []                                   # (log_time, topic, type, schema, data, file, pub. sequence)
@@ -130,7 +132,7 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
                 rec.closing.append(decode_metadata(values))
             else:
                 rec.other_metadata.setdefault(name, values)
-        for channel_id, log_time, publish_time, sequence, data in messages:
+        for channel_id, log_time, _, sequence, data in messages:
             channel = channels.get(channel_id)
             if channel is None:
                 raise RecordingError(f'{f}: message on unknown channel {channel_id}')
@@ -175,7 +177,8 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
 
 def _metadata_from_topics(rec: Recording):
     """Fill what the metadata record lacks (e.g. `ros2 bag record` files) from latched topics: the
-    program YAML (std_msgs/String on ``program``) and the model parameters (ModelParameters)."""
+    program YAML (std_msgs/String on ``program``) and the model parameters (ModelParameters).
+    """
     for topic, msgs in rec.messages.items():
         info = rec.topics[topic]
         last = msgs[-1][1] if msgs else None
@@ -187,7 +190,7 @@ def _metadata_from_topics(rec: Recording):
             rec.metadata.setdefault('model', last.model_name)
             rec.metadata.setdefault('parameter_set', last.parameter_set)
             rec.metadata.setdefault('model_temperature', float(last.temperature))
-            rec.metadata.setdefault('model_parameters', dict(zip(last.names, map(float, last.values))))
+            rec.metadata.setdefault('model_parameters', dict(zip(last.names, map(float, last.values), strict=False)))
 
 
 def _stamp_ns(msg) -> int:
@@ -246,7 +249,7 @@ def _fill_samples(rec: Recording, samples, topic):
 
 
 def _lookup(rec_seq, seq, values, fill):
-    """values at rec_seq positions, joined on sequence numbers (``seq`` -> ``values``)."""
+    """Values at rec_seq positions, joined on sequence numbers (``seq`` -> ``values``)."""
     out = np.full(len(rec_seq), fill, dtype=np.asarray(values).dtype if len(values) else float)
     if not len(seq) or not len(rec_seq):
         return out

@@ -16,9 +16,8 @@ from mcap.writer import Writer as McapWriter
 
 from .bagmeta import METADATA_FILE, write_bag_metadata
 from .errors import RecordingError, RecordingWriteError
-from .gaps import SEQUENCED_TYPES, GapTracker
+from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
 from .mcapio import Decoders, check_file, iter_records
-from .gaps import sequence_span
 from .writer import SEQUENCE_SOURCE_KEY, encode_metadata
 
 RECOVERED_METADATA_NAME = 'rubber_rig.recovered'
@@ -57,7 +56,8 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
     """Copy every readable record of ``path`` into a complete MCAP file.
 
     ``output`` defaults to ``<name>.recovered.mcap``; with ``in_place`` the original is replaced
-    (kept as ``<name>.mcap.bak`` if ``backup``)."""
+    (kept as ``<name>.mcap.bak`` if ``backup``).
+    """
     path = Path(path)
     was_complete = check_file(path)           # raises RecordingError if not an MCAP file at all
     if in_place:
@@ -152,7 +152,8 @@ def _write_error(target: Path, exc: OSError) -> RecordingWriteError:
 
 def _discard(target: Path):
     """Remove a partial output; on a path that could not be written (read-only file system, a parent
-    that is not a directory, ...) removing fails the same way and there is nothing to remove."""
+    that is not a directory, ...) removing fails the same way and there is nothing to remove.
+    """
     try:
         target.unlink(missing_ok=True)
     except OSError:

@@ -18,13 +18,14 @@ from collections import deque
 from datetime import datetime, timezone
 from pathlib import Path
 
-from .errors import RecordingError, RecordingWriteError
+from mcap.records import Schema
+
 from .bagmeta import write_bag_metadata
+from .errors import RecordingError, RecordingWriteError
 from .gaps import GapTracker, sequence_span
 from .mcapio import Decoders
 from .msgdefs import full_definition, normalize_type
 from .writer import RecordingWriter
-from mcap.records import Schema
 
 
 def _stamp(ns: int) -> str:
@@ -84,7 +85,8 @@ class Recorder:
     @property
     def samples_lost_total(self) -> int:
         """Every sample known lost: sequence gaps that are real loss, and samples received but not
-        written (a write error's lost chunk, batches after the error)."""
+        written (a write error's lost chunk, batches after the error).
+        """
         return self.gaps.samples_lost + self.samples_not_recorded + self.samples_unwritten
 
     def set_qos(self, topic: str, qos) -> None:
@@ -112,7 +114,8 @@ class Recorder:
     # -- control -----------------------------------------------------------------------------
     def start(self, path=None) -> Path:
         """Start a new recording: ``path`` names its directory (default: output_dir/rubber_rig_<utc>).
-        Files inside are <name>_0.mcap, <name>_1.mcap, ... as rosbag2 names split files."""
+        Files inside are <name>_0.mcap, <name>_1.mcap, ... as rosbag2 names split files.
+        """
         if self.recording:
             return self.writer.path
         now = time.time_ns()

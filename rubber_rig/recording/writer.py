@@ -55,8 +55,9 @@ def encode_metadata(values: dict) -> dict:
 
 
 def _plain(value):
-    """rosidl messages, numpy arrays and array.array -> dicts, lists and Python numbers, the forms the
-    dynamic CDR encoder (and JSON) accept; rosidl's byte fields (bytes objects) become ints/bytes."""
+    """Rosidl messages, numpy arrays and array.array -> dicts, lists and Python numbers, the forms the
+    dynamic CDR encoder (and JSON) accept; rosidl's byte fields (bytes objects) become ints/bytes.
+    """
     fields = getattr(value, 'get_fields_and_field_types', None)
     if fields is not None:
         out = {}
@@ -201,7 +202,8 @@ class RecordingWriter:
     def add_channel(self, topic: str, msg_type: str, qos=None, topic_type_hash: str = None,
                     sequence_source: str = 'writer') -> int:
         """Register a topic (done implicitly by write_message). ``qos``: offered profiles as a list
-        of dicts (qos.qos_entry keywords) or the rosbag2 YAML string."""
+        of dicts (qos.qos_entry keywords) or the rosbag2 YAML string.
+        """
         msg_type = normalize_type(msg_type)
         known = self._channels.get(topic)
         if known is not None:
@@ -235,7 +237,8 @@ class RecordingWriter:
     def write_message(self, topic: str, msg_type: str, msg, log_time_ns: int = None,
                       publish_time_ns: int = None, sequence: int = None, qos=None) -> None:
         """Write one message. ``msg``: CDR bytes (as rclpy's raw subscriptions give them), a
-        rosidl-generated message or a dict of fields. Times in ns since the epoch (default: now)."""
+        rosidl-generated message or a dict of fields. Times in ns since the epoch (default: now).
+        """
         if msg_type is None:
             msg_type = type_of(msg)
         try:
@@ -350,7 +353,8 @@ class RecordingWriter:
 
     def close(self, extra: dict = None) -> dict:
         """Write the loss report and the summary; returns the report. After a write error the file
-        is only closed (it ends at its last complete record; recover rebuilds the summary)."""
+        is only closed (it ends at its last complete record; recover rebuilds the summary).
+        """
         if self.closed:
             return self.loss_report()
         self.closed = True

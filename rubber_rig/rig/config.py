@@ -1,7 +1,8 @@
 """Rig configuration: which bus, which rate, which limits, and the simulated rig's options.
 
 `RigConfig.from_dict` validates everything before anything is opened or sent; errors name the field
-(e.g. "rig config: field 'sim.faults[1].type': ...")."""
+(e.g. "rig config: field 'sim.faults[1].type': ...").
+"""
 from __future__ import annotations
 
 import math
@@ -17,7 +18,8 @@ from .can.protocol import cycle_time
 
 class ConfigError(ValueError):
     """Invalid rig configuration. `field` is the dotted path of the field it concerns ('sim.faults[1].type'),
-    which the message names too: "rig config: field 'sim.faults[1].type': unknown fault 'x' (...)"."""
+    which the message names too: "rig config: field 'sim.faults[1].type': unknown fault 'x' (...)".
+    """
 
     def __init__(self, field: str, why: str):
         super().__init__(f"rig config: field '{field}': {why}")
@@ -36,7 +38,9 @@ class FaultSpec:
 
     type: drop | delay | duplicate | corrupt (frames named in `frames`, each hit with `probability`),
     stuck_sensor (`sensor` displacement|force freezes), silent_controller (heartbeat and status stop).
-    delay [s]: how late delayed frames are sent."""
+    delay [s]: how late delayed frames are sent.
+    """
+
     type: str
     start: float = 0.0
     duration: float = math.inf
@@ -75,7 +79,9 @@ class SimOptions:
     {"model": "linear", "stiffness": N/m, "damping": N s/m}. The actuator is a second-order position loop
     (natural frequency [Hz], damping ratio) with a velocity limit [m/s]. Sensors: noise (std), offset,
     resolution; temperature [degC]. host_timeout [s]: host heartbeat silence after which the controller ramps
-    to rest on its own."""
+    to rest on its own.
+    """
+
     specimen: dict = field(default_factory=lambda: {'model': 'seed000', 'temperature': 20.0})
     actuator_frequency: float = setting(80.0, 'natural frequency of the actuator position loop', units='Hz',
                                         range=(1.0, 2000.0))
@@ -131,6 +137,7 @@ class RigConfig:
     ('hold'), with a stream fault either way. paced: the simulated
     rig runs in real time (True) or as fast as setpoints arrive (False) - identical waveform and physics.
     """
+
     backend: str = setting('sim', "'sim' (simulated rig on python-can's virtual bus) or a python-can interface "
                            'name (socketcan, pcan, vector, kvaser, virtual, udp_multicast, ...)')
     channel: Optional[str] = setting(None, 'python-can channel (e.g. can0, PCAN_USBBUS1); empty: interface default',

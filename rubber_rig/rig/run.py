@@ -18,7 +18,9 @@ class RunResult:
 
     time = sequence / sample_rate [s]; setpoint is the command the controller applied; block_index is the
     program block that generated the sample (-1 for the abort or hold ramps); status is the controller fault
-    mask. `blocks` are the runner's block summaries; `completed` is False after an abort or fault."""
+    mask. `blocks` are the runner's block summaries; `completed` is False after an abort or fault.
+    """
+
     program: str
     sample_rate: float
     sequence: np.ndarray
@@ -53,7 +55,8 @@ def run_program(program, config, on_progress: Optional[Callable] = None, amplitu
     generated (in chunks of at most 50 ms) - the measurement latency the excitation node has with lead_time =
     lookahead. Without it a fast run feeds the measurement as soon as the simulated rig has consumed the
     queue, so the amplitude loop sees at most one chunk of latency; a paced rig consumes in real time and has
-    about `lookahead` of latency anyway. It changes nothing open loop."""
+    about `lookahead` of latency anyway. It changes nothing open loop.
+    """
     cfg = RigConfig.from_dict(config)
     if not isinstance(program, Program):
         program = load_program(program)

@@ -14,7 +14,8 @@ from .sim.controller import SimController
 class Rig:
     """An open rig: `driver` (RigDriver) plus, for the "sim" backend, the in-process simulated controller
     (`sim`) on the other end of the same virtual bus, or a spawned simulator process (`process`).
-    A paced in-process simulator runs in a thread; an unpaced one is advanced by driver.poll()."""
+    A paced in-process simulator runs in a thread; an unpaced one is advanced by driver.poll().
+    """
 
     def __init__(self, config: RigConfig, driver: RigDriver, sim=None, sim_bus=None, process=None):
         self.config, self.driver, self.sim, self._sim_bus, self.process = config, driver, sim, sim_bus, process
@@ -55,7 +56,8 @@ def open_rig(config) -> Rig:
 
     backend "sim": simulated controller in a thread on a fresh python-can virtual channel. Any other backend:
     the driver on that python-can interface; with spawn_sim, the simulated rig is started as a separate process
-    (python -m rubber_rig.rig.sim) on the same bus and the call waits until it answers."""
+    (python -m rubber_rig.rig.sim) on the same bus and the call waits until it answers.
+    """
     cfg = RigConfig.from_dict(config)
     proto = Protocol()
     if cfg.backend == 'sim':

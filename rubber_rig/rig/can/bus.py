@@ -15,7 +15,8 @@ def sim_channel_name() -> str:
 
 def open_bus(config, channel=None) -> can.BusABC:
     """python-can Bus for RigConfig `config`: the virtual interface for the in-process "sim" backend,
-    otherwise config.backend with channel, bitrates, fd and bus_options."""
+    otherwise config.backend with channel, bitrates, fd and bus_options.
+    """
     if config.backend == 'sim':
         return can.Bus(interface='virtual', channel=channel or sim_channel_name(), receive_own_messages=False)
     kwargs = dict(config.bus_options)

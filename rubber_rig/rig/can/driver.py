@@ -1,5 +1,6 @@
 """Host driver over any python-can Bus: streams setpoints, assembles measured samples, counts bad frames,
-checks limits and sensors, and runs the watchdog. poll() is non-blocking and never raises on bad frames."""
+checks limits and sensors, and runs the watchdog. poll() is non-blocking and never raises on bad frames.
+"""
 import collections
 import itertools
 import math
@@ -10,9 +11,24 @@ from typing import List
 import numpy as np
 
 from ...excitation.ramp import stopping_positions
-from .protocol import (CMD_ABORT, CMD_HOLD, CMD_RESET, FAULT_BUS, FAULT_DISPLACEMENT_LIMIT, FAULT_FORCE_LIMIT,
-                       FAULT_SENSOR, FAULT_STREAM, FAULT_VELOCITY_LIMIT, FAULT_WATCHDOG, SEQ_MOD, STATES,
-                       MalformedFrame, Protocol, fault_names, unwrap_sequence)
+from .protocol import (
+    CMD_ABORT,
+    CMD_HOLD,
+    CMD_RESET,
+    FAULT_BUS,
+    FAULT_DISPLACEMENT_LIMIT,
+    FAULT_FORCE_LIMIT,
+    FAULT_SENSOR,
+    FAULT_STREAM,
+    FAULT_VELOCITY_LIMIT,
+    FAULT_WATCHDOG,
+    SEQ_MOD,
+    STATES,
+    MalformedFrame,
+    Protocol,
+    fault_names,
+    unwrap_sequence,
+)
 
 
 @dataclass
@@ -20,7 +36,9 @@ class SampleBlock:
     """Consecutive measured samples: sample i has sequence first_sequence + i and was taken at
     t0 + i * sample_period (t0: bus timestamp of the first sample's frame [s]). SI units. `setpoint` is the
     command the controller applied (the host setpoint, or its own ramp after an abort). frames_lost: samples
-    lost on the bus just before this block."""
+    lost on the bus just before this block.
+    """
+
     first_sequence: int
     t0: float
     sample_period: float
@@ -42,6 +60,7 @@ class SampleBlock:
 @dataclass
 class RigStatus:
     """Snapshot of the driver (fields as msg_defs/RigStatus; faults is the FAULT_* bit mask)."""
+
     state: str
     faults: int
     fault_messages: List[str]
@@ -67,7 +86,9 @@ class StreamRefused(ValueError):
 @dataclass
 class StreamGrant:
     """The right to command the rig: setpoints of stream `stream_id` start at first_sequence and must continue
-    from `position` [m] (the command the rig holds) at `velocity` [m/s]."""
+    from `position` [m] (the command the rig holds) at `velocity` [m/s].
+    """
+
     stream_id: int
     owner: str
     first_sequence: int
@@ -98,7 +119,8 @@ class RigDriver:
     (level, text) line per transition for the caller's log.
 
     Call poll() often (at least every watchdog_timeout / 2): it drains the bus without blocking, updates the
-    watchdog and returns the next block of contiguous samples or None."""
+    watchdog and returns the next block of contiguous samples or None.
+    """
 
     MAX_LEAD_SAMPLES = 16384     # a stream may start at most this far ahead (16-bit sequences stay unambiguous)
     # a granted stream whose owner has sent nothing yet has moved nothing: it is withdrawn (no fault, nothing to
@@ -157,7 +179,8 @@ class RigDriver:
     # ---- limits
     def set_limits(self, limits):
         """Apply new limits at once: the controller's ramps follow them, and if the rig or what is queued lies
-        outside them the rig ramps into them now (a fault: the program no longer fits)."""
+        outside them the rig ramps into them now (a fault: the program no longer fits).
+        """
         self.limits = limits
         self.send_limits()
         self._event('info', f'limits: displacement {limits.displacement_min * 1e3:g}..{limits.displacement_max * 1e3:g}'
@@ -198,7 +221,8 @@ class RigDriver:
     def open_stream(self, owner: str, lead_samples: int = 0) -> StreamGrant:
         """Grant the setpoint stream to `owner` (StreamRefused says why not). The first setpoint is due at
         first_sequence, lead_samples after every sample the rig has taken or been sent; the rig holds until
-        then. The owner of a held or ended stream may re-open it (resume)."""
+        then. The owner of a held or ended stream may re-open it (resume).
+        """
         why = self.why_not_ready()
         if why:
             raise StreamRefused(why)
@@ -239,7 +263,8 @@ class RigDriver:
         the queue, and that every setpoint can still stop inside the range at deceleration_max; a violation
         faults the rig (safe ramp) and returns False. A batch of another stream, or a discontinuous one, is
         refused (False, counted, `refusal` says why) and changes nothing. Also False while faulted or
-        ramping."""
+        ramping.
+        """
         x = np.asarray(displacement, dtype=float)
         s = self._stream
         if stream_id is None and s is None and not self.why_not_ready():
@@ -320,7 +345,8 @@ class RigDriver:
 
     def stop_stream(self, stream_id: int, target: float, reason: str, hold: bool = False) -> str:
         """The owner stops now: flush and ramp to target [m] (clamped into the limits). hold: the owner keeps
-        the rig and resumes with open_stream. '' on success, else why not."""
+        the rig and resumes with open_stream. '' on success, else why not.
+        """
         s = self._stream
         if s is None or s.grant.stream_id != stream_id:
             return f'stream {stream_id} is not open'
@@ -333,13 +359,15 @@ class RigDriver:
 
     def abort(self, reason: str = 'abort requested', target: float = None):
         """Command the safe ramp: the controller flushes queued setpoints and ramps smoothly from where it is
-        to target [m] (default rest_position, clamped into the limits). The stream is released."""
+        to target [m] (default rest_position, clamped into the limits). The stream is released.
+        """
         self._command_ramp(CMD_ABORT, target, f'abort: {reason}')
         self._release_stream()
 
     def hold_here(self, reason: str):
         """Stop the motion where it can stop (braking within the limits) and hold there; the stream is
-        released."""
+        released.
+        """
         self._command_ramp(CMD_HOLD, None, f'hold: {reason}')
         self._release_stream()
 
@@ -366,7 +394,8 @@ class RigDriver:
 
     def reset(self) -> str:
         """Acknowledge and clear faults (driver and controller) so a new stream can open. '' on success, else
-        why not (the rig is still ramping)."""
+        why not (the rig is still ramping).
+        """
         if self.controller_state == 'ramping_down':
             return 'the rig is still ramping to rest: reset when it is at rest'
         self.bus.send(self.proto.encode('HostCommand', {'CMD_Code': CMD_RESET, 'CMD_Counter': 0,
@@ -387,7 +416,8 @@ class RigDriver:
     # ---- controller -> host
     def poll(self):
         """Drain received frames (non-blocking), run the watchdog and checks; return the next SampleBlock of
-        contiguous samples, or None if there is none."""
+        contiguous samples, or None if there is none.
+        """
         now = self._clock()
         if now - self._last_poll_wall > 0.5 * self._wd_wall:
             # this host was not scheduled (a loaded machine): silence is judged only over time it was awake,
@@ -641,7 +671,8 @@ class _SensorCheck:
     A live transducer never repeats the same reading for 0.1 s while what drives it moves: the displacement
     is stuck when it repeats while the command moves >= 10 um, the load cell when it repeats while the
     measured displacement moves >= 5 um. And over any stretch where the command spans >= 50 um, the measured
-    displacement must span at least 10 % of it (the actuator attenuates, it does not stop)."""
+    displacement must span at least 10 % of it (the actuator attenuates, it does not stop).
+    """
 
     def __init__(self, fs):
         self.n_same = max(10, int(round(0.1 * fs)))

@@ -1,5 +1,6 @@
 """The rig's CAN protocol: the DBC shipped with the package, encode/decode with cantools, CRC-8 and
-sequence-number unwrapping. Both ends (driver and simulated controller) use this module."""
+sequence-number unwrapping. Both ends (driver and simulated controller) use this module.
+"""
 from pathlib import Path
 
 import can
@@ -94,7 +95,8 @@ class Protocol:
     """Encoder/decoder for the frames of rubber_rig.dbc (cantools does the signal packing).
 
     Every message ends with an 8-bit CRC signal (checked when the DBC is loaded) that this class fills in and
-    verifies."""
+    verifies.
+    """
 
     def __init__(self, dbc_path=DBC_PATH):
         self.db = _DBC if Path(dbc_path) == DBC_PATH else cantools.database.load_file(str(dbc_path))
@@ -117,7 +119,8 @@ class Protocol:
 
     def decode(self, msg: can.Message):
         """(name, signals) for a known frame; None for an unknown identifier; MalformedFrame if the length or
-        CRC is wrong (corrupted frame)."""
+        CRC is wrong (corrupted frame).
+        """
         m = self.by_id.get(msg.arbitration_id)
         if m is None or msg.is_extended_id or msg.is_error_frame or msg.is_remote_frame:
             return None

@@ -2,7 +2,8 @@
 
     python -m rubber_rig.rig.sim --config rig.json      (RigConfig as JSON; backend e.g. udp_multicast)
     python -m rubber_rig.rig.sim --config-json '{"backend": "udp_multicast", "paced": false}'
-Stops on SIGTERM/SIGINT."""
+Stops on SIGTERM/SIGINT.
+"""
 import argparse
 import json
 import signal

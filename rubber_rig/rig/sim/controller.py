@@ -3,17 +3,29 @@
 Consumes one setpoint per sample tick, drives the actuator and specimen, sends measured samples, status,
 temperature and heartbeat frames, ramps smoothly to rest on ABORT or when the host heartbeat goes silent.
 Paced: ticks at wall-clock deadlines t0 + k / fs (no drift). Fast: ticks as soon as the setpoint for the next
-tick is there, so it advances only as far as setpoints are queued; waveform and physics are identical."""
+tick is there, so it advances only as far as setpoints are queued; waveform and physics are identical.
+"""
+import math
 import threading
 import time
 
 import numpy as np
 
-import math
-
 from ...excitation.ramp import DECEL_MAX, RAMP_ACCEL, SafeRamp, stopping_positions
-from ..can.protocol import (CMD_ABORT, CMD_DISABLE, CMD_HOLD, CMD_RESET, FAULT_SENSOR, FAULT_WATCHDOG, SEQ_MOD,
-                            STATE_CODE, MalformedFrame, Protocol, cycle_time, unwrap_sequence)
+from ..can.protocol import (
+    CMD_ABORT,
+    CMD_DISABLE,
+    CMD_HOLD,
+    CMD_RESET,
+    FAULT_SENSOR,
+    FAULT_WATCHDOG,
+    SEQ_MOD,
+    STATE_CODE,
+    MalformedFrame,
+    Protocol,
+    cycle_time,
+    unwrap_sequence,
+)
 from .faults import FaultInjector
 from .plant import Actuator, Sensor
 from .specimen import build_specimen
@@ -133,7 +145,8 @@ class SimController:
     def pump(self):
         """Fast mode without a thread: handle every frame waiting on the bus and tick as far as the queued
         setpoints allow, then return. The in-process fast rig is driven this way from the driver's poll(), so
-        the host and the simulator never fight over the GIL; frames still cross the bus both ways."""
+        the host and the simulator never fight over the GIL; frames still cross the bus both ways.
+        """
         if not self._announced:
             self._housekeeping(force=True)
             self._announced = True
@@ -199,7 +212,8 @@ class SimController:
     def abort(self, target: float = 0.0, fault_bits: int = 0, velocity_max: float = None):
         """Flush queued setpoints and ramp from the current command and velocity to target [m] (None: stop
         where the motion can stop, braking at the host's deceleration limit), at most velocity_max [m/s]
-        (default RAMP_VELOCITY_MAX; the host sends half its velocity limit), inside the host's limits."""
+        (default RAMP_VELOCITY_MAX; the host sends half its velocity limit), inside the host's limits.
+        """
         self.fault_bits |= fault_bits
         self.buffer.clear()
         if self.state in ('running', 'holding', 'ramping_down'):

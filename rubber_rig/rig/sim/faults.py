@@ -6,7 +6,8 @@ class FaultInjector:
     """Applies the configured FaultSpecs to each outgoing frame at rig time t [s].
 
     transmit() returns the list of (extra_delay_ticks, message) to put on the bus: [] for a dropped frame,
-    two entries for a duplicated one, a bit-flipped payload for a corrupted one (its CRC no longer matches)."""
+    two entries for a duplicated one, a bit-flipped payload for a corrupted one (its CRC no longer matches).
+    """
 
     def __init__(self, faults, sample_rate: float, seed: int):
         self.faults = list(faults)

@@ -9,7 +9,8 @@ class Actuator:
     """Second-order position loop x'' = wn^2 (u - x) - 2 zeta wn x' with a velocity limit, discretised exactly
     (zero-order hold) at the sample period. frequency [Hz], velocity_max [m/s]; u and x in m.
 
-    Finite bandwidth makes amplitude and phase errors appear at high frequency as on a real rig."""
+    Finite bandwidth makes amplitude and phase errors appear at high frequency as on a real rig.
+    """
 
     def __init__(self, frequency: float, damping: float, velocity_max: float, sample_rate: float,
                  x0: float = 0.0):
@@ -34,7 +35,8 @@ class Actuator:
 
 class Sensor:
     """Transducer with Gaussian noise (std), offset and resolution (quantisation step), all in its unit.
-    Noise is drawn in blocks from a seeded generator so runs are reproducible."""
+    Noise is drawn in blocks from a seeded generator so runs are reproducible.
+    """
 
     def __init__(self, noise: float, offset: float, resolution: float, rng: np.random.Generator, block=4096):
         self.noise, self.offset, self.res = noise, offset, resolution
@@ -47,7 +49,8 @@ class Sensor:
 
         A true value that is not finite (a diverged specimen model), or one beyond what the quantiser can count,
         reads NaN: an invalid channel, for the controller to fault on, rather than an exception in its loop. The
-        noise sequence advances as for any other sample."""
+        noise sequence advances as for any other sample.
+        """
         if self.stuck_value is not None:
             return self.stuck_value
         if self._i >= self._buf.size:

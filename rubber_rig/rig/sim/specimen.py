@@ -1,12 +1,15 @@
 """The specimen of the simulated rig: an element model from rubber_rig.models (default seed 000 at 20 degC),
-or a plain linear spring + dashpot for quick checks."""
-from ..config import ConfigError
+or a plain linear spring + dashpot for quick checks.
+"""
 from rubber_rig.models import build_model
+
+from ..config import ConfigError
 
 
 class LinearSpecimen:
     """Kelvin-Voigt element F = k x + c dx/dt (stiffness [N/m], damping [N s/m]) at time step dt [s].
-    Same streaming interface as the element models: step(x) -> F, run(x_array) -> forces, reset()."""
+    Same streaming interface as the element models: step(x) -> F, run(x_array) -> forces, reset().
+    """
 
     def __init__(self, stiffness: float, damping: float, dt: float):
         self.k, self.c, self.dt = float(stiffness), float(damping), float(dt)
@@ -28,7 +31,8 @@ def build_specimen(spec: dict, dt: float):
     """Streaming specimen model for `spec` at time step dt [s].
 
     {"model": "linear", "stiffness": N/m, "damping": N s/m} builds LinearSpecimen; anything else goes to
-    rubber_rig.models.build_model (e.g. {"model": "seed000", "temperature": 20.0})."""
+    rubber_rig.models.build_model (e.g. {"model": "seed000", "temperature": 20.0}).
+    """
     spec = dict(spec)
     if spec.get('model') == 'linear':
         unknown = set(spec) - {'model', 'stiffness', 'damping'}
