@@ -18,7 +18,7 @@ setup(
     include_package_data=True,
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
-        ('share/' + package_name, ['package.xml', 'LICENSE', 'CHANGELOG.rst']),
+        ('share/' + package_name, ['package.xml', 'LICENSE', 'CHANGELOG.rst', 'REFERENCES.md']),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.json')),
     ],

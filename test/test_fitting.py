@@ -209,18 +209,20 @@ def test_harmonic_method_on_recording_meets_the_targets(recordings):
 
 def test_two_temperatures_give_a_table_loadable_as_parameter_sets(recordings, tmp_path):
     from rubber_rig.fitting.paramfile import load_fit_file, write_fit_file
-    from rubber_rig.models import Seed000Params
+    from rubber_rig.models import Seed000Params, load_parameter_set, parameter_set_info
     runs = [load_run(p) for p in recordings.values()]
     fits, _ = fit_runs(runs, method='harmonic')
     assert [f.temperature for f in fits] == [-40.0, 20.0]
     path = write_fit_file(tmp_path / 'params.yaml', fits)
     import yaml
     data = yaml.safe_load(path.read_text())
-    assert [r['temperature'] for r in data['table1']] == [20.0, -40.0]
+    assert [data['sets'][n]['temperature'] for n in data['temperature_series']] == [20.0, -40.0]
     assert set(data['sets']) == {'fit_20C', 'fit_m40C'}
     for s in data['sets'].values():
-        assert s['model'] == 'seed000'
+        assert s['model'] == 'fractional_zener_berg' and s['source'].startswith('rubber-rig fit')
         Seed000Params.from_dict(s['values'])          # the models library accepts it as is
+    assert load_parameter_set(f'{path}:fit_m40C') == Seed000Params.from_dict(data['sets']['fit_m40C']['values'])
+    assert parameter_set_info(f'{path}:fit_m40C')['temperature'] == -40.0
     back = load_fit_file(path)
     assert back['fit_m40C']['temperature'] == -40.0
     for k in PARAM_NAMES:

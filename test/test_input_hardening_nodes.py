@@ -140,7 +140,7 @@ def test_bad_parameter_changes_are_refused_with_a_reason_and_the_model_keeps_run
         assert why in result.reason and result.reason.split(':')[0] in (
             'parameter_set', 'values.k_inf'), result.reason
         assert node.predictor.params is before
-    assert node.get_parameter('parameter_set').value == 'seed000_20C'
+    assert node.get_parameter('parameter_set').value == 'swing_arm_joint_20C'
     # a good file is read once, in the validating callback: removing it afterwards changes nothing
     good = write_set(tmp_path / 'good.yaml', k0=1.1e7)
     assert node.set_parameters_atomically([Parameter('parameter_set', value=good)]).successful

@@ -36,7 +36,7 @@ def test_table1_loaded_in_si():
 def test_table2_cases():
     names = list_parameter_sets()
     for i in range(1, 10):
-        assert f'seed000_case{i}' in names
+        assert f'swing_arm_joint_case{i}' in names and f'seed000_case{i}' not in names   # aliases are not listed
     kv = load_parameter_set('seed000_case1')
     assert isinstance(kv, KelvinVoigtParams) and kv.k == 14e6 and kv.c == 243e3
     assert load_parameter_set('seed000_case2') == load_parameter_set('seed000_20C')
@@ -187,3 +187,38 @@ def test_parameter_set_from_a_fitted_yaml_file(tmp_path):
                    'alpha: 0.8, x2: 1.2e-3, f_fmax: 6000.0}}\n')
     with pytest.raises(ValueError, match='k_inf'):
         load_parameter_set(str(bad))
+
+
+def test_physics_names_and_the_earlier_names_give_the_same_sets():
+    """Sets and model types have physics names; the earlier seed-file names still load (recordings carry them)."""
+    from rubber_rig.models import (
+        TangentMaxwellBergParams,
+        ZenerBergParams,
+        build_model,
+        canonical_model,
+        model_class,
+        parameter_set_info,
+    )
+    assert Seed000Params is ZenerBergParams
+    for tag in ('20C', '0C', 'm20C', 'm40C', 'case1', 'case5'):
+        assert load_parameter_set(f'seed000_{tag}') == load_parameter_set(f'swing_arm_joint_{tag}')
+    assert canonical_model('seed000') == 'fractional_zener_berg' and model_class('seed001') is TangentMaxwellBergParams
+    with pytest.raises(ValueError, match='unknown model .nope.*fractional_zener_berg'):
+        model_class('nope')
+    old = build_model({'model': 'seed000', 'parameter_set': 'seed000_20C'}, 1e-3)
+    new = build_model({'model': 'fractional_zener_berg', 'parameter_set': 'swing_arm_joint_20C'}, 1e-3)
+    x = 1e-3 * np.sin(2 * np.pi * 4.0 * np.arange(500) * 1e-3)
+    np.testing.assert_array_equal(old.run(x), new.run(x))
+    assert new.name == 'fractional_zener_berg'
+
+
+def test_each_set_stores_its_temperature_and_source():
+    """The temperature of a set comes from its data file, not from its name."""
+    from rubber_rig.models import parameter_set_info
+    for name, row in TABLE1.items():
+        info = parameter_set_info(name)
+        assert info['temperature'] == row[0] and info['source'] == 'seed 000 Table 1'
+        assert info['model'] == 'fractional_zener_berg'
+    assert parameter_set_info('seed000_case9')['temperature'] == -40.0
+    assert np.isnan(parameter_set_info('swing_arm_joint_case4')['temperature'])   # a hypothetical variant
+    assert parameter_set_info('seed000_case4')['source'] == 'seed 000 Table 2 case 4'

@@ -261,7 +261,7 @@ def test_model_parameters_are_latched_and_follow_run_time_changes(suite):
     late.create_subscription(ModelParameters, topics.MODEL_PARAMETERS, got.append, topics.LATCHED_QOS)
     launcher.spin(late)
     assert launcher.wait_for(lambda: got, 15.0), 'latched model_parameters not delivered to a late joiner'
-    assert got[-1].parameter_set == 'seed000_20C'
+    assert got[-1].parameter_set == 'swing_arm_joint_20C' and got[-1].model_name == 'fractional_zener_berg'
     values = dict(zip(got[-1].names, got[-1].values, strict=True))
     assert values['k0'] == pytest.approx(load_parameter_set('seed000_20C').k0)
     result = model.set_parameters_atomically([Parameter('source', value='temperature'),

@@ -64,12 +64,12 @@ def test_report_fits_when_no_parameters_are_given(recording, tmp_path, capsys):
 
 
 def test_report_with_a_shipped_parameter_set(recording, tmp_path, capsys):
-    """The shipped seed000.yaml (models library) is readable as a --fit file; --set picks the set."""
+    """The shipped swing_arm_joint.yaml (models library) is readable as a --fit file; --set picks the set."""
     from pathlib import Path
 
     import rubber_rig.models
     from rubber_rig.cli.main import main
-    shipped = Path(rubber_rig.models.__file__).parent / 'data' / 'seed000.yaml'
+    shipped = Path(rubber_rig.models.__file__).parent / 'data' / 'swing_arm_joint.yaml'
     out = tmp_path / 'shipped'
     assert main(['report', str(recording), '--fit', str(shipped), '--set', 'seed000_20C', '-o', str(out),
                  '--json']) == 0

@@ -199,10 +199,10 @@ class CycleDetector:
         for cycle in self.cutter.feed(x):
             # the loop closes on the next cycle's first sample
             lo, hi = cycle.start - self._first, cycle.end + 1 - self._first
-            xs, fs = self._buffers[0][lo:hi], [b[lo:hi] for b in self._buffers[1:]]
+            x_cycle, forces = self._buffers[0][lo:hi], [b[lo:hi] for b in self._buffers[1:]]
             period = cycle.end_at - cycle.start_at          # [samples], within (k - 1, k + 1)
-            channels = [harmonic_properties(xs, f, self.dt, frequency=1.0 / (period * self.dt),
-                                            whole_cycles=1).as_dict() for f in fs]
+            channels = [harmonic_properties(x_cycle, f, self.dt, frequency=1.0 / (period * self.dt),
+                                            whole_cycles=1).as_dict() for f in forces]
             d = dict(channels[0], channels=channels)
             d.update(index=self._index, start=cycle.start, end=cycle.end, period=period * self.dt)
             self._index += 1

@@ -8,7 +8,7 @@ the first --settle-cycles cycles of each block are skipped, and K_dyn, loss angl
 are measured per block. The fit minimises seed 000 Eq. 29 (differential evolution + least-squares
 polish); --method time (default) then refines on the raw force-displacement loops. Recordings at the
 same temperature (metadata or temperature channel, 0.5 degC bins) are fitted together. The
-parameters are written as YAML in the format of rubber_rig/models/data/seed000.yaml.
+parameters are written as YAML in the format of rubber_rig/models/data/swing_arm_joint.yaml.
 Tables print in the papers' units (mm, kN, kN/mm); YAML and --json are SI.
 """
 from __future__ import annotations

@@ -1,9 +1,9 @@
 """Steady-state properties of a rubber-element model: K_dyn, loss angle, D, C_eq, energy, R_K, R_E.
 
 Examples:
-  rubber-rig props --parameter-set seed000_20C --frequency 0.5Hz 4Hz 14Hz --amplitude 0.5mm 1mm
+  rubber-rig props --parameter-set swing_arm_joint_20C --frequency 0.5Hz 4Hz 14Hz --amplitude 0.5mm 1mm
   rubber-rig props --temperature -10 --frequency-grid 0.5 14 8 --amplitude 1mm --json
-  rubber-rig props --parameter-set seed000_m40C --frequency 4 --amplitude 0.5mm --method time
+  rubber-rig props --parameter-set swing_arm_joint_m40C --frequency 4 --amplitude 0.5mm --method time
 Output in SI (N/m, N s/m, J; loss_angle in rad in JSON, in degrees in the table).
 """
 from __future__ import annotations
@@ -33,7 +33,7 @@ MAX_TIME_SAMPLES_TOTAL = 30_000_000
 def add_arguments(parser):
     src = parser.add_mutually_exclusive_group()
     src.add_argument('--parameter-set', '-p', default=None,
-                     help='named parameter set (default seed000_20C); see --list')
+                     help='named parameter set (default swing_arm_joint_20C); see --list')
     src.add_argument('--temperature', '-T', default=None,
                      help='seed-000 parameters interpolated at this temperature [degC] (Table 1 range -40..20), '
                           'e.g. -10 or --temperature=-10degC')
@@ -55,8 +55,8 @@ def add_arguments(parser):
 
 def _spec(args):
     if args.temperature is not None:
-        return {'model': 'seed000', 'temperature': to_si(args.temperature, 'temperature')}
-    return {'parameter_set': args.parameter_set or 'seed000_20C'}
+        return {'model': 'fractional_zener_berg', 'temperature': to_si(args.temperature, 'temperature')}
+    return {'parameter_set': args.parameter_set or 'swing_arm_joint_20C'}
 
 
 def _frequencies(args):

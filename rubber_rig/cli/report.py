@@ -3,7 +3,7 @@
 Examples:
   rubber-rig report run.mcap                         # fits the recording, then reports
   rubber-rig report run.mcap --fit params.yaml -o report_20C
-  rubber-rig report run.mcap --fit rubber_rig/models/data/seed000.yaml --set seed000_20C
+  rubber-rig report run.mcap --fit rubber_rig/models/data/swing_arm_joint.yaml --set swing_arm_joint_20C
 Figures: hysteresis loops measured vs model per block (Fig. 5/6), K_dyn and C_eq vs frequency per
 amplitude (Fig. 4), R_K and R_E (Fig. 7), time traces with the force residual, errors per block.
 Units in the figures: mm, kN, kN/mm, kN s/m (as in the papers).

@@ -70,8 +70,10 @@ class Block:
 
     # ---- classification
     @property
-    def periodic(self) -> bool:
-        """True for blocks with an amplitude and cycles (sine, triangle, square, sweeps)."""
+    def oscillating(self) -> bool:
+        """True for blocks with an amplitude and cycles about a mean: the periodic waveforms (``waveforms.PERIODIC``:
+        sine, triangle, square) and the sweeps (``waveforms.SWEEPS``, whose frequency changes, so not periodic).
+        """
         return self.waveform in wf.PERIODIC + wf.SWEEPS
 
     @property
@@ -117,7 +119,7 @@ class Block:
         if self.waveform in wf.SWEEPS:
             return wf.sweep_frequency(t, self.frequency, self.frequency_end, self.taper_cycles, self.duration,
                                       self.waveform == 'sweep_log')
-        return np.full_like(np.asarray(t, dtype=float), self.frequency if self.periodic else 0.0)
+        return np.full_like(np.asarray(t, dtype=float), self.frequency if self.oscillating else 0.0)
 
     def unit(self, phase):
         """Tapered unit waveform (-1..1) at phase [cycles]: envelope x shape."""
@@ -135,7 +137,7 @@ class Block:
         where a ramp starts (resume after hold).
         """
         t = np.asarray(t, dtype=float)
-        if self.periodic:
+        if self.oscillating:
             return self.evaluate_phase(self.phase(t), gain, offset)
         start = self.start_level if start_level is None else start_level
         if self.waveform == 'hold':
@@ -191,7 +193,7 @@ def parse_block(raw, index: int, start_level: float, defaults: dict) -> Block:
         return values[key]
 
     blk = Block(index=index, name=name, waveform=wave, start_level=start_level)
-    if blk.periodic:
+    if blk.oscillating:
         blk.amplitude = need('amplitude')
         blk.mean = values.get('mean', start_level)
         if abs(blk.mean - start_level) > 1e-12:
@@ -257,7 +259,7 @@ def _check_duration(blk: Block, values: dict) -> None:
     hours = f'{MAX_PROGRAM_DURATION / 3600:g} h'
     if blk.waveform in wf.SWEEPS:
         frequencies = [('f_start', blk.frequency), ('f_end', blk.frequency_end)]
-    elif blk.periodic:
+    elif blk.oscillating:
         frequencies = [('rate' if blk.waveform == 'triangle' and 'rate' in values else 'frequency', blk.frequency)]
     else:
         frequencies = []

@@ -19,7 +19,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from rubber_rig.models import Seed000Params, load_parameter_set
+from rubber_rig.models import ZenerBergParams, load_parameter_set
 from rubber_rig.models.fractional import zener_complex_stiffness
 from rubber_rig.models.friction import berg_peak_force
 
@@ -188,7 +188,7 @@ class Limits:
             raise LimitError(f'{where}: the force model predicts a non-finite force ({f})')
         if f > self.force_max:
             what = (f'{_max_frequency(blk):g} Hz, {blk.amplitude * 1e3:g} mm amplitude, {blk.mean * 1e3:g} mm mean'
-                    if blk.periodic else f'{blk.waveform} to {blk.end_level * 1e3:g} mm')
+                    if blk.oscillating else f'{blk.waveform} to {blk.end_level * 1e3:g} mm')
             raise LimitError(f'{where}: predicted peak force {f:.6g} N (element model, {what}) above force_max '
                              f'{self.force_max:g} N')
 
@@ -198,10 +198,10 @@ class Limits:
         Returns (its last setpoint, the budget left). The taper in and out (and the step from `prev` into the
         block) are generated exactly if they fit the budget; the rest is bounded by the supremum of its samples.
         """
-        first = blk.start_level if not blk.periodic else blk.mean          # every block starts at its level
+        first = blk.start_level if not blk.oscillating else blk.mean          # every block starts at its level
         self.check_setpoints([first], fs, prev, where)                    # the step into the block
         last = None
-        if blk.periodic:
+        if blk.oscillating:
             a, f_top = blk.amplitude, _max_frequency(blk)
             lo, hi = blk.mean - a, blk.mean + a
             h = f_top / fs                                                 # <= 0.1 (check_sample_rate)
@@ -230,7 +230,7 @@ class Limits:
         else:                                                              # hold
             lo = hi = blk.start_level
             v = 0.0
-        if blk.periodic and not (blk.waveform != 'triangle' and blk.waveform != 'square'
+        if blk.oscillating and not (blk.waveform != 'triangle' and blk.waveform != 'square'
                                  and (2 * math.pi * f_top) ** 2 * a <= self.deceleration_max):
             # where an abort can stop: a sine whose acceleration stays below deceleration_max stops inside its
             # own peaks; otherwise allow for the braking distance at the peak speed
@@ -267,13 +267,13 @@ def _taper_slope(blk) -> float:
 
 def _max_frequency(blk) -> float:
     """Highest frequency [Hz] a block runs at (0 for hold and ramp)."""
-    return max(blk.frequency, blk.frequency_end) if blk.periodic else 0.0
+    return max(blk.frequency, blk.frequency_end) if blk.oscillating else 0.0
 
 
-def element_force_model(params='seed000_20C', harmonics: int = 256) -> Callable:
-    """A force model for Limits.check_program: block -> predicted peak |force| [N] of the seed-000 element.
+def element_force_model(params='swing_arm_joint_20C', harmonics: int = 256) -> Callable:
+    """A force model for Limits.check_program: block -> predicted peak |force| [N] of a fractional Zener + Berg element.
 
-    params: a parameter-set name (default seed000_20C: the simulated specimen at 20 degC), a Seed000Params or a
+    params: a parameter-set name (default swing_arm_joint_20C: the simulated specimen), a ZenerBergParams or a
     mapping of its values. Steady state, analytic (seed 000 Eq. 11, 17):
 
         F_peak ~ k0 |mean| + max_t |F_ev(t)| + F_f0(A)
@@ -290,11 +290,11 @@ def element_force_model(params='seed000_20C', harmonics: int = 256) -> Callable:
     if isinstance(params, str):
         p = load_parameter_set(params)
     elif isinstance(params, dict):
-        p = Seed000Params.from_dict(params)
+        p = ZenerBergParams.from_dict(params)
     else:
         p = params
-    if not isinstance(p, Seed000Params):
-        raise ValueError(f'element_force_model needs seed000 parameters, got {type(p).__name__}')
+    if not isinstance(p, ZenerBergParams):
+        raise ValueError(f'element_force_model needs fractional_zener_berg parameters, got {type(p).__name__}')
     n_grid = 8 * harmonics
     phase = np.arange(n_grid) / n_grid
 
@@ -302,7 +302,7 @@ def element_force_model(params='seed000_20C', harmonics: int = 256) -> Callable:
         return zener_complex_stiffness(2 * np.pi * np.asarray(frequency, float), p.k0, p.k_inf, p.tau, p.alpha)
 
     def peak_force(block) -> float:
-        if not block.periodic:
+        if not block.oscillating:
             level = max(abs(block.start_level), abs(block.end_level))
             return float(p.k0 * level + p.f_fmax)
         a, f = block.amplitude, _max_frequency(block)

@@ -173,7 +173,7 @@ def _frequency_fields(blk: Block):
     """(field, frequency [Hz]) of the frequencies a block runs at (none for hold and ramp)."""
     if blk.waveform in ('sweep_lin', 'sweep_log'):
         return [('f_start', blk.frequency), ('f_end', blk.frequency_end)]
-    if blk.periodic:
+    if blk.oscillating:
         return [('rate' if blk.waveform == 'triangle' and blk.rate > 0 else 'frequency', blk.frequency)]
     return []
 

@@ -29,8 +29,8 @@ class Progress:
 
 
 @dataclass
-class BlockSummary:
-    """Result of one executed block (fields as msg_defs/BlockSummary)."""
+class BlockResult:
+    """Result of one executed block (the fields of msg_defs/BlockSummary, which the nodes fill from it)."""
 
     block_index: int
     name: str
@@ -131,14 +131,14 @@ class ProgramRunner:
         b = self.block_index
         blk = self.program.blocks[b]
         self._hold_block = b
-        self._start_ramp(blk.mean if blk.periodic else self._x)
+        self._start_ramp(blk.mean if blk.oscillating else self._x)
         self.state, self._resume = 'holding', False
 
     @property
     def hold_target(self) -> float:
         """Where hold() goes [m]: the current block's mean (periodic) or the current setpoint."""
         blk = self.program.blocks[self.block_index]
-        return blk.mean if blk.periodic else self._x
+        return blk.mean if blk.oscillating else self._x
 
     def resume_at(self, sequence: int, position: float):
         """Continue after hold() on a new stream: the held block restarts from its beginning at `sequence`,
@@ -240,7 +240,7 @@ class ProgramRunner:
         m = min(want, int(self._starts[b + 1]) - self._p)
         local = np.arange(self._p - self._starts[b], self._p - self._starts[b] + m)
         t = local / self.fs
-        if blk.periodic:
+        if blk.oscillating:
             loop = self._loops.get(b)
             if loop is None or local[0] == 0:   # first sample of a (re)started block: fresh cycle bookkeeping
                 loop = self._loops[b] = BlockLoop(blk, self.fs, self.limits, self.amplitude_control)
@@ -318,7 +318,7 @@ class ProgramRunner:
         blk = self.program.blocks[b]
         local = self._p - int(self._starts[b])
         cycle, total = 0, 0
-        if blk.periodic:
+        if blk.oscillating:
             total = int(math.floor(blk.total_cycles - 2 * blk.taper_cycles + 1e-9))
             phase = float(blk.phase(np.array(local / self.fs)))
             cycle = int(min(max(math.floor(phase - blk.taper_cycles) + 1, 0), total))
@@ -330,7 +330,7 @@ class ProgramRunner:
 
     @property
     def block_summaries(self):
-        """BlockSummary for every block that has started, in program order."""
+        """BlockResult for every block that has started, in program order."""
         out = []
         for b, blk in enumerate(self.program.blocks):
             if self._p <= self._starts[b] and b not in self._completed:
@@ -339,6 +339,6 @@ class ProgramRunner:
             amp, mean = loop.achieved() if loop else (math.nan, math.nan)
             done = b in self._completed and not (self.aborted and self._starts[b + 1] > self._p)
             msg = '' if done else (f'aborted: {self.abort_reason}' if self.aborted else 'running')
-            out.append(BlockSummary(b, blk.name, blk.waveform, blk.frequency, blk.amplitude, amp, blk.mean, mean,
+            out.append(BlockResult(b, blk.name, blk.waveform, blk.frequency, blk.amplitude, amp, blk.mean, mean,
                                     blk.cycles, len(loop.cycles) if loop else 0, done, msg))
         return out

@@ -7,7 +7,7 @@ properties  seed-000 model properties evaluated as the rig measures them (first 
 identify    seed 000 Eq. 29 by differential evolution + least-squares polish; uncertainty from the Jacobian
 timefit     time-domain refinement on the raw loops (model run over the measured displacement)
 pipeline    recordings -> one parameter set per temperature, with per-block fit quality
-paramfile   the table as YAML in the format of rubber_rig/models/data/seed000.yaml
+paramfile   the table as YAML in the format of rubber_rig/models/data/swing_arm_joint.yaml
 report      PNG figures + self-contained HTML (seed 000 Fig. 4-7 style)
 simulate    simulated-rig MCAP recordings for tests, benchmarks and demos
 

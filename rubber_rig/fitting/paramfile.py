@@ -1,15 +1,14 @@
 """Fitted parameter tables as YAML, in the format of the shipped sets (rubber_rig/models/data/*.yaml).
 
-    source: "..."
-    table1:                      # one row per temperature, SI, like seed 000 Table 1
-      - {temperature: 20.0, k0: ..., k_inf: ..., tau: ..., alpha: ..., x2: ..., f_fmax: ...}
-    sets:                        # loadable sets, {model, values} exactly as the shipped file
-      fit_20C: {model: seed000, values: {k0: ..., ...}}
+    sets:                        # loadable sets, exactly as the shipped file
+      fit_20C: {model: fractional_zener_berg, temperature: 20.0, source: "...", values: {k0: ..., ...}}
+    temperature_series: [fit_20C, ...]   # the sets identified per temperature, like seed 000 Table 1
     fit:                         # extra section (ignored by the set loader): quality and uncertainty
       fit_20C: {temperature, method, recordings, objective, relative_sigma, max_error, ...}
 
 A file written here can be copied into rubber_rig/models/data/ and its sets loaded by name with
-`rubber_rig.models.load_parameter_set`; `load_fit_file` reads it back directly.
+`rubber_rig.models.load_parameter_set`; `load_fit_file` reads it back directly. Files written before the
+physics names (``model: seed000``, temperatures in a ``table1`` list) still load.
 """
 from __future__ import annotations
 
@@ -18,7 +17,7 @@ from pathlib import Path
 
 import yaml
 
-from rubber_rig.models import read_parameter_file
+from rubber_rig.models import canonical_model, read_parameter_file, sets_with_aliases
 
 from .identify import PARAM_NAMES
 
@@ -32,13 +31,14 @@ def set_name(temperature, prefix='fit'):
 
 
 def table_dict(fits, prefix='fit', source=None) -> dict:
-    rows, sets, extra = [], {}, {}
+    src = source or f'rubber-rig fit, {_dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}'
+    sets, extra = {}, {}
     for f in fits:
         name = set_name(f.temperature, prefix)
         values = {k: float(f'{f.params[k]:.6g}') for k in PARAM_NAMES}
-        if f.temperature is not None:
-            rows.append({'temperature': float(f.temperature), **values})
-        sets[name] = {'model': 'seed000', 'values': values}
+        sets[name] = {'model': 'fractional_zener_berg',
+                      **({} if f.temperature is None else {'temperature': float(f.temperature)}),
+                      'source': src, 'values': values}
         ek, ec = f.max_errors('simulated')
         ak, ac = f.max_errors('analytic')
         extra[name] = {
@@ -48,12 +48,10 @@ def table_dict(fits, prefix='fit', source=None) -> dict:
             'max_error': {'k_dyn': float(f'{ek:.4g}'), 'c_eq': float(f'{ec:.4g}'),
                           'k_dyn_analytic': float(f'{ak:.4g}'), 'c_eq_analytic': float(f'{ac:.4g}')},
         }
-    rows.sort(key=lambda r: -r['temperature'])
-    src = source or f'rubber-rig fit, {_dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d %H:%M UTC")}'
-    out = {'source': src}
-    if rows:
-        out['table1'] = rows
-    out['sets'] = sets
+    out = {'sets': sets}
+    series = sorted((n for n, s in sets.items() if 'temperature' in s), key=lambda n: -sets[n]['temperature'])
+    if series:
+        out['temperature_series'] = series
     out['fit'] = extra
     return out
 
@@ -61,8 +59,8 @@ def table_dict(fits, prefix='fit', source=None) -> dict:
 def write_fit_file(path, fits, prefix='fit', source=None) -> Path:
     path = Path(path)
     data = table_dict(fits, prefix, source)
-    header = ('# Seed-000 model parameters identified by rubber-rig fit (SI: N/m, s, -, m, N).\n'
-              '# Same layout as rubber_rig/models/data/seed000.yaml; the "fit" section holds fit quality.\n')
+    header = ('# Fractional Zener + Berg parameters identified by rubber-rig fit (SI: N/m, s, -, m, N).\n'
+              '# Same layout as rubber_rig/models/data/swing_arm_joint.yaml; the "fit" section holds fit quality.\n')
     path.write_text(header + yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=120))
     return path
 
@@ -70,24 +68,26 @@ def write_fit_file(path, fits, prefix='fit', source=None) -> Path:
 def load_fit_file(path) -> dict:
     """{set name: {'model', 'values', 'temperature'}} of a parameter YAML (ours or a shipped one)."""
     data = read_parameter_file(path)
-    sets = data['sets']
-    temps = {}
+    sets = sets_with_aliases(data)
+    temps = {}      # files written before each set stored its temperature: the table1 rows
     for row in data.get('table1') or []:
         vals = {k: row.get(k) for k in PARAM_NAMES}
         temps[tuple(sorted(vals.items()))] = row.get('temperature')
     out = {}
     for name, s in sets.items():
-        if not isinstance(s, dict) or s.get('model') != 'seed000':
+        if not isinstance(s, dict) or canonical_model(s.get('model')) != 'fractional_zener_berg':
             continue
         vals = s.get('values') or {}
         missing = [k for k in PARAM_NAMES if k not in vals]
         if missing:
             raise ValueError(f'{path}: set {name!r} lacks {missing}')
         vals = {k: float(vals[k]) for k in PARAM_NAMES}
-        temp = (data.get('fit') or {}).get(name, {}).get('temperature')
+        temp = s.get('temperature')
+        if temp is None:
+            temp = (data.get('fit') or {}).get(name, {}).get('temperature')
         if temp is None:
             temp = temps.get(tuple(sorted(vals.items())))
-        out[name] = {'model': 'seed000', 'values': vals, 'temperature': temp}
+        out[name] = {'model': 'fractional_zener_berg', 'values': vals, 'temperature': temp}
     if not out:
-        raise ValueError(f'{path}: no seed000 parameter set')
+        raise ValueError(f'{path}: no fractional_zener_berg parameter set')
     return out

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from rubber_rig.models import Seed000Params, steady_state_properties
+from rubber_rig.models import ZenerBergParams, steady_state_properties
 
 from .identify import PARAM_NAMES
 from .pipeline import block_quality
@@ -102,7 +102,7 @@ def fig_ratios(blocks, params, plt):
     fig, (ak, ae) = plt.subplots(1, 2, figsize=(11, 4.2))
     groups = _amp_groups(blocks)
     fgrid = np.geomspace(min(b.frequency for b in blocks) * 0.8, max(b.frequency for b in blocks) * 1.2, 120)
-    p = Seed000Params(**{k: float(params[k]) for k in PARAM_NAMES})
+    p = ZenerBergParams(**{k: float(params[k]) for k in PARAM_NAMES})
     for i, a in enumerate(groups):
         pr = steady_state_properties(p, fgrid, a)
         ak.plot(fgrid, pr['r_k'], color=f'C{i}', label=f'{a * 1e3:g} mm')

@@ -87,7 +87,7 @@ def write_recording(path, result, program_text: str, specimen: dict, temperature
 
 def simulated_recording(path, program, parameter_set: str, temperature: float, **kw):
     """Run `program` on the simulated rig with the specimen `parameter_set` and record it to `path`."""
-    specimen = {'model': 'seed000', 'parameter_set': parameter_set}
+    specimen = {'model': 'fractional_zener_berg', 'parameter_set': parameter_set}
     result, text, config = run_simulated(program, specimen, temperature, **kw)
     if not result.completed:
         raise RuntimeError(f'simulated run did not complete: {result.message}')

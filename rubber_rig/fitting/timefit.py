@@ -31,7 +31,7 @@ import numpy as np
 from scipy.optimize import least_squares
 from scipy.signal import butter, sosfiltfilt
 
-from rubber_rig.models import Seed000Params, build_model
+from rubber_rig.models import ZenerBergParams, build_model
 
 from .blocks import _noise_level
 from .identify import PARAM_NAMES, FitResult, _z_bounds, jacobian_uncertainty, params_to_z, z_to_params
@@ -41,7 +41,7 @@ def simulate(params: dict, x, dt, reversal_threshold: float = 0.0):
     """Force [N] of the seed-000 model (rubber_rig.models, default scheme) for displacement x [m];
     ``reversal_threshold`` [m] is Berg's reversal deadband (rubber_rig.models.friction), 0 = the paper's rule.
     """
-    model = build_model(Seed000Params(**{k: float(params[k]) for k in PARAM_NAMES}), dt,
+    model = build_model(ZenerBergParams(**{k: float(params[k]) for k in PARAM_NAMES}), dt,
                         friction_reversal_threshold=reversal_threshold)
     return np.asarray(model.run(np.asarray(x, float)), float)
 

@@ -1,14 +1,24 @@
 """Rubber-element models (pure numpy/scipy; never imports rclpy).
 
 * :func:`build_model` -> a :class:`ParallelModel` with ``step`` (streaming), ``run`` (batch), state
-  save/restore and per-branch forces; ready models 'seed000' (fractional Zener + Berg, 6 parameters),
-  'seed001' (tangent spring + 2 Maxwell + Berg), 'kelvin_voigt', or any parallel composition.
+  save/restore and per-branch forces; ready models 'fractional_zener_berg' (seed 000: fractional Zener + Berg,
+  6 parameters), 'tangent_maxwell_berg' (seed 001: tangent spring + 2 Maxwell + Berg), 'kelvin_voigt', or any
+  parallel composition. REFERENCES.md at the top of the repository names the papers ("seed 000" ...).
 * :func:`steady_state_properties`: analytic K_dyn, loss angle, D, C_eq, E, R_K, R_E (seed 000 Eq. 11-30).
-* Parameter sets: :func:`load_parameter_set`, :func:`list_parameter_sets`, :func:`parameters_at_temperature`.
+* Parameter sets: :func:`load_parameter_set`, :func:`parameter_set_info`, :func:`list_parameter_sets`,
+  :func:`parameters_at_temperature`.
 
 The fractional operator's default scheme and its error bound are documented in :mod:`.fractional`.
 """
-from .composite import ParallelModel, build_model, resolve_params, seed000_model, seed001_model
+from .composite import (
+                        ParallelModel,
+                        build_model,
+                        resolve_params,
+                        seed000_model,
+                        seed001_model,
+                        tangent_maxwell_berg_model,
+                        zener_berg_model,
+)
 from .elements import (
                        Dashpot,
                        FractionalZener,
@@ -23,24 +33,34 @@ from .elements import (
 from .fractional import gl_complex_stiffness, two_order_complex_stiffness, zener_complex_stiffness, zener_storage_loss
 from .friction import BergFriction, SmoothCoulomb, berg_force, berg_steady_state
 from .params import (
+                       MODEL_ALIASES,
+                       PARAM_CLASSES,
                        KelvinVoigtParams,
                        Seed000Params,
                        Seed001Params,
+                       TangentMaxwellBergParams,
+                       ZenerBergParams,
+                       canonical_model,
                        list_parameter_sets,
                        load_parameter_set,
+                       model_class,
+                       parameter_set_info,
                        parameters_at_temperature,
                        read_parameter_file,
+                       sets_with_aliases,
 )
 from .simulate import sine_displacement, time_domain_properties
 from .steady_state import steady_state_properties
 
 __all__ = [
-    'ParallelModel', 'build_model', 'resolve_params', 'seed000_model', 'seed001_model',
+    'ParallelModel', 'build_model', 'resolve_params', 'zener_berg_model', 'tangent_maxwell_berg_model',
+    'seed000_model', 'seed001_model',
     'Dashpot', 'FractionalZener', 'FractionalZenerGL', 'LinearSpring', 'Maxwell', 'PolynomialSpring',
     'TangentSpring', 'TwoOrderFractional', 'Zener', 'BergFriction', 'SmoothCoulomb',
     'gl_complex_stiffness', 'two_order_complex_stiffness', 'zener_complex_stiffness', 'zener_storage_loss',
     'berg_force', 'berg_steady_state',
-    'KelvinVoigtParams', 'Seed000Params', 'Seed001Params', 'list_parameter_sets', 'load_parameter_set',
-    'parameters_at_temperature', 'read_parameter_file', 'steady_state_properties', 'sine_displacement',
-    'time_domain_properties',
+    'KelvinVoigtParams', 'ZenerBergParams', 'TangentMaxwellBergParams', 'Seed000Params', 'Seed001Params',
+    'PARAM_CLASSES', 'MODEL_ALIASES', 'canonical_model', 'model_class', 'list_parameter_sets', 'load_parameter_set',
+    'parameter_set_info', 'sets_with_aliases', 'parameters_at_temperature', 'read_parameter_file',
+    'steady_state_properties', 'sine_displacement', 'time_domain_properties',
 ]

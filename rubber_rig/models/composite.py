@@ -9,11 +9,12 @@ import numpy as np
 from . import elements as el
 from .friction import BergFriction, SmoothCoulomb, check_reversal_threshold
 from .params import (
-    PARAM_CLASSES,
     KelvinVoigtParams,
-    Seed000Params,
-    Seed001Params,
+    TangentMaxwellBergParams,
+    ZenerBergParams,
+    canonical_model,
     load_parameter_set,
+    model_class,
     parameters_at_temperature,
 )
 
@@ -104,7 +105,7 @@ class ParallelModel:
         return np.concatenate([e.complex_stiffness(frequency, amplitude) for e in self.elements])
 
 
-def _fractional_element(p: Seed000Params, dt, scheme):
+def _fractional_element(p: ZenerBergParams, dt, scheme):
     if isinstance(scheme, dict):
         opts = dict(scheme)
         name = opts.pop('name', 'default')
@@ -119,20 +120,21 @@ def _fractional_element(p: Seed000Params, dt, scheme):
     raise ValueError(f"unknown fractional scheme {name!r}: use 'default', 'gl' or 'paper'")
 
 
-def seed000_model(params: Seed000Params, dt: float, scheme='default',
-                  friction_reversal_threshold: float = 0.0) -> ParallelModel:
-    """Seed 000 nonlinear rubber spring: fractional Zener + Berg; branches ('elastic', 'viscous', 'friction').
+def zener_berg_model(params: ZenerBergParams, dt: float, scheme='default',
+                     friction_reversal_threshold: float = 0.0) -> ParallelModel:
+    """Seed 000's nonlinear rubber spring: fractional Zener + Berg; branches ('elastic', 'viscous', 'friction').
 
     ``friction_reversal_threshold`` [m]: Berg's reversal deadband (see :mod:`.friction`), 0 = the paper's rule.
     """
     params.validate()
     return ParallelModel([_fractional_element(params, dt, scheme),
                           BergFriction(params.f_fmax, params.x2, dt, friction_reversal_threshold)],
-                         dt, 'seed000', params)
+                         dt, 'fractional_zener_berg', params)
 
 
-def seed001_model(params: Seed001Params, dt: float, friction_reversal_threshold: float = 0.0) -> ParallelModel:
-    """Seed 001 combined model: tangent spring + 2 Maxwell + Berg.
+def tangent_maxwell_berg_model(params: TangentMaxwellBergParams, dt: float,
+                               friction_reversal_threshold: float = 0.0) -> ParallelModel:
+    """Seed 001's combined model: tangent spring + 2 Maxwell + Berg.
 
     Branches ('elastic', 'viscous_1', 'viscous_2', 'friction').
     """
@@ -140,7 +142,7 @@ def seed001_model(params: Seed001Params, dt: float, friction_reversal_threshold:
     return ParallelModel([el.TangentSpring(params.k_t, params.d_t), el.Maxwell(params.k1, params.c1, dt),
                           el.Maxwell(params.k2, params.c2, dt),
                           BergFriction(params.f_fmax, params.x2, dt, friction_reversal_threshold)],
-                         dt, 'seed001', params)
+                         dt, 'tangent_maxwell_berg', params)
 
 
 def kelvin_voigt_model(params: KelvinVoigtParams, dt: float) -> ParallelModel:
@@ -158,7 +160,7 @@ ELEMENT_TYPES = {
     'maxwell': lambda dt, k, c: el.Maxwell(k, c, dt),
     'zener': lambda dt, k0, k_inf, tau: el.Zener(k0, k_inf, tau, dt),
     'fractional_zener': lambda dt, scheme='default', **p: _fractional_element(
-        Seed000Params(x2=1.0, f_fmax=1.0, **p).validate(), dt, scheme),
+        ZenerBergParams(x2=1.0, f_fmax=1.0, **p).validate(), dt, scheme),
     'two_order_fractional': lambda dt, **p: el.TwoOrderFractional(dt=dt, **p),
     'berg': lambda dt, f_fmax, x2, reversal_threshold=0.0: BergFriction(f_fmax, x2, dt, reversal_threshold),
     'smooth_coulomb': lambda dt, f_c, a: SmoothCoulomb(f_c, a, dt),
@@ -166,10 +168,10 @@ ELEMENT_TYPES = {
 
 
 def _from_params(params, dt, scheme, friction_reversal_threshold=0.0):
-    if isinstance(params, Seed000Params):
-        return seed000_model(params, dt, scheme, friction_reversal_threshold)
-    if isinstance(params, Seed001Params):
-        return seed001_model(params, dt, friction_reversal_threshold)
+    if isinstance(params, ZenerBergParams):
+        return zener_berg_model(params, dt, scheme, friction_reversal_threshold)
+    if isinstance(params, TangentMaxwellBergParams):
+        return tangent_maxwell_berg_model(params, dt, friction_reversal_threshold)
     if isinstance(params, KelvinVoigtParams):
         return kelvin_voigt_model(params, dt)
     raise ValueError(f'cannot build a model from {type(params).__name__}')
@@ -177,26 +179,24 @@ def _from_params(params, dt, scheme, friction_reversal_threshold=0.0):
 
 def resolve_params(spec):
     """Parameters of a spec: a params dataclass, a parameter-set name or a dict spec (see ``build_model``)."""
-    if isinstance(spec, (Seed000Params, Seed001Params, KelvinVoigtParams)):
+    if isinstance(spec, (ZenerBergParams, TangentMaxwellBergParams, KelvinVoigtParams)):
         return spec
     if isinstance(spec, str):
         return load_parameter_set(spec)
     if not isinstance(spec, dict):
         raise ValueError(f'model spec must be parameters, a parameter-set name or a dict, got {type(spec).__name__}')
-    model = spec.get('model', 'seed000')
+    model = canonical_model(spec.get('model', 'fractional_zener_berg'))
     sources = [k for k in ('parameter_set', 'temperature', 'values') if k in spec]
     if len(sources) != 1:
         raise ValueError(f"model spec needs exactly one of 'parameter_set', 'temperature', 'values', got {sources}")
     if 'parameter_set' in spec:
         p = load_parameter_set(spec['parameter_set'])
     elif 'temperature' in spec:
-        if model != 'seed000':
-            raise ValueError(f"'temperature' is only available for model 'seed000', not {model!r}")
+        if model != 'fractional_zener_berg':
+            raise ValueError(f"'temperature' is only available for model 'fractional_zener_berg', not {model!r}")
         p = parameters_at_temperature(spec['temperature'])
     else:
-        if model not in PARAM_CLASSES:
-            raise ValueError(f'unknown model {model!r}; known: {sorted(PARAM_CLASSES)} or parallel')
-        p = PARAM_CLASSES[model].from_dict(spec['values'])
+        p = model_class(model).from_dict(spec['values'])
     return p
 
 
@@ -211,9 +211,10 @@ def _check_threshold(value) -> float:
 def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_threshold: float = 0.0) -> ParallelModel:
     """Model object at sample period ``dt`` [s].
 
-    ``params_or_spec``: a :class:`Seed000Params` / :class:`Seed001Params` / :class:`KelvinVoigtParams`;
-    a parameter-set name; or a dict ``{"model": "seed000", "parameter_set": "seed000_20C"}``,
-    ``{"model": "seed000", "temperature": -10}``, ``{"model": "seed000", "values": {...}}``,
+    ``params_or_spec``: a :class:`ZenerBergParams` / :class:`TangentMaxwellBergParams` /
+    :class:`KelvinVoigtParams`; a parameter-set name; or a dict
+    ``{"model": "fractional_zener_berg", "parameter_set": "swing_arm_joint_20C"}``,
+    ``{"model": "fractional_zener_berg", "temperature": -10}``, ``{"model": "fractional_zener_berg", "values": {...}}``,
     ``{"model": "parallel", "elements": [{"type": "berg", "f_fmax": 4570, "x2": 1.41e-3}, ...]}``.
     ``scheme`` (fractional operator): 'default' (sum of exponentials), 'paper' (GL, N_t = 200,
     h = 1 ms) or 'gl' / ``{"name": "gl", "n_terms": N_t, "h": h}``. A dict spec may carry its own
@@ -247,3 +248,7 @@ def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_t
                     raise ValueError(f'bad parameters for element {kind!r}: {exc}') from None
             return ParallelModel(elems, dt, 'parallel')
     return _from_params(resolve_params(params_or_spec), float(dt), scheme, friction_reversal_threshold)
+
+
+seed000_model = zener_berg_model                 # earlier names, kept for code written against them
+seed001_model = tangent_maxwell_berg_model

@@ -201,29 +201,29 @@ class BergFriction:
             rev = np.concatenate(([0], rev))
         # reference state per segment: sequential only over the reversals
         fm, x2 = self.f_fmax, self.x2
-        xs, fs, f_prev = self.x_s, self.f_s, self.f_prev
-        xs_seg, fs_seg = [xs], [fs]
+        x_s, f_s, f_prev = self.x_s, self.f_s, self.f_prev
+        x_s_seg, f_s_seg = [x_s], [f_s]
         xl = xp[rev].tolist()
         for k, i in enumerate(rev.tolist()):
             if i > 0:
-                f_prev = _berg_scalar(xl[k], xs, fs, fm, x2)
-            xs, fs = xl[k], f_prev
-            xs_seg.append(xs)
-            fs_seg.append(fs)
+                f_prev = _berg_scalar(xl[k], x_s, f_s, fm, x2)
+            x_s, f_s = xl[k], f_prev
+            x_s_seg.append(x_s)
+            f_s_seg.append(f_s)
         bounds = np.concatenate(([0], rev, [n]))
         counts = np.diff(bounds)
-        xs_a, fs_a = np.array(xs_seg), np.array(fs_seg)
+        x_s_a, f_s_a = np.array(x_s_seg), np.array(f_s_seg)
         if counts[0] == 0:   # reversal at the first sample: the stored reference has no samples
-            xs_a, fs_a, counts, bounds = xs_a[1:], fs_a[1:], counts[1:], bounds[1:]
+            x_s_a, f_s_a, counts, bounds = x_s_a[1:], f_s_a[1:], counts[1:], bounds[1:]
         seg_dir = direction[bounds[:-1]]
         # Eq. 16 in one expression: F = F_fs + d A / (B + |d|), A and B per segment and direction
-        mu = fs_a / fm
-        a_coef = np.where(seg_dir > 0, fm - fs_a, fm + fs_a)
+        mu = f_s_a / fm
+        a_coef = np.where(seg_dir > 0, fm - f_s_a, fm + f_s_a)
         b_coef = np.where(seg_dir > 0, x2 * (1.0 - mu), x2 * (1.0 + mu))
-        d = x - np.repeat(xs_a, counts)
-        f = np.repeat(fs_a, counts) + d * np.repeat(a_coef, counts) / (np.repeat(b_coef, counts) + np.abs(d))
+        d = x - np.repeat(x_s_a, counts)
+        f = np.repeat(f_s_a, counts) + d * np.repeat(a_coef, counts) / (np.repeat(b_coef, counts) + np.abs(d))
         self.x_prev, self.direction = float(x[-1]), int(direction[-1])
-        self.x_s, self.f_s, self.f_prev = xs, fs, float(f[-1])
+        self.x_s, self.f_s, self.f_prev = x_s, f_s, float(f[-1])
         self.x_ext, self.f_ext = self.x_prev, self.f_prev
         return f[None, :]
 
@@ -251,7 +251,7 @@ class BergFriction:
                 else:
                     width = 4 * _DENSE
                 continue
-            s, xs, fs, xe, fe = self.direction, self.x_s, self.f_s, self.x_ext, self.f_ext
+            s, x_s, f_s, xe, fe = self.direction, self.x_s, self.f_s, self.x_ext, self.f_ext
             w = x[i:i + width]
             sw = s * w                                          # exact sign flip: work as if rising
             m = np.maximum.accumulate(np.maximum(sw, s * xe))   # extreme so far (in s-space)
@@ -261,8 +261,8 @@ class BergFriction:
                 mk = m[:k]
                 ext = s * mk
                 at_ext = sw[:k] >= mk
-                f_ext = np.where(ext == xe, fe, berg_force(ext, xs, fs, fm, x2))   # carried extreme keeps its force
-                f[i:i + k] = berg_force(w[:k], np.where(at_ext, xs, ext), np.where(at_ext, fs, f_ext), fm, x2)
+                f_ext = np.where(ext == xe, fe, berg_force(ext, x_s, f_s, fm, x2))   # carried extreme keeps its force
+                f[i:i + k] = berg_force(w[:k], np.where(at_ext, x_s, ext), np.where(at_ext, f_s, f_ext), fm, x2)
                 self.x_ext, self.f_ext = float(ext[-1]), float(f_ext[-1])
             i += k
             if k == w.size:

@@ -1,6 +1,10 @@
 """Parameter sets of the rubber-element models, in SI, with validation and temperature interpolation.
 
-Seed 000 Table 1 (20, 0, -20, -40 degC) and Table 2 (cases 1-9) ship as YAML in ``data/seed000.yaml``.
+The swing-arm rubber joint of seed 000 (Table 1 at 20, 0, -20, -40 degC and the Table 2 variants) ships as
+YAML in ``data/swing_arm_joint.yaml``; each set stores its model type, SI values, the temperature it was
+identified at and its source (REFERENCES.md names the papers). Model types have physics names
+(``fractional_zener_berg``, ``tangent_maxwell_berg``, ``kelvin_voigt``); the earlier names (``seed000``,
+``seed001``, ``seed000_20C``...) stay readable as aliases because recordings and fit files carry them.
 
 Temperature interpolation (:func:`parameters_at_temperature`): shape-preserving monotone cubic
 Hermite interpolation (PCHIP, Fritsch-Carlson) of each parameter over the four table temperatures,
@@ -89,8 +93,8 @@ class _Params:
 
 
 @dataclasses.dataclass(frozen=True)
-class Seed000Params(_Params):
-    """Seed 000 nonlinear rubber spring: fractional Zener (Eq. 4) + Berg friction (Eq. 16).
+class ZenerBergParams(_Params):
+    """Fractional-derivative Zener element (seed 000 Eq. 4) in parallel with Berg friction (seed 000 Eq. 16).
 
     k0 [N/m] static stiffness, k_inf [N/m] high-frequency storage stiffness, tau [s] relaxation
     time, alpha [-] fractional order in (0, 1], x2 [m] displacement to reach F_fmax/2 from the
@@ -104,7 +108,7 @@ class Seed000Params(_Params):
     x2: float
     f_fmax: float
 
-    def validate(self) -> 'Seed000Params':
+    def validate(self) -> 'ZenerBergParams':
         for n in ('k0', 'k_inf', 'tau', 'x2', 'f_fmax'):
             _check_positive(n, getattr(self, n))
         _check_order('alpha', self.alpha)
@@ -129,8 +133,8 @@ class KelvinVoigtParams(_Params):
 
 
 @dataclasses.dataclass(frozen=True)
-class Seed001Params(_Params):
-    """Seed 001 combined ("novel") model: Dzierzek tangent spring + two Maxwell branches + Berg friction.
+class TangentMaxwellBergParams(_Params):
+    """Seed 001's combined model: Dzierzek tangent spring + two Maxwell branches + Berg friction.
 
     k_t [N/m] tangent stiffness at x = 0, d_t [m] characteristic thickness (asymptote of the
     elastic curve), k1, k2 [N/m] and c1, c2 [N s/m] the two Maxwell branches, f_fmax [N], x2 [m]
@@ -147,13 +151,33 @@ class Seed001Params(_Params):
     f_fmax: float
     x2: float
 
-    def validate(self) -> 'Seed001Params':
+    def validate(self) -> 'TangentMaxwellBergParams':
         for n in self.names():
             _check_positive(n, getattr(self, n))
         return self
 
 
-PARAM_CLASSES = {'seed000': Seed000Params, 'kelvin_voigt': KelvinVoigtParams, 'seed001': Seed001Params}
+Seed000Params = ZenerBergParams            # earlier names, kept for code written against them
+Seed001Params = TangentMaxwellBergParams
+
+PARAM_CLASSES = {'fractional_zener_berg': ZenerBergParams, 'kelvin_voigt': KelvinVoigtParams,
+                 'tangent_maxwell_berg': TangentMaxwellBergParams}
+# Model type names of files written before the physics names.
+MODEL_ALIASES = {'seed000': 'fractional_zener_berg', 'seed001': 'tangent_maxwell_berg'}
+
+
+def canonical_model(name) -> str:
+    """The physics name of a model type (``'seed000'`` -> ``'fractional_zener_berg'``); unknown names unchanged."""
+    return MODEL_ALIASES.get(name, name)
+
+
+def model_class(name):
+    """The parameter dataclass of a model type name or alias; ValueError naming the known types."""
+    try:
+        return PARAM_CLASSES[canonical_model(name)]
+    except (KeyError, TypeError):
+        raise ValueError(f'unknown model {name!r}; known: {", ".join(PARAM_CLASSES)} '
+                         f'(or the earlier names {", ".join(MODEL_ALIASES)})') from None
 
 
 @lru_cache(maxsize=None)
@@ -162,21 +186,37 @@ def _load_yaml(name: str) -> dict:
         return yaml.safe_load(fh)
 
 
+def sets_with_aliases(data: dict) -> dict:
+    """The ``sets`` of a parameter file's YAML plus its ``aliases`` (old name -> set name) as extra keys."""
+    sets = dict(data.get('sets') or {})
+    for old, new in (data.get('aliases') or {}).items():
+        if new in sets:
+            sets.setdefault(old, sets[new])
+    return sets
+
+
+def _shipped_files() -> list:
+    return [_load_yaml(path.name) for path in sorted(DATA_DIR.glob('*.yaml'))]
+
+
 def _all_sets() -> dict:
     sets = {}
-    for path in sorted(DATA_DIR.glob('*.yaml')):
-        sets.update(_load_yaml(path.name).get('sets', {}))
+    for data in _shipped_files():
+        sets.update(sets_with_aliases(data))
     return sets
 
 
 def list_parameter_sets() -> list:
-    """Names of the shipped parameter sets, e.g. ``['seed000_0C', 'seed000_20C', ...]``."""
-    return sorted(_all_sets())
+    """Names of the shipped parameter sets, e.g. ``['swing_arm_joint_0C', 'swing_arm_joint_20C', ...]``
+    (without the aliases of earlier names).
+    """
+    return sorted(name for data in _shipped_files() for name in data.get('sets', {}))
 
 
 def read_parameter_file(path) -> dict:
-    """The YAML of a parameter file in the shipped layout (``sets:`` name -> {model, values}; optional
-    ``table1:`` rows), e.g. the output of ``rubber-rig fit``. Errors name the file and what is wrong.
+    """The YAML of a parameter file in the shipped layout (``sets:`` name -> {model, values, temperature,
+    source}; optional ``temperature_series`` and ``aliases``), e.g. the output of ``rubber-rig fit``.
+    Errors name the file and what is wrong.
     """
     path = Path(path).expanduser()
     if not path.is_file():
@@ -187,7 +227,8 @@ def read_parameter_file(path) -> dict:
         raise ValueError(f'{path}: not valid YAML ({exc})') from None
     sets = data.get('sets') if isinstance(data, dict) else None
     if not isinstance(sets, dict) or not sets:
-        raise ValueError(f'{path}: no "sets" mapping of parameter sets (the layout of models/data/seed000.yaml)')
+        raise ValueError(f'{path}: no "sets" mapping of parameter sets '
+                         '(the layout of rubber_rig/models/data/swing_arm_joint.yaml)')
     return data
 
 
@@ -197,7 +238,7 @@ def _resolve_set(name: str) -> tuple:
     if not file_part and set_part.endswith(('.yaml', '.yml')):
         file_part, set_part = set_part, ''
     if file_part:
-        sets = read_parameter_file(file_part)['sets']
+        sets = sets_with_aliases(read_parameter_file(file_part))
         if not set_part:
             if len(sets) != 1:
                 raise ValueError(f'{file_part} holds {len(sets)} parameter sets; name one as '
@@ -209,7 +250,7 @@ def _resolve_set(name: str) -> tuple:
     if set_part not in sets:
         raise ValueError(f'unknown parameter set {set_part!r} in {origin}; known: {", ".join(sorted(sets))}')
     entry = sets[set_part]
-    if not isinstance(entry, dict) or entry.get('model') not in PARAM_CLASSES \
+    if not isinstance(entry, dict) or canonical_model(entry.get('model')) not in PARAM_CLASSES \
             or not isinstance(entry.get('values'), dict):
         raise ValueError(f'parameter set {set_part!r} in {origin} needs "model" (one of '
                          f'{", ".join(PARAM_CLASSES)}) and a "values" mapping')
@@ -219,21 +260,33 @@ def _resolve_set(name: str) -> tuple:
 def load_parameter_set(name: str):
     """Parameter set by name, as a validated frozen dataclass in SI units.
 
-    ``seed000_20C``, ``seed000_0C``, ``seed000_m20C``, ``seed000_m40C`` (Table 1) and
-    ``seed000_case2`` .. ``seed000_case9`` give :class:`Seed000Params`; ``seed000_case1`` (the
-    paper's Kelvin-Voigt reference) gives :class:`KelvinVoigtParams`.
+    ``swing_arm_joint_20C``, ``_0C``, ``_m20C``, ``_m40C`` (seed 000 Table 1) and ``swing_arm_joint_case2`` ..
+    ``_case9`` (Table 2) give :class:`ZenerBergParams`; ``swing_arm_joint_case1`` (the paper's Kelvin-Voigt
+    reference) gives :class:`KelvinVoigtParams`. The earlier names (``seed000_20C``...) are aliases.
     ``name`` may also be a YAML file in the same layout (the output of ``rubber-rig fit``):
     ``FILE.yaml`` when it holds one set, ``FILE.yaml:SET`` to pick one.
     """
     _, entry = _resolve_set(name)
-    return PARAM_CLASSES[entry['model']].from_dict(entry['values'])
+    return model_class(entry['model']).from_dict(entry['values'])
+
+
+def parameter_set_info(name: str) -> dict:
+    """What a parameter set's file says about it: ``model`` (physics name), ``temperature`` [degC] it was
+    identified at (NaN when the file gives none) and ``source``.
+    """
+    set_name, entry = _resolve_set(name)
+    t = entry.get('temperature')
+    return {'name': set_name, 'model': canonical_model(entry['model']),
+            'temperature': math.nan if t is None else _check_finite('temperature', t),
+            'source': str(entry.get('source', ''))}
 
 
 @lru_cache(maxsize=None)
 def _temperature_interpolants():
-    rows = sorted(_load_yaml('seed000.yaml')['table1'], key=lambda r: r['temperature'])
+    data = _load_yaml('swing_arm_joint.yaml')
+    rows = sorted((data['sets'][name] for name in data['temperature_series']), key=lambda r: r['temperature'])
     t = np.array([r['temperature'] for r in rows])
-    col = {k: np.array([float(r[k]) for r in rows]) for k in Seed000Params.names()}
+    col = {k: np.array([float(r['values'][k]) for r in rows]) for k in ZenerBergParams.names()}
     return t, {
         'k0': PchipInterpolator(t, col['k0']),
         'log_dk': PchipInterpolator(t, np.log(col['k_inf'] - col['k0'])),
@@ -244,7 +297,7 @@ def _temperature_interpolants():
     }
 
 
-def parameters_at_temperature(t_degC: float) -> Seed000Params:  # noqa: N803 - the unit is part of the name
+def parameters_at_temperature(t_degC: float) -> ZenerBergParams:  # noqa: N803 - the unit is part of the name
     """Seed 000 parameters at temperature ``t_degC`` [degC], interpolated from Table 1.
 
     Exact at 20, 0, -20, -40 degC; monotone PCHIP in between (see the module docstring).
@@ -256,7 +309,7 @@ def parameters_at_temperature(t_degC: float) -> Seed000Params:  # noqa: N803 - t
         raise ParameterValueError('temperature', f'{t:g} degC is outside the identified range '
                                   f'[{temps[0]:g}, {temps[-1]:g}] degC of seed 000 Table 1')
     k0 = float(f['k0'](t))
-    p = Seed000Params(k0=k0, k_inf=k0 + float(np.exp(f['log_dk'](t))), tau=float(np.exp(f['log_tau'](t))),
+    p = ZenerBergParams(k0=k0, k_inf=k0 + float(np.exp(f['log_dk'](t))), tau=float(np.exp(f['log_tau'](t))),
                       alpha=float(f['alpha'](t)), x2=float(np.exp(f['log_x2'](t))),
                       f_fmax=float(np.exp(f['log_f_fmax'](t))))
     return p.validate()

@@ -64,11 +64,12 @@ class ElementModelNode(Node):
 
     def __init__(self, node_name: str = 'element_model', **kwargs):
         super().__init__(node_name, **kwargs)
-        defaults = load_parameter_set('seed000_20C').as_dict()
-        declare(self, 'model', 'seed000', 'element model (seed000: fractional Zener + Berg friction)',
-                choices=('seed000',), read_only=True)
+        defaults = load_parameter_set('swing_arm_joint_20C').as_dict()
+        declare(self, 'model', 'fractional_zener_berg', 'element model (fractional Zener + Berg friction, '
+                'seed 000; seed000 is its earlier name)', choices=('fractional_zener_berg', 'seed000'),
+                read_only=True)
         declare(self, 'source', 'parameter_set', 'where the model parameters come from', choices=SOURCES)
-        declare(self, 'parameter_set', 'seed000_20C', 'named parameter set (source parameter_set)')
+        declare(self, 'parameter_set', 'swing_arm_joint_20C', 'named parameter set (source parameter_set)')
         declare(self, 'temperature', 20.0, 'specimen temperature (source temperature; start value of '
                 'rig_temperature)', range=(-40.0, 20.0), units='degC')
         for name in VALUE_NAMES:
@@ -111,8 +112,9 @@ class ElementModelNode(Node):
         self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints, topics.STREAM_QOS)
         self._published_params = None
         self.publish_parameters()
-        self.get_logger().info(f'model seed000 from {self.predictor.choice.source}: {self.predictor.params}, '
-                               f'friction reversal threshold {self.predictor.choice.friction_reversal_threshold:g} m')
+        choice = self.predictor.choice
+        self.get_logger().info(f'model fractional_zener_berg from {choice.source}: {self.predictor.params}, '
+                               f'friction reversal threshold {choice.friction_reversal_threshold:g} m')
 
     # -- data path --------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
@@ -194,7 +196,7 @@ class ElementModelNode(Node):
     def publish_parameters(self) -> None:
         p = self.predictor
         now = self.get_clock().now().nanoseconds * 1e-9
-        self.pub_params.publish(conv.model_parameters_msg('seed000', p.parameter_set, p.temperature,
+        self.pub_params.publish(conv.model_parameters_msg('fractional_zener_berg', p.parameter_set, p.temperature,
                                                           p.params.as_dict(), now))
         self._published_params = p.params
 

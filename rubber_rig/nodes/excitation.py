@@ -76,7 +76,7 @@ class ExcitationNode(Node):
         self.recorder_timeout = declare(self, 'recorder_timeout', 2.0, 'with require_recording: a recorder status '
                                         'older than this stops a running program (the recorder publishes it every '
                                         '0.5 s)', range=(0.5, 60.0), units='s')
-        self.force_model_set = declare(self, 'force_model', 'seed000_20C', 'element-model parameter set that '
+        self.force_model_set = declare(self, 'force_model', 'swing_arm_joint_20C', 'element-model parameter set that '
                                        'predicts each block\'s peak force before start (refused above '
                                        "limits.force_max); '' = no force prediction")
         if self.stream_period >= self.lead_time / 2:
@@ -96,7 +96,8 @@ class ExcitationNode(Node):
         self.status: RigStatus | None = None
         self._status_wall = 0.0
         self._driver_wall = 0.0          # the latest status or sample batch: the driver is alive
-        self._samples_publishers, self._samples_publishers_wall = None, 0.0   # endpoint gids, when they changed
+        # endpoint gids of the publishers of a topic and when they last changed (a node restarted)
+        self._publisher_sets: dict[str, tuple[frozenset, float]] = {}
         self.recorder: RecorderStatus | None = None
         self._recorder_wall = 0.0
         self.next_sample = None          # sequence after the latest measured sample
@@ -132,6 +133,15 @@ class ExcitationNode(Node):
     def samples_topic(self) -> str:
         ns = self.get_namespace().rstrip('/')
         return f'{ns}/{topics.SAMPLES}'
+
+    def _publishers_changed(self, topic: str) -> tuple[int, float]:
+        """(number of publishers of ``topic``, time.monotonic() when that set of publishers last changed)."""
+        gids = frozenset(bytes(i.endpoint_gid) for i in self.get_publishers_info_by_topic(topic))
+        known, since = self._publisher_sets.get(topic, (None, 0.0))
+        if gids != known:
+            since = time.monotonic()
+            self._publisher_sets[topic] = (gids, since)
+        return len(gids), since
 
     # -- inputs -----------------------------------------------------------------------------------------------
     def on_status(self, msg: RigStatus) -> None:
@@ -215,6 +225,12 @@ class ExcitationNode(Node):
             return "require_recording: no recorder status on 'recorder_status' (is the recorder running?)"
         if time.monotonic() - self._recorder_wall > self.recorder_timeout:
             return f'require_recording: no recorder status for {time.monotonic() - self._recorder_wall:.1f} s'
+        # a restarted recorder is a new publisher of its status: the last status of the one it replaced
+        # (latched, fresh for recorder_timeout) must not stand for it
+        ns = self.get_namespace().rstrip('/')
+        _, since = self._publishers_changed(f'{ns}/{topics.RECORDER_STATUS}')
+        if self._recorder_wall <= since:
+            return 'require_recording: waiting for a status of the recorder that runs now (it was restarted)'
         if r.state != RecorderStatus.STATE_RECORDING:
             return f'require_recording: the recorder is {r.state_name}' + (f': {r.error}' if r.error else '')
         if self.samples_topic not in r.topics:
@@ -222,13 +238,10 @@ class ExcitationNode(Node):
         # a restarted rig_driver is a new publisher: until the recorder has matched it, its first samples
         # would be published to nobody and not even counted lost (the recorder never sees them). A recorder
         # status from before the publishers changed counts the old ones: wait for a newer one
-        gids = frozenset(bytes(i.endpoint_gid) for i in self.get_publishers_info_by_topic(self.samples_topic))
-        if gids != self._samples_publishers:
-            self._samples_publishers, self._samples_publishers_wall = gids, time.monotonic()
-        if self._recorder_wall <= self._samples_publishers_wall:
+        known, since = self._publishers_changed(self.samples_topic)
+        if self._recorder_wall <= since:
             return (f'require_recording: waiting for a recorder status newer than the last change of '
                     f'{self.samples_topic} publishers')
-        known = len(gids)
         matched = (r.topic_publishers[r.topics.index(self.samples_topic)]
                    if len(r.topic_publishers) == len(r.topics) else known)
         if matched < known:

@@ -46,7 +46,7 @@ IGNORED_TOPICS = ('/rosout', '/parameter_events')
 METADATA_FIELDS = {  # parameter metadata.<name> -> description (all strings; YAML/JSON where structured)
     'specimen': 'specimen id / description',
     'temperature': 'specimen temperature [degC] as text (e.g. "23.0")',
-    'model': 'element model name (e.g. seed000)',
+    'model': 'element model name (e.g. fractional_zener_berg)',
     'model_parameters': 'model parameters (YAML or JSON, SI units)',
     'test_program': 'test program (YAML)',
     'rig_configuration': 'rig configuration (YAML or JSON)',

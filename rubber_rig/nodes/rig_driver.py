@@ -68,9 +68,9 @@ class RigDriverNode(LifecycleNode):
                                        'first sample has waited this long (the stream paused or ended)',
                                        range=(0.001, 10.0), units='s')
         declare(self, 'poll_period', 0.01, 'how often the bus is read', range=(0.0005, 0.5), units='s')
-        declare(self, 'sim.specimen.parameter_set', '', 'simulated specimen: seed000 parameter set '
+        declare(self, 'sim.specimen.parameter_set', '', 'simulated specimen: fractional_zener_berg parameter set '
                 '(empty: use sim.specimen.temperature)')
-        declare(self, 'sim.specimen.temperature', 20.0, 'simulated specimen: seed000 parameters at this '
+        declare(self, 'sim.specimen.temperature', 20.0, 'simulated specimen: fractional_zener_berg parameters at this '
                 'temperature', range=(-40.0, 20.0), units='degC')
         declare(self, 'sim.specimen.friction_reversal_threshold', 0.0, "simulated specimen: Berg reversal deadband "
                 "on its true displacement (0 = the paper's rule)", range=(0.0, 1e-4), units='m')
@@ -120,9 +120,9 @@ class RigDriverNode(LifecycleNode):
             except ValueError as exc:
                 raise ParameterError(self.get_name(), setting.name, str(exc)) from None
         p = {name: self.get_parameter(name).value for name in SPECIMEN_PARAMETERS}
-        specimen = ({'model': 'seed000', 'parameter_set': p['sim.specimen.parameter_set']}
+        specimen = ({'model': 'fractional_zener_berg', 'parameter_set': p['sim.specimen.parameter_set']}
                     if p['sim.specimen.parameter_set'] else
-                    {'model': 'seed000', 'temperature': p['sim.specimen.temperature']})
+                    {'model': 'fractional_zener_berg', 'temperature': p['sim.specimen.temperature']})
         specimen['friction_reversal_threshold'] = p['sim.specimen.friction_reversal_threshold']
         values['sim.specimen'] = specimen
         try:

@@ -28,7 +28,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from rubber_rig.models import Seed000Params, build_model, load_parameter_set, parameters_at_temperature
+from rubber_rig.models import (
+    ZenerBergParams,
+    build_model,
+    canonical_model,
+    load_parameter_set,
+    parameter_set_info,
+    parameters_at_temperature,
+)
 from rubber_rig.models.params import ParameterValueError
 
 SOURCES = ('parameter_set', 'temperature', 'rig_temperature', 'values')
@@ -50,20 +57,21 @@ class ModelChoice:
     """Which parameters the model runs with (what the element_model node's parameters select)."""
 
     source: str = 'parameter_set'                 # one of SOURCES
-    parameter_set: str = 'seed000_20C'
+    parameter_set: str = 'swing_arm_joint_20C'
     temperature: float = 20.0                     # [degC] for source 'temperature' (start value for 'rig_temperature')
     values: dict = field(default_factory=dict)    # k0, k_inf, tau, alpha, x2, f_fmax [SI] for source 'values'
-    model: str = 'seed000'
+    model: str = 'fractional_zener_berg'
     friction_reversal_threshold: float = DEFAULT_REVERSAL_THRESHOLD   # [m] Berg reversal deadband, 0 = paper's rule
 
-    def resolve(self, temperature: float | None = None) -> tuple[Seed000Params, str, float]:
+    def resolve(self, temperature: float | None = None) -> tuple[ZenerBergParams, str, float]:
         """(validated parameters, parameter-set name or '', temperature [degC] or NaN).
 
         Raises :class:`ChoiceError` whose ``field`` is the field of this choice that is wrong
         ('values.alpha', 'parameter_set', 'temperature', 'source', 'friction_reversal_threshold').
         """
-        if self.model != 'seed000':
-            raise ChoiceError('model', f"model {self.model!r} is not available online (only 'seed000')")
+        if canonical_model(self.model) != 'fractional_zener_berg':
+            raise ChoiceError('model', f"model {self.model!r} is not available online "
+                              "(only 'fractional_zener_berg')")
         d = self.friction_reversal_threshold
         if not (isinstance(d, (int, float)) and math.isfinite(d) and d >= 0.0):
             raise ChoiceError('friction_reversal_threshold', 'parameter friction_reversal_threshold must be a '
@@ -73,10 +81,10 @@ class ModelChoice:
                 p = load_parameter_set(self.parameter_set)
             except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
                 raise ChoiceError('parameter_set', f'parameter set {self.parameter_set!r}: {exc}') from None
-            if not isinstance(p, Seed000Params):
-                raise ChoiceError('parameter_set', f'parameter set {self.parameter_set!r} is not a seed000 '
-                                  'parameter set')
-            return p, self.parameter_set, _set_temperature(self.parameter_set)
+            if not isinstance(p, ZenerBergParams):
+                raise ChoiceError('parameter_set', f'parameter set {self.parameter_set!r} is not a '
+                                  'fractional_zener_berg parameter set')
+            return p, self.parameter_set, parameter_set_info(self.parameter_set)['temperature']
         if self.source in ('temperature', 'rig_temperature'):
             t = self.temperature if temperature is None else float(temperature)
             try:
@@ -85,21 +93,11 @@ class ModelChoice:
                 raise ChoiceError('temperature', str(exc)) from None
         if self.source == 'values':
             try:
-                return Seed000Params.from_dict(dict(self.values)), '', math.nan
+                return ZenerBergParams.from_dict(dict(self.values)), '', math.nan
             except ParameterValueError as exc:
                 raise ChoiceError('values.' + exc.parameter, str(exc)) from None
         raise ChoiceError('source', f'source {self.source!r} is not one of {", ".join(SOURCES)}')
 
-
-def _set_temperature(name: str) -> float:
-    """Temperature of a Table 1 set from its name (seed000_20C -> 20, seed000_m40C -> -40), else NaN."""
-    tail = name.rsplit('_', 1)[-1]
-    if tail.endswith('C'):
-        try:
-            return float(tail[:-1].replace('m', '-'))
-        except ValueError:
-            pass
-    return math.nan
 
 
 class OnlinePredictor:
@@ -192,7 +190,7 @@ class OnlinePredictor:
 
     # -- internals --------------------------------------------------------------------------------------
     def _rebuild(self, dt: float) -> None:
-        self.model = build_model({'model': 'seed000', 'values': self.params.as_dict()}, dt,
+        self.model = build_model({'model': 'fractional_zener_berg', 'values': self.params.as_dict()}, dt,
                                  friction_reversal_threshold=self.choice.friction_reversal_threshold)
         if self.dt is not None and math.isclose(dt, self.dt, rel_tol=1e-9) and self._history:
             self.model.run(np.concatenate(list(self._history)), return_branches=False)  # warm up (see module doc)

@@ -1,7 +1,7 @@
 """The rig: CAN protocol and driver over python-can (rig.can), the simulated servo-hydraulic rig (rig.sim),
 configuration, open_rig and the ROS-free run_program. Pure Python (no rclpy).
 """
-from .can.driver import RigDriver, RigStatus, SampleBlock
+from .can.driver import DriverStatus, RigDriver, SampleBlock
 from .can.protocol import (
                            FAULT_BUS,
                            FAULT_CONTROLLER,
@@ -20,5 +20,5 @@ from .session import Rig, open_rig
 
 __all__ = ['ConfigError', 'FAULT_BUS', 'FAULT_CONTROLLER', 'FAULT_DISPLACEMENT_LIMIT', 'FAULT_FORCE_LIMIT',
            'FAULT_NONE', 'FAULT_SENSOR', 'FAULT_VELOCITY_LIMIT', 'FAULT_WATCHDOG', 'FaultSpec', 'Rig', 'RigConfig',
-           'RigDriver', 'RigStatus', 'RunResult', 'STATES', 'SampleBlock', 'SimOptions', 'fault_names',
+           'RigDriver', 'DriverStatus', 'RunResult', 'STATES', 'SampleBlock', 'SimOptions', 'fault_names',
            'open_rig', 'run_program']

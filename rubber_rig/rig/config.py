@@ -82,7 +82,7 @@ class SimOptions:
     to rest on its own.
     """
 
-    specimen: dict = field(default_factory=lambda: {'model': 'seed000', 'temperature': 20.0})
+    specimen: dict = field(default_factory=lambda: {'model': 'fractional_zener_berg', 'temperature': 20.0})
     actuator_frequency: float = setting(80.0, 'natural frequency of the actuator position loop', units='Hz',
                                         range=(1.0, 2000.0))
     actuator_damping: float = setting(0.8, 'damping ratio of the actuator position loop', units='-',
@@ -109,7 +109,7 @@ class SimOptions:
     def check(self, path='sim'):
         if not isinstance(self.specimen, dict):
             raise ConfigError(f'{path}.specimen', "expected a mapping like "
-                              "{model: seed000, temperature: 20.0}")
+                              "{model: fractional_zener_berg, temperature: 20.0}")
         positive = ('actuator_frequency', 'actuator_damping', 'actuator_velocity_max', 'displacement_resolution',
                     'force_resolution', 'host_timeout')
         for name in positive:

@@ -6,8 +6,8 @@ from typing import Callable, List, Optional
 import numpy as np
 
 from ..excitation.program import Program, load_program
-from ..excitation.runner import BlockSummary, ProgramRunner
-from .can.driver import RigStatus
+from ..excitation.runner import BlockResult, ProgramRunner
+from .can.driver import DriverStatus
 from .config import RigConfig
 from .session import open_rig
 
@@ -31,10 +31,10 @@ class RunResult:
     temperature: np.ndarray
     status: np.ndarray
     block_index: np.ndarray
-    blocks: List[BlockSummary]
+    blocks: List[BlockResult]
     completed: bool
     message: str
-    final_status: RigStatus
+    final_status: DriverStatus
     wall_time: float
 
 

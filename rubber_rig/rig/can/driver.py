@@ -58,8 +58,10 @@ class SampleBlock:
 
 
 @dataclass
-class RigStatus:
-    """Snapshot of the driver (fields as msg_defs/RigStatus; faults is the FAULT_* bit mask)."""
+class DriverStatus:
+    """Snapshot of the driver (the fields of msg_defs/RigStatus, which the node fills from it; faults is the
+    FAULT_* bit mask).
+    """
 
     state: str
     faults: int
@@ -632,7 +634,7 @@ class RigDriver:
 
     # ---- status
     @property
-    def status(self) -> RigStatus:
+    def status(self) -> DriverStatus:
         """Snapshot of state, faults and counters."""
         if self.controller_state == 'ramping_down' or (self._ramp_pending and not self.faults & FAULT_WATCHDOG):
             state = 'ramping_down'
@@ -646,7 +648,7 @@ class RigDriver:
                  'next_sequence': self.next_sequence, 'position': self._last_applied,
                  'stream_owner': s.grant.owner if s else '', 'stream_id': s.grant.stream_id if s else 0,
                  'stream_held': bool(s and s.held), 'last_event': self.last_event}
-        return RigStatus(state, self.faults | self.controller_faults, list(self.fault_messages), self.fs,
+        return DriverStatus(state, self.faults | self.controller_faults, list(self.fault_messages), self.fs,
                          c['samples_received'], c['frames_lost'], c['frames_late'], c['frames_malformed'],
                          c['frames_unknown'], self.temperature, self.controller_state, self.controller_faults,
                          self.controller_sequence, c['setpoints_sent'], self.limits, extra)

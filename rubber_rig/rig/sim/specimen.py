@@ -31,7 +31,7 @@ def build_specimen(spec: dict, dt: float):
     """Streaming specimen model for `spec` at time step dt [s].
 
     {"model": "linear", "stiffness": N/m, "damping": N s/m} builds LinearSpecimen; anything else goes to
-    rubber_rig.models.build_model (e.g. {"model": "seed000", "temperature": 20.0}).
+    rubber_rig.models.build_model (e.g. {"model": "fractional_zener_berg", "temperature": 20.0}).
     """
     spec = dict(spec)
     if spec.get('model') == 'linear':
