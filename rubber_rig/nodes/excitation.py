@@ -35,6 +35,7 @@ from msg_defs.msg import RecorderStatus, RigSampleBatch, RigStatus, SetpointBatc
 from msg_defs.srv import LoadProgram, OpenStream, StopStream
 from rubber_rig.excitation import Program, ProgramRunner, read_program
 from rubber_rig.excitation.limits import element_force_model
+from rubber_rig.excitation.streamer import SetpointStreamer
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import ParameterError, declare
@@ -102,6 +103,7 @@ class ExcitationNode(Node):
         self._recorder_wall = 0.0
         self.next_sample = None          # sequence after the latest measured sample
         self.runner: ProgramRunner | None = None
+        self.streamer: SetpointStreamer | None = None   # keeps the runner lead_time ahead of the measurement
         self.stream_id = 0               # the stream the driver granted us (0: none)
         self.start_sequence = 0
         self.end_sequence = None         # sequence after the last setpoint of the finished runner
@@ -285,6 +287,8 @@ class ExcitationNode(Node):
         except ValueError as exc:
             self._stop_stream(StopStream.Request.ACTION_ABORT, f'program refused: {exc}')
             return str(exc)
+        fs = self.status.sample_rate
+        self.streamer = SetpointStreamer(self.runner, math.ceil(self.lead_time * fs), self.batch_size)
         self.stream_id, self.held = grant.stream_id, False
         self.start_sequence = grant.first_sequence
         self.next_sample = None          # samples of an earlier rig (a restarted driver counts from 0) do not count
@@ -324,14 +328,10 @@ class ExcitationNode(Node):
                                'watchdog')
             return
         r = self.runner
-        fs = self.status.sample_rate
         measured = self.start_sequence if self.next_sample is None else max(self.next_sample, self.start_sequence)
-        target = measured + int(math.ceil(self.lead_time * fs))
         sent = False
-        while not r.finished and r.sequence < target:
-            first, block = r.sequence, (r.block_index if r.state == 'running' else -1)
-            x = r.next_setpoints(self.batch_size)
-            self._publish(first, x, block, end=r.finished)
+        for chunk in self.streamer.due(measured):
+            self._publish(chunk.first_sequence, chunk.displacement, chunk.block, end=chunk.end)
             sent = True
         if r.finished and self.end_sequence is None:
             self.end_sequence = r.sequence
@@ -505,6 +505,8 @@ class ExcitationNode(Node):
         if grant is None or not grant.success:
             self._end('resume refused: ' + (grant.message if grant is not None else 'rig_driver did not answer'))
             return
+        fs = self.status.sample_rate
+        self.streamer = SetpointStreamer(self.runner, math.ceil(self.lead_time * fs), self.batch_size)
         self.stream_id, self.held = grant.stream_id, False
         self.start_sequence = grant.first_sequence
         self.next_sample = None          # samples of an earlier rig (a restarted driver counts from 0) do not count
