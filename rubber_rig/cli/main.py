@@ -49,12 +49,7 @@ def main(argv=None) -> int:
     sub = parser.add_subparsers(dest='command', required=True)
     available, parsers = {}, {}
     for name, module_name in COMMANDS.items():
-        try:
-            module = importlib.import_module(module_name)
-        except ModuleNotFoundError as exc:
-            if exc.name == module_name:  # sub-command not built yet
-                continue
-            raise
+        module = importlib.import_module(module_name)
         p = sub.add_parser(name, help=(module.__doc__ or '').strip().splitlines()[0])
         module.add_arguments(p)
         available[name], parsers[name] = module, p

@@ -8,9 +8,9 @@ reference states at the reversals are computed sequentially.
 
 Reversal deadband (``reversal_threshold`` d [m], default 0 = exactly the paper's rule). Driven by a
 *measured* displacement, the paper's rule takes every sensor-noise wiggle for a velocity reversal
-and resets the reference state, so the friction loop collapses (0.2 um noise on a 0.5 mm, 0.5 Hz
-sine: the friction energy per cycle, Eq. 18, comes out 14-19 % low at 1 kHz and almost vanishes at
-5 kHz). With d > 0 a reversal is only accepted once the displacement has moved more than d back from
+and resets the reference state, so the friction loop collapses: the friction energy per cycle (Eq. 18)
+comes out low, and the more so the higher the sample rate, because more samples mean more noise
+reversals per cycle. With d > 0 a reversal is only accepted once the displacement has moved more than d back from
 the extreme x_ext reached since the last accepted reversal, and the new reference state is the
 state at that extreme (x_ext, F(x_ext)), not the noisy previous sample. Before acceptance, a sample
 back inside the band already follows Eq. 16 from the candidate reference (x_ext, F(x_ext)) -- the
@@ -22,17 +22,15 @@ follows the virgin curve from (x_0, 0) both ways until the displacement first le
 
 Choosing d: about 10x the displacement noise RMS, well below the smallest amplitude of interest.
 What d must exceed is the spread between the running extreme of the noisy samples and a later
-sample, which grows with the number of samples spent near the extreme - most in slow motion: with
-0.2 um noise, 5x the RMS (1 um) is enough for a 0.5 Hz, 0.5 mm sine at 1 kHz, but on seed 001's
-quasi-static 0.05 mm/s triangle (50 nm per sample) it lets noise dips through and the friction
-energy per cycle comes out 15 % low at 1 kHz, 78 % low at 5 kHz; 10x (2 um) gets both within
-0.6 %. The price: a real reversal smaller than d is not a reversal any more. On a clean signal
+sample, which grows with the number of samples spent near the extreme - most in slow motion, such
+as seed 001's quasi-static 0.05 mm/s triangle (50 nm per sample): there 5x the RMS still lets noise
+dips through, 10x does not (test_models_friction checks 10x on that triangle at 1 and 5 kHz).
+The price: a real reversal smaller than d is not a reversal any more. On a clean signal
 without such small reversals the reference states are exactly the paper's, so the forces agree
 with d = 0 to round-off; but where the paper's rule restarts a fresh (stiff, F_fmax/x2) branch after
 a tiny real reversal -- e.g. a few-nm servo overshoot where the motion stops and resumes in the
 same direction -- the deadband keeps the current branch, and the two can differ by tens of newtons
-for several cycles. With d = 0 the code path is the one from before the deadband existed (bit for
-bit).
+for several cycles. With d = 0 every sign change of the increment is a reversal: exactly the paper's rule.
 """
 from __future__ import annotations
 
@@ -143,8 +141,6 @@ class BergFriction:
         return (self.x_prev, self.direction, self.x_s, self.f_s, self.f_prev, self.x_ext, self.f_ext)
 
     def set_state(self, state):
-        if len(state) == 5:     # saved before the deadband existed: the extreme is the last sample
-            state = tuple(state) + (state[0], state[4])
         (self.x_prev, self.direction, self.x_s, self.f_s, self.f_prev, self.x_ext, self.f_ext) = state
         self.direction = int(self.direction)
 
