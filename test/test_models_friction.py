@@ -317,7 +317,9 @@ def test_reversal_threshold_through_build_model_and_validation():
         BergFriction(FM, X2, 1e-3, reversal_threshold=-1.0)
     # the 6 identified parameters stay the 6 identified parameters
     assert build_model(spec, 1e-3).params == P20
-    # a state saved before the deadband existed (5 values) still loads: its extreme is the last sample
+    # a state round-trips; a state of another shape is refused with what it must hold
     e = BergFriction(FM, X2, 1e-3, reversal_threshold=d)
-    e.set_state((1e-4, 1, 0.0, 0.0, 2000.0))
+    e.set_state((1e-4, 1, 0.0, 0.0, 2000.0, 1e-4, 2000.0))
     assert e.get_state() == (1e-4, 1, 0.0, 0.0, 2000.0, 1e-4, 2000.0)
+    with pytest.raises(ValueError, match='7 values'):
+        e.set_state((1e-4, 1, 0.0, 0.0, 2000.0))

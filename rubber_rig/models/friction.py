@@ -141,6 +141,9 @@ class BergFriction:
         return (self.x_prev, self.direction, self.x_s, self.f_s, self.f_prev, self.x_ext, self.f_ext)
 
     def set_state(self, state):
+        if len(state) != 7:
+            raise ValueError(f'a Berg state has 7 values (x_prev, direction, x_s, f_s, f_prev, x_ext, f_ext), '
+                             f'got {len(state)}')
         (self.x_prev, self.direction, self.x_s, self.f_s, self.f_prev, self.x_ext, self.f_ext) = state
         self.direction = int(self.direction)
 
