@@ -54,8 +54,12 @@ class SplitReport:
     messages: list = field(default_factory=list)   # human-readable warnings, one per problem
 
 
-def _noise_level(x):
-    # third differences cancel a smooth signal well at rig rates; MAD -> sigma; 20 = var factor of d^3
+def noise_level(x) -> float:
+    """Standard deviation of the white noise on a smoothly varying signal ``x`` (shape (n,), its unit).
+
+    Third differences cancel a smooth signal well at rig rates; their median absolute deviation, scaled to a
+    sigma (1.4826) and divided by sqrt(20) (the variance gain of a third difference), estimates the noise.
+    """
     d3 = np.diff(x, 3)
     if d3.size == 0:
         return 0.0
@@ -71,7 +75,7 @@ def _cycles(x) -> list:
     x = np.asarray(x, float)
     if x.size < 4:
         return []
-    noise = _noise_level(x)
+    noise = noise_level(x)
     half = float(np.percentile(np.abs(x - np.median(x)), 99))
     if not half > 5.0 * noise:
         return []

@@ -33,7 +33,7 @@ from scipy.signal import butter, sosfiltfilt
 
 from rubber_rig.models import ZenerBergParams, build_model
 
-from .blocks import _noise_level
+from .blocks import noise_level
 from .identify import PARAM_NAMES, FitResult, _z_bounds, jacobian_uncertainty, params_to_z, z_to_params
 
 
@@ -57,7 +57,7 @@ def model_input(x, dt, f_max):
     y = x
     if 0 < fc < 0.5 * fs and x.size > 30:
         y = sosfiltfilt(butter(4, fc, fs=fs, output='sos'), x)
-    h = max(5.0 * _noise_level(x), 2e-4 * float(np.max(np.abs(x - np.median(x))) or 1.0))
+    h = max(5.0 * noise_level(x), 2e-4 * float(np.max(np.abs(x - np.median(x))) or 1.0))
     return y, h
 
 

@@ -40,7 +40,7 @@ from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles,
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.config import ConfigError, RigConfig
-from rubber_rig.rig.session import open_rig
+from rubber_rig.rig.interface import open_rig
 from rubber_rig.settings import nest, setting_for, settings_of
 
 RIG_SETTINGS = settings_of(RigConfig)   # the core's configuration, described once (rubber_rig/rig/config.py)

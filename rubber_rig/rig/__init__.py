@@ -15,8 +15,8 @@ from .can.protocol import (
                            fault_names,
 )
 from .config import ConfigError, FaultSpec, RigConfig, SimOptions
+from .interface import Rig, open_rig
 from .run import RunResult, run_program
-from .session import Rig, open_rig
 
 __all__ = ['ConfigError', 'FAULT_BUS', 'FAULT_CONTROLLER', 'FAULT_DISPLACEMENT_LIMIT', 'FAULT_FORCE_LIMIT',
            'FAULT_NONE', 'FAULT_SENSOR', 'FAULT_VELOCITY_LIMIT', 'FAULT_WATCHDOG', 'FaultSpec', 'Rig', 'RigConfig',

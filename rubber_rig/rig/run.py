@@ -10,7 +10,7 @@ from ..excitation.runner import BlockResult, ProgramRunner
 from ..excitation.streamer import SetpointStreamer
 from .can.driver import DriverStatus
 from .config import RigConfig
-from .session import open_rig
+from .interface import open_rig
 
 
 @dataclass

@@ -1,4 +1,6 @@
-"""open_rig: the driver on the configured bus, plus the simulated rig behind it when asked for."""
+"""open_rig: the driver on the configured bus, plus the simulated rig behind it when asked for (like python-can's
+can.interface, it picks the backend from the configuration).
+"""
 import json
 import subprocess
 import sys
