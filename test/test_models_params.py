@@ -197,7 +197,6 @@ def test_physics_names_and_the_earlier_names_give_the_same_sets():
         build_model,
         canonical_model,
         model_class,
-        parameter_set_info,
     )
     assert Seed000Params is ZenerBergParams
     for tag in ('20C', '0C', 'm20C', 'm40C', 'case1', 'case5'):

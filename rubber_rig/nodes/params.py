@@ -7,12 +7,15 @@ node at start and raise :class:`ParameterError`, whose message starts with the p
 """
 from __future__ import annotations
 
+import difflib
 from typing import Any, Sequence
 
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.exceptions import InvalidParameterTypeException, InvalidParameterValueException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
+
+from .rclpy_compat import parameter_overrides
 
 
 class ParameterError(ValueError):
@@ -53,10 +56,10 @@ def declare(node: Node, name: str, default: Any, description: str, *, range: tup
 def _promote_int_override(node: Node, name: str, default: Any) -> None:
     """YAML writes ``sample_rate: 1000`` as an integer; accept it for a double parameter as ros2 users expect.
 
-    rclpy keeps the overrides from parameter files and the constructor in ``_parameter_overrides`` until the
-    parameter is declared; an integer there would be refused as the wrong type.
+    rclpy keeps the overrides from parameter files and the constructor until the parameter is declared; an
+    integer there would be refused as the wrong type.
     """
-    overrides = getattr(node, '_parameter_overrides', {})
+    overrides = parameter_overrides(node)
     p = overrides.get(name)
     if isinstance(default, float) and p is not None and p.type_ == Parameter.Type.INTEGER:
         overrides[name] = Parameter(name, Parameter.Type.DOUBLE, float(p.value))
@@ -76,9 +79,8 @@ def undeclared_overrides(node: Node) -> list[str]:
     the constructor has declared everything; returns the names and logs one warning per name, with the
     closest declared names as a hint.
     """
-    import difflib
-    unknown = sorted(k for k in node._parameter_overrides if not node.has_parameter(k))
-    known = sorted(node._parameters)
+    unknown = sorted(k for k in parameter_overrides(node) if not node.has_parameter(k))
+    known = sorted(node.list_parameters([], 0).names)     # depth 0: every parameter
     for name in unknown:
         close = difflib.get_close_matches(name, known, n=2, cutoff=0.6)
         hint = f" (did you mean {' or '.join(repr(c) for c in close)}?)" if close else ''

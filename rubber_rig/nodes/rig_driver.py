@@ -37,6 +37,7 @@ from rubber_rig.excitation.limits import LimitError
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles, declare
+from rubber_rig.nodes.rclpy_compat import lifecycle_state
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.config import ConfigError, RigConfig
@@ -108,7 +109,7 @@ class RigDriverNode(LifecycleNode):
     @property
     def lifecycle_state(self) -> str:
         """'unconfigured', 'inactive', 'active' or 'finalized'."""
-        return self._state_machine.current_state[1]
+        return lifecycle_state(self)
 
     # -- parameters -> core configuration ---------------------------------------------------------------
     def rig_config(self) -> RigConfig:

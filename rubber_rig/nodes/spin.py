@@ -9,11 +9,11 @@ import os
 from typing import Callable
 
 import rclpy
-from rclpy._rclpy_pybind11 import RCLError
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
 from .params import undeclared_overrides
+from .rclpy_compat import RCLError
 
 
 def spin_node(node_factory: Callable[[], Node], args=None) -> None:

@@ -9,7 +9,8 @@ import struct
 from types import SimpleNamespace
 
 import numpy as np
-from mcap_ros2._dynamic import _for_each_msgdef
+
+from .mcap_compat import for_each_msgdef
 
 PRIMITIVES = {  # ros type -> (struct code, size, numpy dtype)
     'bool': ('?', 1, np.bool_), 'byte': ('B', 1, np.uint8), 'char': ('B', 1, np.uint8),
@@ -112,7 +113,7 @@ def make_decoder(schema_name: str, schema_text: str):
     def collect(full, short, msgdef):
         msgdefs[full] = msgdefs[short] = msgdef
     try:
-        _for_each_msgdef(schema_name, schema_text, collect)
+        for_each_msgdef(schema_name, schema_text, collect)
         short = f'{schema_name.split("/")[0]}/{schema_name.split("/")[-1]}'
         root = _message_reader(short, msgdefs, {})
     except (NotImplementedError, ValueError, KeyError):

@@ -9,10 +9,10 @@ from pathlib import Path
 from mcap.reader import make_reader
 from mcap.records import Channel, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader
-from mcap_ros2._dynamic import generate_dynamic
 
 from .cdr import make_decoder
 from .errors import RecordingError
+from .mcap_compat import reference_decoder
 
 MAGIC = b'\x89MCAP0\r\n'
 FOOTER_RECORD_SIZE = 1 + 8 + 8 + 8 + 4
@@ -160,7 +160,7 @@ class Decoders:
 
     def _reference(self, schema: Schema, text: str):
         try:
-            return generate_dynamic(schema.name, text)[schema.name]
+            return reference_decoder(schema)
         except Exception as exc:  # noqa: BLE001
             raise RecordingError(f'{self.path}: cannot parse the schema of {schema.name}: '
                                  f'{exc}') from None

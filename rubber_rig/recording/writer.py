@@ -20,11 +20,10 @@ from pathlib import Path
 from mcap.records import Schema
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
-from mcap_ros2._dynamic import serialize_dynamic
 
 from rubber_rig import __version__
 
-from . import bagmeta
+from . import bagmeta, mcap_compat
 from .errors import RecordingError, RecordingWriteError
 from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
 from .mcapio import Decoders
@@ -229,7 +228,7 @@ class RecordingWriter:
     def _encoder(self, msg_type):
         fn = self._encoders.get(msg_type)
         if fn is None:
-            fn = serialize_dynamic(msg_type, full_definition(msg_type))[msg_type]
+            fn = mcap_compat.encoder(msg_type, full_definition(msg_type))
             self._encoders[msg_type] = fn
         return fn
 

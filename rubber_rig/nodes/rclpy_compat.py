@@ -1,0 +1,50 @@
+"""The private parts of rclpy the nodes rely on, in one place, with the version they were checked on.
+
+rclpy 7 (Jazzy) has no public API for these:
+
+* ``RCLError`` (``rclpy._rclpy_pybind11``): what spinning raises when the context is shut down from outside;
+  rclpy's own modules reach it through ``rclpy.impl.implementation_singleton`` the same way;
+* the parameter overrides of a node (``Node._parameter_overrides``): values from parameter files and the
+  command line before they are declared, to accept an integer for a double and to find misspelt keys;
+* the current state of a lifecycle node (``LifecycleNode._state_machine.current_state``); the public way is
+  the node's own ``get_state`` service, which a node cannot call on itself from its executor.
+
+Checked against :data:`CHECKED_VERSION`; another major.minor version warns once at import, and
+test/test_compat.py exercises each function against the installed rclpy.
+"""
+from __future__ import annotations
+
+import importlib.metadata
+import warnings
+
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.lifecycle import LifecycleNode
+from rclpy.node import Node
+
+PACKAGE = 'rclpy'
+CHECKED_VERSION = '7.1.5'
+RCLError = _rclpy.RCLError
+
+
+def installed_version() -> str:
+    return importlib.metadata.version(PACKAGE)
+
+
+def version_matches(installed: str, checked: str = CHECKED_VERSION) -> bool:
+    """True when ``installed`` has the major.minor of ``checked``."""
+    return installed.split('.')[:2] == checked.split('.')[:2]
+
+
+if not version_matches(installed_version()):
+    warnings.warn(f'{PACKAGE} {installed_version()} is installed; rubber_rig uses private parts of it checked '
+                  f'against {CHECKED_VERSION} (rubber_rig/nodes/rclpy_compat.py)', stacklevel=2)
+
+
+def parameter_overrides(node: Node) -> dict:
+    """The node's parameter overrides (name -> rclpy Parameter), the live dict rclpy declares from."""
+    return node._parameter_overrides
+
+
+def lifecycle_state(node: LifecycleNode) -> str:
+    """'unconfigured', 'inactive', 'active', 'finalized' or a transition state's label."""
+    return node._state_machine.current_state[1]

@@ -1,0 +1,55 @@
+"""The private parts of mcap_ros2 this package relies on, in one place, with the version they were checked on.
+
+mcap-ros2-support has no public API for these two jobs, so they are used from ``mcap_ros2._dynamic``:
+
+* ``serialize_dynamic(name, text)``: a CDR encoder from a ros2msg definition, for writing messages given as
+  rosidl objects or dicts (the public ``mcap_ros2.writer.Writer`` wraps it but also owns the file, which the
+  recording writer must own itself to split files and account for gaps);
+* ``_for_each_msgdef(name, text, fn)``: the parser of a full definition (the type, then ``MSG:`` sections)
+  into ``rosidl_adapter`` specifications, which the numpy CDR decoder (:mod:`.cdr`) walks.
+
+Checked against :data:`CHECKED_VERSION`; another major.minor version warns once at import (the names may have
+moved), and test/test_compat.py exercises each function against the installed package. The reference
+decoder comes from the public ``mcap_ros2.decoder.DecoderFactory`` (:func:`reference_decoder`).
+"""
+from __future__ import annotations
+
+import importlib.metadata
+import warnings
+
+from mcap_ros2._dynamic import _for_each_msgdef, serialize_dynamic
+from mcap_ros2.decoder import DecoderFactory
+
+PACKAGE = 'mcap-ros2-support'
+CHECKED_VERSION = '0.6.0'
+
+
+def installed_version() -> str:
+    return importlib.metadata.version(PACKAGE)
+
+
+def version_matches(installed: str, checked: str = CHECKED_VERSION) -> bool:
+    """True when ``installed`` has the major.minor of ``checked``."""
+    return installed.split('.')[:2] == checked.split('.')[:2]
+
+
+if not version_matches(installed_version()):
+    warnings.warn(f'{PACKAGE} {installed_version()} is installed; rubber_rig uses private parts of it checked '
+                  f'against {CHECKED_VERSION} (rubber_rig/recording/mcap_compat.py)', stacklevel=2)
+
+
+def encoder(type_name: str, definition: str):
+    """CDR encoder (message object or dict -> bytes) of ``type_name`` from its full ros2msg ``definition``."""
+    return serialize_dynamic(type_name, definition)[type_name]
+
+
+def reference_decoder(schema):
+    """The reference decoder of an ``mcap.records.Schema`` through the public DecoderFactory (None if the
+    schema is not ros2msg).
+    """
+    return DecoderFactory().decoder_for('cdr', schema)
+
+
+def for_each_msgdef(type_name: str, definition: str, fn) -> None:
+    """Call ``fn(full_name, short_name, MessageSpecification)`` for the type and each of its dependencies."""
+    _for_each_msgdef(type_name, definition, fn)
