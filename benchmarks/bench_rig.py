@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Rig benchmark: 60 s programs at 1 kHz and 5 kHz through driver + simulated rig on the in-process python-can
 virtual bus (every sample: setpoint frame out, feedback frame back, both DBC-encoded and decoded, seed-000
 specimen). Reports samples, lost frames, achieved rate and per-sample cost.

@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Bad input never takes the element_model node down (issue 11 item 3): refused parameter changes, non-finite
 and malformed sample batches, a restarted driver; and the simulated load cell reads NaN for a NaN force.
 The predictor tests are ROS-free; the node ones use a real rclpy node in-process and call its callbacks."""

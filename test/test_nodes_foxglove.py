@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """The Foxglove live view: the shipped layout is the generated one and only uses channels the node serves; a
 WebSocket client speaking the Foxglove protocol (a minimal one written here: no client library is installed)
 sees the channels advertised and receives live force samples after the node gets a ModelPrediction."""
@@ -127,4 +141,3 @@ def test_live_view_serves_force_samples_over_websocket():
         assert sample['displacement_mm'] == pytest.approx(x[i] * 1e3)
         assert sample['measured_kN'] == pytest.approx(1.5e7 * x[i] * 1e-3)
         assert sample['residual_kN'] == pytest.approx(3.0e-3)
-

@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """The rig driver as the one safety authority, ROS-free (issue 11 items 1, 2, 5, 6, 8, 11): the safe ramp at
 any phase, stream ownership and the true continuation of the command, stream loss, reset and the 16-bit
 sequence wrap, slow and small stuck sensors, limits changed at run time."""
@@ -277,7 +291,7 @@ def test_stuck_displacement_on_seed_001_slow_triangle_is_detected_by_consistency
     prog = Program.from_yaml_text('name: tri\nblocks:\n  - {waveform: triangle, frequency: 0.05 Hz, amplitude: 0.5 mm, '
                                   'cycles: 1}\n')
     r = run_program(prog, dict(FAST, sim={'faults': [{'type': 'stuck_sensor', 'start': 0.5,
-                                                       'sensor': 'displacement'}]}))
+                                                      'sensor': 'displacement'}]}))
     st = r.final_status
     assert st.faults & FAULT_SENSOR and any('displacement sensor stuck' in m for m in st.fault_messages), \
         st.fault_messages

@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """`rubber-rig` command line: one entry point, one sub-command per job."""
 import argparse
 import importlib
@@ -14,6 +28,7 @@ DISCOVERY_RANGE_DEFAULT = 'LOCALHOST'
 
 class CommandError(RuntimeError):
     """A job could not be done for a reason the message states (no traceback is shown)."""
+
 
 # sub-command -> module that provides `add_arguments(parser)` and `run(args) -> int`, optionally
 # `check_arguments(args) -> message or None` for option combinations argparse cannot express

@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Safety limits on displacement, velocity and force, checked before a program starts and on every setpoint.
 
 The pre-start check (Limits.check_program) has a bounded cost for every program that loads (at most 24 h, see
@@ -231,7 +245,7 @@ class Limits:
             lo = hi = blk.start_level
             v = 0.0
         if blk.oscillating and not (blk.waveform != 'triangle' and blk.waveform != 'square'
-                                 and (2 * math.pi * f_top) ** 2 * a <= self.deceleration_max):
+                                    and (2 * math.pi * f_top) ** 2 * a <= self.deceleration_max):
             # where an abort can stop: a sine whose acceleration stays below deceleration_max stops inside its
             # own peaks; otherwise allow for the braking distance at the peak speed
             brake = v * v / (2 * self.deceleration_max) + v / fs

@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Test programs: an ordered list of blocks loaded from YAML and validated on load.
 
 Bounded by construction, so no request can occupy the excitation for long: at most MAX_BLOCKS blocks (grids
@@ -16,7 +30,14 @@ import yaml
 
 from rubber_rig.units import to_si
 
-from .blocks import MAX_FREQUENCY_FRACTION, MAX_PROGRAM_DURATION, MIN_FREQUENCY, Block, ProgramError, parse_block  # noqa: F401
+from .blocks import (  # noqa: F401 - MIN_FREQUENCY, MAX_FREQUENCY_FRACTION are part of this module's API
+    MAX_FREQUENCY_FRACTION,
+    MAX_PROGRAM_DURATION,
+    MIN_FREQUENCY,
+    Block,
+    ProgramError,
+    parse_block,
+)
 
 PROGRAM_DIR = Path(__file__).with_name('programs')
 # The most blocks a program may have (after grid expansion): far above any real test plan (seed000_grid has
@@ -210,5 +231,3 @@ def load_program(path_or_name) -> Program:
 def shipped_programs() -> List[str]:
     """Names of the programs shipped with the package."""
     return sorted(p.stem for p in PROGRAM_DIR.glob('*.yaml'))
-
-

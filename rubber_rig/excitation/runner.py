@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """ProgramRunner: turns a program into setpoint chunks from the sample index, with amplitude control,
 limit enforcement on every setpoint, hold/resume and the abort ramp.
 """
@@ -340,5 +354,5 @@ class ProgramRunner:
             done = b in self._completed and not (self.aborted and self._starts[b + 1] > self._p)
             msg = '' if done else (f'aborted: {self.abort_reason}' if self.aborted else 'running')
             out.append(BlockResult(b, blk.name, blk.waveform, blk.frequency, blk.amplitude, amp, blk.mean, mean,
-                                    blk.cycles, len(loop.cycles) if loop else 0, done, msg))
+                                   blk.cycles, len(loop.cycles) if loop else 0, done, msg))
         return out

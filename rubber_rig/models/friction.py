@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Friction elements: Berg's smooth friction (seed 000 Eq. 16-22) and smooth Coulomb (seed 002).
 
 Berg's element remembers a reference state (x_s, F_fs); following seed 000 Section 5.2 it is
@@ -109,8 +123,9 @@ def check_reversal_threshold(d: float, given, name: str = 'reversal_threshold') 
     return d
 
 
-_DENSE = 96   # batch: after a stretch between accepted reversals shorter than _DENSE/2 samples, the next one runs
-              # sample by sample (cheaper than numpy calls on a few samples)
+# batch: after a stretch between accepted reversals shorter than _DENSE/2 samples, the next one runs sample by
+# sample (cheaper than numpy calls on a few samples)
+_DENSE = 96
 
 
 class BergFriction:

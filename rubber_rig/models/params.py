@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Parameter sets of the rubber-element models, in SI, with validation and temperature interpolation.
 
 The swing-arm rubber joint of seed 000 (Table 1 at 20, 0, -20, -40 degC and the Table 2 variants) ships as
@@ -310,6 +324,6 @@ def parameters_at_temperature(t_degC: float) -> ZenerBergParams:  # noqa: N803 -
                                   f'[{temps[0]:g}, {temps[-1]:g}] degC of seed 000 Table 1')
     k0 = float(f['k0'](t))
     p = ZenerBergParams(k0=k0, k_inf=k0 + float(np.exp(f['log_dk'](t))), tau=float(np.exp(f['log_tau'](t))),
-                      alpha=float(f['alpha'](t)), x2=float(np.exp(f['log_x2'](t))),
-                      f_fmax=float(np.exp(f['log_f_fmax'](t))))
+                        alpha=float(f['alpha'](t)), x2=float(np.exp(f['log_x2'](t))),
+                        f_fmax=float(np.exp(f['log_f_fmax'](t))))
     return p.validate()

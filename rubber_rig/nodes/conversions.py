@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """msg_defs <-> core conversions shared by the nodes (the only place that knows both sides).
 
 Everything is SI on both sides. Arrays go into messages as float64 sequences; rosidl-generated Python
@@ -135,7 +149,7 @@ def status_msg(snapshot: Any, limits: Any, sample_rate: float, t: float) -> RigS
     msg.state_name = STATE_NAMES.get(msg.state, 'unknown')
     msg.faults = int(_get(snapshot, 'faults', 0) or 0)
     msg.fault_messages = [str(m) for m in (_get(snapshot, 'messages', None)
-                                            or _get(snapshot, 'fault_messages', None) or [])]
+                                           or _get(snapshot, 'fault_messages', None) or [])]
     msg.limits = limits_msg(limits)
     msg.sample_rate = float(sample_rate)
     counters = _get(snapshot, 'counters', None) or {}

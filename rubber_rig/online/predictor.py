@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """ROS-free glue behind the element_model node: run a core element model on streamed sample batches.
 
 Why a history buffer: a rebuilt model (new parameters, or a new temperature when the model follows the rig's
@@ -97,7 +111,6 @@ class ModelChoice:
             except ParameterValueError as exc:
                 raise ChoiceError('values.' + exc.parameter, str(exc)) from None
         raise ChoiceError('source', f'source {self.source!r} is not one of {", ".join(SOURCES)}')
-
 
 
 class OnlinePredictor:

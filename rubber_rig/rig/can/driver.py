@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Host driver over any python-can Bus: streams setpoints, assembles measured samples, counts bad frames,
 checks limits and sensors, and runs the watchdog. poll() is non-blocking and never raises on bad frames.
 """
@@ -649,9 +663,9 @@ class RigDriver:
                  'stream_owner': s.grant.owner if s else '', 'stream_id': s.grant.stream_id if s else 0,
                  'stream_held': bool(s and s.held), 'last_event': self.last_event}
         return DriverStatus(state, self.faults | self.controller_faults, list(self.fault_messages), self.fs,
-                         c['samples_received'], c['frames_lost'], c['frames_late'], c['frames_malformed'],
-                         c['frames_unknown'], self.temperature, self.controller_state, self.controller_faults,
-                         self.controller_sequence, c['setpoints_sent'], self.limits, extra)
+                            c['samples_received'], c['frames_lost'], c['frames_late'], c['frames_malformed'],
+                            c['frames_unknown'], self.temperature, self.controller_state, self.controller_faults,
+                            self.controller_sequence, c['setpoints_sent'], self.limits, extra)
 
     @property
     def next_sequence(self) -> int:

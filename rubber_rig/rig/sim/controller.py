@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """The simulated actuator controller: the other end of the rig bus, speaking the same DBC as a real one.
 
 Consumes one setpoint per sample tick, drives the actuator and specimen, sends measured samples, status,
@@ -69,8 +83,8 @@ class SimController:
         self._held = []                   # (release_tick, message) for delayed frames
         self._hb = self._st = self._tc = 0
         per = lambda s: max(1, round(s * self.fs))  # noqa: E731
-        self._hb_every, self._st_every, self._tc_every = (per(cycle_time(name)) for name in
-                                                         ('ControllerHeartbeat', 'ControllerStatus', 'Temperature'))
+        self._hb_every, self._st_every, self._tc_every = (
+            per(cycle_time(name)) for name in ('ControllerHeartbeat', 'ControllerStatus', 'Temperature'))
         self._stop = threading.Event()
         self._announced = False
         self._thread = None
@@ -295,7 +309,6 @@ class SimController:
             temp = self.temperature + self.opt.temperature_noise * float(self.temp_rng.standard_normal())
             self._send('Temperature', {'TEMP_Specimen': temp, 'TEMP_Counter': self._tc})
 
-
     def _send(self, name, signals):
         msg = self.proto.encode(name, signals)
         for delay, m in self.faults.transmit(name, msg, self.fault_time()):
@@ -311,5 +324,3 @@ class SimController:
                 self._held = [(r, m) for r, m in self._held if r > self.ticks]
                 for m in due:
                     self.bus.send(m)
-
-
