@@ -27,7 +27,7 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from launch_ros.actions import LifecycleNode, Node
 from launch_ros.parameter_descriptions import ParameterValue
 
 from launch import LaunchDescription
@@ -48,8 +48,8 @@ def generate_launch_description():
         DeclareLaunchArgument('can_bitrate', default_value='1000000', description='CAN bitrate [bit/s]'),
         DeclareLaunchArgument('program', default_value='', description='test program to run at start (empty: '
                               'wait for a RunProgram goal)'),
-        Node(package='rubber_rig', executable='rig_driver', name='rig_driver', namespace=namespace,
-             parameters=[config, driver_overrides], output='screen'),
+        LifecycleNode(package='rubber_rig', executable='rig_driver', name='rig_driver', namespace=namespace,
+                      parameters=[config, driver_overrides], output='screen'),
         Node(package='rubber_rig', executable='excitation', name='excitation', namespace=namespace,
              parameters=[config, {'program': LaunchConfiguration('program')}], output='screen'),
         Node(package='rubber_rig', executable='element_model', name='element_model', namespace=namespace,

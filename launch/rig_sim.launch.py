@@ -27,7 +27,7 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from launch_ros.actions import LifecycleNode, Node
 
 from launch import LaunchDescription
 
@@ -41,8 +41,8 @@ def generate_launch_description():
         DeclareLaunchArgument('program', default_value='seed000_grid',
                               description='test program (shipped name or YAML path) the excitation runs at start; '
                                           'empty: wait for a RunProgram goal'),
-        Node(package='rubber_rig', executable='rig_driver', name='rig_driver', namespace=namespace,
-             parameters=[config], output='screen'),
+        LifecycleNode(package='rubber_rig', executable='rig_driver', name='rig_driver', namespace=namespace,
+                      parameters=[config], output='screen'),
         Node(package='rubber_rig', executable='excitation', name='excitation', namespace=namespace,
              parameters=[config, {'program': program}], output='screen'),
         Node(package='rubber_rig', executable='element_model', name='element_model', namespace=namespace,

@@ -105,3 +105,18 @@ def test_the_scan_catches_a_violation():
         test_layer_rules(PACKAGE / 'models' / 'bad.py', 'models', ast.parse('def f():\n    import numpy\n'))
     with pytest.raises(AssertionError, match='models may not import rubber_rig.rig'):
         test_layer_rules(PACKAGE / 'models' / 'bad.py', 'models', ast.parse('from rubber_rig.rig import x\n'))
+
+
+def test_test_modules_share_helpers_through_support_only():
+    """A test module imports helpers from test/support, never from another test module (whose import would also
+    collect and run its tests' module-level set-up)."""
+    test_dir = Path(__file__).resolve().parent
+    test_modules = {p.stem for p in test_dir.glob('test_*.py')}
+    offenders = []
+    for path in sorted(test_dir.rglob('*.py')):
+        tree = ast.parse(path.read_text(encoding='utf-8'), str(path))
+        for node in ast.walk(tree):
+            names = ([a.name for a in node.names] if isinstance(node, ast.Import)
+                     else [node.module or ''] if isinstance(node, ast.ImportFrom) else [])
+            offenders += [f'{path.name}:{node.lineno} imports {n}' for n in names if n.split('.')[0] in test_modules]
+    assert not offenders, '\n'.join(offenders)

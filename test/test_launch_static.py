@@ -28,7 +28,8 @@ import pytest
 import rclpy
 import yaml
 from rclpy.node import Node
-from test_support_package import console_scripts_specs
+
+from support.package import console_scripts_specs
 
 ROOT = Path(__file__).resolve().parents[1]
 LAUNCH_FILES = sorted((ROOT / 'launch').glob('*.launch.py'))
@@ -61,7 +62,8 @@ class LaunchFile:
         self.assignments = {t.id: n.value for n in ast.walk(self.tree) if isinstance(n, ast.Assign)
                             for t in n.targets if isinstance(t, ast.Name)}
         calls = [n for n in ast.walk(self.tree) if isinstance(n, ast.Call)]
-        self.nodes = [c for c in calls if _call_name(c) == 'Node']
+        self.nodes = [c for c in calls if _call_name(c) in ('Node', 'LifecycleNode')]
+        self.lifecycle_nodes = {_kw(c, 'executable').value for c in calls if _call_name(c) == 'LifecycleNode'}
         self.declared_args = {c.args[0].value for c in calls if _call_name(c) == 'DeclareLaunchArgument'}
         self.used_args = {c.args[0].value for c in calls if _call_name(c) == 'LaunchConfiguration'}
 
@@ -162,6 +164,8 @@ def test_launch_file_references_exist_and_are_declared(path, declared):
             missing = set(flatten(section['ros__parameters'])) - set(declared[exe])
             assert not missing, f'{rel}: node {name} ({exe}) does not declare {sorted(missing)}'
     assert executables == {'rig_driver', 'excitation', 'element_model', 'recorder'}
+    # the driver is a lifecycle node: launch_ros must know it (ros2 lifecycle, lifecycle events in launch)
+    assert lf.lifecycle_nodes == {'rig_driver'}, f'{path.name}: rig_driver must be a LifecycleNode action'
 
 
 def test_every_node_parameter_has_a_description(declared):

@@ -28,6 +28,8 @@ from rubber_rig.models import (
     steady_state_properties,
 )
 
+from support.signals import NOISE, cycle_energy, noisy_sine
+
 P20 = load_parameter_set('seed000_20C')
 FM, X2 = P20.f_fmax, P20.x2
 
@@ -150,8 +152,6 @@ def test_smooth_coulomb_time_vs_describing_function_and_coulomb_limit():
 
 # -- reversal deadband (reversal_threshold d): Berg driven by a measured, noisy displacement -----------------
 
-NOISE = 0.2e-6          # [m] displacement noise RMS of the simulated rig (rig.config.SimOptions)
-
 
 def paper_rule(x, f_fmax, x2):
     """Independent transcription of seed 000 Section 5.2: the reference state becomes the previous sample
@@ -172,17 +172,6 @@ def paper_rule(x, f_fmax, x2):
         out.append(f)
         xp, fp = v, f
     return np.array(out)
-
-
-def noisy_sine(seed=3, cycles=12, dt=1e-3, frequency=0.5, amplitude=0.5e-3, noise=NOISE):
-    x = sine_displacement(frequency, amplitude, dt, cycles)
-    return x, x + np.random.default_rng(seed).normal(size=x.size) * noise
-
-
-def cycle_energy(x, f, per_cycle, cycles=5):
-    """Mean loop area (Eq. 18's E_f) [J] of the last ``cycles`` cycles, trapezoid over the input x."""
-    xs, fs = x[-(cycles * per_cycle + 1):], f[-(cycles * per_cycle + 1):]
-    return np.sum(0.5 * (fs[1:] + fs[:-1]) * np.diff(xs)) / cycles
 
 
 def test_deadband_zero_is_the_papers_rule_bit_for_bit():

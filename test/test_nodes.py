@@ -21,7 +21,6 @@ the model is driven by the *measured* displacement, so its prediction carries k_
 displacement noise on top: residual RMS ~ 3.6 N when specimen and model are equal.
 """
 import math
-import os
 
 import numpy as np
 import pytest
@@ -34,63 +33,17 @@ from rubber_rig.excitation import Program
 from rubber_rig.models import load_parameter_set, parameters_at_temperature, steady_state_properties
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.element_model import ElementModelNode
-from rubber_rig.nodes.excitation import ExcitationNode
-from rubber_rig.nodes.launcher import InProcessLauncher
-from rubber_rig.nodes.monitor import SuiteMonitor
-from rubber_rig.nodes.recorder import RecorderNode
-from rubber_rig.nodes.rig_driver import RigDriverNode
 from rubber_rig.recording import load_recording
 
-CONFIG = os.path.join(os.path.dirname(__file__), '..', 'config', 'rig_sim.yaml')
-RATE = 1000.0
-PROGRAM = """
-name: node_test
-defaults: {taper_cycles: 1, mean: 0.0}
-blocks:
-  - {name: a, waveform: sine, frequency: 5 Hz, amplitude: 0.5 mm, cycles: 8}
-  - {name: b, waveform: sine, frequency: 2 Hz, amplitude: 1 mm, cycles: 6}
-"""
-FORCE_NOISE, DISP_NOISE = 2.0, 0.2e-6
-
-
-def domain_id() -> int:
-    """A DDS domain of our own: other test runs on this machine must not be seen (or see us)."""
-    return 100 + os.getpid() % 100
-
-
-def start_suite(tmp_path, driver=None, excitation=None, recorder=True):
-    launcher = InProcessLauncher([CONFIG], domain_id=domain_id())
-    nodes = {}
-    if recorder:
-        nodes['recorder'] = launcher.start(RecorderNode, {'output_dir': str(tmp_path), 'discovery_period': 0.2})
-    nodes['model'] = launcher.start(ElementModelNode)
-    nodes['excitation'] = launcher.start(ExcitationNode, excitation or {})
-    nodes['driver'] = launcher.start(RigDriverNode, dict({'paced': False}, **(driver or {})))
-    nodes['monitor'] = launcher.spin(SuiteMonitor(context=launcher.context, keep_messages=True))
-    mon = nodes['monitor']
-    wanted = ('samples', 'prediction', 'setpoints', 'cycle_metrics') if recorder else ()
-    assert launcher.wait_for(lambda: mon.status is not None and nodes['excitation'].rig_ready() == ''
-                             and mon.action.server_is_ready() and mon.recorder_subscribed(*wanted), 30.0), \
-        'suite did not connect'
-    return launcher, nodes
-
-
-def run_program(launcher, mon, text, amplitude_control=False, timeout=90.0):
-    future = mon.send_program(text, amplitude_control=amplitude_control)
-    assert launcher.wait_for(future.done, 30.0)
-    handle = future.result()
-    assert handle.accepted
-    result = handle.get_result_async()
-    assert launcher.wait_for(result.done, timeout), 'program did not finish'
-    return result.result().result
-
-
-def by_sequence(batches, field):
-    """Concatenate a field of batch messages into {sequence: value} arrays (seq array, values array)."""
-    seq = np.concatenate([np.arange(m.first_sequence, m.first_sequence + len(m.displacement)) for m in batches])
-    val = np.concatenate([conv.as_array(getattr(m, field)) for m in batches])
-    return seq, val
+from support.suite import (
+    DISP_NOISE,
+    FORCE_NOISE,
+    PROGRAM,
+    RATE,
+    by_sequence,
+    run_program,
+    start_suite,
+)
 
 
 @pytest.fixture(scope='module')
@@ -182,10 +135,10 @@ def test_online_predictor_friction_deadband_keeps_the_loop_on_noisy_displacement
     """ROS-free: the predictor runs on the measured displacement (0.2 um noise) in 50-sample batches. With the
     default reversal deadband (10x the noise) the friction branch dissipates what it does on the true
     displacement; with the paper's rule (0) noise reversals cut the loop by ~10 %."""
-    from test_models_friction import cycle_energy, noisy_sine
-
     from rubber_rig.models import build_model
     from rubber_rig.online.predictor import DEFAULT_REVERSAL_THRESHOLD, ModelChoice, OnlinePredictor
+
+    from support.signals import cycle_energy, noisy_sine
     dt, per_cycle = 1e-3, 2000
     x, noisy = noisy_sine(seed=5, cycles=8, dt=dt, frequency=0.5, amplitude=0.5e-3, noise=DISP_NOISE)
     assert DEFAULT_REVERSAL_THRESHOLD == pytest.approx(10 * DISP_NOISE)

@@ -17,11 +17,12 @@ import json
 from pathlib import Path
 
 import pytest
-from test_nodes import domain_id
 
 from rubber_rig.cli import bench
 from rubber_rig.cli.main import main
 from rubber_rig.models import load_parameter_set, steady_state_properties
+
+from support.suite import domain_id
 
 
 def args(**kw):
@@ -75,11 +76,11 @@ def test_main_job_end_to_end(tmp_path, capsys):
 
 def test_bench_refuses_to_start_beside_another_suite_on_the_same_domain():
     # two excitations on one rig's topics would both command it: a second suite must not start
-    from test_nodes import CONFIG
-
     from rubber_rig.cli.main import CommandError
     from rubber_rig.nodes.launcher import InProcessLauncher
     from rubber_rig.nodes.rig_driver import RigDriverNode
+
+    from support.suite import CONFIG
     domain = domain_id() - 60
     with InProcessLauncher([CONFIG], domain_id=domain) as running:
         running.start(RigDriverNode, {'autostart': False})

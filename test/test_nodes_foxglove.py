@@ -26,13 +26,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rclpy.node import Node
-from test_nodes import domain_id
 
 from msg_defs.msg import ModelPrediction
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.foxglove_view import LAYOUT_FILE, FoxgloveViewNode, build_layout
 from rubber_rig.nodes.launcher import InProcessLauncher
+
+from support.suite import domain_id
 
 CHANNELS = {'/live/force', '/live/loop', '/live/cycle', '/live/status'}
 

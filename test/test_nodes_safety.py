@@ -18,7 +18,6 @@ import math
 import numpy as np
 import pytest
 from rclpy.parameter import Parameter
-from test_nodes import CONFIG, RATE, by_sequence, domain_id, run_program, start_suite
 
 from msg_defs.msg import RigStatus
 from rubber_rig.nodes.element_model import ElementModelNode
@@ -27,6 +26,8 @@ from rubber_rig.nodes.launcher import InProcessLauncher
 from rubber_rig.nodes.params import ParameterError, undeclared_overrides
 from rubber_rig.nodes.recorder import RecorderNode
 from rubber_rig.nodes.rig_driver import RigDriverNode
+
+from support.suite import CONFIG, RATE, by_sequence, domain_id, run_program, start_suite
 
 LONG_SINE = """
 name: long_sine
@@ -137,7 +138,8 @@ def test_bad_programs_are_refused_before_anything_moves(tmp_path):
         too_big = "blocks:\n  - {name: big, waveform: sine, frequency: 1 Hz, amplitude: 8 mm, cycles: 2}\n"
         result = run_program(launcher, mon, too_big)
         assert not result.success and 'limits' in result.message
-        launcher.wait_for(lambda: False, 0.3)
+        # an absence cannot be waited for: give a stray setpoint or sample 0.3 s (300 samples) to show up
+        launcher.wait_for(lambda: mon.stats['setpoints'].messages or mon.stats['samples'].samples, 0.3)
         assert mon.stats['setpoints'].messages == 0 and mon.stats['samples'].samples == 0
 
 
@@ -163,9 +165,9 @@ def test_rig_driver_lifecycle(tmp_path):
 def test_model_follows_the_rig_temperature_channel(tmp_path):
     """A 0 degC specimen, the model told to follow the rig's temperature channel (starting from 20 degC): it
     re-evaluates its parameters at the measured temperature and then predicts the cold specimen."""
-    from test_nodes import by_sequence
-
     from rubber_rig.models import parameters_at_temperature
+
+    from support.suite import by_sequence
     launcher, nodes = start_suite(tmp_path, recorder=False, driver={
         'sim.specimen.parameter_set': '', 'sim.specimen.temperature': 0.0, 'sim.temperature': 0.0})
     with launcher:

@@ -17,7 +17,8 @@ import importlib
 import pathlib
 
 from catkin_pkg.package import parse_package
-from test_support_package import console_scripts_specs
+
+from support.package import console_scripts_specs
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 

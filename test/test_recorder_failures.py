@@ -32,7 +32,6 @@ from mcap.records import Message
 from mcap.stream_reader import StreamReader
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from ros_support import ros_context, sample_batch, spin_until, spinning
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
@@ -42,6 +41,8 @@ from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.recorder import RecorderNode
 from rubber_rig.recording import GapTracker, load_recording, recover
+
+from support.ros import ros_context, sample_batch, spin_until, spinning
 
 REPO = Path(__file__).resolve().parents[1]
 DOMAIN = 200 + os.getpid() % 30          # a domain of our own (other test modules use 20-199)

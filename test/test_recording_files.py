@@ -40,32 +40,9 @@ from rubber_rig.recording import (
     recover,
 )
 
+from support.recording import BATCH_T, DT, N, batch, stream
+
 REPO = Path(__file__).resolve().parents[1]
-BATCH_T = 'msg_defs/msg/RigSampleBatch'
-N = 20                     # samples per batch (1 kHz rig, 50 batches/s)
-DT = 1e-3
-
-
-def batch(k, first=None):
-    first = k * N if first is None else first
-    n = np.arange(first, first + N)
-    t_ns = first * 1_000_000
-    return {'header': {'stamp': {'sec': t_ns // 10**9, 'nanosec': t_ns % 10**9}},
-            'first_sequence': first, 'sample_period': DT,
-            'displacement': 1e-3 * np.sin(0.02 * n), 'force': 2e3 * np.sin(0.02 * n + 0.3),
-            'setpoint': 1e-3 * np.sin(0.02 * n + 0.01), 'temperature': 23.0 + 0.001 * k,
-            'status_flags': k % 2, 'frames_lost': 0}
-
-
-def stream(n_batches=300):
-    """(topic, type, message, log_time_ns): batches at 50/s plus a status message every second."""
-    out = []
-    for k in range(n_batches):
-        t = 1_700_000_000_000_000_000 + k * N * 1_000_000
-        out.append(('/rig/samples', BATCH_T, batch(k), t))
-        if k % 50 == 0:
-            out.append(('/rig/status', 'msg_defs/msg/RigStatus', {'state': 2, 'state_name': 'running'}, t))
-    return out
 
 
 def raw_messages(files):
@@ -148,7 +125,7 @@ def test_snapshot_keeps_the_last_seconds(tmp_path):
 CHILD = textwrap.dedent('''
     import sys, time, numpy as np
     sys.path.insert(0, {test_dir!r})
-    from test_recording_files import stream
+    from support.recording import stream
     from rubber_rig.recording import Recorder
     rec = Recorder({out!r}, flush_interval_s=0, chunk_size=1 << 24)
     rec.start({out!r} + '/killed')
@@ -159,7 +136,7 @@ CHILD = textwrap.dedent('''
             rec.flush()
             print('FLUSHED', i + 1, flush=True)
     print('WRITTEN', len(msgs), rec.stats()['messages_flushed_current_file'], flush=True)
-    time.sleep(600)
+    time.sleep(600)             # the test kills this writer mid-file
 ''')
 
 
@@ -196,7 +173,7 @@ def test_sigkilled_writer_leaves_a_recoverable_file(tmp_path):
 FULL = textwrap.dedent('''
     import json, resource, signal, sys
     sys.path.insert(0, {test_dir!r})
-    from test_recording_files import stream
+    from support.recording import stream
     from rubber_rig.recording import Recorder
     signal.signal(signal.SIGXFSZ, signal.SIG_IGN)           # get EFBIG instead of being killed
     resource.setrlimit(resource.RLIMIT_FSIZE, (60_000, 60_000))

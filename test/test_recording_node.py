@@ -25,7 +25,6 @@ import pytest
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from ros_support import ros_context, sample_batch, spin_until, spinning
 from rosbags.highlevel import AnyReader
 from rosbags.typesys import Stores, get_typestore
 
@@ -36,6 +35,8 @@ from rubber_rig.nodes import topics
 from rubber_rig.nodes.recorder import RecorderNode
 from rubber_rig.recording import load_recording
 from rubber_rig.recording.qos import parse_offered_qos
+
+from support.ros import ros_context, sample_batch, spin_until, spinning
 
 REPO = Path(__file__).resolve().parents[1]
 BATCH = 20

@@ -16,7 +16,6 @@
 (the controller's applied command moves smoothly back to rest). Limits and bad frames too."""
 import numpy as np
 import pytest
-from test_rig_support import FAST, contiguous_diffs, contiguous_second_diffs
 
 from rubber_rig.excitation import Program
 from rubber_rig.rig import (
@@ -29,6 +28,8 @@ from rubber_rig.rig import (
     open_rig,
     run_program,
 )
+
+from support.rig import FAST, contiguous_diffs, contiguous_second_diffs
 
 PROG = Program.from_yaml_text('name: f\nblocks:\n  - {waveform: sine, frequency: 5 Hz, amplitude: 1 mm, '
                               'cycles: 10}\n')

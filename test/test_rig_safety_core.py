@@ -19,7 +19,6 @@ import time
 
 import numpy as np
 import pytest
-from test_rig_support import FAST, contiguous_diffs
 
 from rubber_rig.excitation import Limits, Program
 from rubber_rig.excitation.ramp import SafeRamp, stopping_positions
@@ -33,6 +32,8 @@ from rubber_rig.rig import (
 )
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.can.protocol import FAULT_STREAM, SEQ_MOD
+
+from support.rig import FAST, contiguous_diffs
 
 FS = 1000.0
 D_MAX = 2.5e-3            # the limits: +-2.5 mm, 0.2 m/s

@@ -18,11 +18,12 @@ import math
 
 import numpy as np
 import pytest
-from test_rig_support import FAST, expected_plant, poll_samples
 
 from rubber_rig.excitation import Program, load_program
 from rubber_rig.rig import RigConfig, open_rig, run_program
 from rubber_rig.rig.config import SimOptions
+
+from support.rig import FAST, expected_plant, poll_samples
 
 WAVES = {
     'sine': '{waveform: sine, frequency: 8 Hz, amplitude: 0.5 mm, cycles: 4}',

@@ -421,7 +421,8 @@ def run(args) -> int:
                     for b in table.add(c):
                         for line in table.format(b):
                             term.line(line)
-                time.sleep(0.1)
+                # the screen refreshes ten times a second, at once when the program ends
+                launcher.wait_for(result_future.done, 0.1)
         except KeyboardInterrupt:
             interrupted = True
             term.end_status()
