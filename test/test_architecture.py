@@ -38,10 +38,10 @@ ALLOWED = {
     'excitation': {'models', 'settings', 'units'},
     'recording': {'__init__'},
     'rig': {'excitation', 'models', 'settings'},
-    'online': {'analysis', 'models'},
+    'online': {'analysis', 'excitation', 'models'},
     'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig'},
     'nodes': {'analysis', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'settings'},
-    'cli': {'__init__', 'analysis', 'excitation', 'fitting', 'models', 'nodes', 'paths', 'recording', 'rig',
+    'cli': {'__init__', 'analysis', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording', 'rig',
             'units'},
 }
 OPTIONAL_HEAVY = {'matplotlib'}

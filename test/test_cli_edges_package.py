@@ -39,8 +39,10 @@ IMPORT_PROVIDER = {
     'ament_index_python': 'ament_index_python', 'launch': 'launch', 'launch_ros': 'launch_ros',
     # tests and benchmarks
     'pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip', 'catkin_pkg': 'python3-catkin-pkg',
-    'differint': 'differint',
+    'differint': 'differint', 'pytest_timeout': 'python3-pytest-timeout',
+    'ament_copyright': 'ament_copyright', 'ament_flake8': 'ament_flake8', 'ament_pep257': 'ament_pep257',
 }
+LOCAL_TEST_PACKAGES = {'support'}    # test/support: the tests' shared helpers
 WORKSPACE_PACKAGES = {'msg_defs'}     # built from this repository (msg_defs/package.xml)
 
 
@@ -80,7 +82,7 @@ def _requirements():
 
 
 def _third_party_imports(*folders):
-    local = {p.stem for p in (ROOT / 'test').glob('*.py')} | {'rubber_rig'}
+    local = {p.stem for p in (ROOT / 'test').glob('*.py')} | {'rubber_rig'} | LOCAL_TEST_PACKAGES
     found = {}
     for folder in folders:
         for f in sorted((ROOT / folder).rglob('*.py')):

@@ -21,13 +21,14 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 COMPAT = {ROOT / 'rubber_rig' / 'recording' / 'mcap_compat.py', ROOT / 'rubber_rig' / 'nodes' / 'rclpy_compat.py'}
-PRIVATE = re.compile(r'mcap_ros2\._dynamic|_for_each_msgdef|_rclpy_pybind11|\._parameter_overrides\b|'
-                     r'\._parameters\b|\._state_machine\b')
+# mcap_ros2._dynamic (and its functions), rclpy's C module, rclpy.Node's and LifecycleNode's private attributes
+PRIVATE = re.compile(r'\b_dynamic\b|serialize_dynamic|generate_dynamic|_for_each_msgdef|_rclpy_pybind11|'
+                     r'\._parameter_overrides\b|\._parameters\b|\._state_machine\b')
 
 
 def test_private_third_party_names_appear_only_in_the_compat_modules():
     offenders = []
-    for folder in ('rubber_rig', 'test', 'benchmarks'):
+    for folder in ('rubber_rig', 'test', 'benchmarks', 'launch'):
         for path in sorted((ROOT / folder).rglob('*.py')):
             if path in COMPAT or path == Path(__file__).resolve():
                 continue
@@ -43,6 +44,27 @@ def test_version_check_compares_major_minor():
     with warnings.catch_warnings():
         warnings.simplefilter('error')         # the installed versions are the checked ones: no warning
         assert mcap_compat.version_matches(mcap_compat.installed_version())
+
+
+def test_the_scan_catches_each_private_name():
+    for line in ('from mcap_ros2._dynamic import generate_dynamic', 'from mcap_ros2 import _dynamic',
+                 'from mcap_ros2._dynamic import _for_each_msgdef', 'from rclpy._rclpy_pybind11 import RCLError',
+                 'node._parameter_overrides.get(name)', 'name in node._parameters',
+                 'self._state_machine.current_state[1]'):
+        assert PRIVATE.search(line), line
+    assert not PRIVATE.search('ParameterDescriptor(dynamic_typing=True); self.parameters')
+
+
+def test_check_version_warns_on_another_major_minor_and_does_not_fail():
+    from rubber_rig.recording import mcap_compat
+    with pytest.warns(RuntimeWarning, match='mcap-ros2-support 0.7.0 is installed'):
+        assert mcap_compat.check_version('0.7.0') is False
+    with pytest.warns(RuntimeWarning, match='version unknown'):
+        assert mcap_compat.check_version('') is False
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        assert mcap_compat.check_version('0.6.9') is True
+        assert mcap_compat.check_version() is True       # the installed version is the checked one
 
 
 def test_mcap_compat_encodes_and_parses_a_definition():
@@ -64,7 +86,11 @@ def test_rclpy_compat_reads_overrides_and_lifecycle_state():
     from rclpy.parameter import Parameter
 
     from rubber_rig.nodes import rclpy_compat
-    assert rclpy_compat.version_matches(rclpy_compat.installed_version())
+    with warnings.catch_warnings():
+        warnings.simplefilter('error')
+        assert rclpy_compat.check_version() is True
+    with pytest.warns(RuntimeWarning, match='rclpy 8.0.0 is installed'):
+        assert rclpy_compat.check_version('8.0.0') is False
     context = rclpy.Context()
     rclpy.init(context=context)
     try:
@@ -77,4 +103,4 @@ def test_rclpy_compat_reads_overrides_and_lifecycle_state():
         node.destroy_node()
     finally:
         rclpy.shutdown(context=context)
-    assert issubclass(rclpy_compat.RCLError, Exception)
+    assert issubclass(rclpy_compat.RCLError, Exception) and rclpy_compat.RCLError.__name__ == 'RCLError'

@@ -202,3 +202,26 @@ def test_progress_and_summaries_report_cycles():
     assert s.completed and s.cycles_measured == 6
     assert s.achieved_amplitude == pytest.approx(0.98e-3, rel=1e-9)
     assert math.isnan(r.block_summaries[1].achieved_amplitude)
+
+
+def test_block_to_dict_is_the_inverse_of_parse_block():
+    """Every waveform round-trips through Block.to_dict (what tools that rewrite programs rely on)."""
+    from rubber_rig.excitation.program import with_overrides
+    from rubber_rig.excitation.waveforms import WAVEFORMS
+    text = ('name: all\nblocks:\n'
+            '  - {name: a, waveform: sine, frequency: 2 Hz, amplitude: 1 mm, cycles: 3, taper_cycles: 2}\n'
+            '  - {name: b, waveform: triangle, rate: 4 mm/s, amplitude: 0.5 mm, cycles: 2}\n'
+            '  - {name: c, waveform: triangle, frequency: 1 Hz, amplitude: 0.5 mm, cycles: 2}\n'
+            '  - {name: d, waveform: square, frequency: 1 Hz, rate: 20 mm/s, amplitude: 0.5 mm, cycles: 2}\n'
+            '  - {name: e, waveform: sweep_lin, f_start: 1 Hz, f_end: 5 Hz, duration: 4 s, amplitude: 0.5 mm}\n'
+            '  - {name: f, waveform: sweep_log, f_start: 1 Hz, f_end: 8 Hz, duration: 4 s, amplitude: 0.5 mm}\n'
+            '  - {name: g, waveform: hold, duration: 1 s}\n'
+            '  - {name: h, waveform: ramp, target: 1 mm, rate: 2 mm/s}\n'
+            '  - {name: i, waveform: ramp, target: 0 mm, duration: 2 s}\n')
+    p = Program.from_yaml_text(text)
+    again, _ = with_overrides(p)
+    assert again.blocks == p.blocks and {b.waveform for b in p.blocks} == set(WAVEFORMS)
+    short, _ = with_overrides(p, cycles=1, duration_scale=0.5, blocks='0,6-8', taper_cycles=1)
+    assert [b.name for b in short.blocks] == ['a', 'g', 'h', 'i']
+    assert short.blocks[0].cycles == 1 and short.blocks[0].taper_cycles == 1
+    assert short.blocks[1].duration == 0.5 and short.blocks[3].duration == 2.0        # ramps keep their time

@@ -205,3 +205,19 @@ def test_numpy_cdr_decoder_matches_mcap_ros2(recorded):
             reference = reference_decoder(schema)(msg.data)
             assert plain(fast(msg.data)) == plain(reference), channel.topic
             assert plain(fast(msg.data)) == plain(originals[schema.name]) or schema.name == 'std_msgs/msg/Empty'
+
+
+def test_the_writer_split_keeps_import_paths_and_the_metadata_codec_round_trips():
+    """encode_metadata and the record names moved to recording.metadata; writer and mcapio still export them."""
+    from rubber_rig.recording import mcapio, writer
+    from rubber_rig.recording.metadata import decode_metadata, encode_metadata
+    assert writer.encode_metadata is encode_metadata and mcapio.decode_metadata is decode_metadata
+    assert (writer.METADATA_NAME, writer.CLOSE_METADATA_NAME, writer.SEQUENCE_SOURCE_KEY) == \
+        ('rubber_rig', 'rubber_rig.close', 'rubber_rig.sequence')
+    batch = msg_class('msg_defs/msg/SetpointBatch')(first_sequence=3, displacement=[1e-3, 2e-3])
+    encoded = encode_metadata({'specimen': 'B-7', 'temperature': 23.5, 'limits': np.array([1.0, 2.0]),
+                               'batch': batch})
+    assert all(isinstance(v, str) for v in encoded.values())
+    decoded = decode_metadata(encoded)
+    assert (decoded['specimen'], decoded['temperature'], decoded['limits']) == ('B-7', 23.5, [1.0, 2.0])
+    assert decoded['batch']['first_sequence'] == 3 and decoded['batch']['displacement'] == [1e-3, 2e-3]

@@ -31,19 +31,17 @@ from __future__ import annotations
 import argparse
 import copy
 import json
-import math
 import os
-import shutil
-import sys
 import time
 from pathlib import Path
 
-import numpy as np
-import yaml
-
+from rubber_rig.cli.bench_view import Terminal, print_result, progress_text
 from rubber_rig.cli.main import CommandError
-from rubber_rig.excitation.waveforms import PERIODIC, SWEEPS
+from rubber_rig.excitation import load_program, read_program
+from rubber_rig.excitation.program import OverrideError, with_overrides
+from rubber_rig.online.summary import BlockTable, write_summary
 from rubber_rig.paths import find_config
+from rubber_rig.recording.loss import recording_loss
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -73,225 +71,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 # -- the program ------------------------------------------------------------------------------------------------
-def _block_dict(b) -> dict:
-    d = {'name': b.name, 'waveform': b.waveform}
-    if b.waveform in PERIODIC:
-        d.update(frequency=b.frequency, amplitude=b.amplitude, mean=b.mean, cycles=int(b.cycles),
-                 taper_cycles=b.taper_cycles)
-        if b.waveform == 'square':
-            d['rate'] = b.rate
-    elif b.waveform in ('sweep_lin', 'sweep_log'):
-        d.update(f_start=b.frequency, f_end=b.frequency_end, duration=b.duration, amplitude=b.amplitude,
-                 mean=b.mean, taper_cycles=b.taper_cycles)
-    elif b.waveform == 'hold':
-        d['duration'] = b.duration
-    elif b.waveform == 'ramp':
-        d.update(target=b.target, duration=b.duration)
-    return d
-
-
-def _parse_blocks(spec: str, n: int) -> list[int]:
-    out = []
-    for part in spec.split(','):
-        part = part.strip()
-        if not part:
-            continue
-        lo, _, hi = part.partition('-')
-        try:
-            a, b = int(lo), int(hi) if hi else int(lo)
-        except ValueError:
-            raise ValueError(f"--blocks: {part!r} is not an index or a range like 0-3") from None
-        if not (0 <= a <= b < n):
-            raise ValueError(f'--blocks: {part!r} outside the program\'s blocks 0-{n - 1}')
-        out.extend(range(a, b + 1))
-    return out
-
-
 def build_program(args) -> tuple:
     """(Program, YAML text) after the command-line overrides; validated like any program."""
-    from rubber_rig.excitation import Program, load_program, read_program
-    overrides = (args.cycles, args.duration_scale, args.blocks, args.taper_cycles)
-    if all(v is None for v in overrides):
+    overrides = {'cycles': args.cycles, 'duration_scale': args.duration_scale, 'blocks': args.blocks,
+                 'taper_cycles': args.taper_cycles}
+    if all(v is None for v in overrides.values()):
         return read_program(args.program)
     program = load_program(args.program)
-    if args.cycles is not None and args.cycles < 1:
-        raise ValueError(f'--cycles must be >= 1, got {args.cycles}')
-    if args.duration_scale is not None and not args.duration_scale > 0:
-        raise ValueError(f'--duration-scale must be > 0, got {args.duration_scale}')
-    if args.taper_cycles is not None and not args.taper_cycles > 0:
-        raise ValueError(f'--taper-cycles must be > 0, got {args.taper_cycles}')
-    blocks = [_block_dict(b) for b in program.blocks]
-    if args.blocks:
-        blocks = [blocks[i] for i in _parse_blocks(args.blocks, len(blocks))]
-    for d in blocks:
-        if 'cycles' in d:
-            if args.cycles is not None:
-                d['cycles'] = args.cycles
-            if args.duration_scale:
-                d['cycles'] = max(1, int(round(d['cycles'] * args.duration_scale)))
-        elif 'duration' in d and args.duration_scale and d['waveform'] != 'ramp':
-            d['duration'] *= args.duration_scale
-        if 'taper_cycles' in d and args.taper_cycles is not None:
-            d['taper_cycles'] = args.taper_cycles
-    data = {'name': program.name, 'description': program.description + ' (rubber-rig bench overrides)',
-            'initial_position': program.initial_position, 'rest_position': program.rest_position, 'blocks': blocks}
-    text = yaml.safe_dump(data, sort_keys=False)
-    return Program.from_yaml_text(text, name=program.name), text
-
-
-# -- per-block table ----------------------------------------------------------------------------------------------
-class BlockTable:
-    """Per-block averages of the steady cycles (full amplitude, second half of them) of cycle_metrics."""
-
-    COLUMNS = (' blk  block                      f [Hz]  A [mm]  A meas  K_dyn meas  K_dyn model  dK [%]'
-               '  C_eq meas  C_eq model  dC [%]',
-               '                                                [mm]    [kN/mm]     [kN/mm]              '
-               '[kN s/m]   [kN s/m]')
-
-    def __init__(self, program):
-        self.blocks = program.blocks
-        self.cycles: dict[int, list] = {}
-        self.printed: set[int] = set()
-        self.rows: dict[int, dict] = {}
-
-    def add(self, msg) -> list[int]:
-        """Add one CycleMetrics; returns the blocks now known complete (a later block has started)."""
-        if msg.block_index < 0:
-            return []
-        self.cycles.setdefault(msg.block_index, []).append(msg)
-        return [b for b in sorted(self.cycles) if b < msg.block_index and b not in self.printed]
-
-    @staticmethod
-    def _amplitude(blk, c) -> float:
-        """Measured amplitude in the program's sense: first harmonic for sines, half peak-valley otherwise."""
-        return c.amplitude if blk.waveform not in ('triangle', 'square') else c.peak_amplitude
-
-    def _row(self, b: int, name: str, frequency: float, steady: list) -> dict:
-        blk = self.blocks[b]
-
-        def mean(side, field):
-            return float(np.mean([getattr(getattr(c, side), field) for c in steady])) if steady else math.nan
-        r = {'block_index': b, 'name': name, 'waveform': blk.waveform, 'frequency': frequency,
-             'target_amplitude': blk.amplitude,
-             'achieved_amplitude': float(np.mean([self._amplitude(blk, c) for c in steady])) if steady else math.nan,
-             'cycles_used': len(steady)}
-        for side in ('measured', 'model'):
-            r[side] = {n: mean(side, n) for n in ('k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy_harmonic',
-                                                  'energy_loop')}
-        r['deviation_k_dyn_pct'] = 100 * (r['model']['k_dyn'] / r['measured']['k_dyn'] - 1)
-        r['deviation_c_eq_pct'] = 100 * (r['model']['c_eq'] / r['measured']['c_eq'] - 1)
-        return r
-
-    def row_list(self, b: int) -> list[dict]:
-        """Rows of block b: one for a periodic block, one per frequency band of a sweep, none otherwise."""
-        blk = self.blocks[b]
-        cycles = self.cycles.get(b, [])
-        if blk.waveform in PERIODIC:
-            cyc = [c for c in cycles if self._amplitude(blk, c) >= 0.9 * blk.amplitude
-                   and abs(c.frequency - blk.frequency) <= 0.1 * blk.frequency]
-            rows = [self._row(b, blk.name, blk.frequency, cyc[len(cyc) // 2:] if len(cyc) > 1 else cyc)]
-        elif blk.waveform in SWEEPS:
-            # a sweep has no steady state: group its cycles into bands around 1-1.5-2-3-5-7 x 10^n Hz (+-10 %),
-            # past the tapers (half the target amplitude; the actuator attenuates the top of a sweep)
-            lo, hi = sorted((blk.frequency, blk.frequency_end))
-            bands = [m * 10.0 ** e for e in range(-2, 4) for m in (1, 1.5, 2, 3, 5, 7) if lo <= m * 10.0 ** e <= hi]
-            rows = []
-            for fc in bands:
-                cyc = [c for c in cycles if c.amplitude >= 0.5 * blk.amplitude and abs(c.frequency / fc - 1) <= 0.1]
-                if cyc:
-                    rows.append(self._row(b, f'{blk.name} @{fc:g}Hz', float(np.mean([c.frequency for c in cyc])),
-                                          cyc))
-        else:
-            rows = []
-        self.rows[b] = rows
-        return rows
-
-    def format(self, b: int) -> list[str]:
-        self.printed.add(b)
-        return [(f"{b:4d}  {r['name'][:24]:<24}  {r['frequency']:6.2f}  {r['target_amplitude'] * 1e3:6.3f}  "
-                 f"{r['achieved_amplitude'] * 1e3:6.3f}  {r['measured']['k_dyn'] * 1e-6:10.3f}  "
-                 f"{r['model']['k_dyn'] * 1e-6:11.3f}  {r['deviation_k_dyn_pct']:+6.2f}  "
-                 f"{r['measured']['c_eq'] * 1e-3:9.2f}  {r['model']['c_eq'] * 1e-3:10.2f}  "
-                 f"{r['deviation_c_eq_pct']:+6.2f}") for r in self.row_list(b)]
-
-
-class Terminal:
-    """Table rows scroll; the progress line is rewritten in place on a terminal (printed every few s otherwise)."""
-
-    def __init__(self, quiet: bool):
-        self.tty = sys.stdout.isatty() and not quiet
-        self.quiet = quiet
-        self._last_plain = 0.0
-        self._status = ''
-
-    def line(self, text: str) -> None:
-        if self.tty and self._status:
-            sys.stdout.write('\r' + ' ' * min(len(self._status), shutil.get_terminal_size().columns - 1) + '\r')
-        print(text, flush=True)
-        if self.tty and self._status:
-            sys.stdout.write(self._status)
-            sys.stdout.flush()
-
-    def status(self, text: str) -> None:
-        if self.quiet:
-            return
-        width = shutil.get_terminal_size().columns - 1
-        if self.tty:
-            self._status = text[:width]
-            sys.stdout.write('\r' + self._status.ljust(width)[:width] + '\r' + self._status)
-            sys.stdout.flush()
-        elif time.monotonic() - self._last_plain >= 5.0:
-            self._last_plain = time.monotonic()
-            print(text, flush=True)
-
-    def end_status(self) -> None:
-        if self.tty and self._status:
-            sys.stdout.write('\n')
-            self._status = ''
-
-
-def progress_text(fb, stats, t_start) -> str:
-    achieved = '--' if math.isnan(fb.achieved_amplitude) else f'{fb.achieved_amplitude * 1e3:.3f}'
-    return (f'[{fb.progress * 100:5.1f}%] block {fb.block_index + 1}/{fb.block_count} {fb.block_name}  '
-            f'cycle {fb.cycle}/{fb.cycles_total}  A {fb.target_amplitude * 1e3:.3f} mm -> {achieved} mm  '
-            f'| {stats.samples} samples, {stats.gaps} gaps | {time.monotonic() - t_start:5.1f} s')
+    try:
+        return with_overrides(program, **overrides, note='rubber-rig bench overrides')
+    except OverrideError as exc:
+        raise ValueError(f"--{exc.field.replace('_', '-')}: {exc.why}") from None
 
 
 # -- summary --------------------------------------------------------------------------------------------------------
-def write_summary(mcap: Path, summary: dict) -> tuple[Path, Path]:
-    base = mcap.with_suffix('')
-    jpath, mpath = Path(f'{base}.summary.json'), Path(f'{base}.summary.md')
-    jpath.write_text(json.dumps(summary, indent=2, default=float) + '\n')
-    lines = [f"# rubber-rig bench: {summary['program']}", '',
-             f"- recording: `{summary['recording']}`",
-             f"- rig: {summary['rig']['backend']}, {summary['rig']['sample_rate']:g} Hz, "
-             f"{'paced' if summary['rig']['paced'] else 'fast'}; specimen {summary['rig']['specimen']}",
-             f"- model: {summary['model']['parameter_set'] or summary['model']['source']} "
-             f"({', '.join(f'{k}={v:.4g}' for k, v in summary['model']['values'].items())})",
-             f"- result: {summary['result']['message']} in {summary['wall_time_s']:.1f} s wall time",
-             f"- samples: {summary['loss']['live']['samples']['samples']} published, "
-             f"{summary['loss']['live']['samples']['gaps']} gaps; predictions "
-             f"{summary['loss']['live']['prediction']['samples']}, "
-             f"{summary['loss']['live']['prediction']['gaps']} gaps;"
-             f" recording: {summary['loss']['recording'].get('samples_lost', 'n/a')} samples lost",
-             ]
-    lat = summary.get('latency', {}).get('last_sample')
-    if lat:
-        lines.append(f"- latency sample -> prediction: median {lat['median_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms")
-    lines += ['', '| block | name | f [Hz] | A [mm] | A meas [mm] | K_dyn meas [kN/mm] | K_dyn model [kN/mm] | '
-              'dK [%] | C_eq meas [kN s/m] | C_eq model [kN s/m] | dC [%] | loss angle meas/model [deg] |',
-              '|---|---|---|---|---|---|---|---|---|---|---|---|']
-    for r in summary['blocks']:
-        lines.append(f"| {r['block_index']} | {r['name']} | {r['frequency']:.2f} | {r['target_amplitude'] * 1e3:.3f} | "
-                     f"{r['achieved_amplitude'] * 1e3:.3f} | {r['measured']['k_dyn'] * 1e-6:.3f} | "
-                     f"{r['model']['k_dyn'] * 1e-6:.3f} | {r['deviation_k_dyn_pct']:+.2f} | "
-                     f"{r['measured']['c_eq'] * 1e-3:.2f} | {r['model']['c_eq'] * 1e-3:.2f} | "
-                     f"{r['deviation_c_eq_pct']:+.2f} | {math.degrees(r['measured']['loss_angle']):.2f} / "
-                     f"{math.degrees(r['model']['loss_angle']):.2f} |")
-    mpath.write_text('\n'.join(lines) + '\n')
-    return jpath, mpath
-
-
 def _wait(launcher, future, timeout: float, what: str):
     if not launcher.wait_for(future.done, timeout):
         raise CommandError(f'timed out after {timeout:.0f} s waiting for {what}')
@@ -364,7 +157,7 @@ def run(args) -> int:
         term.line(f"rubber-rig bench: program '{program.name}' ({len(program.blocks)} blocks, "
                   f'{program.duration(rate):.1f} s of excitation at {rate:g} Hz, '
                   f"{'paced' if cfg.paced else 'as fast as possible'})")
-        term.line(f"rig: {cfg.backend}, specimen {specimen}; model seed000 from "
+        term.line(f"rig: {cfg.backend}, specimen {specimen}; model fractional_zener_berg from "
                   f"{p.parameter_set or p.choice.source}")
         term.line('nodes: rig_driver, excitation, element_model, recorder'
                   + (', foxglove_view' if args.foxglove else '') + ' (one SingleThreadedExecutor thread each)')
@@ -431,7 +224,9 @@ def run(args) -> int:
             launcher.wait_for(result_future.done, 15.0)
         term.end_status()
         wall = time.monotonic() - t_start
-        launcher.wait_for(lambda: False, 0.5)   # let the last cycle metrics arrive
+        # the last cycle metrics are out once the model has predicted every published sample
+        launcher.wait_for(lambda: monitor.stats['prediction'].next is not None and monitor.stats['samples'].next
+                          is not None and monitor.stats['prediction'].next >= monitor.stats['samples'].next, 5.0)
         for c in monitor.cycle_metrics[n_cm:]:
             table.add(c)
         for b in sorted(table.cycles):
@@ -504,52 +299,7 @@ def run(args) -> int:
             summary_error = f'cannot write the summary next to {mcap}: {exc.strerror or exc}'
             print(json.dumps(summary, indent=2, default=float))
 
-    live = summary['loss']['live']
-    print(f"\nprogram: {summary['result']['message']} ({wall:.1f} s)")
-    print(f"samples: {live['samples']['samples']} published, {live['samples']['gaps']} gaps; "
-          f"predictions: {live['prediction']['samples']}, {live['prediction']['gaps']} gaps; "
-          f"recording: {rec_loss.get('samples_lost', 'n/a')} samples lost"
-          + (f" ({rec_loss['samples_not_recorded']} published samples not recorded)"
-             if rec_loss.get('samples_not_recorded') else ''))
-    if recording_error:
-        print(f'RECORDING FAILED: {recording_error}')
-    lat = summary['latency'].get('last_sample')
-    if lat:
-        print(f"latency sample -> prediction: median {lat['median_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms")
-    elif not cfg.paced:
-        print('latency: not measured with --fast (rig time runs ahead of the wall clock)')
-    print(f'MCAP recording: {mcap}' + ('' if rec_loss.get('complete', True) else
-                                       ' (not closed: readable up to its last complete chunk)'))
-    if summary_error:
-        print(f'summary:        NOT WRITTEN ({summary_error}); printed above as JSON')
-    else:
-        print(f'summary:        {jpath}')
-        print(f'                {mpath}')
+    print_result(summary, rec_loss, recording_error, cfg.paced, mcap, jpath, mpath, summary_error)
     if interrupted:
         return 130
     return 0 if summary['result']['success'] and not recording_error else 1
-
-
-def recording_loss(mcap: Path, published, recorder_stats: dict) -> dict:
-    """Loss of the recording: what the file itself shows (sequence gaps that are real loss) plus every sample
-    published during the run (``published``: the monitor's StreamStats of ``samples``) that is not in the file.
-    ``samples_lost`` is the total; it is never 0 while a published sample is missing.
-    """
-    from rubber_rig.recording import load_recording
-    try:
-        rec = load_recording(mcap, allow_truncated=True)
-    except Exception as exc:   # the summary still says where the file is and what is known missing
-        return {'error': str(exc), 'samples_lost': published.samples or 'unknown',
-                'samples_not_recorded': published.samples}
-    seq = np.asarray(rec.sequence, dtype=np.int64)
-    if published.first is not None:
-        in_run = int(np.count_nonzero((seq >= published.first) & (seq < published.next)))
-    else:
-        in_run = 0
-    not_recorded = max(0, published.samples - in_run)
-    return {'samples': int(len(rec)), 'samples_lost': int(rec.samples_lost) + not_recorded,
-            'samples_lost_in_file': int(rec.samples_lost), 'samples_not_recorded': not_recorded,
-            'samples_published': published.samples, 'gaps': len(rec.gaps), 'sequence_jumps': len(rec.jumps),
-            'complete': bool(rec.complete), 'unclosed': rec.unclosed,
-            'recorder_samples_lost': recorder_stats.get('samples_lost_total'),
-            'topics': {t: v.get('count') for t, v in rec.topics.items()}}

@@ -90,6 +90,30 @@ class Block:
         """
         return self.waveform in wf.PERIODIC + wf.SWEEPS
 
+    def to_dict(self) -> dict:
+        """The block as program YAML fields in SI (the inverse of :func:`parse_block`: parsing the result at the
+        same start level gives an equal block), for programs rewritten by tools such as ``rubber-rig bench``.
+        """
+        d = {'name': self.name, 'waveform': self.waveform}
+        if self.oscillating:
+            d.update(amplitude=self.amplitude, mean=self.mean, taper_cycles=self.taper_cycles)
+        if self.waveform in wf.PERIODIC:
+            d['cycles'] = int(self.cycles)
+            if self.waveform == 'triangle' and self.rate > 0:     # given by its rate: the frequency follows
+                d['rate'] = self.rate
+            else:
+                d['frequency'] = self.frequency
+            if self.waveform == 'square':
+                d['rate'] = self.rate
+        elif self.waveform in wf.SWEEPS:
+            d.update(f_start=self.frequency, f_end=self.frequency_end, duration=self.duration)
+        elif self.waveform == 'hold':
+            d['duration'] = self.duration
+        elif self.waveform == 'ramp':
+            d['target'] = self.target
+            d.update({'rate': self.rate} if self.rate > 0 else {'duration': self.duration})
+        return d
+
     @property
     def end_level(self) -> float:
         """Displacement [m] the block ends at."""

@@ -153,6 +153,66 @@ class Program:
         return out
 
 
+class OverrideError(ValueError):
+    """An invalid override of :func:`with_overrides`; ``field`` names it ('cycles', 'blocks', ...)."""
+
+    def __init__(self, field: str, why: str):
+        super().__init__(f'{field}: {why}')
+        self.field, self.why = field, why
+
+
+def select_blocks(spec: str, n: int) -> list[int]:
+    """Block indices of a selection like ``'0-3,7'`` among ``n`` blocks, in the order given."""
+    out = []
+    for part in spec.split(','):
+        part = part.strip()
+        if not part:
+            continue
+        lo, _, hi = part.partition('-')
+        try:
+            a, b = int(lo), int(hi) if hi else int(lo)
+        except ValueError:
+            raise OverrideError('blocks', f'{part!r} is not an index or a range like 0-3') from None
+        if not (0 <= a <= b < n):
+            raise OverrideError('blocks', f"{part!r} outside the program's blocks 0-{n - 1}")
+        out.extend(range(a, b + 1))
+    return out
+
+
+def with_overrides(program: Program, cycles: int = None, duration_scale: float = None, blocks: str = None,
+                   taper_cycles: float = None, note: str = 'rewritten') -> tuple[Program, str]:
+    """(Program, YAML text) of ``program`` rewritten: only the ``blocks`` selected (see :func:`select_blocks`),
+    ``cycles`` full-amplitude cycles per periodic block, cycle counts and hold/sweep durations scaled by
+    ``duration_scale`` (tapers and ramps kept), ``taper_cycles`` for every oscillating block. The result is
+    validated like any program; OverrideError names the override at fault. ``note`` is appended to the
+    description in parentheses.
+    """
+    if cycles is not None and cycles < 1:
+        raise OverrideError('cycles', f'must be >= 1, got {cycles}')
+    if duration_scale is not None and not duration_scale > 0:
+        raise OverrideError('duration_scale', f'must be > 0, got {duration_scale}')
+    if taper_cycles is not None and not taper_cycles > 0:
+        raise OverrideError('taper_cycles', f'must be > 0, got {taper_cycles}')
+    chosen = program.blocks if not blocks else [program.blocks[i] for i in select_blocks(blocks, len(program.blocks))]
+    out = []
+    for blk in chosen:
+        d = blk.to_dict()
+        if 'cycles' in d:
+            if cycles is not None:
+                d['cycles'] = cycles
+            if duration_scale:
+                d['cycles'] = max(1, int(round(d['cycles'] * duration_scale)))
+        elif 'duration' in d and duration_scale and d['waveform'] != 'ramp':
+            d['duration'] *= duration_scale
+        if 'taper_cycles' in d and taper_cycles is not None:
+            d['taper_cycles'] = taper_cycles
+        out.append(d)
+    data = {'name': program.name, 'description': f'{program.description} ({note})'.strip(),
+            'initial_position': program.initial_position, 'rest_position': program.rest_position, 'blocks': out}
+    text = yaml.safe_dump(data, sort_keys=False)
+    return Program.from_yaml_text(text, name=program.name), text
+
+
 def _expand_grid(raw, first_index):
     """A block whose 'amplitude' and/or 'frequency' is a list stands for the grid of all combinations
     (amplitude outer, frequency inner), named <name>_<A>mm_<f>Hz.

@@ -16,15 +16,20 @@
 
 rclpy 7 (Jazzy) has no public API for these:
 
-* ``RCLError`` (``rclpy._rclpy_pybind11``): what spinning raises when the context is shut down from outside;
-  rclpy's own modules reach it through ``rclpy.impl.implementation_singleton`` the same way;
+* ``RCLError`` (defined in ``rclpy._rclpy_pybind11``): what spinning raises when the context is shut down from
+  outside while the executor builds its wait set (the public ``ExternalShutdownException`` covers the other
+  moments); it is taken from ``rclpy.impl.implementation_singleton``, as rclpy's own modules take it;
 * the parameter overrides of a node (``Node._parameter_overrides``): values from parameter files and the
-  command line before they are declared, to accept an integer for a double and to find misspelt keys;
+  command line before they are declared, to accept an integer for a double and to find misspelt keys
+  (``declare_parameter`` reads them without calling the public pre-set callbacks, and no public method lists
+  them). The declared parameters come from the public ``Node.list_parameters`` instead of ``Node._parameters``;
 * the current state of a lifecycle node (``LifecycleNode._state_machine.current_state``); the public way is
   the node's own ``get_state`` service, which a node cannot call on itself from its executor.
 
-Checked against :data:`CHECKED_VERSION`; another major.minor version warns once at import, and
-test/test_compat.py exercises each function against the installed rclpy.
+Checked against rclpy :data:`CHECKED_VERSION` (ROS 2 Jazzy; rclpy's own metadata, as the ros-jazzy-rclpy
+7.1.6 / ros-rclpy 7.1.6 wheels install it). :func:`check_version` runs at import and warns, without failing,
+when another major.minor version is installed; test/test_compat.py exercises each function against the
+installed rclpy.
 """
 from __future__ import annotations
 
@@ -41,7 +46,11 @@ RCLError = _rclpy.RCLError
 
 
 def installed_version() -> str:
-    return importlib.metadata.version(PACKAGE)
+    """The installed version of :data:`PACKAGE` ('' if its metadata cannot be found)."""
+    try:
+        return importlib.metadata.version(PACKAGE)
+    except importlib.metadata.PackageNotFoundError:
+        return ''
 
 
 def version_matches(installed: str, checked: str = CHECKED_VERSION) -> bool:
@@ -49,9 +58,18 @@ def version_matches(installed: str, checked: str = CHECKED_VERSION) -> bool:
     return installed.split('.')[:2] == checked.split('.')[:2]
 
 
-if not version_matches(installed_version()):
-    warnings.warn(f'{PACKAGE} {installed_version()} is installed; rubber_rig uses private parts of it checked '
-                  f'against {CHECKED_VERSION} (rubber_rig/nodes/rclpy_compat.py)', stacklevel=2)
+def check_version(installed: str | None = None) -> bool:
+    """Warn (RuntimeWarning) unless the installed version has the checked major.minor; True when it has."""
+    installed = installed_version() if installed is None else installed
+    if version_matches(installed):
+        return True
+    warnings.warn(f'{PACKAGE} {installed or "(version unknown)"} is installed; rubber_rig uses private parts of it '
+                  f'checked against {CHECKED_VERSION} (rubber_rig/nodes/rclpy_compat.py)', RuntimeWarning,
+                  stacklevel=2)
+    return False
+
+
+check_version()
 
 
 def parameter_overrides(node: Node) -> dict:

@@ -31,8 +31,10 @@ Reading::
 
 Crashes: :func:`recover` (``rubber-rig recover FILE``) rebuilds a file whose writer was killed.
 Modules: msgdefs (ros2msg schema texts), qos (rosbag2 QoS YAML), gaps (sequence-gap accounting),
-writer, session (Recorder), reader, mcapio (checked file access), cdr (numpy CDR decoder), recover,
-bagmeta (rosbag2 metadata.yaml).
+writer (the file), channels (schemas, channels, CDR encoding), gapcheck (gap check while writing),
+metadata (record names, value codec), plain (messages as plain values), rawfile (unbuffered file),
+session (Recorder), reader, mcapio (checked file access), cdr (numpy CDR decoder), recover,
+bagmeta (rosbag2 metadata.yaml), mcap_compat (the private mcap_ros2 parts, with their checked version).
 """
 from .bagmeta import write_bag_metadata
 from .errors import RecordingError, RecordingWriteError

@@ -17,14 +17,19 @@
 mcap-ros2-support has no public API for these two jobs, so they are used from ``mcap_ros2._dynamic``:
 
 * ``serialize_dynamic(name, text)``: a CDR encoder from a ros2msg definition, for writing messages given as
-  rosidl objects or dicts (the public ``mcap_ros2.writer.Writer`` wraps it but also owns the file, which the
-  recording writer must own itself to split files and account for gaps);
+  rosidl objects or dicts. The public ``mcap_ros2.writer.Writer`` wraps it, but it also owns the file (the
+  recording writer must own it to flush, split and survive write errors) and registers its channels without
+  the metadata rosbag2 needs (``offered_qos_profiles``, ``topic_type_hash``);
 * ``_for_each_msgdef(name, text, fn)``: the parser of a full definition (the type, then ``MSG:`` sections)
-  into ``rosidl_adapter`` specifications, which the numpy CDR decoder (:mod:`.cdr`) walks.
+  into ``rosidl_adapter`` specifications, which the numpy CDR decoder (:mod:`.cdr`) walks. The public
+  ``rosidl_adapter`` package parses one section only and is a ROS package, which the recording core must not
+  need.
 
-Checked against :data:`CHECKED_VERSION`; another major.minor version warns once at import (the names may have
-moved), and test/test_compat.py exercises each function against the installed package. The reference
-decoder comes from the public ``mcap_ros2.decoder.DecoderFactory`` (:func:`reference_decoder`).
+Checked against mcap-ros2-support :data:`CHECKED_VERSION` (with mcap 1.6.0). :func:`check_version` runs at
+import and warns, without failing, when another major.minor version is installed (the names may have moved);
+test/test_compat.py exercises each function against the installed package. The reference decoder comes from
+the public ``mcap_ros2.decoder.DecoderFactory`` (:func:`reference_decoder`), which replaced
+``_dynamic.generate_dynamic``.
 """
 from __future__ import annotations
 
@@ -39,7 +44,11 @@ CHECKED_VERSION = '0.6.0'
 
 
 def installed_version() -> str:
-    return importlib.metadata.version(PACKAGE)
+    """The installed version of :data:`PACKAGE` ('' if its metadata cannot be found)."""
+    try:
+        return importlib.metadata.version(PACKAGE)
+    except importlib.metadata.PackageNotFoundError:
+        return ''
 
 
 def version_matches(installed: str, checked: str = CHECKED_VERSION) -> bool:
@@ -47,9 +56,18 @@ def version_matches(installed: str, checked: str = CHECKED_VERSION) -> bool:
     return installed.split('.')[:2] == checked.split('.')[:2]
 
 
-if not version_matches(installed_version()):
-    warnings.warn(f'{PACKAGE} {installed_version()} is installed; rubber_rig uses private parts of it checked '
-                  f'against {CHECKED_VERSION} (rubber_rig/recording/mcap_compat.py)', stacklevel=2)
+def check_version(installed: str | None = None) -> bool:
+    """Warn (RuntimeWarning) unless the installed version has the checked major.minor; True when it has."""
+    installed = installed_version() if installed is None else installed
+    if version_matches(installed):
+        return True
+    warnings.warn(f'{PACKAGE} {installed or "(version unknown)"} is installed; rubber_rig uses private parts of it '
+                  f'checked against {CHECKED_VERSION} (rubber_rig/recording/mcap_compat.py)', RuntimeWarning,
+                  stacklevel=2)
+    return False
+
+
+check_version()
 
 
 def encoder(type_name: str, definition: str):

@@ -15,7 +15,6 @@
 """Checked low-level access to MCAP files: every failure becomes a RecordingError naming the file and
 the problem (bad magic, truncated, corrupt chunk, undecodable schema), never a library traceback.
 """
-import json
 import re
 import struct
 from pathlib import Path
@@ -27,6 +26,7 @@ from mcap.stream_reader import StreamReader
 from .cdr import make_decoder
 from .errors import RecordingError
 from .mcap_compat import reference_decoder
+from .metadata import decode_metadata  # importable from here as before
 
 MAGIC = b'\x89MCAP0\r\n'
 FOOTER_RECORD_SIZE = 1 + 8 + 8 + 8 + 4
@@ -144,18 +144,6 @@ def read_file(path: Path, allow_truncated: bool = False):
             metadata.append((record.name, dict(record.metadata)))
     messages.sort(key=lambda m: m[1])
     return schemas, channels, messages, metadata, False
-
-
-def decode_metadata(values: dict) -> dict:
-    """Inverse of writer.encode_metadata."""
-    values = dict(values)
-    json_keys = [k for k in values.pop('_json_keys', '').split(',') if k]
-    for key in json_keys:
-        try:
-            values[key] = json.loads(values[key])
-        except (KeyError, ValueError):
-            pass
-    return values
 
 
 class Decoders:

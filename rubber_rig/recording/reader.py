@@ -39,8 +39,8 @@ import numpy as np
 
 from .errors import RecordingError
 from .gaps import GapTracker
-from .mcapio import Decoders, decode_metadata, read_file, recording_files
-from .writer import CLOSE_METADATA_NAME, METADATA_NAME, SEQUENCE_SOURCE_KEY
+from .mcapio import Decoders, read_file, recording_files
+from .metadata import CLOSE_METADATA_NAME, METADATA_NAME, SEQUENCE_SOURCE_KEY, decode_metadata
 
 BATCH = 'msg_defs/msg/RigSampleBatch'
 SAMPLE = 'msg_defs/msg/RigSample'

@@ -32,7 +32,7 @@ from .bagmeta import METADATA_FILE, write_bag_metadata
 from .errors import RecordingError, RecordingWriteError
 from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
 from .mcapio import Decoders, check_file, iter_records
-from .writer import SEQUENCE_SOURCE_KEY, encode_metadata
+from .metadata import SEQUENCE_SOURCE_KEY, encode_metadata
 
 RECOVERED_METADATA_NAME = 'rubber_rig.recovered'
 

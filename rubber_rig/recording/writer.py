@@ -14,116 +14,38 @@
 
 """RecordingWriter: one MCAP file in the ros2 profile, as rosbag2's MCAP storage writes it (ROS-free).
 
-- Schemas: ``ros2msg`` with the full concatenated definition (msgdefs.full_definition); channels:
-  ``cdr`` with ``offered_qos_profiles`` and ``topic_type_hash`` metadata; chunked, zstd/lz4, with
-  message indexes and a summary (mcap's Writer does the format).
-- Crash safety: the file is written unbuffered (each MCAP record reaches the OS in one write), and the
-  chunk in progress is closed at least every ``flush_interval_s`` of log time, so a SIGKILL loses at
-  most that much; ``rubber_rig.recording.recover`` rebuilds the summary of such a file.
-- Loss is never silent: messages that could not be written are counted by reason, sequence gaps of the
-  rig's sample streams are counted (gaps.GapTracker), and both go into a ``rubber_rig.close`` metadata
-  record when the file is closed.
+The writer does the file: it owns the mcap Writer (chunked, zstd/lz4, message indexes and a summary) on an
+unbuffered file (rawfile), flushes, turns write errors into RecordingWriteError and counts messages. The
+rest is in modules of their own: schemas, channels and CDR encoding (channels), the gap check of the rig's
+sample streams (gapcheck, gaps), metadata names and values (metadata), rosbag2's bag info (bagmeta).
+
+- Crash safety: each MCAP record reaches the OS in one write, and the chunk in progress is closed at least
+  every ``flush_interval_s`` of log time, so a SIGKILL loses at most that much; ``rubber_rig.recording.recover``
+  rebuilds the summary of such a file.
+- Loss is never silent: messages that could not be written are counted by reason, sequence gaps of the rig's
+  sample streams are counted, and both go into a ``rubber_rig.close`` metadata record when the file is closed.
 """
 import errno as errno_mod
-import json
-import os
 import time
 from datetime import datetime, timezone
 from pathlib import Path
 
-from mcap.records import Schema
 from mcap.writer import CompressionType
 from mcap.writer import Writer as McapWriter
 
 from rubber_rig import __version__
 
-from . import bagmeta, mcap_compat
+from . import bagmeta
+from .channels import ChannelTable
 from .errors import RecordingError, RecordingWriteError
-from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
-from .mcapio import Decoders
-from .msgdefs import MessageDefinitionError, full_definition, normalize_type, type_hash, type_of
-from .qos import offered_qos_yaml
+from .gapcheck import GapCheck
+from .gaps import GapTracker
+from .metadata import CLOSE_METADATA_NAME, METADATA_NAME, SEQUENCE_SOURCE_KEY, encode_metadata
+from .msgdefs import MessageDefinitionError, normalize_type, type_of
+from .rawfile import UnbufferedFile
 
-METADATA_NAME = 'rubber_rig'           # self-description record written at the start of every file
-# channel metadata key: 'publication' when the MCAP message sequence is the DDS publication sequence number
-# (gaps in it are messages lost in transport), 'writer' when the writer numbered the messages itself
-SEQUENCE_SOURCE_KEY = 'rubber_rig.sequence'
-CLOSE_METADATA_NAME = 'rubber_rig.close'  # loss accounting written when a file is closed
 COMPRESSION = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE,
                '': CompressionType.NONE}
-
-
-def encode_metadata(values: dict) -> dict:
-    """MCAP metadata values are strings: keep strings, JSON-encode the rest and remember which."""
-    out, json_keys = {}, []
-    for key, value in (values or {}).items():
-        if isinstance(value, str):
-            out[str(key)] = value
-        else:
-            out[str(key)] = json.dumps(_plain(value), sort_keys=True)
-            json_keys.append(str(key))
-    if json_keys:
-        out['_json_keys'] = ','.join(json_keys)
-    return out
-
-
-def _plain(value):
-    """Rosidl messages, numpy arrays and array.array -> dicts, lists and Python numbers, the forms the
-    dynamic CDR encoder (and JSON) accept; rosidl's byte fields (bytes objects) become ints/bytes.
-    """
-    fields = getattr(value, 'get_fields_and_field_types', None)
-    if fields is not None:
-        out = {}
-        for name, ftype in fields().items():
-            v = getattr(value, name)
-            if ftype == 'octet' and isinstance(v, (bytes, bytearray)):
-                v = v[0] if v else 0
-            elif ftype.startswith(('sequence<octet', 'octet[')) and isinstance(v, (list, tuple)):
-                v = b''.join(v)
-            out[name] = _plain(v)
-        return out
-    if isinstance(value, (bytes, bytearray)):
-        return bytes(value)
-    if hasattr(value, 'tolist'):
-        return value.tolist()
-    if isinstance(value, dict):
-        return {k: _plain(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_plain(v) for v in value]
-    return value
-
-
-class _UnbufferedFile:
-    """Write-only file whose every write goes straight to the OS (no Python-side buffer to lose)."""
-
-    def __init__(self, path: Path, overwrite: bool):
-        flags = os.O_WRONLY | os.O_CREAT | (os.O_TRUNC if overwrite else os.O_EXCL)
-        self._fd = os.open(path, flags, 0o644)
-        self._pos = 0
-
-    def write(self, data) -> int:
-        view = memoryview(data)
-        while view:
-            n = os.write(self._fd, view)
-            if n <= 0:
-                raise OSError(errno_mod.ENOSPC, 'no space left on device')
-            self._pos += n
-            view = view[n:]
-        return len(data)
-
-    def tell(self) -> int:
-        return self._pos
-
-    def flush(self):
-        pass
-
-    def fsync(self):
-        os.fsync(self._fd)
-
-    def close(self):
-        if self._fd >= 0:
-            os.close(self._fd)
-            self._fd = -1
 
 
 class RecordingWriter:
@@ -140,27 +62,16 @@ class RecordingWriter:
         if compression not in COMPRESSION:
             raise RecordingError(f'unknown compression {compression!r}; use zstd, lz4 or none')
         try:
-            self._file = _UnbufferedFile(self.path, overwrite)
+            self._file = UnbufferedFile(self.path, overwrite)
         except OSError as exc:
             raise RecordingWriteError(f'cannot create recording {self.path}: {exc.strerror}',
                                       exc.errno) from None
         self._mcap = McapWriter(self._file, chunk_size=chunk_size, compression=COMPRESSION[compression])
         self._flush_interval_ns = int(flush_interval_s * 1e9) if flush_interval_s else 0
-        self._schemas, self._channels, self._sequences = {}, {}, {}
-        self._channel_qos, self._channel_hash = {}, {}
-        self._schema_records = {}          # msg_type -> its Schema record (for the gap check's decoder)
-        self._encoders = {}
-        # numpy decoder for the gap check (10 kHz), mcap_ros2's only if it fails (e.g. big-endian CDR)
-        self._decoders = Decoders(self.path, lazy_fallback=True)
-        self.gaps = gaps if gaps is not None else GapTracker()
-        # the tracker may carry on from earlier files: this file reports what it added since it opened
-        self._gaps_at_open = self.gaps.summary()
-        self._events_at_open = len(self.gaps.events)
+        self._channels = ChannelTable(self._mcap, self._guard)
+        self._gap_check = GapCheck(self.path, gaps)
         self.messages_written = 0
         self.messages_flushed = 0          # messages in complete chunks handed to the OS
-        self.samples_written = 0           # samples of sequenced messages (RigSampleBatch, ...) written
-        self.samples_flushed = 0           # ... of them in complete chunks handed to the OS
-        self.samples_lost_unwritten = 0    # samples of the chunk a write error lost
         self.last_flushed_log_time_ns = None
         self.messages_by_topic = {}
         self.dropped = {}                  # reason -> count of messages not written
@@ -190,6 +101,26 @@ class RecordingWriter:
         """Bytes on disk plus the (uncompressed) chunk in progress: an upper bound for splitting."""
         return self._file.tell() + self._pending
 
+    @property
+    def gaps(self) -> GapTracker:
+        """The sequence-gap tracker (shared by the files of a split recording)."""
+        return self._gap_check.gaps
+
+    @property
+    def samples_written(self) -> int:
+        """Samples of sequenced messages (RigSampleBatch, ...) written."""
+        return self._gap_check.samples_written
+
+    @property
+    def samples_flushed(self) -> int:
+        """Samples of sequenced messages in complete chunks handed to the OS."""
+        return self._gap_check.samples_flushed
+
+    @property
+    def samples_lost_unwritten(self) -> int:
+        """Samples of the chunk a write error lost."""
+        return self._gap_check.samples_lost_unwritten
+
     def _guard(self, fn, *args, **kwargs):
         if self.failure is not None:
             raise RecordingWriteError(f'recording {self.path} stopped after a write error: '
@@ -201,7 +132,7 @@ class RecordingWriter:
             # messages of the chunk that could not be written are lost too: say how many
             if self.messages_written > self.messages_flushed:
                 self.count_dropped('lost_in_unwritten_chunk', self.messages_written - self.messages_flushed)
-            self.samples_lost_unwritten = self.samples_written - self.samples_flushed
+            self._gap_check.chunk_lost()
             what = {errno_mod.ENOSPC: 'disk full', errno_mod.EFBIG: 'file too large',
                     errno_mod.EDQUOT: 'disk quota exceeded'}.get(exc.errno, exc.strerror)
             raise RecordingWriteError(f'writing {self.path} failed ({what}); the file is kept up to '
@@ -217,34 +148,7 @@ class RecordingWriter:
         """Register a topic (done implicitly by write_message). ``qos``: offered profiles as a list
         of dicts (qos.qos_entry keywords) or the rosbag2 YAML string.
         """
-        msg_type = normalize_type(msg_type)
-        known = self._channels.get(topic)
-        if known is not None:
-            if known[1] != msg_type:
-                raise RecordingError(f'topic {topic} already recorded as {known[1]}, got {msg_type}')
-            return known[0]
-        schema_id = self._schemas.get(msg_type)
-        if schema_id is None:
-            text = full_definition(msg_type).encode()
-            schema_id = self._guard(self._mcap.register_schema, msg_type, 'ros2msg', text)
-            self._schemas[msg_type] = schema_id
-            self._schema_records[msg_type] = Schema(schema_id, text, 'ros2msg', msg_type)
-        metadata = {'offered_qos_profiles': offered_qos_yaml(qos or []),
-                    'topic_type_hash': topic_type_hash if topic_type_hash is not None
-                    else type_hash(msg_type), SEQUENCE_SOURCE_KEY: sequence_source}
-        self._channel_qos[topic] = metadata['offered_qos_profiles']
-        self._channel_hash[topic] = metadata['topic_type_hash']
-        channel_id = self._guard(self._mcap.register_channel, topic, 'cdr', schema_id, metadata)
-        self._channels[topic] = (channel_id, msg_type)
-        self._sequences[channel_id] = 0
-        return channel_id
-
-    def _encoder(self, msg_type):
-        fn = self._encoders.get(msg_type)
-        if fn is None:
-            fn = mcap_compat.encoder(msg_type, full_definition(msg_type))
-            self._encoders[msg_type] = fn
-        return fn
+        return self._channels.add(topic, msg_type, qos, topic_type_hash, sequence_source)
 
     # -- messages ----------------------------------------------------------------------------
     def write_message(self, topic: str, msg_type: str, msg, log_time_ns: int = None,
@@ -272,7 +176,7 @@ class RecordingWriter:
             decoded = None
         else:
             try:
-                data = self._encoder(msg_type)(_plain(msg))
+                data = self._channels.encode(msg_type, msg)
             except Exception as exc:  # the encoder raises many types; name the message instead
                 self.count_dropped('encode_error')
                 raise RecordingError(f'cannot encode a {msg_type} for {topic}: {exc}') from None
@@ -282,9 +186,7 @@ class RecordingWriter:
         if publish_time_ns is None:
             publish_time_ns = log_time_ns
         publication_sequence = sequence
-        if sequence is None:
-            sequence = self._sequences[channel_id] + 1
-        self._sequences[channel_id] = sequence
+        sequence = self._channels.sequence(channel_id, sequence)
         before = self._file.tell()
         try:
             self._guard(self._mcap.add_message, channel_id, int(log_time_ns), data,
@@ -298,8 +200,9 @@ class RecordingWriter:
         if self.first_log_time_ns is None:
             self.first_log_time_ns = self._last_flush_ns = log_time_ns
         self.last_log_time_ns = log_time_ns
-        if msg_type in SEQUENCED_TYPES:
-            self._track(topic, msg_type, data, decoded, log_time_ns, publication_sequence)
+        if not self._gap_check.observe(topic, msg_type, self._channels.schema(msg_type), data, decoded,
+                                       log_time_ns, publication_sequence):
+            self.count_dropped('undecodable_for_gap_check')
         if self._file.tell() != before:    # mcap closed a full chunk (with this message) just now
             self._pending = 0
             self._mark_flushed()
@@ -308,23 +211,8 @@ class RecordingWriter:
 
     def _mark_flushed(self):
         self.messages_flushed = self.messages_written
-        self.samples_flushed = self.samples_written
+        self._gap_check.flushed()
         self.last_flushed_log_time_ns = self.last_log_time_ns
-
-    def _track(self, topic, msg_type, data, decoded, log_time_ns, publication_sequence=None):
-        if decoded is None:
-            try:
-                decoded = self._decoders.decode(self._schema_records[msg_type], data, topic)
-            except Exception:  # undecodable bytes are recorded anyway; count them
-                self.count_dropped('undecodable_for_gap_check')
-                return
-        event = self.gaps.observe_message(topic, msg_type, decoded, log_time_ns,
-                                          publication_sequence & 0xFFFFFFFF
-                                          if publication_sequence is not None else None)
-        span = sequence_span(msg_type, decoded)
-        if span is not None:
-            self.samples_written += span[1]
-        return event
 
     def add_metadata(self, name: str, values: dict) -> None:
         self._guard(self._mcap.add_metadata, name, encode_metadata(values))
@@ -339,19 +227,12 @@ class RecordingWriter:
             self._guard(self._file.fsync)
 
     def loss_report(self) -> dict:
-        now, at_open = self.gaps.summary(), self._gaps_at_open
-        added = {key: now[key] - at_open[key] for key in
-                 ('sequence_gaps', 'samples_lost', 'sequence_restarts', 'sequence_jumps', 'samples_skipped')}
         return {
             'messages_written': self.messages_written,
             'messages_by_topic': dict(self.messages_by_topic),
             'messages_dropped': sum(self.dropped.values()),
             'dropped_by_reason': dict(self.dropped),
-            **added,                                            # sequence jumps (between programs) are not loss
-            'samples_lost_unwritten': self.samples_lost_unwritten,
-            'gap_events': self.gaps.events[self._events_at_open:],
-            'total_sequence_gaps': now['sequence_gaps'],
-            'total_samples_lost': now['samples_lost'],
+            **self._gap_check.report(),
         }
 
     def bag_info(self) -> dict:
@@ -359,10 +240,7 @@ class RecordingWriter:
         first = self.first_log_time_ns or 0
         files = [{'path': self.path.name, 'start_ns': first, 'end_ns': self.last_log_time_ns or first,
                   'count': self.messages_written}]
-        topics = [{'name': topic, 'type': msg_type, 'qos': self._channel_qos.get(topic, ''),
-                   'hash': self._channel_hash.get(topic, ''), 'count': self.messages_by_topic.get(topic, 0)}
-                  for topic, (_, msg_type) in self._channels.items()]
-        return bagmeta.make_bag_info(files, topics)
+        return bagmeta.make_bag_info(files, self._channels.bag_topics(self.messages_by_topic))
 
     def close(self, extra: dict = None) -> dict:
         """Write the loss report and the summary; returns the report. After a write error the file
@@ -389,3 +267,8 @@ class RecordingWriter:
 
     def __exit__(self, *exc):
         self.close()
+
+
+# the metadata names and encode_metadata were defined here before the split: still importable from here
+__all__ = ['RecordingWriter', 'COMPRESSION', 'METADATA_NAME', 'CLOSE_METADATA_NAME', 'SEQUENCE_SOURCE_KEY',
+           'encode_metadata']

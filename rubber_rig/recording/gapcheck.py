@@ -1,0 +1,73 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The gap check of a file being written: sample-stream messages are decoded as they are written and fed to
+the GapTracker, and their samples counted, so that the file's close record says what was lost.
+
+This is accounting, not I/O, so it lives apart from the writer. The tracker may carry on from the earlier
+files of a split recording: :meth:`GapCheck.report` covers what this file added, plus the totals so far.
+"""
+from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
+from .mcapio import Decoders
+
+GAP_COUNTS = ('sequence_gaps', 'samples_lost', 'sequence_restarts', 'sequence_jumps', 'samples_skipped')
+
+
+class GapCheck:
+    """Sequence gaps and sample counts of the messages written to one file."""
+
+    def __init__(self, path, gaps: GapTracker = None):
+        # numpy decoder for the gap check (10 kHz), mcap_ros2's only if it fails (e.g. big-endian CDR)
+        self._decoders = Decoders(path, lazy_fallback=True)
+        self.gaps = gaps if gaps is not None else GapTracker()
+        self._gaps_at_open = self.gaps.summary()
+        self._events_at_open = len(self.gaps.events)
+        self.samples_written = 0           # samples of sequenced messages (RigSampleBatch, ...) written
+        self.samples_flushed = 0           # ... of them in complete chunks handed to the OS
+        self.samples_lost_unwritten = 0    # samples of the chunk a write error lost
+
+    def observe(self, topic, msg_type, schema, data, decoded, log_time_ns, publication_sequence=None) -> bool:
+        """Check one written message (``decoded``, or its CDR ``data`` under ``schema``); False if its bytes
+        could not be decoded (they are recorded anyway: the writer counts them).
+        """
+        if msg_type not in SEQUENCED_TYPES:
+            return True
+        if decoded is None:
+            try:
+                decoded = self._decoders.decode(schema, data, topic)
+            except Exception:  # the decoders raise many types on bad bytes; the caller counts them
+                return False
+        self.gaps.observe_message(topic, msg_type, decoded, log_time_ns,
+                                  publication_sequence & 0xFFFFFFFF if publication_sequence is not None else None)
+        span = sequence_span(msg_type, decoded)
+        if span is not None:
+            self.samples_written += span[1]
+        return True
+
+    def flushed(self) -> None:
+        """Every sample written so far is in a complete chunk on disk."""
+        self.samples_flushed = self.samples_written
+
+    def chunk_lost(self) -> None:
+        """A write error lost the chunk in progress, and the samples in it."""
+        self.samples_lost_unwritten = self.samples_written - self.samples_flushed
+
+    def report(self) -> dict:
+        """The gap part of the writer's loss report (sequence jumps, between programs, are not loss)."""
+        now, at_open = self.gaps.summary(), self._gaps_at_open
+        return {**{key: now[key] - at_open[key] for key in GAP_COUNTS},
+                'samples_lost_unwritten': self.samples_lost_unwritten,
+                'gap_events': self.gaps.events[self._events_at_open:],
+                'total_sequence_gaps': now['sequence_gaps'],
+                'total_samples_lost': now['samples_lost']}
