@@ -46,11 +46,11 @@ setup(
     entry_points={
         'console_scripts': [
             'rubber-rig = rubber_rig.cli.main:main',
-            'rig_driver = rubber_rig.nodes.rig_driver:main',
-            'excitation = rubber_rig.nodes.excitation:main',
-            'element_model = rubber_rig.nodes.element_model:main',
-            'recorder = rubber_rig.nodes.recorder:main',
-            'foxglove_view = rubber_rig.nodes.foxglove_view:main',
+            'rig_driver = rubber_rig.nodes.rig_driver_node:main',
+            'excitation = rubber_rig.nodes.excitation_node:main',
+            'element_model = rubber_rig.nodes.element_model_node:main',
+            'recorder = rubber_rig.nodes.recorder_node:main',
+            'foxglove_view = rubber_rig.nodes.foxglove_view_node:main',
         ],
     },
 )

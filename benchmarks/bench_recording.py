@@ -126,7 +126,7 @@ def node_cpu(tmp, rate, n, duration):
     ns = f'/bench{rate}'
     out = tmp / f'node_{rate}'
     env = dict(os.environ, RMW_IMPLEMENTATION=os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp'))
-    proc = subprocess.Popen([sys.executable, '-m', 'rubber_rig.nodes.recorder', '--ros-args',
+    proc = subprocess.Popen([sys.executable, '-m', 'rubber_rig.nodes.recorder_node', '--ros-args',
                              '-r', f'__ns:={ns}', '-p', f'output_dir:={out}'],
                             env=env, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     ctx = rclpy.Context()

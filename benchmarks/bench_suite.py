@@ -85,7 +85,7 @@ def start_processes(args, rate, batch, out_dir, domain):
 def run_once(args, rate: float, out_dir: Path) -> dict:
     from msg_defs.srv import RecorderControl
     from rubber_rig.excitation import Program
-    from rubber_rig.nodes.excitation import READY_STATES
+    from rubber_rig.nodes.excitation_node import READY_STATES
     from rubber_rig.nodes.launcher import InProcessLauncher
     from rubber_rig.nodes.monitor import SuiteMonitor
     from rubber_rig.recording import load_recording
@@ -100,10 +100,10 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         if args.processes:
             procs = start_processes(args, rate, batch, out_dir, domain)
         else:
-            from rubber_rig.nodes.element_model import ElementModelNode
-            from rubber_rig.nodes.excitation import ExcitationNode
-            from rubber_rig.nodes.recorder import RecorderNode
-            from rubber_rig.nodes.rig_driver import RigDriverNode
+            from rubber_rig.nodes.element_model_node import ElementModelNode
+            from rubber_rig.nodes.excitation_node import ExcitationNode
+            from rubber_rig.nodes.recorder_node import RecorderNode
+            from rubber_rig.nodes.rig_driver_node import RigDriverNode
             launcher.start(RecorderNode, {'output_dir': str(out_dir), 'discovery_period': 0.2})
             launcher.start(ElementModelNode)
             launcher.start(ExcitationNode, {'batch_size': batch})

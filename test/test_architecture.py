@@ -120,3 +120,15 @@ def test_test_modules_share_helpers_through_support_only():
                      else [node.module or ''] if isinstance(node, ast.ImportFrom) else [])
             offenders += [f'{path.name}:{node.lineno} imports {n}' for n in names if n.split('.')[0] in test_modules]
     assert not offenders, '\n'.join(offenders)
+
+
+def test_the_readme_shows_the_layer_table_this_test_enforces():
+    readme = (PACKAGE.parent / 'README.md').read_text(encoding='utf-8')
+    section = readme.split('### Layers', 1)[1].split('\n## ', 1)[0]
+    shown = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip('|').split('|')]
+        if len(cells) == 2 and cells[0] not in ('layer', '---'):
+            deps = set() if cells[1] == '-' else {d.strip() for d in cells[1].split(',')}
+            shown[cells[0]] = {'__init__' if d == 'rubber_rig (version)' else d for d in deps}
+    assert shown == ALLOWED

@@ -24,7 +24,7 @@ from rclpy.parameter import Parameter
 
 from rubber_rig.models import build_model, load_parameter_set
 from rubber_rig.nodes import conversions as conv
-from rubber_rig.nodes.element_model import ElementModelNode
+from rubber_rig.nodes.element_model_node import ElementModelNode
 from rubber_rig.nodes.params import ParameterError
 from rubber_rig.online.predictor import ModelChoice, OnlinePredictor, batch_problem
 from rubber_rig.rig.sim.plant import Sensor

@@ -30,7 +30,7 @@ from rclpy.node import Node
 from msg_defs.msg import ModelPrediction
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.foxglove_view import LAYOUT_FILE, FoxgloveViewNode, build_layout
+from rubber_rig.nodes.foxglove_view_node import LAYOUT_FILE, FoxgloveViewNode, build_layout
 from rubber_rig.nodes.launcher import InProcessLauncher
 
 from support.suite import domain_id

@@ -39,7 +39,7 @@ from msg_defs.msg import RecorderStatus, RigSampleBatch
 from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.recorder import RecorderNode
+from rubber_rig.nodes.recorder_node import RecorderNode
 from rubber_rig.recording import GapTracker, load_recording, recover
 
 from support.ros import ros_context, sample_batch, spin_until, spinning
@@ -90,10 +90,10 @@ class Client:
 
 
 def recorder_process(ns, params, prefix=(), script=None):
-    """The recorder as its own process (``python -m rubber_rig.nodes.recorder``), on the test's domain."""
+    """The recorder as its own process (``python -m rubber_rig.nodes.recorder_node``), on the test's domain."""
     env = dict(os.environ, RMW_IMPLEMENTATION='rmw_fastrtps_cpp', ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST',
                ROS_DOMAIN_ID=str(DOMAIN))
-    args = [sys.executable, '-m', 'rubber_rig.nodes.recorder', '--ros-args', '-r', f'__ns:={ns}']
+    args = [sys.executable, '-m', 'rubber_rig.nodes.recorder_node', '--ros-args', '-r', f'__ns:={ns}']
     for k, v in params.items():
         args += ['-p', f'{k}:={v}']
     if script is not None:      # run inside a shell script (private mounts): it gets the command as "$@"

@@ -32,7 +32,7 @@ from msg_defs.msg import RigSampleBatch, RigStatus
 from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.recorder import RecorderNode
+from rubber_rig.nodes.recorder_node import RecorderNode
 from rubber_rig.recording import load_recording
 from rubber_rig.recording.qos import parse_offered_qos
 
@@ -140,7 +140,7 @@ def test_recorder_node_records_published_batches(context, tmp_path):
 def run_recorder_process(ns, out_dir, extra=()):
     env = dict(os.environ, RMW_IMPLEMENTATION='rmw_fastrtps_cpp', ROS_AUTOMATIC_DISCOVERY_RANGE='LOCALHOST')
     return subprocess.Popen(
-        [sys.executable, '-m', 'rubber_rig.nodes.recorder', '--ros-args', '-r', f'__ns:={ns}',
+        [sys.executable, '-m', 'rubber_rig.nodes.recorder_node', '--ros-args', '-r', f'__ns:={ns}',
          '-p', f'output_dir:={out_dir}', '-p', 'flush_period:=0.1', '-p', 'diagnostics_period:=0.1',
          '-p', 'discovery_period:=0.1', '-p', 'metadata.specimen:=killed', *extra],
         env=env, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)

@@ -114,12 +114,12 @@ def run(args) -> int:
     os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
     from msg_defs.msg import RigStatus
     from msg_defs.srv import RecorderControl
-    from rubber_rig.nodes.element_model import ElementModelNode
-    from rubber_rig.nodes.excitation import ExcitationNode
+    from rubber_rig.nodes.element_model_node import ElementModelNode
+    from rubber_rig.nodes.excitation_node import ExcitationNode
     from rubber_rig.nodes.launcher import InProcessLauncher
     from rubber_rig.nodes.monitor import SuiteMonitor
-    from rubber_rig.nodes.recorder import RecorderNode
-    from rubber_rig.nodes.rig_driver import RigDriverNode
+    from rubber_rig.nodes.recorder_node import RecorderNode
+    from rubber_rig.nodes.rig_driver_node import RigDriverNode
 
     config = find_config(args.config)
     program, program_yaml = build_program(args)
@@ -146,7 +146,7 @@ def run(args) -> int:
         if driver.lifecycle_state != 'active':
             raise CommandError(f'rig_driver did not come up (lifecycle state {driver.lifecycle_state}); see the log')
         if args.foxglove:
-            from rubber_rig.nodes.foxglove_view import LAYOUT_FILE, FoxgloveViewNode
+            from rubber_rig.nodes.foxglove_view_node import LAYOUT_FILE, FoxgloveViewNode
             launcher.start(FoxgloveViewNode, {'port': args.foxglove_port})
         monitor = launcher.spin(SuiteMonitor(context=launcher.context, namespace=args.namespace))
 

@@ -16,7 +16,7 @@
 outside through its ROS interfaces only (topics, services, the action). Used by the fault-matrix tests and
 the safety benchmarks.
 
-Every node runs ``python -m rubber_rig.nodes.<node> --ros-args -r __ns:=<ns> --params-file <file> [--params-file
+Every node runs ``python -m rubber_rig.nodes.<node>_node --ros-args -r __ns:=<ns> --params-file <file> [--params-file
 <overrides>]`` with the environment of a launch file (RMW, domain, LOCALHOST discovery unless set), its
 output in ``<log_dir>/<node>.log``. Waits are bounded waits on conditions, never fixed sleeps.
 """
@@ -72,7 +72,7 @@ class SuiteProcesses:
             self.env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
     def command(self, node: str, overrides: dict | None = None) -> list[str]:
-        cmd = [sys.executable, '-m', f'rubber_rig.nodes.{node}', '--ros-args', '-r', f'__ns:={self.namespace}',
+        cmd = [sys.executable, '-m', f'rubber_rig.nodes.{node}_node', '--ros-args', '-r', f'__ns:={self.namespace}',
                '--params-file', self.params_file]
         cmd += self.extra_args.get(node, [])
         params = dict(self.overrides.get(node, {}), **(overrides or {}))

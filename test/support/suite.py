@@ -18,12 +18,12 @@ import os
 import numpy as np
 
 from rubber_rig.nodes import conversions as conv
-from rubber_rig.nodes.element_model import ElementModelNode
-from rubber_rig.nodes.excitation import ExcitationNode
+from rubber_rig.nodes.element_model_node import ElementModelNode
+from rubber_rig.nodes.excitation_node import ExcitationNode
 from rubber_rig.nodes.launcher import InProcessLauncher
 from rubber_rig.nodes.monitor import SuiteMonitor
-from rubber_rig.nodes.recorder import RecorderNode
-from rubber_rig.nodes.rig_driver import RigDriverNode
+from rubber_rig.nodes.recorder_node import RecorderNode
+from rubber_rig.nodes.rig_driver_node import RigDriverNode
 
 CONFIG = os.path.join(os.path.dirname(__file__), '..', '..', 'config', 'rig_sim.yaml')
 RATE = 1000.0
