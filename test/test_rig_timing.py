@@ -22,6 +22,7 @@ def test_classic_frame_bits_match_the_iso_frame_layout():
     assert frame_bits(8, worst_case=False) == (111, 0)
     assert frame_bits(8) == (135, 0)
     assert frame_bits(0, worst_case=False) == (47, 0)
+    assert frame_bits(8, worst_case=False, extended=True) == (131, 0)     # CAN 2.0B: 67 + 8 n
     assert frame_time(8, 1e6) == pytest.approx(135e-6) and frame_time(8, 5e5) == pytest.approx(270e-6)
     with pytest.raises(ValueError, match='0-8 bytes'):
         frame_bits(12)

@@ -39,6 +39,7 @@ COMMANDS = {
     'report': 'rubber_rig.cli.report',
     'recover': 'rubber_rig.cli.recover',
     'info': 'rubber_rig.cli.info',
+    'canlog': 'rubber_rig.cli.canlog',
 }
 
 

@@ -27,6 +27,7 @@ import can
 
 from ..excitation.limits import LimitError, Limits
 from ..settings import setting
+from .can.canlog import CanLogError, log_format
 from .can.protocol import cycle_time
 
 
@@ -150,6 +151,7 @@ class RigConfig:
     the rig ramps to rest_position [m] (stream_loss_action 'ramp') or stops and holds where it can
     ('hold'), with a stream fault either way. paced: the simulated
     rig runs in real time (True) or as fast as setpoints arrive (False) - identical waveform and physics.
+    can_log: file the driver logs every CAN frame it sends and receives to ('' = off; rubber_rig.rig.can.canlog).
     """
 
     backend: str = setting('sim', "'sim' (simulated rig on python-can's virtual bus) or a python-can interface "
@@ -179,6 +181,8 @@ class RigConfig:
     paced: bool = setting(True, 'simulated rig runs in real time (false: as fast as setpoints arrive)')
     spawn_sim: bool = setting(False, 'with a python-can interface: also run the simulated rig as a separate '
                               'process on that bus')
+    can_log: str = setting('', 'raw CAN log: every frame the driver sends and receives, written by python-can '
+                           '(format by suffix: .blf Vector BLF, .asc Vector ASC, .log candump -L); empty: off')
     sim: SimOptions = setting(doc='simulated rig', nested=SimOptions, default_factory=SimOptions)
 
     @classmethod
@@ -219,6 +223,11 @@ class RigConfig:
                               "displacement limits")
         if self.bus_error_max < 0:
             raise ConfigError('bus_error_max', "must be >= 0")
+        if self.can_log:
+            try:
+                log_format(self.can_log)
+            except CanLogError as exc:
+                raise ConfigError('can_log', str(exc)) from None
         self.sim.check()
 
 

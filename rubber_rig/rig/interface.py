@@ -21,6 +21,7 @@ import sys
 import time
 
 from .can.bus import open_bus, sim_channel_name
+from .can.canlog import LOG_CHANNEL_SIM, CanLogError, CanLogTap, LoggingBus
 from .can.driver import RigDriver
 from .can.protocol import Protocol
 from .config import ConfigError, RigConfig
@@ -31,10 +32,12 @@ class Rig:
     """An open rig: `driver` (RigDriver) plus, for the "sim" backend, the in-process simulated controller
     (`sim`) on the other end of the same virtual bus, or a spawned simulator process (`process`).
     A paced in-process simulator runs in a thread; an unpaced one is advanced by driver.poll().
+    `can_log`: the CanLogTap writing the driver's frames (config.can_log), or None.
     """
 
-    def __init__(self, config: RigConfig, driver: RigDriver, sim=None, sim_bus=None, process=None):
+    def __init__(self, config: RigConfig, driver: RigDriver, sim=None, sim_bus=None, process=None, can_log=None):
         self.config, self.driver, self.sim, self._sim_bus, self.process = config, driver, sim, sim_bus, process
+        self.can_log = can_log
 
     def wait_ready(self, timeout: float = 10.0) -> bool:
         """Poll until the controller has announced itself (state no longer 'unconfigured'); wall timeout [s]."""
@@ -47,7 +50,7 @@ class Rig:
         return False
 
     def close(self):
-        """Stop the simulator (thread or process) and shut both bus ends down."""
+        """Stop the simulator (thread or process), shut both bus ends down and close the raw CAN log."""
         if self.sim is not None:
             self.sim.stop()
         if self.process is not None:
@@ -56,7 +59,11 @@ class Rig:
                 self.process.wait(timeout=5)
             except subprocess.TimeoutExpired:
                 self.process.kill()
-        self.driver.close()
+        try:
+            self.driver.close()
+        finally:
+            if self.can_log is not None:   # also when the bus failed on the way down
+                self.can_log.close()
         if self._sim_bus is not None:
             self._sim_bus.shutdown()
 
@@ -73,9 +80,43 @@ def open_rig(config) -> Rig:
     backend "sim": simulated controller in a thread on a fresh python-can virtual channel. Any other backend:
     the driver on that python-can interface; with spawn_sim, the simulated rig is started as a separate process
     (python -m rubber_rig.rig.sim) on the same bus and the call waits until it answers.
+
+    can_log: the raw CAN log is created before the bus is opened (ConfigError naming 'can_log' if it cannot be
+    written) and closed with the rig.
     """
     cfg = RigConfig.from_dict(config)
     proto = Protocol()
+    tap = _open_can_log(cfg)
+    try:
+        rig = _open(cfg, proto, tap)
+    except BaseException:
+        if tap is not None:
+            tap.close()
+            if not tap.frames_tx + tap.frames_rx:   # nothing was logged: leave no empty log behind
+                tap.path.unlink(missing_ok=True)
+        raise
+    if tap is not None:
+        driver = rig.driver
+        tap.on_error = lambda text: driver.events.append(('warn', text))   # reported once, by the node's log
+        driver.events.append(('info', f'raw CAN log: every frame sent and received goes to {tap.path}'))
+    return rig
+
+
+def _open_can_log(cfg: RigConfig):
+    if not cfg.can_log:
+        return None
+    if cfg.channel not in (None, ''):
+        channel = str(cfg.channel)
+    else:
+        channel = LOG_CHANNEL_SIM if cfg.backend == 'sim' else f'{cfg.backend}0'
+    try:
+        return CanLogTap(cfg.can_log, channel)
+    except CanLogError as exc:
+        raise ConfigError('can_log', str(exc)) from None
+
+
+def _open(cfg: RigConfig, proto: Protocol, tap) -> Rig:
+    logged = (lambda bus: LoggingBus(bus, tap)) if tap is not None else (lambda bus: bus)
     if cfg.backend == 'sim':
         channel = sim_channel_name()
         bus = open_bus(cfg, channel)
@@ -86,12 +127,12 @@ def open_rig(config) -> Rig:
             bus.shutdown()
             sim_bus.shutdown()
             raise
-        driver = RigDriver(bus, cfg, proto)
+        driver = RigDriver(logged(bus), cfg, proto)
         if cfg.paced:
             sim.start()              # real time: the simulator keeps its own clock in a thread
         else:
             driver.pump = sim.pump   # as fast as possible: the driver's poll() lets the simulator catch up
-        rig = Rig(cfg, driver, sim=sim, sim_bus=sim_bus)
+        rig = Rig(cfg, driver, sim=sim, sim_bus=sim_bus, can_log=tap)
     else:
         process = None
         if cfg.spawn_sim:
@@ -99,7 +140,7 @@ def open_rig(config) -> Rig:
                                         json.dumps(cfg.to_dict())],
                                        stdout=subprocess.DEVNULL)
         bus = open_bus(cfg)
-        rig = Rig(cfg, RigDriver(bus, cfg, proto), process=process)
+        rig = Rig(cfg, RigDriver(logged(bus), cfg, proto), process=process, can_log=tap)
         if process is not None and not rig.wait_ready(20.0):
             rig.close()
             raise ConfigError('spawn_sim', 'the simulated rig process did not answer on '

@@ -167,6 +167,9 @@ class RigDriver:
         self._bad = collections.deque()  # (sample position, count) of bad-frame events, 1 s window
         self.events = collections.deque(maxlen=1000)   # (level 'info'|'warn'|'error', text)
         self.last_event = ''
+        # a stop the host commanded (abort, hold, limits) stays the headline while the controller's ramp, its
+        # consequence, runs: a status published in between must say why the stream ended, not 'ramping'
+        self._host_stop = False
         self.refusal = ''                # why the latest batch was refused
         # counters and state
         self.counters = dict(samples_received=0, frames_lost=0, frames_late=0, frames_malformed=0,
@@ -188,9 +191,10 @@ class RigDriver:
         self.send_limits()
 
     # ---- events
-    def _event(self, level: str, text: str):
+    def _event(self, level: str, text: str, headline: bool = True):
         self.events.append((level, text))
-        self.last_event = text
+        if headline:
+            self.last_event = text
 
     # ---- limits
     def set_limits(self, limits):
@@ -258,6 +262,7 @@ class RigDriver:
         v = (self._last_applied - self._prev_applied) * self.fs if self.controller_state == 'running' else 0.0
         grant = StreamGrant(next(self._stream_ids), owner, first, self._last_applied, v)
         self._stream = _Stream(grant, first, self._last_applied, v, self._clock())
+        self._host_stop = False
         self._event('info', f'stream {grant.stream_id} opened for {owner or "a local client"}: first setpoint '
                             f'at sample {first}, from {grant.position * 1e3:.4f} mm')
         return grant
@@ -396,6 +401,7 @@ class RigDriver:
                                                         'CMD_Argument': target, 'CMD_RampVelocity': ramp_v}))
         # until the controller reports its ramp, status says ramping_down (not idle/fault while still moving)
         self._ramp_pending = self.controller_state in ('running', 'holding')
+        self._host_stop = True
         if not self._aborting:
             self._event('warn',
                         f'{text}; ramp to {"a stop" if code == CMD_HOLD else f"{target * 1e3:.4f} mm"} from '
@@ -535,7 +541,8 @@ class RigDriver:
         self.controller_state = state
         self._ramp_pending = False
         if state == 'ramping_down':
-            self._event('warn', f'controller ramping to rest from {self._last_applied * 1e3:.4f} mm')
+            self._event('warn', f'controller ramping to rest from {self._last_applied * 1e3:.4f} mm',
+                        headline=not self._host_stop)
         elif old == 'ramping_down' and state in ('idle', 'fault'):
             self._aborting = False
             self._event('info', f'rig at rest at {self._last_applied * 1e3:.4f} mm (controller {state})')

@@ -56,9 +56,11 @@ def _stuff(bits: int, worst_case: bool) -> int:
     return (bits - 1) // 4 if worst_case else 0
 
 
-def frame_bits(data_bytes: int, fd: bool = False, bitrate_switch: bool = True,
-               worst_case: bool = True) -> tuple[int, int]:
-    """(bits at the nominal bitrate, bits at the data bitrate) of one data frame with an 11-bit identifier.
+def frame_bits(data_bytes: int, fd: bool = False, bitrate_switch: bool = True, worst_case: bool = True,
+               extended: bool = False) -> tuple[int, int]:
+    """(bits at the nominal bitrate, bits at the data bitrate) of one data frame with an 11-bit identifier
+    (29-bit with extended: 20 more arbitration bits in a classic frame, SRR, IDE and 18 identifier bits;
+    19 in an FD frame, which has no r1).
 
     Classic frames (fd False) carry at most 8 bytes and run entirely at the nominal bitrate (second item 0);
     FD frames without bitrate_switch too.
@@ -66,10 +68,11 @@ def frame_bits(data_bytes: int, fd: bool = False, bitrate_switch: bool = True,
     if not fd:
         if not 0 <= data_bytes <= 8:
             raise ValueError(f'a classic CAN frame carries 0-8 bytes, not {data_bytes}')
-        stuffed = 34 + 8 * data_bytes
+        stuffed = 34 + (20 if extended else 0) + 8 * data_bytes
         return stuffed + _stuff(stuffed, worst_case) + 13, 0
     n = fd_length(data_bytes)
-    arbitration = 17 + _stuff(17, worst_case)
+    head = 17 + (19 if extended else 0)
+    arbitration = head + _stuff(head, worst_case)
     data_field = 1 + 4 + 8 * n                                   # ESI, DLC, data
     crc = 17 if n <= 16 else 21
     data_phase = data_field + _stuff(data_field, worst_case) + 5 + crc + math.ceil(crc / 4)

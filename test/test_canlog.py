@@ -1,0 +1,408 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Raw CAN logs (RigConfig.can_log, rubber_rig.rig.can.canlog, `rubber-rig canlog`): a program on the simulated
+rig is logged as BLF, ASC and candump .log; the decoded log gives the same samples, sequences and counts as the
+driver, plain python-can reads the files, and bad names, bad places and damaged logs are refused or reported."""
+import datetime
+import importlib
+import json
+import os
+import subprocess
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import can
+import numpy as np
+import pytest
+
+from rubber_rig.cli.main import main as cli_main
+from rubber_rig.excitation import Program
+from rubber_rig.rig import ConfigError, RigConfig, open_rig, run_program
+from rubber_rig.rig import interface as rig_interface
+from rubber_rig.rig.can.canlog import CanLogWarning, decode_log
+from rubber_rig.settings import settings_of
+
+FAST = {'paced': False}
+FORMATS = ('.blf', '.asc', '.log')
+PROG = Program.from_yaml_text('name: canlog\nblocks:\n  - {waveform: sine, frequency: 8 Hz, amplitude: 0.5 mm, '
+                              'cycles: 4}\n')
+RUBBER_RIG = Path(sys.executable).with_name('rubber-rig')
+FEEDBACK, SETPOINT = 0x180, 0x100
+
+
+def read_plain(path):
+    """The frames of a log through python-can alone (ASC: times relative to its start)."""
+    return list(can.LogReader(str(path)))
+
+
+def decode_clean(path):
+    with warnings.catch_warnings():
+        warnings.simplefilter('error', CanLogWarning)   # a complete log decodes without a warning
+        return decode_log(path)
+
+
+@pytest.fixture(scope='module')
+def logged_runs(tmp_path_factory):
+    """One fast run per format: {suffix: (RunResult, log path, wall time before, wall time after)}."""
+    out = {}
+    for suffix in FORMATS:
+        path = tmp_path_factory.mktemp('canlog') / f'rig{suffix}'
+        t0 = time.time()
+        r = run_program(PROG, dict(FAST, can_log=str(path)))
+        out[suffix] = (r, path, t0, time.time())
+    return out
+
+
+# ---- the log of a run decodes to the run -------------------------------------------------------------------
+
+@pytest.mark.parametrize('suffix', FORMATS)
+def test_decoded_log_equals_the_run(logged_runs, suffix):
+    r, path, _, _ = logged_runs[suffix]
+    assert r.completed, r.message
+    log = decode_clean(path)
+    assert log.complete and not log.warnings and log.format == suffix
+    # the samples the driver assembled, frame by frame (DBC resolution: 0.1 um, 0.01 N)
+    np.testing.assert_array_equal(log.sequence, r.sequence)
+    np.testing.assert_allclose(log.displacement, r.displacement, rtol=0, atol=0.5e-7)
+    np.testing.assert_allclose(log.force, r.force, rtol=0, atol=0.005)
+    np.testing.assert_allclose(log.setpoint, r.setpoint, rtol=0, atol=0.5e-7)
+    assert np.all(np.abs(log.temperature[np.isfinite(log.temperature)] - 20.0) < 0.2)
+    np.testing.assert_array_equal(log.status, 0)
+    # the host's setpoints: the program, from sequence 0
+    n = PROG.n_samples(1000.0)
+    np.testing.assert_array_equal(log.setpoint_sequence, np.arange(log.setpoint_sequence.size))
+    np.testing.assert_allclose(log.setpoint_displacement[:n], PROG.setpoints(1000.0), rtol=0, atol=0.6e-7)
+    # frame counts agree with what the driver counted
+    st = r.final_status
+    assert log.frames['Feedback'] == st.samples_received + st.frames_late
+    assert log.frames['Setpoint'] == st.setpoints_sent
+    assert log.frames['ControllerHeartbeat'] == st.extra['heartbeats_received']
+    assert log.frames_malformed == st.frames_malformed == 0 and log.frames_unknown == 0
+    assert log.gaps == [] and log.samples_lost == st.frames_lost == 0
+    assert sum(log.frames.values()) == log.frames_total == log.frames_rx + log.frames_tx
+    assert [s for _, s in log.states][:2] == ['idle', 'running'] and log.faults_seen == []
+    assert log.commands[-1][1] == 'ABORT'          # closing the rig commands the ramp to rest
+
+
+@pytest.mark.parametrize('suffix', FORMATS)
+def test_plain_python_can_reads_the_log(logged_runs, suffix):
+    """Direction, CAN FD flags, one channel and wall-clock timestamps in order, as any CAN tool expects."""
+    r, path, t0, t1 = logged_runs[suffix]
+    frames = read_plain(path)
+    assert len(frames) == decode_clean(path).frames_total
+    fb = [m for m in frames if m.arbitration_id == FEEDBACK]
+    sp = [m for m in frames if m.arbitration_id == SETPOINT]
+    assert len(fb) == r.sequence.size and len(sp) == r.final_status.setpoints_sent
+    assert all(m.is_rx and m.is_fd and m.bitrate_switch and len(m.data) == 12 for m in fb)
+    assert all(not m.is_rx and not m.is_fd and len(m.data) == 8 for m in sp)
+    stamps = np.array([m.timestamp for m in frames])
+    assert np.all(np.diff(stamps) >= 0)
+    log = decode_clean(path)
+    np.testing.assert_allclose(log.time, stamps[[m.arbitration_id == FEEDBACK for m in frames]] - stamps[0],
+                               rtol=0, atol=2e-6)
+    slack = 0.0011 if suffix == '.asc' else 1e-5     # ASC keeps its start time to the millisecond
+    assert t0 - slack <= log.start and log.end <= t1 + slack
+    if suffix != '.asc':
+        assert (stamps[0], stamps[-1]) == (log.start, log.end)
+    assert len({m.channel for m in frames}) == 1
+    assert frames[0].channel == ('sim0' if suffix == '.log' else 0)
+
+
+@pytest.mark.parametrize('millisecond', [4, 40, 400])
+def test_asc_start_time_is_read_to_the_millisecond(tmp_path, millisecond):
+    """python-can's ASCWriter writes the start's milliseconds without leading zeros ('.40' for 40 ms); decode_log
+    reads them as milliseconds, as CANoe's three digits are."""
+    t = datetime.datetime(2026, 3, 2, 9, 15, 30, millisecond * 1000 + 600).timestamp()
+    path = tmp_path / 'ms.asc'
+    with can.ASCWriter(str(path)) as w:
+        w.on_message_received(can.Message(timestamp=t, arbitration_id=0x123, data=b'\x01', is_extended_id=False))
+        w.on_message_received(can.Message(timestamp=t + 0.25, arbitration_id=0x123, data=b'\x02',
+                                          is_extended_id=False))
+    log = decode_clean(path)
+    assert log.frames == {'0x123': 2} and log.frames_unknown == 2
+    assert log.start == pytest.approx(t, abs=1e-3) and log.duration == pytest.approx(0.25, abs=1e-6)
+
+
+def test_paced_run_keeps_the_bus_timestamps(tmp_path):
+    """Paced, the controller's feedback frames come in real time and the log says so, in order, although the
+    driver reads them in bursts after it has sent newer frames."""
+    prog = Program.from_yaml_text('name: paced\nblocks:\n  - {waveform: sine, frequency: 5 Hz, amplitude: 0.3 mm, '
+                                  'cycles: 2}\n')
+    path = tmp_path / 'paced.log'
+    r = run_program(prog, {'paced': True, 'can_log': str(path)})
+    assert r.completed, r.message
+    log = decode_clean(path)
+    np.testing.assert_array_equal(log.sequence, r.sequence)
+    # real time: the feedback frames span the samples' duration (single ticks may come in bursts on a busy host)
+    assert np.all(np.diff(log.time) >= 0)
+    assert log.time[-1] - log.time[0] == pytest.approx((r.sequence[-1] - r.sequence[0]) * 1e-3, rel=0.15)
+    stamps = np.array([m.timestamp for m in read_plain(path)])
+    assert np.all(np.diff(stamps) >= 0)
+    assert 0.0 <= log.bus_load() < 0.5     # a real-time 1 kHz stream: a realistic load on a 1/5 Mbit/s bus
+
+
+def test_bad_frames_and_loss_decode_as_the_driver_counted(tmp_path):
+    faults = [{'type': 'drop', 'probability': 0.005, 'frames': ['Feedback']},
+              {'type': 'corrupt', 'probability': 0.002, 'frames': ['Feedback', 'Temperature']},
+              {'type': 'duplicate', 'probability': 0.003}]
+    path = tmp_path / 'bad.blf'
+    r = run_program(PROG, dict(FAST, sim={'faults': faults}, can_log=str(path)))
+    st = r.final_status
+    assert r.completed, r.message
+    assert st.frames_lost > 0 and st.frames_malformed > 0 and st.frames_late > 0
+    log = decode_clean(path)
+    np.testing.assert_array_equal(log.sequence, r.sequence)
+    np.testing.assert_allclose(log.force, r.force, rtol=0, atol=0.005)
+    assert (log.samples_lost, log.frames_malformed, log.frames_late) == (st.frames_lost, st.frames_malformed,
+                                                                         st.frames_late)
+    assert len(log.gaps) == np.count_nonzero(np.diff(r.sequence) > 1)
+
+
+def test_fault_and_abort_path_closes_a_complete_log(tmp_path):
+    """A fault stops the program with the controller's ramp; the log is complete and shows the ramp."""
+    path = tmp_path / 'abort.asc'
+    r = run_program(PROG, dict(FAST, limits={'force_max': 3e3}, can_log=str(path)))
+    assert not r.completed and 'force' in r.message
+    log = decode_clean(path)
+    assert log.complete
+    aborts = [t for t, c, _ in log.commands if c == 'ABORT']
+    ramp = [t for t, s in log.states if s == 'ramping_down']
+    assert aborts and ramp and aborts[0] <= ramp[0]
+    np.testing.assert_array_equal(log.sequence, r.sequence)
+    np.testing.assert_allclose(log.setpoint, r.setpoint, rtol=0, atol=0.5e-7)
+
+
+def test_open_rig_reports_the_log_and_closes_it(tmp_path):
+    path = tmp_path / 'open.log'
+    with open_rig(dict(FAST, can_log=str(path))) as rig:
+        assert rig.can_log is not None and rig.wait_ready(5.0)
+        assert any('raw CAN log' in text and str(path) in text for _, text in rig.driver.events)
+    assert rig.can_log.closed and rig.can_log.write_errors == 0
+    assert rig.can_log.frames_written == rig.can_log.frames_tx + rig.can_log.frames_rx > 0
+    log = decode_clean(path)
+    assert log.frames['HostLimits'] == 1 and log.frames['HostHeartbeat'] >= 1
+
+
+# ---- the parameter ------------------------------------------------------------------------------------------
+
+def test_can_log_is_a_described_setting():
+    s = {x.name: x for x in settings_of(RigConfig)}['can_log']
+    assert s.default == '' and '.blf' in s.doc and '.asc' in s.doc and '.log' in s.doc
+    assert RigConfig().can_log == ''
+
+
+def rig_driver_module():
+    pytest.importorskip('rclpy')
+    for name in ('rubber_rig.nodes.rig_driver_node', 'rubber_rig.nodes.rig_driver'):
+        try:
+            return importlib.import_module(name)
+        except ModuleNotFoundError as exc:
+            if exc.name != name:
+                raise
+    pytest.skip('no rig_driver node module')
+
+
+@pytest.fixture
+def ros_context():
+    rclpy = pytest.importorskip('rclpy')
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+def test_rig_driver_declares_can_log():
+    """The node declares every RigConfig setting as a parameter, so can_log:=... reaches the core."""
+    rig_driver = rig_driver_module()
+    assert 'can_log' in {s.name for s in rig_driver.RIG_SETTINGS}
+    assert 'can_log' not in rig_driver.LIVE_PARAMETERS     # the log is opened at configure
+
+
+@pytest.mark.ros
+def test_rig_driver_node_writes_the_log_and_refuses_bad_ones(ros_context, tmp_path):
+    from rclpy.parameter import Parameter
+
+    from rubber_rig.nodes.params import ParameterError
+    node_class = rig_driver_module().RigDriverNode
+    path = tmp_path / 'node.blf'
+    node = node_class(context=ros_context, parameter_overrides=[Parameter('can_log', value=str(path))])
+    try:
+        assert node.lifecycle_state == 'active' and node.rig.can_log is not None
+        assert node.rig.wait_ready(5.0)
+    finally:
+        node.close()
+        node.destroy_node()
+    log = decode_clean(path)
+    assert log.frames['HostLimits'] == 1 and log.frames['ControllerHeartbeat'] >= 1
+    # a bad suffix is a bad parameter at start; an unwritable place fails configure, with the reason
+    with pytest.raises(ParameterError, match="'can_log'.*supported: .blf"):
+        node_class(context=ros_context, parameter_overrides=[Parameter('can_log', value=str(tmp_path / 'x.trc'))])
+    node = node_class(context=ros_context, parameter_overrides=[
+        Parameter('can_log', value=str(tmp_path / 'missing' / 'x.log'))])
+    try:
+        assert node.lifecycle_state == 'unconfigured' and node.rig is None
+    finally:
+        node.destroy_node()
+
+
+@pytest.fixture
+def no_bus(monkeypatch):
+    """Fail the test if open_rig opens a bus."""
+    opened = []
+    monkeypatch.setattr(rig_interface, 'open_bus', lambda *a, **k: opened.append(a) or pytest.fail('bus opened'))
+    return opened
+
+
+@pytest.mark.parametrize('name', ['rig.trc', 'rig.csv', 'rig', 'rig.blf.gz'])
+def test_unknown_suffix_is_refused_before_the_rig_opens(tmp_path, no_bus, name):
+    path = tmp_path / name
+    with pytest.raises(ConfigError) as exc:
+        open_rig(dict(FAST, can_log=str(path)))
+    assert exc.value.field == 'can_log'
+    for suffix in FORMATS:
+        assert suffix in str(exc.value)
+    assert not path.exists() and not no_bus
+    with pytest.raises(ConfigError, match='can_log'):
+        run_program(PROG, dict(FAST, can_log=str(path)))
+    assert not no_bus
+
+
+def test_unwritable_place_is_refused_before_the_rig_opens(tmp_path, no_bus):
+    a_file = tmp_path / 'file.txt'
+    a_file.write_text('x')
+    cases = {tmp_path / 'missing' / 'rig.blf': 'does not exist', a_file / 'rig.blf': 'not a directory',
+             tmp_path / 'dir.log': 'is a directory'}
+    (tmp_path / 'dir.log').mkdir()
+    if os.geteuid() != 0:    # root writes anywhere: the permission case needs an ordinary user
+        locked = tmp_path / 'locked'
+        locked.mkdir(mode=0o500)
+        cases[locked / 'rig.asc'] = 'not writable'
+    for path, why in cases.items():
+        with pytest.raises(ConfigError) as exc:
+            open_rig(dict(FAST, can_log=str(path)))
+        assert exc.value.field == 'can_log' and why in str(exc.value) and str(path) in str(exc.value)
+    assert not no_bus
+
+
+def test_a_failing_disk_does_not_stop_the_rig(tmp_path):
+    """Writes to a full disk (/dev/full) fail: the run completes, the error is counted and reported once."""
+    if not os.path.exists('/dev/full'):
+        pytest.skip('no /dev/full on this system')
+    path = tmp_path / 'full.log'
+    path.symlink_to('/dev/full')
+    rig = open_rig(dict(FAST, can_log=str(path)))
+    try:
+        r = run_program(PROG, FAST, rig=rig)
+        assert r.completed, r.message
+    finally:
+        rig.close()
+    tap = rig.can_log
+    assert tap.write_errors >= 1 and str(path) in tap.error and 'No space left' in tap.error
+    reported = [text for level, text in rig.driver.events if level == 'warn' and 'raw CAN log' in text]
+    assert reported == [tap.error]
+
+
+# ---- damaged logs ------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize('suffix', FORMATS)
+def test_truncated_log_decodes_what_is_there_with_a_warning(logged_runs, tmp_path, suffix):
+    r, path, _, _ = logged_runs[suffix]
+    data = path.read_bytes()
+    cut = tmp_path / f'cut{suffix}'
+    cut.write_bytes(data[:int(len(data) * 0.6)])
+    with pytest.warns(CanLogWarning, match='truncated|not closed'):
+        log = decode_log(cut)
+    assert not log.complete and log.warnings
+    k = len(log)
+    assert 0.2 * r.sequence.size < k < r.sequence.size
+    np.testing.assert_array_equal(log.sequence, r.sequence[:k])
+    np.testing.assert_allclose(log.displacement, r.displacement[:k], rtol=0, atol=0.5e-7)
+
+
+@pytest.mark.parametrize('suffix', FORMATS)
+def test_corrupt_log_decodes_up_to_the_damage_with_a_warning(logged_runs, tmp_path, suffix):
+    r, path, _, _ = logged_runs[suffix]
+    data = bytearray(path.read_bytes())
+    mid = len(data) // 2
+    if suffix == '.blf':
+        data[mid:mid + 32] = b'\xa5' * 32                  # inside the compressed container
+    elif suffix == '.asc':
+        start = data.index(b'Rx', mid)
+        begin, end = data.rindex(b'\n', 0, start) + 1, data.index(b'\n', start)
+        data[begin:end] = data[begin:end].split()[0] + b' 1 QQQ Rx d 8 00'   # a frame whose identifier is no hex
+    else:
+        mid = data.index(b'\n', mid) + 1
+        data[mid:mid] = b'(17.5) garbage that is no frame\n'
+    bad = tmp_path / f'bad{suffix}'
+    bad.write_bytes(bytes(data))
+    with pytest.warns(CanLogWarning, match='unreadable after frame|not closed'):
+        log = decode_log(bad)
+    assert not log.complete
+    k = len(log)
+    assert k < r.sequence.size
+    np.testing.assert_array_equal(log.sequence, r.sequence[:k])
+
+
+def test_a_file_that_is_no_log_is_refused_with_its_name(tmp_path):
+    path = tmp_path / 'text.blf'
+    path.write_text('this is not a BLF file\n')
+    with pytest.raises(ValueError, match='text.blf'):
+        decode_log(path)
+
+
+# ---- the command ---------------------------------------------------------------------------------------------
+
+def test_cli_summary_json_and_csv(logged_runs, tmp_path, capsys):
+    r, path, _, _ = logged_runs['.blf']
+    out = tmp_path / 'samples.csv'
+    assert cli_main(['canlog', str(path), '-o', str(out)]) == 0
+    text = capsys.readouterr().out
+    for needle in ('Feedback', 'Setpoint', 'duration:', 'gaps:       0 sequence gaps', 'faults:     none',
+                   'bus load:', f'{r.sequence.size} (Feedback)'):
+        assert needle in text, (needle, text)
+    rows = np.genfromtxt(out, delimiter=',', names=True)
+    np.testing.assert_array_equal(rows['sequence'], r.sequence)
+    np.testing.assert_allclose(rows['force_N'], r.force, rtol=0, atol=0.005)
+    assert cli_main(['canlog', str(path), '--json']) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info['frames']['Feedback'] == r.sequence.size and info['samples_lost'] == 0 and info['complete']
+
+
+def test_cli_warns_on_a_truncated_log(logged_runs, tmp_path, capsys):
+    _, path, _, _ = logged_runs['.log']
+    cut = tmp_path / 'cut.log'
+    cut.write_bytes(path.read_bytes()[:5000])
+    assert cli_main(['canlog', str(cut)]) == 0
+    captured = capsys.readouterr()
+    assert 'INCOMPLETE' in captured.out and 'WARNING:' in captured.out and str(cut) in captured.err
+
+
+@pytest.mark.skipif(not RUBBER_RIG.exists(), reason=f'{RUBBER_RIG} is not installed')
+def test_cli_missing_file_exit_2_naming_it(tmp_path):
+    missing = tmp_path / 'nothing.blf'
+    proc = subprocess.run([str(RUBBER_RIG), 'canlog', str(missing)], capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 2, (proc.stdout, proc.stderr)
+    assert 'Traceback' not in proc.stderr
+    assert str(missing) in proc.stderr.strip().splitlines()[-1]
+
+
+def test_cli_unknown_suffix_exit_2(tmp_path, capsys):
+    path = tmp_path / 'x.trc'
+    path.write_text('')
+    assert cli_main(['canlog', str(path)]) == 2
+    err = capsys.readouterr().err
+    assert str(path) in err and '.blf' in err
