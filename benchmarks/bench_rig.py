@@ -34,6 +34,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'
 
 from rubber_rig.excitation import Program  # noqa: E402
 from rubber_rig.rig import run_program  # noqa: E402
+from rubber_rig.rig.can.timing import protocol_load  # noqa: E402
 
 
 def program(duration: float) -> Program:
@@ -59,12 +60,36 @@ def run(rate: float, duration: float, paced: bool) -> dict:
                 realtime=(n / rate) / wall, message=r.message)
 
 
+PROFILES = (('classic 500 kbit/s', 500_000, None, False), ('classic 1 Mbit/s', 1_000_000, None, False),
+            ('FD 1/5 Mbit/s', 1_000_000, 5_000_000, True), ('FD 1/8 Mbit/s', 1_000_000, 8_000_000, True))
+
+
+def bus_profiles(rates) -> None:
+    """What the protocol (the DBC) needs of each bus profile: load at each rate (worst-case bit stuffing) and the
+    highest rate at 50 %, 70 % and 100 % load.
+    """
+    print('bus load of the protocol (rubber_rig.rig.can.timing, worst-case bit stuffing):')
+    print(f"{'profile':>20} " + ' '.join(f'{r:>8.0f}' for r in rates) + f" {'@50 %':>8} {'@70 %':>8} {'full':>8}")
+    for name, bitrate, data_bitrate, fd in PROFILES:
+        try:
+            loads = [protocol_load(r, bitrate, data_bitrate, fd=fd) for r in rates]
+        except ValueError as exc:
+            print(f'{name:>20}  cannot carry it: {str(exc).split(": ", 1)[1]}')
+            continue
+        top = loads[0]
+        print(f'{name:>20} ' + ' '.join(f'{ld.load * 100:7.0f}%' for ld in loads)
+              + f' {top.rate_at(0.5):8.0f} {top.rate_at(0.7):8.0f} {top.max_rate:8.0f}')
+    print()
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--duration', type=float, default=60.0, help='program length [s] (default 60)')
-    ap.add_argument('--rates', type=float, nargs='*', default=[1000.0, 5000.0], help='sample rates [Hz]')
+    ap.add_argument('--rates', type=float, nargs='*', default=[1000.0, 3000.0],
+                    help='sample rates [Hz] (the default bus, CAN FD 1/5 Mbit/s, carries at most ~3.4 kHz at 70 %%)')
     ap.add_argument('--paced', type=float, nargs='*', default=[], help='also run these rates paced (real time)')
     args = ap.parse_args(argv)
+    bus_profiles(sorted(set(args.rates) | set(args.paced) | {1000.0, 2000.0, 5000.0, 10000.0}))
     runs = [(r, False) for r in args.rates] + [(r, True) for r in args.paced]
     print(f'rig benchmark: {args.duration:g} s sine program, driver + simulated rig (seed 000) on the in-process '
           f'virtual bus, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}')

@@ -15,7 +15,7 @@
 """Rates, loss and latency of the whole node suite on the simulated rig, paced to the wall clock.
 
     .venv/bin/python benchmarks/bench_suite.py --rate 1000 --duration 600          # the 10-minute 1 kHz run
-    .venv/bin/python benchmarks/bench_suite.py --rate 1000,2000,5000 --duration 60  # highest zero-loss rate
+    .venv/bin/python benchmarks/bench_suite.py --rate 1000,2000,3000 --duration 60  # highest zero-loss rate
     .venv/bin/python benchmarks/bench_suite.py --processes ...                      # one process per node
 
 rig_driver (simulated rig over python-can's virtual bus), excitation (a 5 Hz, 1 mm sine, open loop),

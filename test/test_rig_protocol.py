@@ -171,10 +171,30 @@ def test_bad_program_or_limits_send_nothing():
     assert set(can.interfaces.virtual.channels) == before
 
 
-def test_5khz_short_run_no_loss():
+def test_3khz_short_run_no_loss():
+    """3 kHz: near the highest rate the default 1/5 Mbit/s CAN FD bus carries within 70 % load."""
     prog = Program.from_yaml_text('blocks:\n  - {waveform: sine, frequency: 20 Hz, amplitude: 0.5 mm, '
                                   'cycles: 5}\n')
-    r = run_program(prog, {'paced': False, 'sample_rate': 5000.0})
+    r = run_program(prog, {'paced': False, 'sample_rate': 3000.0})
     assert r.completed and r.final_status.frames_lost == 0
-    assert r.sequence.size >= prog.n_samples(5000.0)
+    assert r.sequence.size >= prog.n_samples(3000.0)
     assert np.all(np.diff(r.sequence) == 1)
+
+
+def test_a_rate_the_configured_bus_cannot_carry_is_refused_before_the_bus_opens():
+    before = set(can.interfaces.virtual.channels)
+    prog = Program.from_yaml_text('blocks:\n  - {waveform: sine, frequency: 20 Hz, amplitude: 0.5 mm, cycles: 2}\n')
+    with pytest.raises(ConfigError, match=r"'sample_rate': 5000 Hz needs 10[0-9] % of the 1/5 Mbit/s CAN FD bus, "
+                                          r'more than max_bus_load \(70 %\): this bus carries at most 34[0-9]{2} Hz'):
+        run_program(prog, {'paced': False, 'sample_rate': 5000.0})
+    with pytest.raises(ConfigError, match='needs .* than max_bus_load \\(100 %\\)'):
+        run_program(prog, {'paced': False, 'sample_rate': 5000.0, 'max_bus_load': 1.0})   # a full bus is full
+    with pytest.raises(ConfigError, match=r"'sample_rate': 2000 Hz needs 7[0-9] % of the 0.5/5 Mbit/s CAN FD bus.*at most 17[0-9]{2} Hz"):
+        run_program(prog, {'paced': False, 'sample_rate': 2000.0, 'bitrate': 500_000})
+    with pytest.raises(ConfigError, match=r"field 'fd': .*Feedback is a CAN FD frame"):
+        run_program(prog, {'paced': False, 'fd': False})
+    assert set(can.interfaces.virtual.channels) == before          # no bus was opened
+    cfg = RigConfig.from_dict({'sample_rate': 2000.0})
+    assert cfg.bus_load().load == pytest.approx(2000 * cfg.bus_load().per_sample + cfg.bus_load().periodic)
+    with open_rig({'paced': False, 'sample_rate': 2000.0}) as rig:
+        assert rig.driver.status.extra['bus_load'] == pytest.approx(cfg.bus_load().load)

@@ -178,7 +178,7 @@ def test_specimen_parameter_set_and_temperature_are_selectable():
 
 
 def test_config_from_dict_round_trip():
-    cfg = RigConfig.from_dict({'backend': 'sim', 'sample_rate': 5000.0, 'paced': False,
+    cfg = RigConfig.from_dict({'backend': 'sim', 'sample_rate': 2000.0, 'paced': False,
                                'limits': {'force_max': 30e3}, 'sim': {'faults': [{'type': 'drop'}]}})
     again = RigConfig.from_dict(cfg.to_dict())
     assert again == cfg and again.limits.force_max == 30e3 and again.sim.faults[0].type == 'drop'

@@ -332,7 +332,8 @@ class RigDriverNode(LifecycleNode):
     def publish_diagnostics(self) -> None:
         status = self._last_status or self.status_message()
         hw = f'{self.config.backend}:{self.config.channel or self.get_fully_qualified_name()}'
-        self.pub_diag.publish(conv.diagnostics_msg(status, hw, name=self.get_fully_qualified_name()))
+        extra = {'bus_load_pct': f'{self.rig.driver.bus_load * 100:.1f}'} if self.rig is not None else {}
+        self.pub_diag.publish(conv.diagnostics_msg(status, hw, extra, name=self.get_fully_qualified_name()))
 
     def on_reset(self, request, response):
         if self.rig is None:

@@ -29,6 +29,7 @@ from ..excitation.limits import LimitError, Limits
 from ..settings import setting
 from .can.canlog import CanLogError, log_format
 from .can.protocol import cycle_time
+from .can.timing import protocol_load
 
 
 class ConfigError(ValueError):
@@ -152,6 +153,8 @@ class RigConfig:
     ('hold'), with a stream fault either way. paced: the simulated
     rig runs in real time (True) or as fast as setpoints arrive (False) - identical waveform and physics.
     can_log: file the driver logs every CAN frame it sends and receives to ('' = off; rubber_rig.rig.can.canlog).
+    max_bus_load: the bus (bitrate, data_bitrate, fd; the simulated rig stands for the same bus) must carry the
+    protocol at sample_rate within this load (rubber_rig.rig.can.timing), or the configuration is refused.
     """
 
     backend: str = setting('sim', "'sim' (simulated rig on python-can's virtual bus) or a python-can interface "
@@ -163,6 +166,9 @@ class RigConfig:
     data_bitrate: int = setting(5_000_000, 'CAN FD data bitrate', units='bit/s', range=(10_000, 12_000_000),
                                 name='can.data_bitrate')
     fd: bool = setting(True, 'use CAN FD frames', name='can.fd')
+    max_bus_load: float = setting(0.7, 'highest bus load the protocol may need at sample_rate (worst-case bit '
+                                  'stuffing); a faster rate is refused before the bus opens', range=(0.05, 1.0),
+                                  name='can.max_load')
     bus_options: dict = setting(doc='extra keyword arguments for can.Bus (YAML/JSON mapping)', name='can.bus_options',
                                 yaml_text=True, default_factory=dict)
     sample_rate: float = setting(1000.0, 'rig sample rate', units='Hz', range=(10.0, 20000.0))
@@ -223,12 +229,31 @@ class RigConfig:
                               "displacement limits")
         if self.bus_error_max < 0:
             raise ConfigError('bus_error_max', "must be >= 0")
+        self._check_bus_load()
         if self.can_log:
             try:
                 log_format(self.can_log)
             except CanLogError as exc:
                 raise ConfigError('can_log', str(exc)) from None
         self.sim.check()
+
+    def bus_load(self):
+        """The protocol's load on the configured bus at sample_rate (rubber_rig.rig.can.timing.BusLoad)."""
+        return protocol_load(self.sample_rate, self.bitrate, self.data_bitrate if self.fd else None, fd=self.fd)
+
+    def _check_bus_load(self):
+        if not 0 < self.max_bus_load <= 1:
+            raise ConfigError('max_bus_load', f'must be within (0, 1], got {self.max_bus_load!r}')
+        try:
+            load = self.bus_load()
+        except ValueError as exc:
+            raise ConfigError('fd', str(exc)) from None
+        if load.load > self.max_bus_load:
+            bus = (f'{self.bitrate / 1e6:g}/{self.data_bitrate / 1e6:g} Mbit/s CAN FD' if self.fd
+                   else f'{self.bitrate / 1e6:g} Mbit/s classic CAN')
+            raise ConfigError('sample_rate', f'{self.sample_rate:g} Hz needs {load.load * 100:.0f} % of the {bus} '
+                              f'bus, more than max_bus_load ({self.max_bus_load * 100:.0f} %): this bus carries at '
+                              f'most {load.rate_at(self.max_bus_load):.0f} Hz')
 
 
 def _build(cls, data, path):

@@ -149,6 +149,9 @@ class RigDriver:
         self.bus, self.cfg = bus, config
         self.proto = protocol or Protocol()
         self.fs = float(config.sample_rate)
+        # the protocol's share of the configured bus at this rate (worst-case stuffing; RigConfig refused more
+        # than its max_bus_load): what status and diagnostics report as bus load
+        self.bus_load = config.bus_load().load
         self.limits = config.limits
         self._clock = clock
         self._handlers = {'Feedback': self._on_feedback, 'ControllerStatus': self._on_status,
@@ -668,7 +671,7 @@ class RigDriver:
         extra = {'heartbeats_received': c['heartbeats_received'], 'setpoints_refused': c['setpoints_refused'],
                  'next_sequence': self.next_sequence, 'position': self._last_applied,
                  'stream_owner': s.grant.owner if s else '', 'stream_id': s.grant.stream_id if s else 0,
-                 'stream_held': bool(s and s.held), 'last_event': self.last_event}
+                 'stream_held': bool(s and s.held), 'last_event': self.last_event, 'bus_load': self.bus_load}
         return DriverStatus(state, self.faults | self.controller_faults, list(self.fault_messages), self.fs,
                             c['samples_received'], c['frames_lost'], c['frames_late'], c['frames_malformed'],
                             c['frames_unknown'], self.temperature, self.controller_state, self.controller_faults,
