@@ -46,7 +46,13 @@ from msg_defs.srv import LoadProgram
 from rubber_rig.nodes.processes import Operator, SuiteProcesses
 from rubber_rig.recording import load_recording
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow]
+from support.waiting import wait_for
+
+# timeout: a scenario chains bounded waits (a node restart 30 s, the rig ready 60 s, the goal 40-60 s, the next
+# program 80 s; the first test also starts the suite, 90 s) that add up to more than the 300 s default: a
+# scenario that goes wrong must fail on its own assertion, which says what did not happen, not on the timeout.
+# Measured here: 3-10 s per scenario, about 70 s for the module.
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'rig_sim.yaml'
 NS = '/fm'
@@ -194,7 +200,8 @@ def start_fast_sine(op, seconds=1.0):
         result = op.result(handle, 1.0)
         raise AssertionError(f'program did not start: {result.message if result else "no result"}')
     first = op.status.next_sequence
-    op.wait_for(lambda: op.last_sequence > first + seconds * FS, seconds + 10.0)
+    wait_for(lambda: op.last_sequence > first + seconds * FS, seconds + 10.0,
+             f'{seconds:g} s of samples of the running program to arrive')
     return handle
 
 
@@ -261,7 +268,7 @@ def test_hold_and_resume(suite):
     since = op.last_sequence + 1
     handle = op.send_goal(SHORT.replace('cycles: 5', 'cycles: 15'))
     assert handle is not None and handle.accepted
-    op.wait_for(lambda: op.last_sequence > since + 1200, 10.0)
+    wait_for(lambda: op.last_sequence > since + 1200, 10.0, '1.2 s of samples of the program before holding it')
     r = op.hold(True)
     assert r is not None and r.success, r
     assert op.wait_status(lambda s: s.state in (RigStatus.STATE_IDLE, RigStatus.STATE_HOLDING)
@@ -306,8 +313,8 @@ def test_rig_driver_killed_mid_program_ends_the_goal_and_a_restarted_driver_runs
     op.clear_history()                       # the restarted rig numbers its samples from 0 again
     procs.start('rig_driver')
     assert procs.wait_started('rig_driver'), procs.log('rig_driver')[-2000:]
-    assert op.wait_for(lambda: op.status is not None and op.status.samples_received == 0
-                       and op.status.state == RigStatus.STATE_IDLE, 60.0)
+    wait_for(lambda: op.status is not None and op.status.samples_received == 0
+             and op.status.state == RigStatus.STATE_IDLE, 60.0, 'the status of the restarted driver, idle')
     next_program_completes(op, procs)
 
 
@@ -400,7 +407,8 @@ def test_nan_batches_and_bad_parameters_do_not_take_nodes_down(suite):
     pub = op.node.create_publisher(RigSampleBatch, 'samples', 10)
     bad = RigSampleBatch(first_sequence=op.last_sequence + 1, sample_period=1e-3,
                          displacement=[math.nan] * 50, force=[math.nan] * 50, setpoint=[math.nan] * 50)
-    op.wait_for(lambda: pub.get_subscription_count() >= 3, 5.0)
+    wait_for(lambda: pub.get_subscription_count() >= 3, 5.0,
+             'three of the nodes to subscribe to the test\'s samples publisher')
     pub.publish(bad)
     r = op.call('element_model/set_parameters', SetParameters, SetParameters.Request(parameters=[ParameterMsg(
         name='parameter_set', value=ParameterValue(type=ParameterType.PARAMETER_STRING,
@@ -460,7 +468,7 @@ def test_element_model_and_recorder_killed_and_restarted(suite):
     procs, op, base = suite
     since = op.last_sequence + 1
     handle = op.send_goal(SHORT.replace('cycles: 5', 'cycles: 10'))
-    op.wait_for(lambda: op.last_sequence > since + 300, 10.0)
+    wait_for(lambda: op.last_sequence > since + 300, 10.0, '0.3 s of samples of the program before the kill')
     procs.kill('element_model', signal.SIGKILL)
     procs.start('element_model')
     assert procs.wait_started('element_model'), procs.log('element_model')[-2000:]
@@ -475,8 +483,8 @@ def test_element_model_and_recorder_killed_and_restarted(suite):
     wait_at_rest(op)
     procs.start('recorder')
     assert procs.wait_started('recorder'), procs.log('recorder')[-2000:]
-    assert op.wait_for(lambda: op.recorder is not None and op.recorder.state == RecorderStatus.STATE_RECORDING
-                       and f'{NS}/samples' in op.recorder.topics, 30.0)
+    wait_for(lambda: op.recorder is not None and op.recorder.state == RecorderStatus.STATE_RECORDING
+             and f'{NS}/samples' in op.recorder.topics, 30.0, 'the restarted recorder to record the samples')
     next_program_completes(op, procs)
     files = sorted((base / 'recordings').rglob('*.mcap'))
     rec = load_recording(files[0].parent, allow_truncated=True) if files else None
@@ -489,7 +497,8 @@ def test_recorder_that_cannot_write_stops_programs_before_motion(suite):
     blocker.write_text('a file where the recorder wants a directory')
     procs.start('recorder', {'output_dir': str(blocker / 'recordings')})
     assert procs.wait_started('recorder'), procs.log('recorder')[-2000:]
-    assert op.wait_for(lambda: op.recorder is not None and op.recorder.state == RecorderStatus.STATE_ERROR, 30.0)
+    wait_for(lambda: op.recorder is not None and op.recorder.state == RecorderStatus.STATE_ERROR, 30.0,
+             'the recorder to report the unwritable output_dir as an error')
     assert 'not_a_directory' in op.recorder.error, op.recorder.error
     before = op.last_sequence
     _, u_before, _ = op.applied(before)
@@ -500,8 +509,8 @@ def test_recorder_that_cannot_write_stops_programs_before_motion(suite):
     assert np.all(u == u_before[-1]) and not op.status.stream_owner
     procs.start('recorder')
     assert procs.wait_started('recorder'), procs.log('recorder')[-2000:]
-    assert op.wait_for(lambda: op.recorder.state == RecorderStatus.STATE_RECORDING
-                       and f'{NS}/samples' in op.recorder.topics, 30.0)
+    wait_for(lambda: op.recorder is not None and op.recorder.state == RecorderStatus.STATE_RECORDING
+             and f'{NS}/samples' in op.recorder.topics, 30.0, 'the restarted recorder to record the samples')
     next_program_completes(op, procs)
 
 
@@ -528,8 +537,8 @@ def test_simulated_rig_faults_end_safely(suite, name):
     op.clear_history()                       # the restarted rig numbers its samples from 0 again
     procs.start('rig_driver', {'sim': {'faults': fault}})
     assert procs.wait_started('rig_driver'), procs.log('rig_driver')[-2000:]
-    assert op.wait_for(lambda: op.status is not None and op.status.samples_received == 0
-                       and op.status.state == RigStatus.STATE_IDLE, 60.0)
+    wait_for(lambda: op.status is not None and op.status.samples_received == 0
+             and op.status.state == RigStatus.STATE_IDLE, 60.0, 'the status of the restarted driver, idle')
     assert op.wait_ready(60.0)
     since, t_wall = op.last_sequence + 1, time.time()
     handle = op.send_goal(program)

@@ -11,7 +11,12 @@
 # WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
 # See the License for the specific language governing permissions and
 # limitations under the License.
-"""ament_flake8 over the package, as ros2/demos runs it under colcon test (configuration: setup.cfg [flake8])."""
+"""ament_flake8 over the package, as ros2/demos runs it under colcon test.
+
+ros2/demos calls main_with_errors(argv=[]): ament_flake8's own configuration over the working directory. Here
+the configuration is setup.cfg's [flake8] (ament's choices at ruff.toml's 120 columns) and the folders are
+named, because a checkout also holds build/ and .venv/, which a colcon source space does not.
+"""
 from pathlib import Path
 
 import pytest

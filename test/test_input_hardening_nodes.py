@@ -137,6 +137,7 @@ def write_set(path, **values):
     return f'{path}:fit_20C'
 
 
+@pytest.mark.ros
 def test_bad_parameter_changes_are_refused_with_a_reason_and_the_model_keeps_running(node, tmp_path):
     before = node.predictor.params
     bad_yaml = tmp_path / 'bad.yaml'
@@ -164,6 +165,7 @@ def test_bad_parameter_changes_are_refused_with_a_reason_and_the_model_keeps_run
     assert np.all(np.isfinite(node.published[-1].predicted_force))
 
 
+@pytest.mark.ros
 def test_a_bad_parameter_set_at_start_names_the_parameter(context):
     with pytest.raises(ParameterError, match="parameter 'parameter_set'.*no such parameter file"):
         ElementModelNode(context=context, parameter_overrides=[
@@ -178,6 +180,7 @@ def stream(node, x, force, skip=(), first=0):
         node.on_samples(conv.sample_batch_msg(first + lo, (first + lo) * DT, DT, x[s], force[s], x[s], 20.0, 0, 0))
 
 
+@pytest.mark.ros
 def test_nan_batches_and_nan_forces_neither_crash_nor_poison_the_node(node):
     n = 8000
     x = sine(n, f=2.0)
@@ -199,6 +202,7 @@ def test_nan_batches_and_nan_forces_neither_crash_nor_poison_the_node(node):
     assert all(math.isfinite(m.measured.k_dyn) and math.isfinite(m.model.k_dyn) for m in node.metrics)
 
 
+@pytest.mark.ros
 def test_malformed_batches_are_dropped_and_a_restarted_driver_restarts_the_model(node):
     x = sine(1000)
     f = np.zeros(1000)

@@ -17,7 +17,8 @@
 For every launch file: it compiles; every Node action names an executable that setup.py installs; every
 parameter file it passes exists, is installed by setup.py, and only sets parameters the node declares (the
 nodes are instantiated with real rclpy to list what they declare); every inline parameter override is
-declared too; every LaunchConfiguration is declared with DeclareLaunchArgument.
+declared too; every LaunchConfiguration is declared with DeclareLaunchArgument; rig_driver, a lifecycle node,
+is started as a launch_ros LifecycleNode.
 """
 import ast
 import importlib
@@ -133,6 +134,7 @@ def test_launch_file_compiles_and_defines_generate_launch_description(path):
     assert lf.used_args <= lf.declared_args, f'undeclared launch arguments: {lf.used_args - lf.declared_args}'
 
 
+@pytest.mark.ros
 @pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
 def test_launch_file_references_exist_and_are_declared(path, declared):
     lf = LaunchFile(path)
@@ -168,6 +170,37 @@ def test_launch_file_references_exist_and_are_declared(path, declared):
     assert lf.lifecycle_nodes == {'rig_driver'}, f'{path.name}: rig_driver must be a LifecycleNode action'
 
 
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_rig_driver_is_a_lifecycle_node_brought_up_by_autostart_or_by_the_operator(path):
+    """rig_driver is a managed node: launch_ros.actions.LifecycleNode (as the ros2 lifecycle demos start one, with
+    the name and namespace it requires). The launch files emit no ChangeState events: the driver's parameter file
+    says whether it configures and activates itself (autostart) or waits for the operator's `ros2 lifecycle set`,
+    and the launch file's docstring says which."""
+    lf = LaunchFile(path)
+    imported = {a.name for n in ast.walk(lf.tree) if isinstance(n, ast.ImportFrom) and n.module == 'launch_ros.actions'
+                for a in n.names}
+    assert 'LifecycleNode' in imported, f'{path.name}: LifecycleNode must come from launch_ros.actions'
+    [driver] = [c for c in lf.nodes if _call_name(c) == 'LifecycleNode']
+    assert _kw(driver, 'executable').value == 'rig_driver'
+    assert _kw(driver, 'name') is not None and _kw(driver, 'namespace') is not None, \
+        f'{path.name}: a LifecycleNode needs name= and namespace='
+    assert not {'ChangeState', 'EmitEvent', 'RegisterEventHandler'} & {_call_name(c) for c in ast.walk(lf.tree)
+                                                                       if isinstance(c, ast.Call)}
+    files = [lf.config_file(p) for p in _kw(driver, 'parameters').elts if not isinstance(lf.resolve(p), ast.Dict)]
+    overrides = [k.value for p in _kw(driver, 'parameters').elts if isinstance(lf.resolve(p), ast.Dict)
+                 for k in lf.resolve(p).keys]
+    assert 'autostart' not in overrides
+    [cfg] = files
+    autostart = yaml.safe_load((ROOT / cfg).read_text())['/**/rig_driver']['ros__parameters']['autostart']
+    doc = ast.get_docstring(lf.tree)
+    if autostart is True:
+        assert 'autostart: true' in doc, f'{path.name}: the docstring should say the driver activates itself'
+    else:
+        assert autostart is False and 'ros2 lifecycle set' in doc, \
+            f'{path.name}: {cfg} must set autostart, and without it the docstring must say how to bring it up'
+
+
+@pytest.mark.ros
 def test_every_node_parameter_has_a_description(declared):
     for exe, params in declared.items():
         for name, d in params.items():
@@ -179,6 +212,7 @@ def test_every_node_parameter_has_a_description(declared):
                     f'{exe}: numeric parameter {name} has no range'
 
 
+@pytest.mark.ros
 def test_config_values_have_the_declared_types(declared):
     """A config value of the wrong type would fail at node start; catch it here (ints allowed for doubles)."""
     type_ok = {1: (bool,), 2: (int,), 3: (int, float), 4: (str,)}

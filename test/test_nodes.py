@@ -67,6 +67,7 @@ def suite(tmp_path_factory):
         launcher.shutdown()
 
 
+@pytest.mark.ros
 def test_program_completes_with_block_summaries(suite):
     result = suite['result']
     assert result.success, result.message
@@ -78,6 +79,7 @@ def test_program_completes_with_block_summaries(suite):
         assert b.achieved_amplitude == pytest.approx(target, rel=0.01)
 
 
+@pytest.mark.ros
 def test_setpoints_follow_the_program_and_reach_the_rig_in_time(suite):
     mon = suite['monitor']
     program = Program.from_yaml_text(PROGRAM)
@@ -99,6 +101,7 @@ def test_setpoints_follow_the_program_and_reach_the_rig_in_time(suite):
     np.testing.assert_allclose(applied[inside], expected[sseq[inside]], rtol=0, atol=0.5e-7 + 1e-12)
 
 
+@pytest.mark.ros
 def test_no_sample_lost_between_driver_model_and_monitor(suite):
     stats = {k: v.as_dict() for k, v in suite['monitor'].stats.items()}
     for name in ('samples', 'prediction', 'setpoints'):
@@ -107,6 +110,7 @@ def test_no_sample_lost_between_driver_model_and_monitor(suite):
     assert suite['monitor'].status.frames_lost == 0
 
 
+@pytest.mark.ros
 def test_prediction_agrees_with_measurement_within_the_noise(suite):
     mon = suite['monitor']
     preds = mon.messages['prediction']
@@ -176,6 +180,7 @@ def test_an_invalid_model_choice_names_the_field_at_fault(choice, field):
     assert err.value.field == field, str(err.value)
 
 
+@pytest.mark.ros
 def test_cycle_metrics_match_the_analytic_steady_state(suite):
     """Steady full-amplitude cycles vs seed 000 Eq. 17-27. Tolerances: the model library's time-domain steady
     state is within 0.5 % of the analytic storage stiffness (its documented bound), so K_dyn within 0.6 %,
@@ -210,6 +215,7 @@ def test_cycle_metrics_match_the_analytic_steady_state(suite):
     assert checked >= 8
 
 
+@pytest.mark.ros
 def test_recording_holds_every_sample_and_prediction(suite):
     rec = load_recording(suite['mcap'])
     mon = suite['monitor']
@@ -221,6 +227,7 @@ def test_recording_holds_every_sample_and_prediction(suite):
     assert rec.block_index[500] == 0
 
 
+@pytest.mark.ros
 def test_model_parameters_are_latched_and_follow_run_time_changes(suite):
     launcher, model = suite['launcher'], suite['model']
     late = Node('late_joiner', context=launcher.context)
@@ -240,6 +247,7 @@ def test_model_parameters_are_latched_and_follow_run_time_changes(suite):
     model.set_parameters_atomically([Parameter('source', value='parameter_set')])
 
 
+@pytest.mark.ros
 def test_rig_status_is_latched_with_limits_and_rate(suite):
     status = suite['monitor'].status
     assert status.sample_rate == RATE

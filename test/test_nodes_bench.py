@@ -47,6 +47,7 @@ def test_program_overrides_keep_the_program_valid():
         bench.build_program(args(cycles=0))
 
 
+@pytest.mark.ros
 def test_main_job_end_to_end(tmp_path, capsys):
     # a domain of its own: the bench refuses to start where another suite's rig_driver is visible, and DDS
     # can still list the nodes of a suite another test module of this process has just shut down
@@ -74,6 +75,7 @@ def test_main_job_end_to_end(tmp_path, capsys):
     assert 'sine_1mm_5Hz' in out     # the live table
 
 
+@pytest.mark.ros
 def test_bench_refuses_to_start_beside_another_suite_on_the_same_domain():
     # two excitations on one rig's topics would both command it: a second suite must not start
     from rubber_rig.cli.main import CommandError

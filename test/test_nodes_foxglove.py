@@ -100,6 +100,7 @@ class FoxgloveClient:
         self.sock.sendall(head + mask + bytes(b ^ mask[i % 4] for i, b in enumerate(payload)))
 
 
+@pytest.mark.ros
 def test_live_view_serves_force_samples_over_websocket():
     port = 20000 + os.getpid() % 20000
     with InProcessLauncher(domain_id=domain_id()) as launcher:

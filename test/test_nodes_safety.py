@@ -29,6 +29,8 @@ from rubber_rig.nodes.rig_driver_node import RigDriverNode
 
 from support.suite import CONFIG, RATE, by_sequence, domain_id, run_program, start_suite
 
+pytestmark = pytest.mark.ros   # every test here runs nodes with real rclpy
+
 LONG_SINE = """
 name: long_sine
 blocks:

@@ -135,6 +135,7 @@ exit 0
 
 
 # -- unwritable / uncreatable output directory ---------------------------------------------------------------------
+@pytest.mark.ros
 def test_uncreatable_output_dir_is_an_error_status_then_start_elsewhere_records(context, tmp_path):
     blocker = tmp_path / 'a_file'
     blocker.write_text('x')
@@ -169,6 +170,7 @@ def test_uncreatable_output_dir_is_an_error_status_then_start_elsewhere_records(
     assert len(r) == 200 and r.samples_lost == 0 and r.complete
 
 
+@pytest.mark.ros
 def test_read_only_output_dir_is_an_error_status_and_a_later_start_works(context, tmp_path):
     why = private_mounts_available()
     if why:
@@ -205,6 +207,7 @@ def test_read_only_output_dir_is_an_error_status_and_a_later_start_works(context
 
 
 # -- disk full mid-recording -------------------------------------------------------------------------------------------
+@pytest.mark.ros
 def test_disk_full_mid_recording_is_an_error_within_half_a_second_and_the_file_stays_readable(context, tmp_path):
     why = private_mounts_available()
     if why:
@@ -277,6 +280,7 @@ def test_disk_full_mid_recording_is_an_error_within_half_a_second_and_the_file_s
 
 
 # -- SIGKILL mid-stream ------------------------------------------------------------------------------------------------
+@pytest.mark.ros
 def test_sigkill_mid_stream_loses_at_most_the_flush_period_and_says_the_tail_is_unaccounted(context, tmp_path,
                                                                                             capsys):
     ns = '/killed'
@@ -316,6 +320,7 @@ def test_sigkill_mid_stream_loses_at_most_the_flush_period_and_says_the_tail_is_
 
 
 # -- loss accounting -----------------------------------------------------------------------------------------------
+@pytest.mark.ros
 def test_program_to_program_jump_is_not_loss_but_the_drivers_frames_lost_is(context, tmp_path):
     ns = '/jumps'
     rec = RecorderNode(namespace=ns, context=context, parameter_overrides=[

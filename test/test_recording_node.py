@@ -38,6 +38,8 @@ from rubber_rig.recording.qos import parse_offered_qos
 
 from support.ros import ros_context, sample_batch, spin_until, spinning
 
+pytestmark = pytest.mark.ros   # every test here runs nodes with real rclpy
+
 REPO = Path(__file__).resolve().parents[1]
 BATCH = 20
 PERIOD = 1e-3

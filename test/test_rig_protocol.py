@@ -189,7 +189,8 @@ def test_a_rate_the_configured_bus_cannot_carry_is_refused_before_the_bus_opens(
         run_program(prog, {'paced': False, 'sample_rate': 5000.0})
     with pytest.raises(ConfigError, match='needs .* than max_bus_load \\(100 %\\)'):
         run_program(prog, {'paced': False, 'sample_rate': 5000.0, 'max_bus_load': 1.0})   # a full bus is full
-    with pytest.raises(ConfigError, match=r"'sample_rate': 2000 Hz needs 7[0-9] % of the 0.5/5 Mbit/s CAN FD bus.*at most 17[0-9]{2} Hz"):
+    with pytest.raises(ConfigError, match=r"'sample_rate': 2000 Hz needs 7[0-9] % of the 0.5/5 Mbit/s CAN FD bus"
+                                          r'.*at most 17[0-9]{2} Hz'):
         run_program(prog, {'paced': False, 'sample_rate': 2000.0, 'bitrate': 500_000})
     with pytest.raises(ConfigError, match=r"field 'fd': .*Feedback is a CAN FD frame"):
         run_program(prog, {'paced': False, 'fd': False})

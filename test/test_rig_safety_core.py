@@ -249,6 +249,7 @@ def test_a_granted_stream_that_never_sends_is_withdrawn_without_a_fault():
         drv = rig.driver
         g = drv.open_stream('/rig1/excitation')
         t0 = time.monotonic()
+        # deliberately let 0.6 s pass (twice stream_timeout) with the rig polled: a silence to be survived
         assert _poll_until(drv, lambda: time.monotonic() - t0 > 0.6, 10 ** 8)
         # past 0.3 s: no fault
         assert drv.status.faults == 0 and drv.status.extra['stream_owner'] == '/rig1/excitation'

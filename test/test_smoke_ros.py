@@ -30,6 +30,7 @@ def test_msg_defs_is_generated_by_rosidl():
     assert RigStatus.STATE_FAULT == 5 and RigStatus.FAULT_WATCHDOG == 1
 
 
+@pytest.mark.ros
 def test_pub_sub_rig_sample_batch_over_fast_dds():
     rclpy.init()
     try:

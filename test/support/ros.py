@@ -13,7 +13,6 @@
 # limitations under the License.
 
 """Helpers shared by the tests that run nodes in-process with real rclpy + Fast DDS."""
-import time
 from contextlib import contextmanager
 
 import numpy as np
@@ -21,6 +20,8 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
 from msg_defs.msg import RigSampleBatch
+
+from support.waiting import poll_until, wait_for
 
 
 @contextmanager
@@ -53,12 +54,16 @@ def spinning(context, *nodes):
         executor.shutdown()
 
 
-def spin_until(executor, condition, timeout=20.0):
-    """Spin until ``condition()`` holds or ``timeout`` seconds pass; returns the condition's last value."""
-    deadline = time.monotonic() + timeout
-    while not condition() and time.monotonic() < deadline:
+def spin_until(executor, condition, timeout=20.0, what=None):
+    """Spin until ``condition()`` holds or ``timeout`` seconds pass; returns the condition's last value.
+
+    With ``what``, a condition that never holds fails the test saying what did not happen (support.waiting).
+    """
+    def step():
         executor.spin_once(timeout_sec=0.01)
-    return condition()
+    if what is not None:
+        return wait_for(condition, timeout, what, step=step)
+    return poll_until(condition, timeout, step=step)
 
 
 def sample_batch(first: int, n: int, *, period: float = 1e-3, frames_lost: int = 0, temperature: float = 23.0,
