@@ -322,8 +322,10 @@ def test_second_excitation_cannot_take_the_rig(suite):
     """A second excitation (another station's, misconfigured to command this rig: its own namespace, the rig's
     topics and driver) gets its goal refused with the owner's name while a program runs."""
     procs, op, base = suite
+    # the other station would run on its own computer: here it shares two cores, so it runs at a lower priority
     other = SuiteProcesses(CONFIG, '/fm_b', domain_id(), base / 'logs_b',
-                           {'excitation': {'amplitude_control': False, 'rig_driver': f'{NS}/rig_driver'}})
+                           {'excitation': {'amplitude_control': False, 'rig_driver': f'{NS}/rig_driver'}},
+                           niceness=10)
     other.extra_args['excitation'] = ['-r', f'status:={NS}/status', '-r', f'samples:={NS}/samples',
                                       '-r', f'setpoints:={NS}/setpoints']
     with other:
