@@ -33,7 +33,8 @@ from rubber_rig.cli.main import main as cli_main
 from rubber_rig.excitation import Program
 from rubber_rig.rig import ConfigError, RigConfig, open_rig, run_program
 from rubber_rig.rig import interface as rig_interface
-from rubber_rig.rig.can.canlog import CanLogWarning, decode_log
+from rubber_rig.rig.can.canlog import CanLogWarning
+from rubber_rig.rig.can.canlog_reader import decode_log
 from rubber_rig.settings import settings_of
 
 FAST = {'paced': False}

@@ -28,7 +28,8 @@ import math
 import sys
 import warnings
 
-from rubber_rig.rig.can.canlog import SUPPORTED_FORMATS, decode_log
+from rubber_rig.rig.can.canlog import SUPPORTED_FORMATS
+from rubber_rig.rig.can.canlog_reader import decode_log
 from rubber_rig.rig.can.protocol import Protocol
 from rubber_rig.rig.config import RigConfig
 

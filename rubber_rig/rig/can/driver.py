@@ -19,8 +19,6 @@ import collections
 import itertools
 import math
 import time
-from dataclasses import dataclass, field
-from typing import List
 
 import numpy as np
 
@@ -43,85 +41,10 @@ from .protocol import (
     fault_names,
     unwrap_sequence,
 )
+from .sensor_check import SensorCheck
+from .stream import DriverStatus, GrantedStream, SampleBlock, StreamGrant, StreamRefused
 
-
-@dataclass
-class SampleBlock:
-    """Consecutive measured samples: sample i has sequence first_sequence + i and was taken at
-    t0 + i * sample_period (t0: bus timestamp of the first sample's frame [s]). SI units. `setpoint` is the
-    command the controller applied (the host setpoint, or its own ramp after an abort). frames_lost: samples
-    lost on the bus just before this block.
-    """
-
-    first_sequence: int
-    t0: float
-    sample_period: float
-    displacement: np.ndarray
-    force: np.ndarray
-    setpoint: np.ndarray
-    temperature: float
-    status_flags: int
-    frames_lost: int
-
-    def __len__(self):
-        return int(self.displacement.size)
-
-    @property
-    def sequence(self) -> np.ndarray:
-        return np.arange(self.first_sequence, self.first_sequence + len(self), dtype=np.int64)
-
-
-@dataclass
-class DriverStatus:
-    """Snapshot of the driver (the fields of msg_defs/RigStatus, which the node fills from it; faults is the
-    FAULT_* bit mask).
-    """
-
-    state: str
-    faults: int
-    fault_messages: List[str]
-    sample_rate: float
-    samples_received: int
-    frames_lost: int
-    frames_late: int
-    frames_malformed: int
-    frames_unknown: int
-    temperature: float
-    controller_state: str
-    controller_faults: int
-    controller_sequence: int
-    setpoints_sent: int
-    limits: object = None
-    extra: dict = field(default_factory=dict)
-
-
-class StreamRefused(ValueError):
-    """A stream could not be opened or a batch was refused; the message says why."""
-
-
-@dataclass
-class StreamGrant:
-    """The right to command the rig: setpoints of stream `stream_id` start at first_sequence and must continue
-    from `position` [m] (the command the rig holds) at `velocity` [m/s].
-    """
-
-    stream_id: int
-    owner: str
-    first_sequence: int
-    position: float
-    velocity: float
-
-
-@dataclass
-class _Stream:
-    grant: StreamGrant
-    queued_end: int             # sequence after the last queued setpoint
-    last_queued: float          # last queued setpoint [m] (the true continuation of the applied command)
-    last_velocity: float        # velocity at the end of the queue [m/s]
-    last_rx_wall: float         # wall time of the latest batch
-    ended: bool = False         # the owner sent its last batch: running dry is the end, not a loss
-    batches: int = 0            # batches accepted (keep-alives included): 0 = granted, nothing sent yet
-    held: bool = False          # stopped by a hold: the owner keeps the rig and re-opens to resume
+__all__ = ['DriverStatus', 'RigDriver', 'SampleBlock', 'StreamGrant', 'StreamRefused']
 
 
 class RigDriver:
@@ -157,7 +80,7 @@ class RigDriver:
         self._handlers = {'Feedback': self._on_feedback, 'ControllerStatus': self._on_status,
                           'ControllerHeartbeat': self._on_heartbeat, 'Temperature': self._on_temperature}
         # stream bookkeeping
-        self._stream = None              # _Stream of the owner, or None
+        self._stream = None              # GrantedStream of the owner, or None
         self._stream_ids = itertools.count(int(clock() * 1000) % 1_000_000 * 1000 + 1)
         self._jump_to = None             # a stream on an idle rig starts at this sequence: the jump is no loss
         self._last_applied = 0.0         # last command the controller reported applying [m]
@@ -166,7 +89,7 @@ class RigDriver:
         self._pend = ([], [], [])        # x, f, u of the contiguous samples not yet returned
         self._pend_first, self._pend_t0, self._pend_lost = None, None, 0   # first sequence, its frame time
         self._ready = collections.deque()
-        self._sensor = _SensorCheck(self.fs)
+        self._sensor = SensorCheck(self.fs)
         self._bad = collections.deque()  # (sample position, count) of bad-frame events, 1 s window
         self.events = collections.deque(maxlen=1000)   # (level 'info'|'warn'|'error', text)
         self.last_event = ''
@@ -264,7 +187,7 @@ class RigDriver:
             self._jump_to = first     # an idle controller starts at the first setpoint it gets
         v = (self._last_applied - self._prev_applied) * self.fs if self.controller_state == 'running' else 0.0
         grant = StreamGrant(next(self._stream_ids), owner, first, self._last_applied, v)
-        self._stream = _Stream(grant, first, self._last_applied, v, self._clock())
+        self._stream = GrantedStream(grant, first, self._last_applied, v, self._clock())
         self._host_stop = False
         self._event('info', f'stream {grant.stream_id} opened for {owner or "a local client"}: first setpoint '
                             f'at sample {first}, from {grant.position * 1e3:.4f} mm')
@@ -689,60 +612,3 @@ class RigDriver:
         if ramp and self.controller_state in ('running', 'holding'):
             self.abort('driver shutting down')
         self.bus.shutdown()
-
-
-class _SensorCheck:
-    """Stuck-sensor detection from consistency, not from motion per window, so slow motion is covered too.
-
-    A live transducer never repeats the same reading for 0.1 s while what drives it moves: the displacement
-    is stuck when it repeats while the command moves >= 10 um, the load cell when it repeats while the
-    measured displacement moves >= 5 um. And over any stretch where the command spans >= 50 um, the measured
-    displacement must span at least 10 % of it (the actuator attenuates, it does not stop).
-    """
-
-    def __init__(self, fs):
-        self.n_same = max(10, int(round(0.1 * fs)))
-        self.window_max = max(10, int(round(2.0 * fs)))
-        self.clear()
-
-    def clear(self):
-        self.x_prev = self.f_prev = None
-        self.x_run = self.f_run = 0
-        self.u_lo = self.u_hi = self.x_lo = self.x_hi = None        # during the current repeated x / f
-        self.wu_lo = self.wu_hi = self.wx_lo = self.wx_hi = None    # consistency window
-        self.wn = 0
-
-    def add(self, u, x, f) -> str:
-        if x == self.x_prev:
-            self.x_run += 1
-            self.u_lo, self.u_hi = min(self.u_lo, u), max(self.u_hi, u)
-        else:
-            self.x_run, self.u_lo, self.u_hi = 0, u, u
-        if f == self.f_prev:
-            self.f_run += 1
-            self.x_lo, self.x_hi = min(self.x_lo, x), max(self.x_hi, x)
-        else:
-            self.f_run, self.x_lo, self.x_hi = 0, x, x
-        self.x_prev, self.f_prev = x, f
-        if self.x_run >= self.n_same and self.u_hi - self.u_lo >= 10e-6:
-            return (f'displacement sensor stuck at {x * 1e3:.4f} mm for {self.x_run} samples while the command '
-                    f'moved {(self.u_hi - self.u_lo) * 1e3:.4f} mm')
-        if self.f_run >= self.n_same and self.x_hi - self.x_lo >= 5e-6:
-            return (f'force sensor stuck at {f:.2f} N for {self.f_run} samples while the displacement moved '
-                    f'{(self.x_hi - self.x_lo) * 1e3:.4f} mm')
-        if self.wn == 0:
-            self.wu_lo = self.wu_hi = u
-            self.wx_lo = self.wx_hi = x
-        self.wn += 1
-        self.wu_lo, self.wu_hi = min(self.wu_lo, u), max(self.wu_hi, u)
-        self.wx_lo, self.wx_hi = min(self.wx_lo, x), max(self.wx_hi, x)
-        du = self.wu_hi - self.wu_lo
-        if du >= 50e-6:
-            dx = self.wx_hi - self.wx_lo
-            self.wn = 0
-            if dx < 0.1 * du:
-                return (f'displacement sensor stuck or disconnected: the command moved {du * 1e3:.4f} mm, the '
-                        f'measurement {dx * 1e3:.4f} mm')
-        elif self.wn >= self.window_max:
-            self.wn = 0
-        return ''

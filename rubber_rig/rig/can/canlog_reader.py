@@ -1,0 +1,340 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Reading raw CAN logs back: decode_log reads a log written by python-can (BLF, ASC, candump -L; see
+:mod:`.canlog`) with can.LogReader and decodes it with the project's DBC (cantools) into the numpy arrays a
+recording gives, with frame counts, sequence gaps, faults and the bus load.
+"""
+from __future__ import annotations
+
+import collections
+import errno
+import math
+import re
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import can
+import numpy as np
+
+from .canlog import SUPPORTED_FORMATS, CanLogError, CanLogWarning, log_format
+from .protocol import DBC_PATH, STATES, MalformedFrame, Protocol, fault_names, unwrap_sequence
+from .timing import frame_bits
+
+
+@dataclass
+class CanLog:
+    """A raw CAN log decoded with the DBC. SI units; times in seconds since the log's first frame (`start`:
+    its absolute timestamp [s since the epoch]; ASC logs carry it to the millisecond only).
+
+    Samples (one per Feedback frame that advances the sequence; late or duplicated ones are counted in
+    frames_late, as the driver does): sequence (unwrapped), time, time_ns (absolute), displacement [m], force [N],
+    setpoint (the command the controller applied) [m], temperature [degC] and status (controller fault bits) of
+    the latest Temperature / ControllerStatus frame before the sample - the arrays a recording gives.
+    Host setpoints: setpoint_sequence, setpoint_time, setpoint_displacement. Controller: status_* (state code,
+    index into STATES, fault bits, last consumed sequence, buffer level), heartbeat_time/heartbeat_state;
+    commands: (time, command name, argument) of the host. gaps: sequence gaps while the controller was streaming
+    ({'expected', 'received', 'lost', 'time'}); jumps: sequence jumps of an idle controller starting a new stream
+    (not loss). frames: count per message name (unknown identifiers as '0x...'); frames_by_id: per identifier.
+    complete is False when the log was damaged or not closed (warnings say how; what precedes it is decoded).
+    """
+
+    path: str
+    format: str
+    complete: bool = True
+    warnings: list = field(default_factory=list)
+    start: float = math.nan
+    end: float = math.nan
+    channels: list = field(default_factory=list)
+    frames_total: int = 0
+    frames_rx: int = 0
+    frames_tx: int = 0
+    frames: dict = field(default_factory=dict)
+    frames_by_id: dict = field(default_factory=dict)
+    frames_malformed: int = 0
+    frames_unknown: int = 0
+    error_frames: int = 0
+    frames_late: int = 0
+    sequence: np.ndarray = None
+    time: np.ndarray = None
+    time_ns: np.ndarray = None
+    displacement: np.ndarray = None
+    force: np.ndarray = None
+    setpoint: np.ndarray = None
+    temperature: np.ndarray = None
+    status: np.ndarray = None
+    setpoint_sequence: np.ndarray = None
+    setpoint_time: np.ndarray = None
+    setpoint_displacement: np.ndarray = None
+    status_time: np.ndarray = None
+    status_state: np.ndarray = None
+    status_faults: np.ndarray = None
+    status_last_sequence: np.ndarray = None
+    status_buffer_level: np.ndarray = None
+    heartbeat_time: np.ndarray = None
+    heartbeat_state: np.ndarray = None
+    commands: list = field(default_factory=list)
+    gaps: list = field(default_factory=list)
+    jumps: list = field(default_factory=list)
+    samples_lost: int = 0
+    faults: int = 0                       # union of the controller's fault bits
+    states: list = field(default_factory=list)   # (time, state name) at each change of the controller state
+    bits_nominal: int = 0                 # bits at the arbitration bit rate, summed over the frames
+    bits_data: int = 0                    # bits in the CAN FD data phase (bit rate switch)
+
+    @property
+    def duration(self) -> float:
+        return self.end - self.start if self.frames_total else 0.0
+
+    @property
+    def faults_seen(self) -> list:
+        return fault_names(self.faults)
+
+    def __len__(self):
+        return int(self.sequence.size)
+
+    def bus_load(self, bitrate: float = 1_000_000, data_bitrate: float = 5_000_000) -> float:
+        """Estimated bus load (0..1; above 1: the frames came faster than a real bus carries them, e.g. an
+        unpaced simulated run): frame bits without bit stuffing (timing.frame_bits; stuffing adds up to about
+        20 %) over the duration.
+        """
+        if not self.duration > 0:
+            return math.nan
+        return (self.bits_nominal / bitrate + self.bits_data / data_bitrate) / self.duration
+
+
+def _frame_bits(msg: can.Message) -> tuple[int, int]:
+    """(nominal, data-phase) bits of a logged frame, without bit stuffing."""
+    return frame_bits(len(msg.data), fd=msg.is_fd, bitrate_switch=msg.bitrate_switch, worst_case=False,
+                      extended=msg.is_extended_id)
+
+
+_ASC_TRIGGER = re.compile(rb'begin\s+triggerblock\s+\w+\s+(?P<when>.+)', re.IGNORECASE)
+_ASC_MILLISECONDS = re.compile(r'(\d{1,2}:\d{2}:\d{2})\.(\d{1,3})(?!\d)')
+
+
+def _asc_start(path: Path) -> float:
+    """Absolute time [s since the epoch] of an ASC log's first trigger block, NaN if it has none.
+
+    ASC times are relative to it. It carries milliseconds, which python-can's ASCWriter writes without leading
+    zeros ('.40' for 40 ms) and its reader takes for a decimal fraction (0.40 s); CANoe writes three digits. Read
+    here as a count of milliseconds, right for both.
+    """
+    with open(path, 'rb') as f:
+        for _, line in zip(range(100), f, strict=False):
+            m = _ASC_TRIGGER.match(line.strip())
+            if m:
+                when = _ASC_MILLISECONDS.sub(lambda g: f'{g.group(1)}.{g.group(2).zfill(3)}',
+                                             m.group('when').decode('utf-8', 'replace').strip())
+                try:
+                    return can.ASCReader._datetime_to_timestamp(when)
+                except ValueError:
+                    return math.nan
+    return math.nan
+
+
+def _integrity(path: Path, fmt: str, reader, frames: int) -> list:
+    """Signs that a log was not closed or is cut short that its reader passes over silently."""
+    out = []
+    size = path.stat().st_size
+    if fmt == '.blf':
+        header_size, objects = getattr(reader, 'file_size', size), getattr(reader, 'object_count', frames)
+        if header_size != size or objects != frames:
+            out.append(f'{path}: BLF header says {objects} objects in {header_size} bytes, the file has {frames} '
+                       f'frames in {size} bytes: the log was not closed (writer killed) or is truncated')
+        return out
+    with open(path, 'rb') as f:
+        f.seek(max(0, size - 64))
+        tail = f.read()
+    if size and not tail.endswith(b'\n'):
+        out.append(f'{path}: the last line is incomplete: the log is truncated')
+    if fmt == '.asc' and b'end triggerblock' not in tail.lower():
+        out.append(f'{path}: no "End TriggerBlock": the log was not closed (writer killed) or is truncated')
+    return out
+
+
+def decode_log(path, dbc=DBC_PATH) -> CanLog:
+    """Read the raw CAN log `path` (.blf, .asc or candump .log) with can.LogReader and decode it with the DBC
+    `dbc` (a path, or a Protocol) into a CanLog. A damaged or unclosed log decodes up to the damage, with a
+    CanLogWarning (also in CanLog.warnings, complete=False). FileNotFoundError for a missing file, CanLogError for
+    a file that is no log of its suffix's format.
+    """
+    p = Path(str(path)).expanduser()
+    fmt = log_format(p)
+    if not p.exists():
+        raise FileNotFoundError(errno.ENOENT, 'no such CAN log', str(p))
+    if p.is_dir():
+        raise CanLogError(f'{p}: is a directory, not a CAN log')
+    proto = dbc if isinstance(dbc, Protocol) else Protocol(dbc)
+    out = CanLog(str(p), fmt)
+    offset = 0.0
+    if fmt == '.asc':   # relative times; the absolute start is in the trigger block header
+        offset = _asc_start(p)
+        if not math.isfinite(offset):
+            offset = 0.0
+            out.warnings.append(f'{p}: no readable "Begin Triggerblock" date: times are relative to the start of '
+                                'the measurement, not absolute')
+    try:
+        reader = can.LogReader(str(p))
+    except Exception as exc:   # noqa: BLE001 - python-can raises anything from struct.error to its own errors
+        raise CanLogError(f'{p}: not a readable {SUPPORTED_FORMATS[fmt]} log: {exc or type(exc).__name__}') from None
+    try:
+        _decode(reader, proto, out, offset)
+    except _Damaged as exc:
+        out.complete = False
+        out.warnings.append(f'{p}: unreadable after frame {out.frames_total}: {exc.reason} (the frames before it '
+                            'are decoded)')
+    finally:
+        try:
+            reader.stop()
+        except Exception:   # noqa: BLE001
+            pass
+    more = _integrity(p, fmt, reader, out.frames_total)
+    if more:
+        out.complete = False
+        out.warnings += more
+    for text in out.warnings:
+        warnings.warn(text, CanLogWarning, stacklevel=2)
+    return out
+
+
+class _Damaged(Exception):
+    def __init__(self, reason):
+        super().__init__(reason)
+        self.reason = reason
+
+
+# CanLog array -> dtype, filled from the lists of the same name while decoding
+_ARRAYS = {
+    'sequence': np.int64, 'time': float, 'displacement': float, 'force': float, 'setpoint': float,
+    'temperature': float, 'status': np.uint32, 'setpoint_sequence': np.int64, 'setpoint_time': float,
+    'setpoint_displacement': float, 'status_time': float, 'status_state': np.uint8, 'status_faults': np.uint32,
+    'status_last_sequence': np.int64, 'status_buffer_level': np.int64, 'heartbeat_time': float,
+    'heartbeat_state': np.uint8,
+}
+
+
+def _decode(reader, proto: Protocol, out: CanLog, offset: float = 0.0):
+    by_id = proto.by_id
+    cmd_names = {int(k): str(v) for k, v in proto.by_name['HostCommand'].get_signal_by_name('CMD_Code')
+                 .choices.items()}
+    idle_states = {i for i, s in enumerate(STATES) if s not in ('running', 'holding', 'ramping_down')}
+    frames, by_id_count, channels = collections.Counter(), collections.Counter(), {}
+    a = collections.defaultdict(list)   # the arrays of _ARRAYS, as lists; 'time' holds absolute timestamps
+    expected = last_status_seq = sp_ref = state = None
+    temperature, faults = math.nan, 0
+    it = iter(reader)
+    try:
+        while True:
+            try:
+                msg = next(it)
+            except StopIteration:
+                break
+            except Exception as exc:   # noqa: BLE001 - corrupt data: decode what precedes it
+                raise _Damaged(f'{type(exc).__name__}: {exc}') from None
+            t = float(msg.timestamp) + offset
+            if not out.frames_total:
+                out.start = t
+            out.end = t
+            rel = t - out.start
+            out.frames_total += 1
+            if msg.is_rx:
+                out.frames_rx += 1
+            else:
+                out.frames_tx += 1
+            channels[msg.channel] = None
+            nominal, data = _frame_bits(msg)
+            out.bits_nominal += nominal
+            out.bits_data += data
+            if msg.is_error_frame:
+                out.error_frames += 1
+                frames['error frame'] += 1
+                continue
+            by_id_count[msg.arbitration_id] += 1
+            try:
+                decoded = proto.decode(msg)
+            except MalformedFrame:
+                out.frames_malformed += 1
+                m = by_id.get(msg.arbitration_id)
+                frames[m.name if m else f'0x{msg.arbitration_id:x}'] += 1
+                continue
+            if decoded is None:
+                out.frames_unknown += 1
+                frames[f'0x{msg.arbitration_id:x}'] += 1
+                continue
+            name, sig = decoded
+            frames[name] += 1
+            if name == 'Feedback':
+                ref = expected if expected is not None else max(last_status_seq or 0, 0)
+                s = unwrap_sequence(int(sig['FB_Sequence']), ref)
+                if expected is not None and s < expected:
+                    out.frames_late += 1      # delayed or duplicated: its slot is already past (as the driver)
+                    continue
+                if expected is not None and s > expected:
+                    gap = {'expected': expected, 'received': s, 'lost': s - expected, 'time': rel}
+                    if state in idle_states:
+                        out.jumps.append(gap)    # an idle controller started a new stream there: no loss
+                    else:
+                        out.gaps.append(gap)
+                        out.samples_lost += s - expected
+                expected = s + 1
+                a['sequence'].append(s)
+                a['time'].append(t)
+                a['displacement'].append(sig['FB_Displacement'])
+                a['force'].append(sig['FB_Force'])
+                a['setpoint'].append(sig['FB_Setpoint'])
+                a['temperature'].append(temperature)
+                a['status'].append(faults)
+            elif name == 'Setpoint':
+                sp_ref = unwrap_sequence(int(sig['SP_Sequence']), sp_ref if sp_ref is not None else (expected or 0))
+                a['setpoint_sequence'].append(sp_ref)
+                a['setpoint_time'].append(rel)
+                a['setpoint_displacement'].append(sig['SP_Displacement'])
+            elif name == 'ControllerStatus':
+                code, faults = int(sig['ST_State']), int(sig['ST_Faults'])
+                out.faults |= faults
+                last_status_seq = unwrap_sequence(int(sig['ST_LastSequence']), last_status_seq
+                                                  if last_status_seq is not None else (expected or 0))
+                a['status_time'].append(rel)
+                a['status_state'].append(code)
+                a['status_faults'].append(faults)
+                a['status_last_sequence'].append(last_status_seq)
+                a['status_buffer_level'].append(int(sig['ST_BufferLevel']))
+                state = _state_change(out, state, code, rel)
+            elif name == 'ControllerHeartbeat':
+                code = int(sig['HB_State'])
+                a['heartbeat_time'].append(rel)
+                a['heartbeat_state'].append(code)
+                state = _state_change(out, state, code, rel)
+            elif name == 'Temperature':
+                temperature = float(sig['TEMP_Specimen'])
+            elif name == 'HostCommand':
+                code = int(sig['CMD_Code'])
+                out.commands.append((rel, cmd_names.get(code, str(code)), float(sig['CMD_Argument'])))
+    finally:   # also after damage: what was decoded is the result
+        out.frames = dict(frames)
+        out.frames_by_id = dict(sorted(by_id_count.items()))
+        out.channels = [c for c in channels if c is not None]
+        for key, dtype in _ARRAYS.items():
+            setattr(out, key, np.asarray(a[key], dtype=dtype))
+        t = out.time
+        out.time_ns = np.round(t * 1e9).astype(np.int64)
+        out.time = t - out.start if t.size else t
+
+
+def _state_change(out: CanLog, state, code, rel):
+    if code != state:
+        out.states.append((rel, STATES[code] if code < len(STATES) else f'state {code}'))
+    return code
