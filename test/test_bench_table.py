@@ -18,6 +18,7 @@ from types import SimpleNamespace
 
 import pytest
 
+from rubber_rig.cli.bench import save_summary
 from rubber_rig.excitation import Program
 from rubber_rig.online.summary import BlockTable, write_summary
 
@@ -26,6 +27,14 @@ PROGRAM = Program.from_yaml_text(
     '  - {name: s, waveform: sine, frequency: 4 Hz, amplitude: 1 mm, cycles: 8}\n'
     '  - {name: w, waveform: sweep_log, f_start: 1 Hz, f_end: 10 Hz, duration: 20 s, amplitude: 0.5 mm}\n'
     '  - {name: h, waveform: hold, duration: 1 s}\n')
+
+SUMMARY = {'program': 't', 'recording': 'run.mcap', 'wall_time_s': 3.5,
+           'rig': {'backend': 'sim', 'sample_rate': 1000.0, 'paced': False, 'specimen': 'x'},
+           'model': {'source': 'parameter_set', 'parameter_set': 'swing_arm_joint_20C', 'values': {'k0': 1.2e7}},
+           'result': {'message': 'completed'},
+           'loss': {'live': {'samples': {'samples': 100, 'gaps': 0}, 'prediction': {'samples': 100, 'gaps': 0}},
+                    'recording': {'samples_lost': 0}},
+           'latency': {}, 'blocks': []}
 
 
 def cycle(block, i, f, amplitude, k_meas, k_model, c_meas=2e5, c_model=2.1e5):
@@ -70,15 +79,20 @@ def test_summary_files_hold_the_rows(tmp_path):
     for i in range(1, 9):
         t.add(cycle(0, i, 4.0, 1e-3, 14e6, 14.7e6))
     rows = t.row_list(0)
-    summary = {'program': 't', 'recording': 'run.mcap', 'wall_time_s': 3.5,
-               'rig': {'backend': 'sim', 'sample_rate': 1000.0, 'paced': False, 'specimen': 'x'},
-               'model': {'source': 'parameter_set', 'parameter_set': 'swing_arm_joint_20C', 'values': {'k0': 1.2e7}},
-               'result': {'message': 'completed'},
-               'loss': {'live': {'samples': {'samples': 100, 'gaps': 0}, 'prediction': {'samples': 100, 'gaps': 0}},
-                        'recording': {'samples_lost': 0}},
-               'latency': {}, 'blocks': rows}
+    summary = {**SUMMARY, 'blocks': rows}
     jpath, mpath = write_summary(tmp_path / 'run.mcap', summary)
     assert json.loads(jpath.read_text())['blocks'][0]['measured']['k_dyn'] == pytest.approx(14e6)
     md = mpath.read_text()
     assert '| 0 | s | 4.00 | 1.000 | 1.000 | 14.000 | 14.700 | +5.00 |' in md
     assert f"{math.degrees(0.1):.2f} / {math.degrees(0.1):.2f}" in md
+
+
+def test_a_summary_that_cannot_be_written_is_printed_instead(tmp_path, capsys):
+    summary = {**SUMMARY, 'wall_time_s': 1.5}
+    missing = tmp_path / 'gone' / 'run.mcap'           # its directory does not exist: the write fails
+    assert save_summary(missing, summary) == (None, None, f'cannot write the summary next to {missing}: '
+                                                          'No such file or directory')
+    assert json.loads(capsys.readouterr().out) == summary
+    jpath, mpath, error = save_summary(tmp_path / 'run.mcap', SUMMARY)
+    assert error == '' and jpath.name == 'run.summary.json' and mpath.name == 'run.summary.md'
+    assert '- result: completed in 3.5 s wall time' in mpath.read_text()

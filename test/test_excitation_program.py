@@ -225,3 +225,32 @@ def test_block_to_dict_is_the_inverse_of_parse_block():
     assert [b.name for b in short.blocks] == ['a', 'g', 'h', 'i']
     assert short.blocks[0].cycles == 1 and short.blocks[0].taper_cycles == 1
     assert short.blocks[1].duration == 0.5 and short.blocks[3].duration == 2.0        # ramps keep their time
+
+
+def test_parse_block_of_to_dict_gives_the_same_block_for_every_waveform():
+    """parse_block(b.to_dict()) == b, field by field, for each waveform (both ways of giving a triangle and a ramp),
+    also about a mean other than 0 and through YAML text (what a rewritten program is sent as)."""
+    import yaml
+
+    from rubber_rig.excitation.blocks import parse_block
+    from rubber_rig.excitation.waveforms import WAVEFORMS
+    text = ('name: all\nblocks:\n'
+            '  - {name: up, waveform: ramp, target: 1.5 mm, duration: 1 s}\n'
+            '  - {waveform: sine, frequency: 7 Hz, amplitude: 0.3 mm, cycles: 5, taper_cycles: 1.5}\n'
+            '  - {name: tr, waveform: triangle, rate: 3 mm/s, amplitude: 0.7 mm, cycles: 2}\n'
+            '  - {name: tf, waveform: triangle, frequency: 0.25 Hz, amplitude: 0.5 mm, cycles: 1}\n'
+            '  - {name: sq, waveform: square, frequency: 2 Hz, rate: 50 mm/s, amplitude: 0.4 mm, cycles: 3}\n'
+            '  - {name: sl, waveform: sweep_lin, f_start: 10 Hz, f_end: 2 Hz, duration: 3 s, amplitude: 0.2 mm}\n'
+            '  - {name: sg, waveform: sweep_log, f_start: 0.5 Hz, f_end: 30 Hz, duration: 6 s, amplitude: 0.1 mm,'
+            ' taper_cycles: 3}\n'
+            '  - {name: h, waveform: dwell, duration: 0.25 s}\n'
+            '  - {name: down, waveform: ramp, target: -0.5 mm, rate: 4 mm/s}\n')
+    blocks = Program.from_yaml_text(text).blocks
+    assert {b.waveform for b in blocks} == set(WAVEFORMS)
+    assert blocks[1].mean == pytest.approx(1.5e-3) and blocks[4].square_slope > 1
+    for b in blocks:
+        d = b.to_dict()
+        assert parse_block(d, b.index, b.start_level, {}) == b, b.name
+        assert parse_block(yaml.safe_load(yaml.safe_dump(d)), b.index, b.start_level, {}) == b, b.name
+    assert 'rate' in blocks[2].to_dict() and 'frequency' not in blocks[2].to_dict()       # given as it was
+    assert 'rate' in blocks[8].to_dict() and 'duration' not in blocks[8].to_dict()

@@ -1,0 +1,267 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The ROS side of ``rubber-rig bench``: the suite's nodes in this process, the RunProgram goal with its feedback
+and cycle metrics, and the end of the recording. ``bench.run`` drives it; the per-block table and the summary
+files (``online.summary``) and the screen (``cli.bench_view``) know nothing of ROS.
+
+Every wait here waits for something to happen, with a deadline; when the deadline passes the bench says what did
+not happen (an error that stops it, or a warning where the summary can still count what is missing).
+"""
+from __future__ import annotations
+
+import copy
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+from msg_defs.msg import RigStatus
+from msg_defs.srv import RecorderControl
+from rubber_rig.cli.bench_view import progress_text
+from rubber_rig.cli.main import CommandError
+from rubber_rig.nodes.element_model_node import ElementModelNode
+from rubber_rig.nodes.excitation_node import ExcitationNode
+from rubber_rig.nodes.foxglove_view_node import LAYOUT_FILE, FoxgloveViewNode
+from rubber_rig.nodes.monitor import SuiteMonitor
+from rubber_rig.nodes.recorder_node import RecorderNode
+from rubber_rig.nodes.rig_driver_node import RigDriverNode
+from rubber_rig.recording.loss import recording_loss
+
+# the streams the recorder must record (matched with their publishers) before the first setpoint is sent
+RECORDED_TOPICS = ('samples', 'prediction', 'setpoints', 'cycle_metrics', 'status')
+CONNECT_TIMEOUT = 30.0      # [s] nodes connected, goal accepted, recorder stopped
+ABORT_TIMEOUT = 15.0        # [s] the program ends after Ctrl-C cancelled it
+CATCH_UP_TIMEOUT = 5.0      # [s] the model predicts the last published samples
+TAIL_TIMEOUT = 10.0         # [s] the rig at rest and its last samples recorded
+REFRESH_PERIOD = 0.1        # [s] the screen refreshes ten times a second, at once when the program ends
+MOVING = (RigStatus.STATE_RUNNING, RigStatus.STATE_RAMPING_DOWN)
+
+
+@dataclass
+class ProgramRun:
+    """What the RunProgram goal did, as the bench saw it."""
+
+    wall_time: float = 0.0
+    interrupted: bool = False
+    recording_error: str = ''
+    result: Any = None                  # the action's result; None when it never came (interrupted)
+    published: Any = None               # the samples' StreamStats when the rig came to rest
+    future: Any = field(default=None, repr=False)
+
+
+class BenchSession:
+    """The nodes of one bench run, started in ``launcher`` (recorder first: nothing moves unless it records)."""
+
+    def __init__(self, launcher, args, program_yaml: str, out_dir: Path):
+        self.launcher = launcher
+        self.recorder = launcher.start(RecorderNode, {
+            'output_dir': str(out_dir), 'metadata.test_program': program_yaml,
+            'metadata.notes': f'rubber-rig bench --program {args.program}'})
+        if not self.recorder.core.recording:              # before any other node exists: nothing can move
+            raise CommandError('cannot record, nothing started: '
+                               f'{self.recorder.core.error or "recorder not recording"}')
+        self.model = launcher.start(ElementModelNode)
+        self.excitation = launcher.start(ExcitationNode, {'program': ''})
+        self.driver = launcher.start(RigDriverNode, driver_overrides(args))
+        if self.driver.lifecycle_state != 'active':
+            raise CommandError(f'rig_driver did not come up (lifecycle state {self.driver.lifecycle_state}); '
+                               'see the log')
+        self.foxglove = ''
+        if args.foxglove:
+            launcher.start(FoxgloveViewNode, {'port': args.foxglove_port})
+            self.foxglove = f'Foxglove: connect to ws://127.0.0.1:{args.foxglove_port}, import layout {LAYOUT_FILE}'
+        self.monitor = launcher.spin(SuiteMonitor(context=launcher.context, namespace=args.namespace))
+        self.cfg = self.driver.config
+        self._n_feedback = self._n_cycles = 0
+        self._rest_since = None
+
+    def describe(self, program) -> list[str]:
+        """The opening lines: program, rig and model, nodes (and where Foxglove connects)."""
+        cfg, p = self.cfg, self.model.predictor
+        lines = [f"rubber-rig bench: program '{program.name}' ({len(program.blocks)} blocks, "
+                 f'{program.duration(cfg.sample_rate):.1f} s of excitation at {cfg.sample_rate:g} Hz, '
+                 f"{'paced' if cfg.paced else 'as fast as possible'})",
+                 f"rig: {cfg.backend}, specimen {cfg.sim.specimen}; model fractional_zener_berg from "
+                 f"{p.parameter_set or p.choice.source}",
+                 'nodes: rig_driver, excitation, element_model, recorder' + (', foxglove_view' if self.foxglove else '')
+                 + ' (one SingleThreadedExecutor thread each)']
+        return lines + ([self.foxglove] if self.foxglove else [])
+
+    # -- before the program -----------------------------------------------------------------------------------------
+    def recorder_failed(self) -> bool:
+        st = self.monitor.recorder_status
+        return st is not None and st.state == st.STATE_ERROR
+
+    def wait_ready(self) -> str:
+        """Wait until the excitation has seen the rig ready (not the driver's first, pre-configure status) and the
+        recorder records every stream; returns the recording's path.
+        """
+        mon, exc = self.monitor, self.excitation
+        ready = self.launcher.wait_for(lambda: self.recorder_failed() or (
+            mon.status is not None and mon.action.server_is_ready() and exc.rig_ready() == ''
+            and mon.recording_ready(*RECORDED_TOPICS) == ''), CONNECT_TIMEOUT)
+        if self.recorder_failed():
+            raise CommandError(f'cannot record, nothing moved: {mon.recording_ready()}')
+        if not ready:
+            why = exc.rig_ready() or mon.recording_ready(*RECORDED_TOPICS) or 'run_program missing'
+            raise CommandError(f'the nodes did not connect within {CONNECT_TIMEOUT:.0f} s ({why})')
+        return mon.recorder_status.path
+
+    def _result_of(self, future, timeout: float, what: str):
+        if not self.launcher.wait_for(future.done, timeout):
+            raise CommandError(f'timed out after {timeout:.0f} s waiting for {what}')
+        return future.result()
+
+    # -- the program --------------------------------------------------------------------------------------------------
+    def new_cycle_metrics(self) -> list:
+        """Cycle metrics that arrived since the last call."""
+        cms = self.monitor.cycle_metrics[self._n_cycles:]
+        self._n_cycles += len(cms)
+        return cms
+
+    def run_program(self, program_yaml: str, amplitude_control: bool, on_cycle: Callable, term) -> ProgramRun:
+        """Send the goal and follow it to its end: progress line from the feedback, ``on_cycle`` for each cycle
+        metrics message. A recorder error cancels the goal (the excitation also aborts on its own), so does Ctrl-C.
+        """
+        run = ProgramRun()
+        t_start = time.monotonic()
+        goal_handle = self._result_of(self.monitor.send_program(program_yaml, amplitude_control=amplitude_control),
+                                      CONNECT_TIMEOUT, 'the goal to be accepted')
+        if not goal_handle.accepted:
+            raise CommandError('the excitation refused the program: another program is running on this ROS domain '
+                               '(a second bench? give it its own --domain-id)')
+        run.future = goal_handle.get_result_async()
+        try:
+            while not run.future.done():
+                self.launcher.check()
+                if self.recorder_failed() and not run.recording_error:
+                    run.recording_error = self.monitor.recorder_status.error
+                    term.end_status()
+                    term.line(f'RECORDING FAILED: {run.recording_error}; stopping the program (smooth ramp to rest)')
+                    goal_handle.cancel_goal_async()
+                self._show_progress(term, t_start)
+                for c in self.new_cycle_metrics():
+                    on_cycle(c)
+                self.launcher.wait_for(run.future.done, REFRESH_PERIOD)
+        except KeyboardInterrupt:
+            run.interrupted = True
+            term.end_status()
+            term.line('interrupted: aborting the program (smooth ramp to rest) ...')
+            goal_handle.cancel_goal_async()
+            if not self.launcher.wait_for(run.future.done, ABORT_TIMEOUT):
+                term.line(f'warning: the program did not end within {ABORT_TIMEOUT:.0f} s of the abort '
+                          '(no result from the excitation); the rig ramps to rest as the nodes shut down')
+        term.end_status()
+        run.wall_time = time.monotonic() - t_start
+        return run
+
+    def _show_progress(self, term, t_start: float) -> None:
+        fb = self.monitor.feedback[self._n_feedback:]
+        self._n_feedback += len(fb)
+        if fb:
+            term.status(progress_text(fb[-1], self.monitor.stats['samples'], t_start))
+
+    def catch_up(self, run: ProgramRun, on_cycle: Callable, term) -> None:
+        """Wait until the model has predicted every published sample (then the last cycle metrics are out), hand
+        those to ``on_cycle`` and take the goal's result.
+        """
+        stats = self.monitor.stats
+
+        def predicted_all():
+            return stats['prediction'].next is not None and stats['samples'].next is not None \
+                and stats['prediction'].next >= stats['samples'].next
+        if not self.launcher.wait_for(predicted_all, CATCH_UP_TIMEOUT):
+            term.line(f'warning: the model did not predict every published sample within {CATCH_UP_TIMEOUT:.0f} s '
+                      '(the table may miss the last cycles)')
+        for c in self.new_cycle_metrics():
+            on_cycle(c)
+        run.result = run.future.result().result if run.future.done() else None
+
+    # -- the end of the recording -------------------------------------------------------------------------------------
+    def _tail_recorded(self, run: ProgramRun) -> bool:
+        """True once the rig has been at rest for two batch delays (a fault's ramp tail arrives after the goal
+        ended) and every sample published so far has been recorded; then ``run.published`` holds them.
+        """
+        mon, st = self.monitor.stats['samples'], self.monitor.status
+        # unpaced (--fast), the simulated controller only ticks while setpoints are queued: after the program it
+        # still says running, holding its last setpoint, but the driver has released the stream
+        at_rest = st is not None and (st.state not in MOVING
+                                      or (st.state == RigStatus.STATE_RUNNING and not st.stream_owner))
+        if not at_rest:
+            self._rest_since = None
+            return False
+        if self._rest_since is None:
+            self._rest_since = time.monotonic()
+        settled = time.monotonic() - self._rest_since >= 2 * self.driver.max_batch_delay
+        samples_topic = self.monitor.resolve_topic_name('samples')
+        recorded = self.recorder_failed() or mon.next is None \
+            or self.recorder.core.gaps.next_expected.get(samples_topic, -1) >= mon.next
+        if settled and recorded:
+            run.published = copy.copy(mon)
+        return settled and recorded
+
+    def stop_recording(self, run: ProgramRun, term) -> tuple[Path, dict]:
+        """Stop the recorder once the run's tail is recorded; (MCAP file, its loss against what was published).
+
+        A paced rig goes on sampling while it stands: the run's samples are those published up to the moment it
+        came to rest (``run.published``), not those that keep arriving until the recorder stops.
+        """
+        if not self.launcher.wait_for(lambda: self._tail_recorded(run), TAIL_TIMEOUT):
+            term.line('warning: the rig did not come to rest or the recorder did not receive the last samples '
+                      f'within {TAIL_TIMEOUT:.0f} s; the summary counts what is missing')
+        if self.recorder_failed() and not run.recording_error:
+            run.recording_error = self.monitor.recorder_status.error
+        stop = self._result_of(self.monitor.recorder(RecorderControl.Request.STOP), CONNECT_TIMEOUT,
+                               'the recorder to stop')
+        if not stop.file:
+            raise CommandError(f'the recorder did not report its file: {stop.message or "no message"}')
+        mcap = Path(stop.file)
+        rec_loss = recording_loss(mcap, run.published or self.monitor.stats['samples'], self.recorder.core.stats())
+        if run.recording_error:
+            rec_loss['recorder_error'] = run.recording_error
+        return mcap, rec_loss
+
+    def summary(self, program, mcap: Path, run: ProgramRun, rec_loss: dict, rows: list[dict]) -> dict:
+        """The run's summary (written as JSON and Markdown by ``online.summary.write_summary``)."""
+        cfg, p, result = self.cfg, self.model.predictor, run.result
+        blocks = [{'block_index': b.block_index, 'name': b.name, 'target_amplitude': b.target_amplitude,
+                   'achieved_amplitude': b.achieved_amplitude, 'completed': b.completed, 'message': b.message}
+                  for b in (result.blocks if result else [])]
+        return {
+            'program': program.name, 'recording': str(mcap), 'wall_time_s': run.wall_time,
+            'interrupted': run.interrupted,
+            'rig': {'backend': cfg.backend, 'sample_rate': cfg.sample_rate, 'paced': cfg.paced,
+                    'specimen': cfg.sim.specimen, 'batch_size': self.driver.batch_size},
+            'model': {'source': p.choice.source, 'parameter_set': p.parameter_set, 'temperature': p.temperature,
+                      'values': p.params.as_dict()},
+            'result': {'success': bool(result.success) if result else False,
+                       'message': result.message if result else 'no result (interrupted)', 'blocks': blocks},
+            'loss': {'live': {k: v.as_dict() for k, v in self.monitor.stats.items()}, 'recording': rec_loss},
+            # stamps are rig time (sample index / rate): only a paced rig keeps it in step with the wall clock
+            'latency': self.monitor.latency_summary() if cfg.paced else {},
+            'blocks': rows,
+        }
+
+
+def driver_overrides(args) -> dict:
+    """rig_driver parameters the command line sets on top of the config file."""
+    overrides = {'autostart': True}
+    if args.rate:
+        overrides['sample_rate'] = float(args.rate)
+    if args.batch_size:
+        overrides['batch_size'] = int(args.batch_size)
+    if args.fast:
+        overrides['paced'] = False
+    return overrides
