@@ -369,3 +369,18 @@ def test_core_works_without_rclpy(tmp_path):
     out = subprocess.run([sys.executable, '-c', code], capture_output=True, text=True, cwd=REPO, timeout=60)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == 'False'
+
+
+def test_a_restarted_publisher_matched_late_counts_what_it_published_before():
+    """A restarted rig numbers its samples from 0; if its first message to reach the recorder is not its first
+    publication, the samples it numbered before were published unseen: lost, not a silent restart."""
+    from rubber_rig.recording.gaps import GapTracker
+    g = GapTracker()
+    for k in range(3):
+        g.observe('/s', k * 50, 50, publication_sequence=k + 1)
+    on_time = g.observe('/s', 0, 50, publication_sequence=1)            # new driver, matched from its start
+    assert on_time['kind'] == 'restart' and on_time['lost'] == 0 and g.samples_lost == 0
+    g.observe('/s', 50, 100, publication_sequence=2)                    # expected next: 150
+    late = g.observe('/s', 120, 30, publication_sequence=6)             # another new driver, matched 5 messages late
+    assert late['kind'] == 'gap' and late['restart'] and late['lost'] == 120
+    assert g.samples_lost == 120 and g.restarts == 2

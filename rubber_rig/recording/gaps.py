@@ -28,7 +28,9 @@ at ``first_sequence + N``. A larger start is a *gap*; what the skipped samples w
 - when no publication sequence number is known (data written without one, foreign recordings): lost
   (the conservative reading).
 
-A smaller start means the stream restarted (counted separately, not as loss).
+A smaller start means the stream restarted (counted separately). When the restarted publisher's first message
+is not its first publication, the samples it numbered before that message were published before the recorder
+matched it: lost.
 """
 from dataclasses import dataclass, field
 
@@ -134,8 +136,16 @@ class GapTracker:
                      'log_time_ns': int(log_time_ns)}
         else:
             self.restarts += 1
-            event = {'topic': topic, 'kind': 'restart', 'expected': expected, 'received': first,
-                     'lost': frames_lost, 'frames_lost': frames_lost, 'log_time_ns': int(log_time_ns)}
+            # a new publisher (a restarted rig numbers its samples from 0 again) whose first message reached us
+            # after others it had published (its DDS publication sequence starts at 1): the samples before this
+            # one, 0..first-1, were published before we matched it, so they are lost, not merely unseen
+            missed = first if pub is not None and pub > 1 and first > 0 else 0
+            if missed:
+                self._lose(topic, missed)
+                self.gaps += 1
+            event = {'topic': topic, 'kind': 'gap' if missed else 'restart', 'restart': True, 'expected': expected,
+                     'received': first, 'lost': frames_lost + missed, 'frames_lost': frames_lost,
+                     'log_time_ns': int(log_time_ns)}
         if len(self.events) < MAX_EVENTS:
             self.events.append(event)
         return event
