@@ -32,15 +32,16 @@ ROS_LAYERS = {'nodes', 'cli'}
 ALLOWED = {
     'settings': set(),
     'units': set(),
+    'versions': set(),
     'paths': set(),
     'analysis': set(),
     'models': {'analysis'},
     'excitation': {'models', 'settings', 'units'},
-    'recording': {'__init__'},
+    'recording': {'__init__', 'versions'},
     'rig': {'excitation', 'models', 'settings'},
     'online': {'analysis', 'excitation', 'models'},
     'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig'},
-    'nodes': {'analysis', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'settings'},
+    'nodes': {'analysis', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'settings', 'versions'},
     'cli': {'__init__', 'analysis', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording', 'rig',
             'units'},
 }

@@ -33,40 +33,26 @@ installed rclpy.
 """
 from __future__ import annotations
 
-import importlib.metadata
-import warnings
-
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.lifecycle import LifecycleNode
 from rclpy.node import Node
+
+from rubber_rig.versions import CheckedVersion
+from rubber_rig.versions import version_matches as _version_matches
 
 PACKAGE = 'rclpy'
 CHECKED_VERSION = '7.1.5'
 RCLError = _rclpy.RCLError
 
 
-def installed_version() -> str:
-    """The installed version of :data:`PACKAGE` ('' if its metadata cannot be found)."""
-    try:
-        return importlib.metadata.version(PACKAGE)
-    except importlib.metadata.PackageNotFoundError:
-        return ''
+VERSION = CheckedVersion(PACKAGE, CHECKED_VERSION, 'rubber_rig/nodes/rclpy_compat.py')
+installed_version = VERSION.installed
+check_version = VERSION.check
 
 
 def version_matches(installed: str, checked: str = CHECKED_VERSION) -> bool:
     """True when ``installed`` has the major.minor of ``checked``."""
-    return installed.split('.')[:2] == checked.split('.')[:2]
-
-
-def check_version(installed: str | None = None) -> bool:
-    """Warn (RuntimeWarning) unless the installed version has the checked major.minor; True when it has."""
-    installed = installed_version() if installed is None else installed
-    if version_matches(installed):
-        return True
-    warnings.warn(f'{PACKAGE} {installed or "(version unknown)"} is installed; rubber_rig uses private parts of it '
-                  f'checked against {CHECKED_VERSION} (rubber_rig/nodes/rclpy_compat.py)', RuntimeWarning,
-                  stacklevel=2)
-    return False
+    return _version_matches(installed, checked)
 
 
 check_version()

@@ -33,38 +33,24 @@ the public ``mcap_ros2.decoder.DecoderFactory`` (:func:`reference_decoder`), whi
 """
 from __future__ import annotations
 
-import importlib.metadata
-import warnings
-
 from mcap_ros2._dynamic import _for_each_msgdef, serialize_dynamic
 from mcap_ros2.decoder import DecoderFactory
+
+from rubber_rig.versions import CheckedVersion
+from rubber_rig.versions import version_matches as _version_matches
 
 PACKAGE = 'mcap-ros2-support'
 CHECKED_VERSION = '0.6.0'
 
 
-def installed_version() -> str:
-    """The installed version of :data:`PACKAGE` ('' if its metadata cannot be found)."""
-    try:
-        return importlib.metadata.version(PACKAGE)
-    except importlib.metadata.PackageNotFoundError:
-        return ''
+VERSION = CheckedVersion(PACKAGE, CHECKED_VERSION, 'rubber_rig/recording/mcap_compat.py')
+installed_version = VERSION.installed
+check_version = VERSION.check
 
 
 def version_matches(installed: str, checked: str = CHECKED_VERSION) -> bool:
     """True when ``installed`` has the major.minor of ``checked``."""
-    return installed.split('.')[:2] == checked.split('.')[:2]
-
-
-def check_version(installed: str | None = None) -> bool:
-    """Warn (RuntimeWarning) unless the installed version has the checked major.minor; True when it has."""
-    installed = installed_version() if installed is None else installed
-    if version_matches(installed):
-        return True
-    warnings.warn(f'{PACKAGE} {installed or "(version unknown)"} is installed; rubber_rig uses private parts of it '
-                  f'checked against {CHECKED_VERSION} (rubber_rig/recording/mcap_compat.py)', RuntimeWarning,
-                  stacklevel=2)
-    return False
+    return _version_matches(installed, checked)
 
 
 check_version()
