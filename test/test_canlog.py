@@ -37,7 +37,7 @@ from rubber_rig.rig.can.canlog import CanLogWarning
 from rubber_rig.rig.can.canlog_reader import decode_log
 from rubber_rig.settings import settings_of
 
-FAST = {'paced': False}
+FAST = {'paced': False, 'profile': 'single'}   # one frame per sample: frame counts are sample counts
 FORMATS = ('.blf', '.asc', '.log')
 PROG = Program.from_yaml_text('name: canlog\nblocks:\n  - {waveform: sine, frequency: 8 Hz, amplitude: 0.5 mm, '
                               'cycles: 4}\n')
@@ -97,6 +97,31 @@ def test_decoded_log_equals_the_run(logged_runs, suffix):
     assert sum(log.frames.values()) == log.frames_total == log.frames_rx + log.frames_tx
     assert [s for _, s in log.states][:2] == ['idle', 'running'] and log.faults_seen == []
     assert log.commands[-1][1] == 'ABORT'          # closing the rig commands the ramp to rest
+
+
+@pytest.mark.parametrize('profile, rate', [('packed', 6000.0), ('classic', 500.0)])
+def test_packed_and_classic_logs_decode_to_the_run(tmp_path, profile, rate):
+    """Packed frames (6 samples per frame at 6 kHz) and the classic pairs decode to the same samples."""
+    path = tmp_path / 'rig.blf'
+    cfg = {'paced': False, 'profile': profile, 'sample_rate': rate, 'can_log': str(path)}
+    if profile == 'classic':
+        cfg['fd'] = False
+    r = run_program(PROG, cfg)
+    assert r.completed, r.message
+    log = decode_clean(path)
+    np.testing.assert_array_equal(log.sequence, r.sequence)
+    np.testing.assert_allclose(log.force, r.force, rtol=0, atol=0.005)
+    np.testing.assert_allclose(log.setpoint, r.setpoint, rtol=0, atol=0.5e-7)
+    np.testing.assert_allclose(log.setpoint_displacement[:PROG.n_samples(rate)], PROG.setpoints(rate), rtol=0,
+                               atol=0.6e-7)
+    assert log.samples_lost == 0 and log.gaps == [] and np.all(np.diff(log.time) >= 0)
+    st = r.final_status
+    if profile == 'packed':
+        assert log.frames['FeedbackPacked'] == pytest.approx(st.samples_received / 6, abs=20)
+        assert log.frames['SetpointPacked'] == pytest.approx(st.setpoints_sent / 19, abs=20)
+    else:
+        assert log.frames['FeedbackApplied'] == log.frames['FeedbackMeasured'] == st.samples_received
+    assert 'Feedback' not in log.frames and 'Setpoint' not in log.frames or profile == 'classic'
 
 
 @pytest.mark.parametrize('suffix', FORMATS)

@@ -110,8 +110,8 @@ def test_host_silence_makes_the_controller_ramp_on_its_own():
         t = np.arange(1500) / 1000.0
         x = 1e-3 * np.sin(2 * np.pi * 5 * t) * np.minimum(t / 0.2, 1.0) ** 2
         # stream setpoints without the driver's heartbeats: a dead host, as the controller sees it
-        for i, v in enumerate(x):
-            drv.bus.send(drv.proto.encode('Setpoint', {'SP_Sequence': i, 'SP_Displacement': float(v)}))
+        for msg in drv.frames.encode_setpoints(0, x.tolist()):
+            drv.bus.send(msg)
         for _ in range(200000):
             drv.poll()
             if drv.controller_state == 'fault':

@@ -28,8 +28,15 @@ from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, Protocol, crc8
 def test_dbc_defines_the_rig_frames_with_units_and_counters():
     db = cantools.database.load_file(str(DBC_PATH))
     names = {m.name for m in db.messages}
-    assert names == {'HostCommand', 'HostLimits', 'Setpoint', 'Feedback', 'ControllerStatus', 'Temperature',
+    assert names == {'HostCommand', 'HostLimits', 'Setpoint', 'SetpointPacked', 'Feedback', 'FeedbackPacked',
+                     'FeedbackApplied', 'FeedbackMeasured', 'ControllerStatus', 'Temperature',
                      'ControllerHeartbeat', 'HostHeartbeat'}
+    assert db.version == 'rubber_rig 3'
+    packed = db.get_message_by_name('FeedbackPacked')
+    assert packed.is_fd and packed.length == 64 and packed.get_signal_by_name('FBP_Sequence').length == 32
+    assert {s.unit for s in packed.signals if s.name.startswith('FBP_Force')} == {'N'}
+    measured = db.get_message_by_name('FeedbackMeasured')
+    assert not measured.is_fd and measured.length == 8
     fb = db.get_message_by_name('Feedback')
     units = {s.name: s.unit for s in fb.signals}
     assert units['FB_Displacement'] == 'm' and units['FB_Force'] == 'N' and fb.is_fd and fb.length == 12
@@ -108,7 +115,7 @@ def test_sequence_unwrap():
 
 
 def test_driver_counts_unknown_and_malformed_frames_without_crashing():
-    cfg = RigConfig.from_dict({'backend': 'virtual', 'channel': 'rr_test_counts', 'paced': False})
+    cfg = RigConfig.from_dict({'backend': 'virtual', 'channel': 'rr_test_counts', 'paced': False, 'profile': 'single'})
     host = can.Bus(interface='virtual', channel='rr_test_counts')
     other = can.Bus(interface='virtual', channel='rr_test_counts')
     try:
@@ -184,16 +191,20 @@ def test_3khz_short_run_no_loss():
 def test_a_rate_the_configured_bus_cannot_carry_is_refused_before_the_bus_opens():
     before = set(can.interfaces.virtual.channels)
     prog = Program.from_yaml_text('blocks:\n  - {waveform: sine, frequency: 20 Hz, amplitude: 0.5 mm, cycles: 2}\n')
-    with pytest.raises(ConfigError, match=r"'sample_rate': 5000 Hz needs 10[0-9] % of the 1/5 Mbit/s CAN FD bus, "
-                                          r'more than max_bus_load \(70 %\): this bus carries at most 34[0-9]{2} Hz'):
-        run_program(prog, {'paced': False, 'sample_rate': 5000.0})
+    with pytest.raises(ConfigError, match=r"'sample_rate': 5000 Hz needs 10[0-9] % of the 1/5 Mbit/s CAN FD bus "
+                                          r'with single frames, more than max_bus_load \(70 %\): this bus carries at '
+                                          r'most 34[0-9]{2} Hz'):
+        run_program(prog, {'paced': False, 'sample_rate': 5000.0, 'profile': 'single'})
     with pytest.raises(ConfigError, match='needs .* than max_bus_load \\(100 %\\)'):
-        run_program(prog, {'paced': False, 'sample_rate': 5000.0, 'max_bus_load': 1.0})   # a full bus is full
-    with pytest.raises(ConfigError, match=r"'sample_rate': 2000 Hz needs 7[0-9] % of the 0.5/5 Mbit/s CAN FD bus"
-                                          r'.*at most 17[0-9]{2} Hz'):
-        run_program(prog, {'paced': False, 'sample_rate': 2000.0, 'bitrate': 500_000})
-    with pytest.raises(ConfigError, match=r"field 'fd': .*Feedback is a CAN FD frame"):
-        run_program(prog, {'paced': False, 'fd': False})
+        run_program(prog, {'paced': False, 'sample_rate': 5000.0, 'max_bus_load': 1.0, 'profile': 'single'})
+    with pytest.raises(ConfigError, match=r"'sample_rate': 1000 Hz needs 8[0-9] % of the 0.5 Mbit/s classic CAN bus "
+                                          r'with classic frames.*at most 85[0-9] Hz'):
+        run_program(prog, {'paced': False, 'bitrate': 500_000, 'fd': False})
+    with pytest.raises(ConfigError, match=r"'sample_rate': 20000 Hz needs 7[0-9] % of the 1/5 Mbit/s CAN FD bus "
+                                          r'with packed frames'):
+        run_program(prog, {'paced': False, 'sample_rate': 20000.0})
+    with pytest.raises(ConfigError, match=r"field 'profile': .*Packed is a CAN FD frame"):
+        run_program(prog, {'paced': False, 'fd': False, 'profile': 'packed'})
     assert set(can.interfaces.virtual.channels) == before          # no bus was opened
     cfg = RigConfig.from_dict({'sample_rate': 2000.0})
     assert cfg.bus_load().load == pytest.approx(2000 * cfg.bus_load().per_sample + cfg.bus_load().periodic)

@@ -43,8 +43,8 @@ def test_fd_frames_switch_to_the_data_bitrate_after_arbitration():
         fd_length(65)
 
 
-def test_the_protocol_fills_a_1_5_mbit_bus_at_about_5_khz():
-    load = protocol_load(1000.0, 1e6, 5e6, fd=True)
+def test_single_sample_frames_fill_a_1_5_mbit_bus_at_about_5_khz():
+    load = protocol_load(1000.0, 1e6, 5e6, fd=True, profile='single')
     setpoint, feedback = load.frames['Setpoint'][1], load.frames['Feedback'][1]
     assert setpoint == pytest.approx(135e-6) and feedback == pytest.approx(frame_time(12, 1e6, 5e6, fd=True))
     assert load.per_sample == pytest.approx(setpoint + feedback)
@@ -52,9 +52,35 @@ def test_the_protocol_fills_a_1_5_mbit_bus_at_about_5_khz():
     assert load.periodic == pytest.approx(150 * 135e-6)
     assert load.load == pytest.approx(1000 * load.per_sample + load.periodic)
     assert 4800 < load.max_rate < 5000 and 2300 < load.rate_at(0.5) < 2500
-    assert protocol_load(load.max_rate, 1e6, 5e6).load == pytest.approx(1.0)
+    assert protocol_load(load.max_rate, 1e6, 5e6, profile='single').load == pytest.approx(1.0)
 
 
-def test_a_classic_bus_cannot_carry_the_fd_feedback_frame():
-    with pytest.raises(ValueError, match='Feedback is a CAN FD frame.*classic CAN bus'):
-        protocol_load(1000.0, 1e6, fd=False)
+def test_packed_frames_carry_10_khz_within_half_a_1_5_mbit_bus():
+    load = protocol_load(10000.0, 1e6, 5e6, fd=True)           # packed is the FD default
+    sp, fb = load.frames['SetpointPacked'], load.frames['FeedbackPacked']
+    t64 = frame_time(64, 1e6, 5e6, fd=True)
+    assert sp == pytest.approx((10000 / 19, t64)) and fb == pytest.approx((10000 / 6, t64))
+    assert set(load.frames) == {'SetpointPacked', 'FeedbackPacked', 'ControllerStatus', 'Temperature',
+                                'ControllerHeartbeat', 'HostHeartbeat'}
+    assert load.load == pytest.approx(10000 * t64 * (1 / 19 + 1 / 6) + 150 * 135e-6) and load.load < 0.5
+    # packing follows the rate (at most 1 ms of samples per frame): at 1 kHz one sample per 64-byte frame
+    one = protocol_load(1000.0, 1e6, 5e6)
+    assert one.frames['FeedbackPacked'] == pytest.approx((1000, t64))
+    assert protocol_load(one.rate_at(0.5), 1e6, 5e6).load <= 0.5 + 1e-9
+    assert 12000 < one.rate_at(0.5) < 14000 and protocol_load(one.max_rate, 1e6, 5e6).load == pytest.approx(1.0)
+
+
+def test_the_classic_profile_runs_on_8_byte_frames_and_says_its_limit():
+    load = protocol_load(500.0, 500e3, fd=False)             # classic is the default without FD
+    assert {n: f[1] for n, f in load.frames.items() if n.startswith(('Setpoint', 'Feedback'))} == pytest.approx(
+        {'Setpoint': frame_time(8, 500e3), 'FeedbackApplied': frame_time(6, 500e3),
+         'FeedbackMeasured': frame_time(8, 500e3)})
+    assert 590 < load.rate_at(0.5) < 600 and 1240 < load.max_rate < 1250
+    assert 1240 < protocol_load(500.0, 1e6, fd=False).rate_at(0.5) < 1250
+
+
+def test_a_classic_bus_cannot_carry_fd_frames():
+    with pytest.raises(ValueError, match='Feedback is a CAN FD frame.*classic CAN bus cannot carry the single'):
+        protocol_load(1000.0, 1e6, fd=False, profile='single')
+    with pytest.raises(ValueError, match='Packed is a CAN FD frame.*cannot carry the packed'):
+        protocol_load(1000.0, 1e6, fd=False, profile='packed')

@@ -28,6 +28,7 @@ import can
 from ..excitation.limits import LimitError, Limits
 from ..settings import setting
 from .can.canlog import CanLogError, log_format
+from .can.frames import PROFILES, default_profile
 from .can.protocol import cycle_time
 from .can.timing import protocol_load
 
@@ -166,6 +167,9 @@ class RigConfig:
     data_bitrate: int = setting(5_000_000, 'CAN FD data bitrate', units='bit/s', range=(10_000, 12_000_000),
                                 name='can.data_bitrate')
     fd: bool = setting(True, 'use CAN FD frames', name='can.fd')
+    profile: str = setting('', "frames that carry the samples: 'packed' (CAN FD, several samples per frame), "
+                           "'single' (CAN FD, one sample per frame), 'classic' (8-byte classic CAN frames); empty: "
+                           'packed on CAN FD, classic on classic CAN', choices=('', ) + PROFILES, name='can.profile')
     max_bus_load: float = setting(0.7, 'highest bus load the protocol may need at sample_rate (worst-case bit '
                                   'stuffing); a faster rate is refused before the bus opens', range=(0.05, 1.0),
                                   name='can.max_load')
@@ -237,23 +241,32 @@ class RigConfig:
                 raise ConfigError('can_log', str(exc)) from None
         self.sim.check()
 
+    @property
+    def frame_profile(self) -> str:
+        """The frame profile in use (profile, or the bus's default when profile is empty)."""
+        return self.profile or default_profile(self.fd)
+
     def bus_load(self):
         """The protocol's load on the configured bus at sample_rate (rubber_rig.rig.can.timing.BusLoad)."""
-        return protocol_load(self.sample_rate, self.bitrate, self.data_bitrate if self.fd else None, fd=self.fd)
+        return protocol_load(self.sample_rate, self.bitrate, self.data_bitrate if self.fd else None, fd=self.fd,
+                             profile=self.frame_profile)
 
     def _check_bus_load(self):
         if not 0 < self.max_bus_load <= 1:
             raise ConfigError('max_bus_load', f'must be within (0, 1], got {self.max_bus_load!r}')
+        if self.profile not in ('',) + PROFILES:
+            raise ConfigError('profile', f"{self.profile!r}: one of {', '.join(PROFILES)} (or empty)")
         try:
             load = self.bus_load()
         except ValueError as exc:
-            raise ConfigError('fd', str(exc)) from None
+            raise ConfigError('profile' if self.profile else 'fd', str(exc)) from None
         if load.load > self.max_bus_load:
             bus = (f'{self.bitrate / 1e6:g}/{self.data_bitrate / 1e6:g} Mbit/s CAN FD' if self.fd
                    else f'{self.bitrate / 1e6:g} Mbit/s classic CAN')
             raise ConfigError('sample_rate', f'{self.sample_rate:g} Hz needs {load.load * 100:.0f} % of the {bus} '
-                              f'bus, more than max_bus_load ({self.max_bus_load * 100:.0f} %): this bus carries at '
-                              f'most {load.rate_at(self.max_bus_load):.0f} Hz')
+                              f'bus with {self.frame_profile} frames, more than max_bus_load '
+                              f'({self.max_bus_load * 100:.0f} %): this bus carries at most '
+                              f'{load.rate_at(self.max_bus_load):.0f} Hz')
 
 
 def _build(cls, data, path):

@@ -122,7 +122,8 @@ def _open(cfg: RigConfig, proto: Protocol, tap) -> Rig:
         bus = open_bus(cfg, channel)
         sim_bus = open_bus(cfg, channel)
         try:
-            sim = SimController(sim_bus, cfg.sample_rate, cfg.sim, cfg.paced, proto)   # may raise ConfigError
+            sim = SimController(sim_bus, cfg.sample_rate, cfg.sim, cfg.paced, proto,   # may raise ConfigError
+                                profile=cfg.frame_profile)
         except Exception:
             bus.shutdown()
             sim_bus.shutdown()

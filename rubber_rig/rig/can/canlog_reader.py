@@ -30,7 +30,8 @@ import can
 import numpy as np
 
 from .canlog import SUPPORTED_FORMATS, CanLogError, CanLogWarning, log_format
-from .protocol import DBC_PATH, STATES, MalformedFrame, Protocol, fault_names, unwrap_sequence
+from .frames import PROFILES, SampleFrames
+from .protocol import DBC_PATH, STATES, STATUS_SEQ_MOD, MalformedFrame, Protocol, fault_names, unwrap
 from .timing import frame_bits
 
 
@@ -228,6 +229,13 @@ _ARRAYS = {
 
 def _decode(reader, proto: Protocol, out: CanLog, offset: float = 0.0):
     by_id = proto.by_id
+    # a log does not say which frame profile the rig ran: each identifier says it (Setpoint serves two profiles)
+    by_sample_id = {}
+    for profile in PROFILES:
+        sf = SampleFrames(profile, proto.db)
+        for codec in sf.codecs.values():
+            by_sample_id.setdefault(codec.frame_id, sf)
+    last_fb = None   # (time, sequence) of the last sample of the previous feedback frame
     cmd_names = {int(k): str(v) for k, v in proto.by_name['HostCommand'].get_signal_by_name('CMD_Code')
                  .choices.items()}
     idle_states = {i for i, s in enumerate(STATES) if s not in ('running', 'holding', 'ramping_down')}
@@ -263,6 +271,55 @@ def _decode(reader, proto: Protocol, out: CanLog, offset: float = 0.0):
                 frames['error frame'] += 1
                 continue
             by_id_count[msg.arbitration_id] += 1
+            sample_frames = None if msg.is_extended_id else by_sample_id.get(msg.arbitration_id)
+            if sample_frames is not None:
+                name = by_id[msg.arbitration_id].name
+                frames[name] += 1
+                try:
+                    if name in sample_frames.feedback_names:
+                        samples = sample_frames.decode_feedback(msg)
+                    else:
+                        seq, values = sample_frames.decode_setpoints(msg)
+                        samples = None
+                        sp_ref = unwrap(seq, sp_ref if sp_ref is not None else (expected or 0),
+                                        sample_frames.setpoint_modulus)
+                        for i, v in enumerate(values):
+                            a['setpoint_sequence'].append(sp_ref + i)
+                            a['setpoint_time'].append(rel)
+                            a['setpoint_displacement'].append(v)
+                except MalformedFrame:
+                    out.frames_malformed += 1
+                    continue
+                if samples is None:
+                    continue
+                seq, xs, fs, us = samples
+                ref = expected if expected is not None else max(last_status_seq or 0, 0)
+                s = unwrap(seq, ref, sample_frames.feedback_modulus)
+                # a packed frame's samples were taken before it was sent: spread them back over the sample period
+                # the frames' arrival times show
+                last = s + len(xs) - 1
+                period = (t - last_fb[0]) / (last - last_fb[1]) if last_fb and last > last_fb[1] else 0.0
+                last_fb = (t, last)
+                for i in range(len(xs)):
+                    if expected is not None and s + i < expected:
+                        out.frames_late += 1      # delayed or duplicated: its slot is already past (as the driver)
+                        continue
+                    if expected is not None and s + i > expected:
+                        gap = {'expected': expected, 'received': s + i, 'lost': s + i - expected, 'time': rel}
+                        if state in idle_states:
+                            out.jumps.append(gap)    # an idle controller started a new stream there: no loss
+                        else:
+                            out.gaps.append(gap)
+                            out.samples_lost += s + i - expected
+                    expected = s + i + 1
+                    a['sequence'].append(s + i)
+                    a['time'].append(t - (len(xs) - 1 - i) * period)
+                    a['displacement'].append(xs[i])
+                    a['force'].append(fs[i])
+                    a['setpoint'].append(us[i])
+                    a['temperature'].append(temperature)
+                    a['status'].append(faults)
+                continue
             try:
                 decoded = proto.decode(msg)
             except MalformedFrame:
@@ -276,37 +333,11 @@ def _decode(reader, proto: Protocol, out: CanLog, offset: float = 0.0):
                 continue
             name, sig = decoded
             frames[name] += 1
-            if name == 'Feedback':
-                ref = expected if expected is not None else max(last_status_seq or 0, 0)
-                s = unwrap_sequence(int(sig['FB_Sequence']), ref)
-                if expected is not None and s < expected:
-                    out.frames_late += 1      # delayed or duplicated: its slot is already past (as the driver)
-                    continue
-                if expected is not None and s > expected:
-                    gap = {'expected': expected, 'received': s, 'lost': s - expected, 'time': rel}
-                    if state in idle_states:
-                        out.jumps.append(gap)    # an idle controller started a new stream there: no loss
-                    else:
-                        out.gaps.append(gap)
-                        out.samples_lost += s - expected
-                expected = s + 1
-                a['sequence'].append(s)
-                a['time'].append(t)
-                a['displacement'].append(sig['FB_Displacement'])
-                a['force'].append(sig['FB_Force'])
-                a['setpoint'].append(sig['FB_Setpoint'])
-                a['temperature'].append(temperature)
-                a['status'].append(faults)
-            elif name == 'Setpoint':
-                sp_ref = unwrap_sequence(int(sig['SP_Sequence']), sp_ref if sp_ref is not None else (expected or 0))
-                a['setpoint_sequence'].append(sp_ref)
-                a['setpoint_time'].append(rel)
-                a['setpoint_displacement'].append(sig['SP_Displacement'])
-            elif name == 'ControllerStatus':
+            if name == 'ControllerStatus':
                 code, faults = int(sig['ST_State']), int(sig['ST_Faults'])
                 out.faults |= faults
-                last_status_seq = unwrap_sequence(int(sig['ST_LastSequence']), last_status_seq
-                                                  if last_status_seq is not None else (expected or 0))
+                last_status_seq = unwrap(int(sig['ST_LastSequence']), last_status_seq if last_status_seq is not None
+                                         else (expected or 0), STATUS_SEQ_MOD)
                 a['status_time'].append(rel)
                 a['status_state'].append(code)
                 a['status_faults'].append(faults)

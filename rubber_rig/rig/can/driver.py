@@ -23,6 +23,7 @@ import time
 import numpy as np
 
 from ...excitation.ramp import stopping_positions
+from .frames import SampleFrames
 from .protocol import (
     CMD_ABORT,
     CMD_HOLD,
@@ -34,12 +35,12 @@ from .protocol import (
     FAULT_STREAM,
     FAULT_VELOCITY_LIMIT,
     FAULT_WATCHDOG,
-    SEQ_MOD,
     STATES,
+    STATUS_SEQ_MOD,
     MalformedFrame,
     Protocol,
     fault_names,
-    unwrap_sequence,
+    unwrap,
 )
 from .sensor_check import SensorCheck
 from .stream import DriverStatus, GrantedStream, SampleBlock, StreamGrant, StreamRefused
@@ -77,8 +78,11 @@ class RigDriver:
         self.bus_load = config.bus_load().load
         self.limits = config.limits
         self._clock = clock
-        self._handlers = {'Feedback': self._on_feedback, 'ControllerStatus': self._on_status,
-                          'ControllerHeartbeat': self._on_heartbeat, 'Temperature': self._on_temperature}
+        # the frames that carry samples (config.frame_profile) take a fast path; the rest go through cantools
+        self.frames = SampleFrames(config.frame_profile, self.proto.db, self.fs)
+        self._feedback_ids = {self.frames.codecs[n].frame_id for n in self.frames.feedback_names}
+        self._handlers = {'ControllerStatus': self._on_status, 'ControllerHeartbeat': self._on_heartbeat,
+                          'Temperature': self._on_temperature}
         # stream bookkeeping
         self._stream = None              # GrantedStream of the owner, or None
         self._stream_ids = itertools.count(int(clock() * 1000) % 1_000_000 * 1000 + 1)
@@ -254,14 +258,15 @@ class RigDriver:
             self._last_fb_wall = self._clock()   # pipeline was empty: the feedback clock starts now
         if self._next_hb_seq is None or self._next_hb_seq < first_sequence - self._hb_every:
             self._next_hb_seq = first_sequence
-        encode, send = self.proto.encode, self.bus.send
-        for i, value in enumerate(x.tolist()):
-            seq = first_sequence + i
-            if seq >= self._next_hb_seq:
+        send, per = self.bus.send, self.frames.setpoints_per_frame
+        values = x.tolist()
+        for i, msg in enumerate(self.frames.encode_setpoints(first_sequence, values)):
+            last = first_sequence + min((i + 1) * per, len(values)) - 1
+            if last >= self._next_hb_seq:
                 # heartbeats ride with the stream so the controller sees them at the right sample in fast mode
                 self._send_host_heartbeat()
-                self._next_hb_seq = seq + self._hb_every
-            send(encode('Setpoint', {'SP_Sequence': seq % SEQ_MOD, 'SP_Displacement': value}))
+                self._next_hb_seq = last + self._hb_every
+            send(msg)
         s.queued_end = first_sequence + x.size
         s.last_queued, s.last_velocity = float(x[-1]), float(v[-1])
         self.counters['setpoints_sent'] += int(x.size)
@@ -389,6 +394,16 @@ class RigDriver:
         return self._ready.popleft() if self._ready else None
 
     def _receive(self, msg):
+        if msg.arbitration_id in self._feedback_ids and not msg.is_extended_id:
+            try:
+                samples = self.frames.decode_feedback(msg)
+            except MalformedFrame:
+                self.counters['frames_malformed'] += 1
+                self._bad_event(1)
+                return
+            if samples is not None:
+                self._on_samples(*samples, msg.timestamp)
+            return
         try:
             decoded = self.proto.decode(msg)
         except MalformedFrame:
@@ -404,22 +419,29 @@ class RigDriver:
             return
         handler(decoded[1], msg)
 
-    def _on_feedback(self, sig, msg):
+    def _on_samples(self, seq, xs, fs, us, timestamp):
+        """Contiguous measured samples from sequence number seq (modulo the profile's): displacement xs [m],
+        force fs [N], applied command us [m] (lists); timestamp: the frame's arrival time.
+        """
         ref = self._jump_to if self._jump_to is not None and self._expected is None else (
             self._expected if self._expected is not None else max(self.controller_sequence, 0))
-        seq = unwrap_sequence(int(sig['FB_Sequence']), ref)
-        if self._jump_to is not None and seq >= self._jump_to - 1:
-            if seq == self._jump_to and (self._expected is None or seq > self._expected):
-                self._expected = seq   # an idle rig started the new stream here: a jump, not a loss
+        seq = unwrap(seq, ref, self.frames.feedback_modulus)
+        n = len(xs)
+        if self._jump_to is not None and seq + n - 1 >= self._jump_to - 1:
+            if seq <= self._jump_to < seq + n and (self._expected is None or self._jump_to > self._expected):
+                self._expected = self._jump_to   # an idle rig started the new stream here: a jump, not a loss
                 if self._hb_sample is not None:   # nor heartbeat silence: no sample passed in between
-                    self._hb_sample = seq
+                    self._hb_sample = self._jump_to
             self._jump_to = None
         if self._expected is None:
             self._expected = seq
         if seq < self._expected:
-            self.counters['frames_late'] += 1    # delayed or duplicated: its slot is already past
-            self._bad_event(1)
-            return
+            skip = min(n, self._expected - seq)
+            self.counters['frames_late'] += skip    # delayed or duplicated: their slots are already past
+            self._bad_event(skip)
+            if skip == n:
+                return
+            seq, xs, fs, us, n = seq + skip, xs[skip:], fs[skip:], us[skip:], n - skip
         if seq > self._expected:
             lost = seq - self._expected
             self.counters['frames_lost'] += lost
@@ -430,28 +452,31 @@ class RigDriver:
                 self._fault(FAULT_BUS, f'{lost} consecutive samples lost ({lost / self.fs * 1e3:.1f} ms > '
                                        f'{self.cfg.lost_burst_max * 1e3:g} ms)')
         if self._pend_first is None:
-            self._pend_first, self._pend_t0 = seq, msg.timestamp
-        x, f, u = float(sig['FB_Displacement']), float(sig['FB_Force']), float(sig['FB_Setpoint'])
+            # the first sample's time: its frame arrived at `timestamp`, after the later samples it packs
+            self._pend_first, self._pend_t0 = seq, timestamp - (n - 1) / self.fs
         px, pf, pu = self._pend
-        px.append(x)
-        pf.append(f)
-        pu.append(u)
-        self._prev_applied, self._last_applied = self._last_applied, u
-        self._expected = seq + 1
-        self.counters['samples_received'] += 1
+        px.extend(xs)
+        pf.extend(fs)
+        pu.extend(us)
+        self._prev_applied, self._last_applied = (us[-2] if n > 1 else self._last_applied), us[-1]
+        self._expected = seq + n
+        self.counters['samples_received'] += n
         self._last_fb_wall = self._clock()
-        self._check_measurement(x, f)
+        self._check_measurements(xs, fs)
         if self.controller_state in ('running', 'ramping_down') and not self.faults & FAULT_SENSOR:
-            why = self._sensor.add(u, x, f)
-            if why:
-                self._fault(FAULT_SENSOR, why)
+            add = self._sensor.add
+            for u, x, f in zip(us, xs, fs, strict=True):
+                why = add(u, x, f)
+                if why:
+                    self._fault(FAULT_SENSOR, why)
+                    break
 
     def _on_status(self, sig, msg):
         code = int(sig['ST_State'])
         self._set_controller_state(STATES[code] if code < len(STATES) else 'fault')
         self.controller_faults = int(sig['ST_Faults'])
         ref = self.controller_sequence if self.controller_sequence >= 0 else (self._expected or 0)
-        self.controller_sequence = unwrap_sequence(int(sig['ST_LastSequence']), ref)
+        self.controller_sequence = unwrap(int(sig['ST_LastSequence']), ref, STATUS_SEQ_MOD)
 
     def _on_heartbeat(self, sig, msg):
         code = int(sig['HB_State'])
@@ -498,17 +523,21 @@ class RigDriver:
             self._fault(FAULT_BUS, f'{total} bad frames (lost/late/malformed) within 1 s of samples '
                                    f'(> {self.cfg.bus_error_max})')
 
-    def _check_measurement(self, x, f):
+    def _check_measurements(self, xs, fs):
+        """Force and displacement limits on measured samples (lists)."""
         lim = self.limits
-        if not (math.isfinite(x) and math.isfinite(f)):
+        x_lo, x_hi, f_peak = min(xs), max(xs), max(max(fs), -min(fs))
+        if not (math.isfinite(x_lo) and math.isfinite(x_hi) and math.isfinite(f_peak)):
             if not self.faults & FAULT_SENSOR:
-                self._fault(FAULT_SENSOR, f'non-finite measurement (displacement {x}, force {f})')
+                self._fault(FAULT_SENSOR, f'non-finite measurement (displacement {xs}, force {fs})')
             return
-        if abs(f) > lim.force_max and not self.faults & FAULT_FORCE_LIMIT:
+        if f_peak > lim.force_max and not self.faults & FAULT_FORCE_LIMIT:
+            f = max(fs, key=abs)
             self._fault(FAULT_FORCE_LIMIT, f'measured force {f:.6g} N above force_max {lim.force_max:g} N')
         margin = 0.02 * (lim.displacement_max - lim.displacement_min)
-        if not (lim.displacement_min - margin <= x <= lim.displacement_max + margin) \
+        if not (lim.displacement_min - margin <= x_lo and x_hi <= lim.displacement_max + margin) \
                 and not self.faults & FAULT_DISPLACEMENT_LIMIT:
+            x = x_lo if x_lo < lim.displacement_min - margin else x_hi
             self._fault(FAULT_DISPLACEMENT_LIMIT, f'measured displacement {x:.6g} m outside the limits')
 
     def _watchdog(self):

@@ -20,6 +20,8 @@ from pathlib import Path
 import can
 import cantools
 
+from .codec import crc8
+
 DBC_PATH = Path(__file__).with_name('rubber_rig.dbc')
 # The DBC is the one definition of the protocol: states, command codes, fault bits and frame periods are read
 # from its VAL_ tables and GenMsgCycleTime attributes here (test_rig_protocol checks RigStatus.msg agrees).
@@ -61,8 +63,10 @@ _CMD = {name: code for code, name in _choices('HostCommand', 'CMD_Code').items()
 CMD_NOP, CMD_ENABLE, CMD_ABORT = _CMD['NOP'], _CMD['ENABLE'], _CMD['ABORT']
 CMD_RESET, CMD_DISABLE, CMD_HOLD = _CMD['RESET'], _CMD['DISABLE'], _CMD['HOLD']
 
-# sequence numbers are the sample index modulo 2**bits of SP_Sequence
+# sequence numbers are the sample index modulo 2**bits of SP_Sequence (single-sample frames) and of
+# ST_LastSequence (status); the packed frames have their own (rubber_rig.rig.can.frames)
 SEQ_MOD = 1 << _DBC.get_message_by_name('Setpoint').get_signal_by_name('SP_Sequence').length
+STATUS_SEQ_MOD = 1 << _DBC.get_message_by_name('ControllerStatus').get_signal_by_name('ST_LastSequence').length
 
 
 def fault_names(mask: int) -> list[str]:
@@ -70,35 +74,19 @@ def fault_names(mask: int) -> list[str]:
     return [name for bit, name in sorted(FAULT_NAMES.items()) if mask & bit]
 
 
-def _crc8_table():
-    table = []
-    for byte in range(256):
-        crc = byte
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-        table.append(crc)
-    return bytes(table)
-
-
-_CRC_TABLE = _crc8_table()
-
-
-def crc8(frame_id: int, payload: bytes) -> int:
-    """CRC-8 SAE J1850 (poly 0x1D, init/xor 0xFF) over the identifier (2 bytes LE) and payload."""
-    crc = 0xFF
-    for b in (frame_id & 0xFF, (frame_id >> 8) & 0xFF):
-        crc = _CRC_TABLE[crc ^ b]
-    for b in payload:
-        crc = _CRC_TABLE[crc ^ b]
-    return crc ^ 0xFF
+def unwrap(seq: int, reference: int, modulus: int) -> int:
+    """Full sample index for a sequence number `seq` (index mod modulus), the value nearest to `reference`."""
+    delta = (seq - reference) % modulus
+    if delta >= modulus // 2:
+        delta -= modulus
+    return reference + delta
 
 
 def unwrap_sequence(seq16: int, reference: int) -> int:
-    """Full sample index for a 16-bit sequence number, taking the value nearest to `reference`."""
-    delta = (seq16 - reference) % SEQ_MOD
-    if delta >= SEQ_MOD // 2:
-        delta -= SEQ_MOD
-    return reference + delta
+    """Full sample index for a 16-bit sequence number (Setpoint, Feedback, ControllerStatus), nearest to
+    `reference`.
+    """
+    return unwrap(seq16, reference, SEQ_MOD)
 
 
 class MalformedFrame(ValueError):

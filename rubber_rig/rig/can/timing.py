@@ -27,8 +27,9 @@ stuff bit per four bits of the stuffed fields after the first (ISO 11898-1):
   the next valid FD length (12, 16, 20, 24, 32, 48, 64 bytes). A 12-byte frame at 1/5 Mbit/s takes
   0.056 ms without stuffing, 0.065 ms worst case.
 
-:func:`protocol_load` adds the frames the rig protocol sends per second at a sample rate: one Setpoint and one
-Feedback frame per sample, and the periodic frames at their DBC GenMsgCycleTime. Bus load is the fraction of
+:func:`protocol_load` adds the frames the rig protocol sends per second at a sample rate: the setpoint and
+feedback frames of the frame profile (rubber_rig.rig.can.frames: packed, single or classic), and the periodic
+frames at their DBC GenMsgCycleTime. Bus load is the fraction of
 each second the bus is busy; rig buses are laid out for 50-70 % so that high-priority frames still get through.
 """
 from __future__ import annotations
@@ -36,12 +37,13 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from .frames import FEEDBACK_FRAMES, SETPOINT_FRAMES, SampleFrames, default_profile
 from .protocol import DBC_PATH, Protocol
 
 FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
-# frames sent once per sample (the stream), and the frames sent only on events (not counted in the load)
-PER_SAMPLE = ('Setpoint', 'Feedback')
+# frames sent only on events (not counted in the load)
 EVENT_FRAMES = ('HostCommand', 'HostLimits')
+SAMPLE_FRAMES = {name for names in (*SETPOINT_FRAMES.values(), *FEEDBACK_FRAMES.values()) for name in names}
 
 
 def fd_length(n: int) -> int:
@@ -96,7 +98,8 @@ class BusLoad:
     """The protocol's use of a bus: load [-] (busy fraction of each second), per_sample [s] of bus time
     the per-sample frames take, periodic [s/s] the periodic frames take, frames {name: (frames/s,
     duration [s])}; max_rate [Hz] the sample rate at which the bus would be full and rate_at (a
-    function) the sample rate at a given load.
+    function) the sample rate at a given load. segments: ((rate_lo, rate_hi, per_sample), ...), the bus time
+    per sample over the sample-rate ranges of constant packing (packed feedback frames fill up with the rate).
     """
 
     sample_rate: float
@@ -104,36 +107,52 @@ class BusLoad:
     per_sample: float
     periodic: float
     frames: dict
+    segments: tuple = ()
 
     @property
     def max_rate(self) -> float:
-        return (1.0 - self.periodic) / self.per_sample
+        return self.rate_at(1.0)
 
     def rate_at(self, load: float) -> float:
         """The highest sample rate [Hz] whose load stays at or below load (e.g. 0.5 for 50 %)."""
-        return max(0.0, (load - self.periodic) / self.per_sample)
+        best = 0.0
+        for lo, hi, per_sample in self.segments or ((0.0, math.inf, self.per_sample),):
+            rate = (load - self.periodic) / per_sample
+            if rate >= lo:
+                best = max(best, min(rate, hi))
+        return best
 
 
 def protocol_load(sample_rate: float, bitrate: float, data_bitrate: float = None, fd: bool = True,
-                  protocol: Protocol = None, worst_case: bool = True) -> BusLoad:
-    """Bus load of the rig protocol (the project's DBC) at sample_rate [Hz] on a bus of bitrate (and,
-    with fd, data_bitrate) [bit/s]. ValueError when the bus cannot carry a frame at all (an FD frame on
-    a classic bus).
+                  protocol: Protocol = None, worst_case: bool = True, profile: str = None) -> BusLoad:
+    """Bus load of the rig protocol (the project's DBC) with the frames of `profile` (rubber_rig.rig.can.frames;
+    default: packed on CAN FD, classic otherwise) at sample_rate [Hz] on a bus of bitrate (and, with fd,
+    data_bitrate) [bit/s]. A frame that carries k samples costs its duration / k per sample (a partly filled
+    frame at the end of a stream is not counted). ValueError when the bus cannot carry a frame of the profile
+    (an FD frame on a classic bus).
     """
     proto = protocol or Protocol()
-    frames, per_sample, periodic = {}, 0.0, 0.0
+    profile = profile or default_profile(fd)
+    sample = SampleFrames(profile, proto.db, sample_rate)
+    frames, per_sample, periodic, setpoint_time, feedback_time = {}, 0.0, 0.0, 0.0, 0.0
     for m in proto.db.messages:
-        if m.name in EVENT_FRAMES:
+        if m.name in EVENT_FRAMES or (m.name in SAMPLE_FRAMES and m.name not in sample.codecs):
             continue
         if m.is_fd and not fd:
             raise ValueError(f'{DBC_PATH.name}: {m.name} is a CAN FD frame ({m.length} bytes); a classic CAN bus '
-                             'cannot carry this protocol')
+                             f'cannot carry the {profile} profile')
         t = frame_time(m.length, bitrate, data_bitrate, fd=m.is_fd, bitrate_switch=m.is_fd, worst_case=worst_case)
-        if m.name in PER_SAMPLE:
-            frames[m.name] = (float(sample_rate), t)
-            per_sample += t
+        if m.name in sample.codecs:
+            per = sample.setpoints_per_frame if m.name in sample.setpoint_names else sample.feedback_per_frame
+            frames[m.name] = (float(sample_rate) / per, t)
+            per_sample += t / per
+            if m.name in sample.setpoint_names:
+                setpoint_time += t / per
+            else:
+                feedback_time += t
         elif m.cycle_time:
             rate = 1000.0 / m.cycle_time
             frames[m.name] = (rate, t)
             periodic += rate * t
-    return BusLoad(float(sample_rate), per_sample * sample_rate + periodic, per_sample, periodic, frames)
+    segments = tuple((lo, hi, setpoint_time + feedback_time / k) for lo, hi, k in sample.pack_ranges())
+    return BusLoad(float(sample_rate), per_sample * sample_rate + periodic, per_sample, periodic, frames, segments)

@@ -44,7 +44,7 @@ def main(argv=None) -> int:
         print(f'rubber_rig.rig.sim: error: {exc}', file=sys.stderr)
         return 2
     bus = open_bus(cfg)
-    sim = SimController(bus, cfg.sample_rate, cfg.sim, cfg.paced)
+    sim = SimController(bus, cfg.sample_rate, cfg.sim, cfg.paced, profile=cfg.frame_profile)
     signal.signal(signal.SIGTERM, lambda *_: sim._stop.set())
     signal.signal(signal.SIGINT, lambda *_: sim._stop.set())
     print('rubber_rig.rig.sim: serving', cfg.backend, cfg.channel or '', flush=True)

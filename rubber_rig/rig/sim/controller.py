@@ -26,6 +26,7 @@ import time
 import numpy as np
 
 from ...excitation.ramp import DECEL_MAX, RAMP_ACCEL, SafeRamp, stopping_positions
+from ..can.frames import SampleFrames
 from ..can.protocol import (
     CMD_ABORT,
     CMD_DISABLE,
@@ -33,12 +34,12 @@ from ..can.protocol import (
     CMD_RESET,
     FAULT_SENSOR,
     FAULT_WATCHDOG,
-    SEQ_MOD,
     STATE_CODE,
+    STATUS_SEQ_MOD,
     MalformedFrame,
     Protocol,
     cycle_time,
-    unwrap_sequence,
+    unwrap,
 )
 from .faults import FaultInjector
 from .plant import Actuator, Sensor
@@ -48,13 +49,20 @@ STREAMING = ('running', 'holding', 'ramping_down')
 
 
 class SimController:
-    """Simulated rig on python-can `bus` (any interface) at sample_rate [Hz] with SimOptions `options`."""
+    """Simulated rig on python-can `bus` (any interface) at sample_rate [Hz] with SimOptions `options`, speaking
+    the frame profile `profile` (rubber_rig.rig.can.frames) for setpoints and samples.
+    """
 
     RAMP_VELOCITY_MAX = 0.05   # [m/s] controller-side abort ramp (it does not know the host's limits)
 
-    def __init__(self, bus, sample_rate: float, options, paced: bool, protocol: Protocol = None):
+    def __init__(self, bus, sample_rate: float, options, paced: bool, protocol: Protocol = None,
+                 profile: str = 'packed'):
         self.bus, self.fs, self.opt, self.paced = bus, float(sample_rate), options, paced
         self.proto = protocol or Protocol()
+        self.frames = SampleFrames(profile, self.proto.db, self.fs)
+        self._setpoint_ids = {self.frames.codecs[n].frame_id for n in self.frames.setpoint_names}
+        self._fb = ([], [], [])           # measured x, f and applied u not yet sent
+        self._fb_first = 0                # sequence of the first of them
         # one stream per noise source, so idle-time draws (temperature) never shift the sensor noise and paced
         # and fast runs stay identical
         rng_x, rng_f, rng_t = (np.random.default_rng([options.seed, k]) for k in range(3))
@@ -155,6 +163,7 @@ class SimController:
                 # ticks only as far as setpoints are queued (or while ramping down)
                 while self._can_tick():
                     self._tick()
+                self._send_feedback()
 
     def pump(self):
         """Fast mode without a thread: handle every frame waiting on the bus and tick as far as the queued
@@ -172,6 +181,7 @@ class SimController:
             msg = self.bus.recv(0)
         while self._can_tick():
             self._tick()
+        self._send_feedback()   # nothing more to tick now: the host gets what there is
 
     def _can_tick(self):
         if self.state == 'ramping_down':
@@ -183,6 +193,9 @@ class SimController:
 
     # ---- receive
     def _handle(self, msg):
+        if msg.arbitration_id in self._setpoint_ids and not msg.is_extended_id:
+            self._on_setpoints(msg)
+            return
         try:
             decoded = self.proto.decode(msg)
         except MalformedFrame:
@@ -191,21 +204,7 @@ class SimController:
         if decoded is None:
             return
         name, sig = decoded
-        if name == 'Setpoint':
-            seq = unwrap_sequence(int(sig['SP_Sequence']), self.next_seq)
-            if self.state in ('ramping_down', 'fault'):
-                return
-            if self.state == 'idle':
-                self.buffer.clear()
-                self.next_seq = seq
-                self.state = 'running'
-                self.last_host_hb = self.ticks
-                self._housekeeping(force=True)
-            if seq < self.next_seq:
-                self.counters['setpoints_late'] += 1
-            elif len(self.buffer) < SEQ_MOD // 2:
-                self.buffer[seq] = float(sig['SP_Displacement'])
-        elif name == 'HostHeartbeat':
+        if name == 'HostHeartbeat':
             self.last_host_hb = self.ticks
         elif name == 'HostLimits':
             lo, hi = float(sig['HL_DisplacementMin']), float(sig['HL_DisplacementMax'])
@@ -222,6 +221,28 @@ class SimController:
                 self.fault_bits = 0
                 self.state = 'idle'
                 self._housekeeping(force=True)
+
+    def _on_setpoints(self, msg):
+        try:
+            seq, values = self.frames.decode_setpoints(msg)
+        except MalformedFrame:
+            self.counters['frames_bad'] += 1
+            return
+        if self.state in ('ramping_down', 'fault'):
+            return
+        seq = unwrap(seq, self.next_seq, self.frames.setpoint_modulus)
+        if self.state == 'idle':
+            self.buffer.clear()
+            self.next_seq = seq
+            self.state = 'running'
+            self.last_host_hb = self.ticks
+            self._housekeeping(force=True)
+        late = max(0, min(len(values), self.next_seq - seq))
+        self.counters['setpoints_late'] += late
+        if len(self.buffer) < self.frames.setpoint_modulus // 2:
+            buffer = self.buffer
+            for i in range(late, len(values)):
+                buffer[seq + i] = values[i]
 
     def abort(self, target: float = 0.0, fault_bits: int = 0, velocity_max: float = None):
         """Flush queued setpoints and ramp from the current command and velocity to target [m] (None: stop
@@ -271,12 +292,18 @@ class SimController:
                 sensor.stuck_value = None
         xm, fm = self.disp_sensor.read(x), self.force_sensor.read(force)
         # a frame cannot carry NaN: an invalid channel reads 0 and the status frame carries the sensor fault
-        self._send('Feedback', {'FB_Sequence': self.next_seq % SEQ_MOD,
-                                'FB_Displacement': xm if math.isfinite(xm) else 0.0,
-                                'FB_Force': fm if math.isfinite(fm) else 0.0, 'FB_Setpoint': u})
+        fx, ff, fu = self._fb
+        if not fx:
+            self._fb_first = self.next_seq
+        fx.append(xm if math.isfinite(xm) else 0.0)
+        ff.append(fm if math.isfinite(fm) else 0.0)
+        fu.append(u)
+        if len(fx) >= self.frames.feedback_per_frame:
+            self._send_feedback()
         self.next_seq += 1
         self.ticks += 1
         if self.state == 'ramping_down' and self.ramp.done:
+            self._send_feedback()
             self.state = 'fault' if self.fault_bits else 'idle'
             self.buffer.clear()
             for _, m in self._held:   # delayed frames still go out once the rig stops ticking
@@ -293,13 +320,21 @@ class SimController:
             idle += int((time.monotonic() - self._idle_since) * self.fs)
         return (self.ticks + idle) / self.fs
 
+    def _send_feedback(self):
+        """Send the samples taken since the last feedback frame (a packed frame may carry fewer than it holds)."""
+        fx, ff, fu = self._fb
+        if fx:
+            for m in self.frames.encode_feedback(self._fb_first, fx, ff, fu):
+                self._transmit('Feedback', m)
+            self._fb = ([], [], [])
+
     def _housekeeping(self, force=False):
         """Status, heartbeat and temperature at their DBC cycle times of rig time (or now if force)."""
         code = STATE_CODE[self.state]
         if force or self.ticks % self._st_every == 0:
             self._st = (self._st + 1) % 16
             self._send('ControllerStatus', {'ST_State': code, 'ST_Counter': self._st, 'ST_Faults': self.fault_bits,
-                                            'ST_LastSequence': (self.next_seq - 1) % SEQ_MOD,
+                                            'ST_LastSequence': (self.next_seq - 1) % STATUS_SEQ_MOD,
                                             'ST_BufferLevel': min(len(self.buffer), 65535)})
         if force or self.ticks % self._hb_every == 0:
             self._hb = (self._hb + 1) % 256
@@ -310,7 +345,10 @@ class SimController:
             self._send('Temperature', {'TEMP_Specimen': temp, 'TEMP_Counter': self._tc})
 
     def _send(self, name, signals):
-        msg = self.proto.encode(name, signals)
+        self._transmit(name, self.proto.encode(name, signals))
+
+    def _transmit(self, name, msg):
+        """Put msg on the bus through the fault injector (name: the frame's role, e.g. 'Feedback')."""
         for delay, m in self.faults.transmit(name, msg, self.fault_time()):
             if delay:
                 self._held.append((self.ticks + delay, m))

@@ -1,0 +1,126 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""Fast encode/decode of the rig's per-sample frames, derived from their DBC definition.
+
+cantools builds a dict per frame and (through python-can) a deep copy per send: tens of microseconds per frame,
+more than the element model costs per sample. The sample frames of rubber_rig.dbc only hold byte-aligned
+little-endian integers with a scale, so :class:`ByteCodec` reads the layout (start, length, sign, scale, offset)
+from the cantools Message and packs values with plain integer arithmetic, or decodes a whole stack of frames at
+once with numpy. cantools stays the definition: a codec refuses a message it cannot represent exactly, and
+test_rig_codec checks both agree on every field.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ['ByteCodec', 'crc8']
+
+
+def _crc8_table() -> list[int]:
+    table = []
+    for byte in range(256):
+        crc = byte
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
+        table.append(crc)
+    return table
+
+
+_CRC_TABLE = _crc8_table()
+
+
+def crc8(frame_id: int, payload) -> int:
+    """CRC-8 SAE J1850 (poly 0x1D, init/xor 0xFF) over the identifier (2 bytes LE) and payload bytes."""
+    table = _CRC_TABLE
+    crc = table[0xFF ^ (frame_id & 0xFF)]
+    crc = table[crc ^ ((frame_id >> 8) & 0xFF)]
+    for b in payload:
+        crc = table[crc ^ b]
+    return crc ^ 0xFF
+
+
+class ByteCodec:
+    """Encoder/decoder of one DBC message whose signals are all byte-aligned little-endian integers and whose
+    last byte is its CRC-8 (rubber_rig.dbc's convention).
+
+    Values are physical (the DBC's units: m, N); raw = round((value - offset) / scale), saturated to the
+    signal's integer range (a frame cannot carry more; the sender's own checks judge such a value).
+    ValueError (naming the signal) for a message this codec cannot represent exactly.
+    """
+
+    def __init__(self, message):
+        self.name, self.frame_id, self.length = message.name, message.frame_id, message.length
+        self.is_fd = bool(message.is_fd)
+        signals = message.signals[:-1]
+        crc = message.signals[-1]
+        if not (crc.name.endswith('_Crc') and crc.start == 8 * (self.length - 1) and crc.length == 8):
+            raise ValueError(f'{self.name}: the last signal must be an 8-bit CRC in the last byte')
+        self.names = [s.name for s in signals]
+        self._layout = []
+        for s in signals:
+            if s.byte_order != 'little_endian' or s.start % 8 or s.length % 8 or s.is_float or s.multiplexer_ids:
+                raise ValueError(f'{self.name}.{s.name}: not a byte-aligned little-endian integer signal')
+            nbytes = s.length // 8
+            lo, hi = (-(1 << (s.length - 1)), (1 << (s.length - 1)) - 1) if s.is_signed else (0, (1 << s.length) - 1)
+            self._layout.append((s.start // 8, nbytes, bool(s.is_signed), float(s.scale), float(s.offset), lo, hi))
+        self._integer = [sc == 1.0 and off == 0.0 for _, _, _, sc, off, _, _ in self._layout]
+        # numpy decode: one gather per byte width
+        self._groups = []
+        for nbytes in sorted({n for _, n, *_ in self._layout}):
+            cols = [i for i, (_, n, *_) in enumerate(self._layout) if n == nbytes]
+            idx = np.array([[self._layout[i][0] + k for k in range(nbytes)] for i in cols])
+            signed = np.array([self._layout[i][2] for i in cols])
+            scale = np.array([self._layout[i][3] for i in cols])
+            offset = np.array([self._layout[i][4] for i in cols])
+            self._groups.append((np.array(cols), idx, nbytes, signed, scale, offset))
+        self._shifts = {n: (8 * np.arange(n)).astype(np.int64) for n in {g[2] for g in self._groups}}
+
+    def encode(self, values) -> bytearray:
+        """Payload (length bytes, CRC filled in) for physical `values` in the order of `names`."""
+        data = bytearray(self.length)
+        for (start, nbytes, signed, scale, offset, lo, hi), value in zip(self._layout, values, strict=True):
+            raw = round((value - offset) / scale)
+            raw = lo if raw < lo else hi if raw > hi else raw
+            data[start:start + nbytes] = raw.to_bytes(nbytes, 'little', signed=signed)
+        data[-1] = crc8(self.frame_id, memoryview(data)[:-1])
+        return data
+
+    def check(self, data) -> str:
+        """'' if data has this message's length and a matching CRC, else what is wrong."""
+        if len(data) != self.length:
+            return f'{self.name}: {len(data)} bytes instead of {self.length}'
+        if crc8(self.frame_id, memoryview(data)[:-1]) != data[-1]:
+            return f'{self.name}: CRC mismatch'
+        return ''
+
+    def decode(self, data) -> list:
+        """Physical values (ints for unscaled integer signals) in the order of `names`, from one payload."""
+        out = []
+        for (start, nbytes, signed, scale, offset, _, _), integer in zip(self._layout, self._integer, strict=True):
+            raw = int.from_bytes(data[start:start + nbytes], 'little', signed=signed)
+            out.append(raw if integer else raw * scale + offset)
+        return out
+
+    def decode_many(self, payloads: np.ndarray) -> np.ndarray:
+        """Physical values, shape (n_frames, n_signals), from payloads of shape (n_frames, length) uint8."""
+        d = np.asarray(payloads, dtype=np.uint8)
+        out = np.empty((d.shape[0], len(self._layout)))
+        for cols, idx, nbytes, signed, scale, offset in self._groups:
+            raw = (d[:, idx].astype(np.int64) << self._shifts[nbytes]).sum(axis=2)
+            top = np.int64(1) << (8 * nbytes - 1)
+            raw = np.where(signed & (raw >= top), raw - 2 * top, raw)
+            out[:, cols] = raw * scale + offset
+        return out
