@@ -22,6 +22,7 @@ import pytest
 from rubber_rig.excitation import Program, load_program
 from rubber_rig.rig import RigConfig, open_rig, run_program
 from rubber_rig.rig.config import SimOptions
+from rubber_rig.rig.sim.controller import SimController
 
 from support.rig import FAST, expected_plant, poll_samples
 
@@ -126,6 +127,21 @@ def test_paced_and_fast_runs_are_identical():
     np.testing.assert_array_equal(paced.displacement[:n], fast.displacement[:n])
     np.testing.assert_array_equal(paced.force[:n], fast.force[:n])
     assert paced.wall_time >= 0.9 * n / 1000.0
+
+
+@pytest.mark.parametrize('rate, profile', [(10000.0, 'packed'), (1000.0, 'single')])
+def test_block_ticks_equal_tick_by_tick(monkeypatch, rate, profile):
+    """The controller's numpy block path gives the very samples of its per-sample path."""
+    prog = Program.from_yaml_text('name: b\nblocks:\n  - {waveform: sine, frequency: 20 Hz, amplitude: 0.5 mm, '
+                                  'cycles: 6, taper_cycles: 1}\n')
+    cfg = dict(FAST, sample_rate=rate, profile=profile)
+    blocks = run_program(prog, cfg)
+    monkeypatch.setattr(SimController, 'MAX_BLOCK', 1)     # a block of one tick takes the per-sample path
+    ticks = run_program(prog, cfg)
+    n = prog.n_samples(rate)
+    assert blocks.completed and ticks.completed and blocks.final_status.frames_lost == 0
+    for name in ('setpoint', 'displacement', 'force'):
+        np.testing.assert_array_equal(getattr(blocks, name)[:n], getattr(ticks, name)[:n])
 
 
 def test_seed000_program_block_through_the_rig_reports_progress():

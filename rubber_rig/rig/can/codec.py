@@ -89,9 +89,11 @@ class ByteCodec:
         self._shifts = {n: (8 * np.arange(n)).astype(np.int64) for n in {g[2] for g in self._groups}}
 
     def encode(self, values) -> bytearray:
-        """Payload (length bytes, CRC filled in) for physical `values` in the order of `names`."""
+        """Payload (length bytes, CRC filled in) for physical `values` in the order of `names`; signals after
+        the last value given are raw 0 (the unused slots of a packed frame).
+        """
         data = bytearray(self.length)
-        for (start, nbytes, signed, scale, offset, lo, hi), value in zip(self._layout, values, strict=True):
+        for (start, nbytes, signed, scale, offset, lo, hi), value in zip(self._layout, values, strict=False):
             raw = round((value - offset) / scale)
             raw = lo if raw < lo else hi if raw > hi else raw
             data[start:start + nbytes] = raw.to_bytes(nbytes, 'little', signed=signed)

@@ -101,7 +101,7 @@ class SampleFrames:
         out = []
         for i in range(0, len(values), per):
             chunk = values[i:i + per]
-            out.append(self._message(codec, [(first + i) % mod, len(chunk)] + chunk + [0.0] * (per - len(chunk))))
+            out.append(self._message(codec, [(first + i) % mod, len(chunk)] + chunk))   # unused slots: 0
         return out
 
     def decode_setpoints(self, msg) -> tuple:
@@ -126,8 +126,8 @@ class SampleFrames:
         mod = self.feedback_modulus
         if self.profile == 'packed':
             values = [first % mod, len(x)]
-            for i in range(self.feedback_slots):
-                values += (x[i], f[i], u[i]) if i < len(x) else (0.0, 0.0, 0.0)
+            for sample in zip(x, f, u, strict=True):   # unused slots: 0
+                values += sample
             return [self._message(self._fb, values)]
         out = []
         for i in range(len(x)):

@@ -54,6 +54,8 @@ class SimController:
     """
 
     RAMP_VELOCITY_MAX = 0.05   # [m/s] controller-side abort ramp (it does not know the host's limits)
+    MAX_BLOCK = 1024           # ticks computed at once (numpy) while nothing but the stream happens
+    MIN_RUN = 32               # from this many ticks the specimen model's batch run beats its per-sample step
 
     def __init__(self, bus, sample_rate: float, options, paced: bool, protocol: Protocol = None,
                  profile: str = 'packed'):
@@ -137,9 +139,9 @@ class SimController:
                         # watchdog does not count that time (a real controller has its own CPU)
                         self.last_host_hb += due - 1
                     while now >= deadline and self.state in STREAMING:
-                        self._tick()
-                        deadline += 1.0 / self.fs
-                        n += 1
+                        done = self._tick_block(int((now - deadline) * self.fs) + 1) or self._tick()
+                        deadline += done / self.fs
+                        n += done
                     if n > 1:
                         self.counters['overruns'] += n - 1
                     timeout = max(0.0, min(deadline - time.monotonic(), 0.01)) if self.state in STREAMING \
@@ -158,11 +160,10 @@ class SimController:
                     msg = self.bus.recv(0)
             else:
                 msg = self.bus.recv(0.02)
-                if msg is not None:
-                    self._handle(msg)
-                # ticks only as far as setpoints are queued (or while ramping down)
-                while self._can_tick():
-                    self._tick()
+                while msg is not None:
+                    self._handle_in_order(msg)
+                    msg = self.bus.recv(0)
+                self._catch_up()   # ticks only as far as setpoints are queued (or while ramping down)
                 self._send_feedback()
 
     def pump(self):
@@ -175,13 +176,23 @@ class SimController:
             self._announced = True
         msg = self.bus.recv(0)
         while msg is not None:
-            self._handle(msg)
-            while self._can_tick():
-                self._tick()
+            self._handle_in_order(msg)
             msg = self.bus.recv(0)
-        while self._can_tick():
-            self._tick()
+        self._catch_up()
         self._send_feedback()   # nothing more to tick now: the host gets what there is
+
+    def _handle_in_order(self, msg):
+        """Fast mode: setpoint frames queue up; any other frame (heartbeat, command) is handled after the ticks
+        of the setpoints that came before it on the bus, as it would be in real time.
+        """
+        if msg.arbitration_id not in self._setpoint_ids:
+            self._catch_up()
+        self._handle(msg)
+
+    def _catch_up(self):
+        """Fast mode: tick as far as the queued setpoints allow (or while ramping down)."""
+        while self._can_tick():
+            self._tick_block(self.MAX_BLOCK) or self._tick()
 
     def _can_tick(self):
         if self.state == 'ramping_down':
@@ -263,8 +274,64 @@ class SimController:
             self.state = 'fault'
         self._housekeeping(force=True)
 
+    # ---- many samples at once
+    def _tick_block(self, limit: int) -> int:
+        """Up to `limit` ticks of a running stream at once, the same samples and frames as as many _tick() calls;
+        returns how many, 0 when the next tick needs the per-sample path (not running, a fault injection or delayed frame pending, the host
+        watchdog about to expire, no setpoint queued).
+
+        A block ends at the next housekeeping tick, so status, heartbeat and temperature frames go out at the
+        same ticks as tick by tick.
+        """
+        if self.state != 'running' or self.faults.faults or self._held:
+            return 0
+        ticks, seq, buffer = self.ticks, self.next_seq, self.buffer
+        n = min(limit, self._st_every - ticks % self._st_every, self._hb_every - ticks % self._hb_every,
+                self._tc_every - ticks % self._tc_every,
+                int(self.opt.host_timeout * self.fs - (ticks - self.last_host_hb)) + 1)
+        if n < 2:
+            return 0
+        u = []
+        for k in range(seq, seq + n):
+            value = buffer.pop(k, None)
+            if value is None:
+                break
+            u.append(value)
+        n = len(u)
+        if n == 0:
+            return 0
+        x, v = self.actuator.run(u)
+        force = self.specimen.run(np.asarray(x)) if n >= self.MIN_RUN else [self.specimen.step(p) for p in x]
+        finite = np.isfinite(force)
+        bad = not finite.all()
+        if bad:   # the load cell channel went invalid: the stream ends at that tick, as tick by tick
+            n = int(np.argmin(finite)) + 1
+            for k in range(n, len(u)):
+                buffer[seq + k] = u[k]
+            u, x, force = u[:n], x[:n], np.asarray(force)[:n]
+            self.actuator.x, self.actuator.v = x[-1], v[n - 1]
+        xm, fm = self.disp_sensor.read_many(x), self.force_sensor.read_many(force)
+        fx, ff, fu = self._fb
+        if not fx:
+            self._fb_first = seq
+        # a frame cannot carry NaN: an invalid channel reads 0 and the status frame carries the sensor fault
+        fx.extend(np.where(np.isfinite(xm), xm, 0.0).tolist())
+        ff.extend(np.where(np.isfinite(fm), fm, 0.0).tolist())
+        fu.extend(u)
+        per = self.frames.feedback_per_frame
+        while len(self._fb[0]) >= per:
+            self._send_feedback(per)
+        self.u_prev, self.u = (u[-2] if n > 1 else self.u), u[-1]
+        self.next_seq += n
+        self.ticks += n
+        if bad and not self.fault_bits & FAULT_SENSOR:
+            self.abort(0.0, FAULT_SENSOR)
+        else:
+            self._housekeeping()
+        return n
+
     # ---- one sample
-    def _tick(self):
+    def _tick(self) -> int:
         t = self.fault_time()
         self._release_held()
         if self.state == 'ramping_down':
@@ -312,6 +379,7 @@ class SimController:
             self._housekeeping(force=True)
         else:
             self._housekeeping()
+        return 1
 
     def fault_time(self) -> float:
         """Time [s] on the fault schedule: rig time, plus (paced) the wall time stood idle after the first tick."""
@@ -320,13 +388,17 @@ class SimController:
             idle += int((time.monotonic() - self._idle_since) * self.fs)
         return (self.ticks + idle) / self.fs
 
-    def _send_feedback(self):
-        """Send the samples taken since the last feedback frame (a packed frame may carry fewer than it holds)."""
+    def _send_feedback(self, count: int = None):
+        """Send the first `count` samples not yet sent (default: all; a packed frame may carry fewer than it
+        holds).
+        """
         fx, ff, fu = self._fb
-        if fx:
-            for m in self.frames.encode_feedback(self._fb_first, fx, ff, fu):
+        k = len(fx) if count is None else count
+        if k:
+            for m in self.frames.encode_feedback(self._fb_first, fx[:k], ff[:k], fu[:k]):
                 self._transmit('Feedback', m)
-            self._fb = ([], [], [])
+            self._fb = (fx[k:], ff[k:], fu[k:])
+            self._fb_first += k
 
     def _housekeeping(self, force=False):
         """Status, heartbeat and temperature at their DBC cycle times of rig time (or now if force)."""

@@ -46,6 +46,26 @@ class Actuator:
         self.x, self.v = x, v
         return x
 
+    def run(self, u) -> tuple[list, list]:
+        """Apply commands u [m] (a list), one per sample; return the positions [m] and velocities [m/s] (lists),
+        exactly as repeated step() calls.
+        """
+        a11, a12, b1, a21, a22, b2, vmax = self.a11, self.a12, self.b1, self.a21, self.a22, self.b2, self.v_max
+        x0, v0 = self.x, self.v
+        xs, vs = [], []
+        for c in u:
+            x = a11 * x0 + a12 * v0 + b1 * c
+            v = a21 * x0 + a22 * v0 + b2 * c
+            if v > vmax:
+                v = vmax
+            elif v < -vmax:
+                v = -vmax
+            xs.append(x)
+            vs.append(v)
+            x0, v0 = x, v
+        self.x, self.v = x0, v0
+        return xs, vs
+
 
 class Sensor:
     """Transducer with Gaussian noise (std), offset and resolution (quantisation step), all in its unit.
@@ -75,3 +95,24 @@ class Sensor:
         if not math.isfinite(counts):
             return math.nan
         return round(counts) * self.res
+
+    def read_many(self, true_values) -> np.ndarray:
+        """Measured values for an array of true values: the same numbers and noise sequence as read() one by one
+        (not while stuck: the caller reads stuck sensors one by one).
+        """
+        true_values = np.asarray(true_values, dtype=float)
+        n = true_values.size
+        noise = np.empty(n)
+        done = 0
+        while done < n:
+            if self._i >= self._buf.size:
+                self._buf, self._i = self._rng.standard_normal(self._block) * self.noise, 0
+            take = min(n - done, self._buf.size - self._i)
+            noise[done:done + take] = self._buf[self._i:self._i + take]
+            self._i += take
+            done += take
+        with np.errstate(over='ignore', invalid='ignore'):
+            counts = (true_values + self.offset + noise) / self.res
+            out = np.round(counts) * self.res
+        out[~np.isfinite(counts)] = np.nan
+        return out
