@@ -276,9 +276,9 @@ class SimController:
 
     # ---- many samples at once
     def _tick_block(self, limit: int) -> int:
-        """Up to `limit` ticks of a running stream at once, the same samples and frames as as many _tick() calls;
-        returns how many, 0 when the next tick needs the per-sample path (not running, a fault injection or delayed frame pending, the host
-        watchdog about to expire, no setpoint queued).
+        """Up to `limit` ticks of a running stream at once, the same samples and frames as as many _tick()
+        calls; returns how many, 0 when the next tick needs the per-sample path (not running, a fault injection
+        or delayed frame pending, the host watchdog about to expire, no setpoint queued).
 
         A block ends at the next housekeeping tick, so status, heartbeat and temperature frames go out at the
         same ticks as tick by tick.
