@@ -20,6 +20,7 @@ import itertools
 import math
 import time
 
+import can
 import numpy as np
 
 from ...excitation.ramp import stopping_positions
@@ -81,6 +82,10 @@ class RigDriver:
         # the frames that carry samples (config.frame_profile) take a fast path; the rest go through cantools
         self.frames = SampleFrames(config.frame_profile, self.proto.db, self.fs)
         self._feedback_ids = {self.frames.codecs[n].frame_id for n in self.frames.feedback_names}
+        self._setpoint_ids = {self.frames.codecs[n].frame_id for n in self.frames.setpoint_names}
+        # frames the bus did not take yet (its transmit queue was full), sent in order by poll()
+        self._outbox = collections.deque()
+        self._outbox_since = None        # when the oldest of them was first refused
         self._handlers = {'ControllerStatus': self._on_status, 'ControllerHeartbeat': self._on_heartbeat,
                           'Temperature': self._on_temperature}
         # stream bookkeeping
@@ -103,7 +108,8 @@ class RigDriver:
         self.refusal = ''                # why the latest batch was refused
         # counters and state
         self.counters = dict(samples_received=0, frames_lost=0, frames_late=0, frames_malformed=0,
-                             frames_unknown=0, setpoints_sent=0, setpoints_refused=0, heartbeats_received=0)
+                             frames_unknown=0, setpoints_sent=0, setpoints_refused=0, heartbeats_received=0,
+                             tx_queue_full=0)
         self.faults, self.fault_messages = 0, []
         self.controller_state, self.controller_faults, self.controller_sequence = 'unconfigured', 0, -1
         self.temperature = math.nan
@@ -146,7 +152,7 @@ class RigDriver:
 
     def send_limits(self):
         lim = self.limits
-        self.bus.send(self.proto.encode('HostLimits', {
+        self._send(self.proto.encode('HostLimits', {
             'HL_DisplacementMin': lim.displacement_min, 'HL_DisplacementMax': lim.displacement_max,
             'HL_Deceleration': min(510.0, math.floor(lim.deceleration_max / 2) * 2.0)}))
 
@@ -258,7 +264,7 @@ class RigDriver:
             self._last_fb_wall = self._clock()   # pipeline was empty: the feedback clock starts now
         if self._next_hb_seq is None or self._next_hb_seq < first_sequence - self._hb_every:
             self._next_hb_seq = first_sequence
-        send, per = self.bus.send, self.frames.setpoints_per_frame
+        send, per = self._send, self.frames.setpoints_per_frame
         values = x.tolist()
         for i, msg in enumerate(self.frames.encode_setpoints(first_sequence, values)):
             last = first_sequence + min((i + 1) * per, len(values)) - 1
@@ -328,7 +334,9 @@ class RigDriver:
         lim = self.limits
         # the travel speed: at most half the velocity limit (and 50 mm/s), in whole mm/s as the frame carries it
         ramp_v = max(0.001, math.floor(min(0.5 * lim.velocity_max, 0.05) * 1000) / 1000)
-        self.bus.send(self.proto.encode('HostCommand', {'CMD_Code': code, 'CMD_Counter': 0,
+        # the command goes before any setpoint still waiting for room (the controller would flush them anyway)
+        self._outbox = collections.deque(m for m in self._outbox if m.arbitration_id not in self._setpoint_ids)
+        self._send(self.proto.encode('HostCommand', {'CMD_Code': code, 'CMD_Counter': 0,
                                                         'CMD_Argument': target, 'CMD_RampVelocity': ramp_v}))
         # until the controller reports its ramp, status says ramping_down (not idle/fault while still moving)
         self._ramp_pending = self.controller_state in ('running', 'holding')
@@ -351,7 +359,7 @@ class RigDriver:
         """
         if self.controller_state == 'ramping_down':
             return 'the rig is still ramping to rest: reset when it is at rest'
-        self.bus.send(self.proto.encode('HostCommand', {'CMD_Code': CMD_RESET, 'CMD_Counter': 0,
+        self._send(self.proto.encode('HostCommand', {'CMD_Code': CMD_RESET, 'CMD_Counter': 0,
                                                         'CMD_Argument': 0, 'CMD_RampVelocity': 0}))
         if self.faults or self.fault_messages:
             self._event('info', 'reset: cleared ' + ('; '.join(self.fault_messages[-3:]) or 'faults'))
@@ -363,8 +371,38 @@ class RigDriver:
 
     def _send_host_heartbeat(self):
         self._host_hb_counter = (self._host_hb_counter + 1) % 256
-        self.bus.send(self.proto.encode('HostHeartbeat', {'HH_Counter': self._host_hb_counter}))
+        self._send(self.proto.encode('HostHeartbeat', {'HH_Counter': self._host_hb_counter}))
         self._last_host_hb_wall = self._clock()
+
+    # ---- host -> controller
+    def _send(self, msg):
+        """Send a frame in order: when the bus's transmit queue is full (python-can CanOperationError, e.g.
+        SocketCAN ENOBUFS on an overloaded bus) it waits in the outbox with every later frame, and poll() sends
+        them as room frees up. Frames that cannot leave for watchdog_timeout fault the bus.
+        """
+        if not self._outbox:
+            try:
+                self.bus.send(msg)
+                return
+            except can.CanOperationError:
+                self.counters['tx_queue_full'] += 1
+                self._outbox_since = self._clock()
+        self._outbox.append(msg)
+
+    def _drain_outbox(self):
+        box = self._outbox
+        while box:
+            try:
+                self.bus.send(box[0])
+            except can.CanOperationError:
+                waited = self._clock() - self._outbox_since
+                if waited > self._wd_wall and not self.faults & FAULT_BUS:
+                    self._fault(FAULT_BUS, f'{len(box)} frames could not be sent for {waited:.3f} s (transmit '
+                                           'queue full: the bus is overloaded or disconnected)')
+                return
+            box.popleft()
+            self._outbox_since = self._clock()
+        self._outbox_since = None
 
     # ---- controller -> host
     def poll(self):
@@ -381,6 +419,8 @@ class RigDriver:
             if self._stream is not None:
                 self._stream.last_rx_wall += late
         self._last_poll_wall = now
+        if self._outbox:
+            self._drain_outbox()
         if self.pump is not None:
             self.pump()
         recv = self.bus.recv
@@ -623,7 +663,8 @@ class RigDriver:
         extra = {'heartbeats_received': c['heartbeats_received'], 'setpoints_refused': c['setpoints_refused'],
                  'next_sequence': self.next_sequence, 'position': self._last_applied,
                  'stream_owner': s.grant.owner if s else '', 'stream_id': s.grant.stream_id if s else 0,
-                 'stream_held': bool(s and s.held), 'last_event': self.last_event, 'bus_load': self.bus_load}
+                 'stream_held': bool(s and s.held), 'last_event': self.last_event, 'bus_load': self.bus_load,
+                 'tx_queue_full': c['tx_queue_full'], 'tx_backlog': len(self._outbox)}
         return DriverStatus(state, self.faults | self.controller_faults, list(self.fault_messages), self.fs,
                             c['samples_received'], c['frames_lost'], c['frames_late'], c['frames_malformed'],
                             c['frames_unknown'], self.temperature, self.controller_state, self.controller_faults,

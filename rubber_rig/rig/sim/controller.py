@@ -23,6 +23,7 @@ import math
 import threading
 import time
 
+import can
 import numpy as np
 
 from ...excitation.ramp import DECEL_MAX, RAMP_ACCEL, SafeRamp, stopping_positions
@@ -89,7 +90,7 @@ class SimController:
         self.last_host_hb = 0
         # the host's limits for the controller's own ramps (HostLimits frame); until then: no bounds
         self.lower, self.upper, self.decel_max = -math.inf, math.inf, DECEL_MAX
-        self.counters = {'underruns': 0, 'setpoints_late': 0, 'frames_bad': 0, 'overruns': 0}
+        self.counters = {'underruns': 0, 'setpoints_late': 0, 'frames_bad': 0, 'overruns': 0, 'tx_dropped': 0}
         self._held = []                   # (release_tick, message) for delayed frames
         self._hb = self._st = self._tc = 0
         per = lambda s: max(1, round(s * self.fs))  # noqa: E731
@@ -374,7 +375,7 @@ class SimController:
             self.state = 'fault' if self.fault_bits else 'idle'
             self.buffer.clear()
             for _, m in self._held:   # delayed frames still go out once the rig stops ticking
-                self.bus.send(m)
+                self._put(m)
             self._held = []
             self._housekeeping(force=True)
         else:
@@ -425,7 +426,16 @@ class SimController:
             if delay:
                 self._held.append((self.ticks + delay, m))
             else:
-                self.bus.send(m)
+                self._put(m)
+
+    def _put(self, msg):
+        """Hand a frame to the bus; a full transmit queue (an overloaded bus) loses it, as a controller's
+        mailboxes would: counted, and the host sees the gap.
+        """
+        try:
+            self.bus.send(msg)
+        except can.CanOperationError:
+            self.counters['tx_dropped'] += 1
 
     def _release_held(self):
         if self._held:
@@ -433,4 +443,4 @@ class SimController:
             if due:
                 self._held = [(r, m) for r, m in self._held if r > self.ticks]
                 for m in due:
-                    self.bus.send(m)
+                    self._put(m)
