@@ -337,7 +337,7 @@ class RigDriver:
         # the command goes before any setpoint still waiting for room (the controller would flush them anyway)
         self._outbox = collections.deque(m for m in self._outbox if m.arbitration_id not in self._setpoint_ids)
         self._send(self.proto.encode('HostCommand', {'CMD_Code': code, 'CMD_Counter': 0,
-                                                        'CMD_Argument': target, 'CMD_RampVelocity': ramp_v}))
+                                                     'CMD_Argument': target, 'CMD_RampVelocity': ramp_v}))
         # until the controller reports its ramp, status says ramping_down (not idle/fault while still moving)
         self._ramp_pending = self.controller_state in ('running', 'holding')
         self._host_stop = True
@@ -360,7 +360,7 @@ class RigDriver:
         if self.controller_state == 'ramping_down':
             return 'the rig is still ramping to rest: reset when it is at rest'
         self._send(self.proto.encode('HostCommand', {'CMD_Code': CMD_RESET, 'CMD_Counter': 0,
-                                                        'CMD_Argument': 0, 'CMD_RampVelocity': 0}))
+                                                     'CMD_Argument': 0, 'CMD_RampVelocity': 0}))
         if self.faults or self.fault_messages:
             self._event('info', 'reset: cleared ' + ('; '.join(self.fault_messages[-3:]) or 'faults'))
         self.faults, self.fault_messages, self._aborting, self._ramp_pending = 0, [], False, False
