@@ -59,7 +59,10 @@ def program_text(duration: float) -> str:
 
 
 def driver_extra(args) -> dict:
-    return {'backend': 'udp_multicast', 'spawn_sim': True} if args.spawn_sim else {}
+    extra = {'backend': 'udp_multicast', 'spawn_sim': True} if args.spawn_sim else {}
+    if args.poll_period:
+        extra['poll_period'] = args.poll_period
+    return extra
 
 
 def cpu_seconds(children: bool = False) -> float:
@@ -76,7 +79,7 @@ def start_processes(args, rate, batch, out_dir, domain):
         ('recorder', ['-p', f'output_dir:={out_dir}', '-p', 'discovery_period:=0.2']),
         ('element_model', []),
         ('excitation', ['-p', f'batch_size:={batch}']),
-        ('rig_driver', ['-p', f'sample_rate:={rate}', '-p', f'batch_size:={batch}']
+        ('rig_driver', ['-p', f'sample_rate:={rate}', '-p', f'batch_size:={args.batch_size or 0}']
          + sum((['-p', f'{k}:={v}'] for k, v in driver_extra(args).items()), [])),
     ]
     return [subprocess.Popen([str(bindir / exe)] + common + extra, env=env) for exe, extra in specs]
@@ -90,7 +93,9 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
     from rubber_rig.nodes.monitor import SuiteMonitor
     from rubber_rig.recording import load_recording
 
-    batch = args.batch_size or max(20, int(round(rate / 20)))   # ~20 messages/s per stream
+    # setpoints: ~20 messages/s; samples: rig_driver's own default (10 ms of samples) unless --batch-size
+    batch = args.batch_size or max(20, int(round(rate / 20)))
+    sample_batch = args.batch_size or max(1, round(0.01 * rate))
     domain = args.domain_id if args.domain_id is not None else 150 + os.getpid() % 50
     text = program_text(args.duration)
     program = Program.from_yaml_text(text)
@@ -107,8 +112,8 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
             launcher.start(RecorderNode, {'output_dir': str(out_dir), 'discovery_period': 0.2})
             launcher.start(ElementModelNode)
             launcher.start(ExcitationNode, {'batch_size': batch})
-            driver = launcher.start(RigDriverNode, dict({'sample_rate': float(rate), 'batch_size': batch},
-                                                        **driver_extra(args)))
+            driver = launcher.start(RigDriverNode, dict({'sample_rate': float(rate),
+                                                         'batch_size': args.batch_size or 0}, **driver_extra(args)))
         mon = launcher.spin(SuiteMonitor(context=launcher.context))
         # the rig ready, not just any status (the driver's first one, before autostart, says 'unconfigured')
         if not launcher.wait_for(lambda: mon.status is not None and mon.status.state in READY_STATES
@@ -163,7 +168,7 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         ('program did not complete', message != 'completed')) if bad]
     pred_gaps = [g for g in rec.gaps if 'prediction' in str(g.get('topic', ''))] if rec.gaps else []
     return {
-        'rate': rate, 'batch_size': batch, 'mode': 'processes' if args.processes else 'one process',
+        'rate': rate, 'batch_size': sample_batch, 'mode': 'processes' if args.processes else 'one process',
         'duration_s': wall, 'program': message,
         'samples_expected': len(expected), 'samples_recorded': int(len(rec)),
         'recording_samples_lost': int(rec.samples_lost), 'recording_gaps': len(rec.gaps),
@@ -184,7 +189,9 @@ def main(argv=None) -> int:
     parser.add_argument('--rate', default='1000', help='rig rate(s) [Hz], comma separated (default 1000)')
     parser.add_argument('--duration', type=float, default=60.0, help='seconds of excitation per rate (600 = the '
                         '10-minute run)')
-    parser.add_argument('--batch-size', type=int, help='samples per batch (default: rate/20, at least 20)')
+    parser.add_argument('--batch-size', type=int, help='samples per batch (default: rig_driver 10 ms of samples, '
+                        'excitation rate/20, at least 20)')
+    parser.add_argument('--poll-period', type=float, help='rig_driver poll_period [s] (default: its parameter)')
     parser.add_argument('--processes', action='store_true', help='one process per node instead of one thread each')
     parser.add_argument('--spawn-sim', action='store_true', help="simulated rig in a process of its own, on "
                         "python-can's udp_multicast bus over loopback (instead of a thread on the virtual bus)")

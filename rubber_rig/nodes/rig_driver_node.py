@@ -58,6 +58,7 @@ from rubber_rig.rig.config import ConfigError, RigConfig
 from rubber_rig.rig.interface import open_rig
 from rubber_rig.settings import nest, setting_for, settings_of
 
+BATCH_PERIOD = 0.01   # [s] default length of a sample batch (batch_size 0)
 RIG_SETTINGS = settings_of(RigConfig)   # the core's configuration, described once (rubber_rig/rig/config.py)
 # parameters the running driver applies at once; every other one needs configure (refused while configured)
 LIVE_PARAMETERS = {s.name for s in RIG_SETTINGS if s.name.startswith('limits.')} | {
@@ -76,13 +77,15 @@ class RigDriverNode(LifecycleNode):
         for setting in RIG_SETTINGS:
             declare(self, setting.name, setting.default, setting.description(), range=setting.range,
                     choices=setting.choices)
-        self.batch_size = declare(self, 'batch_size', 50, 'samples per RigSampleBatch message (at least; whole bus '
-                                  'reads are never split, so the stamp is the bus time of the first sample)',
-                                  range=(1, 10000))
+        self.batch_size = declare(self, 'batch_size', 0, 'samples per RigSampleBatch message (at least; whole bus '
+                                  'reads are never split, so the stamp is the bus time of the first sample); 0: '
+                                  f'{BATCH_PERIOD * 1e3:g} ms of samples, which keeps a prediction within 25 ms of '
+                                  'its sample at 1 kHz', range=(0, 10000))
         self.max_batch_delay = declare(self, 'max_batch_delay', 0.1, 'a partial batch is published when its '
                                        'first sample has waited this long (the stream paused or ended)',
                                        range=(0.001, 10.0), units='s')
-        declare(self, 'poll_period', 0.01, 'how often the bus is read', range=(0.0005, 0.5), units='s')
+        declare(self, 'poll_period', 0.002, 'how often the bus is read (a sample waits up to this long)',
+                range=(0.0005, 0.5), units='s')
         declare(self, 'sim.specimen.parameter_set', '', 'simulated specimen: fractional_zener_berg parameter set '
                 '(empty: use sim.specimen.temperature)')
         declare(self, 'sim.specimen.temperature', 20.0, 'simulated specimen: fractional_zener_berg parameters at this '
@@ -158,8 +161,13 @@ class RigDriverNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         self.pub_samples = self.create_lifecycle_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
         self.get_logger().info(f'rig open: backend {self.config.backend}, {self.config.sample_rate:g} Hz, '
-                               f'{self.batch_size} samples per batch')
+                               f'{self.samples_per_batch} samples per batch')
         return TransitionCallbackReturn.SUCCESS
+
+    @property
+    def samples_per_batch(self) -> int:
+        """batch_size, or BATCH_PERIOD of samples at the configured rate when it is 0."""
+        return self.batch_size or max(1, round(BATCH_PERIOD * self.config.sample_rate))
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         driver = self.rig.driver
@@ -293,7 +301,7 @@ class RigDriverNode(LifecycleNode):
                 self._buffer_since = time.monotonic()
             self._buffer.append(block)
             self._buffered += len(block)
-            if self._buffered >= self.batch_size:
+            if self._buffered >= self.samples_per_batch:
                 self._publish_batch()
         if self._buffered and time.monotonic() - self._buffer_since > self.max_batch_delay:
             self._publish_batch()   # the stream paused (program end, abort ramp done)
