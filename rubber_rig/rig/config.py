@@ -43,7 +43,7 @@ class ConfigError(ValueError):
         self.field = field
 
 
-FAULT_TYPES = ('drop', 'delay', 'duplicate', 'corrupt', 'stuck_sensor', 'silent_controller')
+FAULT_TYPES = ('drop', 'delay', 'duplicate', 'corrupt', 'stuck_sensor', 'silent_controller', 'bus_flood')
 FRAME_NAMES = ('Feedback', 'ControllerStatus', 'Temperature', 'ControllerHeartbeat')
 
 
@@ -54,7 +54,9 @@ class FaultSpec:
     window also ends while the rig stands faulted).
 
     type: drop | delay | duplicate | corrupt (frames named in `frames`, each hit with `probability`),
-    stuck_sensor (`sensor` displacement|force freezes), silent_controller (heartbeat and status stop).
+    stuck_sensor (`sensor` displacement|force freezes), silent_controller (heartbeat and status stop),
+    bus_flood (another node on the bus sends 8-byte frames with identifier `frame_id` taking `load` of the bus:
+    frames of lower priority are delayed, then lost; only on the timed bus of the paced sim backend).
     delay [s]: how late delayed frames are sent.
     """
 
@@ -65,6 +67,8 @@ class FaultSpec:
     frames: List[str] = field(default_factory=lambda: ['Feedback'])
     delay: float = 0.05
     sensor: str = 'displacement'
+    load: float = 1.0
+    frame_id: int = 0x0FF
 
     def check(self, path):
         if self.type not in FAULT_TYPES:
@@ -82,6 +86,10 @@ class FaultSpec:
             raise ConfigError(f'{path}.delay', "must be > 0")
         if self.sensor not in ('displacement', 'force'):
             raise ConfigError(f'{path}.sensor', "displacement or force")
+        if not 0 < self.load <= 1:
+            raise ConfigError(f'{path}.load', "bus share within (0, 1]")
+        if not 0 <= self.frame_id <= 0x7FF:
+            raise ConfigError(f'{path}.frame_id', "an 11-bit identifier 0..0x7FF")
 
     def active(self, t: float) -> bool:
         """True while the fault is active at rig time t [s]."""
@@ -143,7 +151,9 @@ class SimOptions:
 class RigConfig:
     """How to reach the rig.
 
-    backend: "sim" (simulated rig in this process on python-can's virtual bus) or a python-can interface
+    backend: "sim" (simulated rig in this process; paced, on a simulated bus with the configured bitrates, frame
+    timing, arbitration and transmit queues of tx_queue frames (rubber_rig.rig.can.simbus); unpaced, on
+    python-can's virtual bus, which has no time) or a python-can interface
     name ("socketcan", "pcan", "vector", "kvaser", "virtual", "udp_multicast", ...) with `channel`, bitrates
     and extra `bus_options` passed to can.Bus. spawn_sim: with an interface backend, also start the simulated
     rig as a separate process on that bus. sample_rate [Hz]; watchdog_timeout [s]: feedback/heartbeat silence
@@ -170,6 +180,9 @@ class RigConfig:
     profile: str = setting('', "frames that carry the samples: 'packed' (CAN FD, several samples per frame), "
                            "'single' (CAN FD, one sample per frame), 'classic' (8-byte classic CAN frames); empty: "
                            'packed on CAN FD, classic on classic CAN', choices=('', ) + PROFILES, name='can.profile')
+    tx_queue: int = setting(128, 'frames each node of the simulated bus holds waiting for the bus (its transmit '
+                            'queue; a full queue refuses frames: the driver keeps them, the controller loses them)',
+                            range=(1, 100000), name='can.tx_queue')
     max_bus_load: float = setting(0.7, 'highest bus load the protocol may need at sample_rate (worst-case bit '
                                   'stuffing); a faster rate is refused before the bus opens', range=(0.05, 1.0),
                                   name='can.max_load')
@@ -240,6 +253,9 @@ class RigConfig:
             except CanLogError as exc:
                 raise ConfigError('can_log', str(exc)) from None
         self.sim.check()
+        if any(f.type == 'bus_flood' for f in self.sim.faults) and not (self.backend == 'sim' and self.paced):
+            raise ConfigError('sim.faults', 'bus_flood needs the timed bus of the paced sim backend (backend sim, '
+                              'paced true)')
 
     @property
     def frame_profile(self) -> str:

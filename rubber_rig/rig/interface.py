@@ -24,6 +24,7 @@ from .can.bus import open_bus, sim_channel_name
 from .can.canlog import LOG_CHANNEL_SIM, CanLogError, CanLogTap, LoggingBus
 from .can.driver import RigDriver
 from .can.protocol import Protocol
+from .can.simbus import BusMedium
 from .config import ConfigError, RigConfig
 from .sim.controller import SimController
 
@@ -77,7 +78,8 @@ class Rig:
 def open_rig(config) -> Rig:
     """Open the rig described by `config` (RigConfig or mapping; validated first, nothing is opened on error).
 
-    backend "sim": simulated controller in a thread on a fresh python-can virtual channel. Any other backend:
+    backend "sim": simulated controller in a thread on a simulated bus of the configured bitrates (paced; frames
+    take their time, rubber_rig.rig.can.simbus) or on a fresh python-can virtual channel (unpaced). Any other backend:
     the driver on that python-can interface; with spawn_sim, the simulated rig is started as a separate process
     (python -m rubber_rig.rig.sim) on the same bus and the call waits until it answers.
 
@@ -118,17 +120,25 @@ def _open_can_log(cfg: RigConfig):
 def _open(cfg: RigConfig, proto: Protocol, tap) -> Rig:
     logged = (lambda bus: LoggingBus(bus, tap)) if tap is not None else (lambda bus: bus)
     if cfg.backend == 'sim':
-        channel = sim_channel_name()
-        bus = open_bus(cfg, channel)
-        sim_bus = open_bus(cfg, channel)
+        medium = flood = None
+        if cfg.paced:   # real time: frames take the time the configured bus needs for them
+            medium = BusMedium(cfg.bitrate, cfg.data_bitrate, cfg.fd, tx_queue=cfg.tx_queue, name=sim_channel_name())
+            bus, sim_bus = medium.attach('host'), medium.attach('controller')
+            if any(f.type == 'bus_flood' for f in cfg.sim.faults):
+                flood = medium.attach('flood')
+        else:           # as fast as possible: no time, so no bus timing (python-can's virtual bus)
+            channel = sim_channel_name()
+            bus, sim_bus = open_bus(cfg, channel), open_bus(cfg, channel)
         try:
             sim = SimController(sim_bus, cfg.sample_rate, cfg.sim, cfg.paced, proto,   # may raise ConfigError
-                                profile=cfg.frame_profile)
+                                profile=cfg.frame_profile, flood_bus=flood)
         except Exception:
             bus.shutdown()
             sim_bus.shutdown()
             raise
         driver = RigDriver(logged(bus), cfg, proto)
+        if medium is not None:
+            driver.measured_load = medium.load
         if cfg.paced:
             sim.start()              # real time: the simulator keeps its own clock in a thread
         else:

@@ -77,6 +77,8 @@ class RigDriver:
         # the protocol's share of the configured bus at this rate (worst-case stuffing; RigConfig refused more
         # than its max_bus_load): what status and diagnostics report as bus load
         self.bus_load = config.bus_load().load
+        self.measured_load = None        # callable -> busy fraction of the last second, when the bus can tell
+        self._load_at, self._load = -math.inf, None
         self.limits = config.limits
         self._clock = clock
         # the frames that carry samples (config.frame_profile) take a fast path; the rest go through cantools
@@ -664,11 +666,23 @@ class RigDriver:
                  'next_sequence': self.next_sequence, 'position': self._last_applied,
                  'stream_owner': s.grant.owner if s else '', 'stream_id': s.grant.stream_id if s else 0,
                  'stream_held': bool(s and s.held), 'last_event': self.last_event, 'bus_load': self.bus_load,
+                 'bus_load_measured': self._measured_bus_load(),
                  'tx_queue_full': c['tx_queue_full'], 'tx_backlog': len(self._outbox)}
         return DriverStatus(state, self.faults | self.controller_faults, list(self.fault_messages), self.fs,
                             c['samples_received'], c['frames_lost'], c['frames_late'], c['frames_malformed'],
                             c['frames_unknown'], self.temperature, self.controller_state, self.controller_faults,
                             self.controller_sequence, c['setpoints_sent'], self.limits, extra)
+
+    def _measured_bus_load(self):
+        """The bus's busy fraction over the last second, when the bus can tell (the simulated bus), read at most
+        every 0.1 s (status is read often).
+        """
+        if self.measured_load is None:
+            return None
+        now = self._clock()
+        if now - self._load_at > 0.1:
+            self._load_at, self._load = now, self.measured_load()
+        return self._load
 
     @property
     def next_sequence(self) -> int:

@@ -42,6 +42,7 @@ from ..can.protocol import (
     cycle_time,
     unwrap,
 )
+from ..can.timing import frame_time
 from .faults import FaultInjector
 from .plant import Actuator, Sensor
 from .specimen import build_specimen
@@ -59,13 +60,15 @@ class SimController:
     MIN_RUN = 32               # from this many ticks the specimen model's batch run beats its per-sample step
 
     def __init__(self, bus, sample_rate: float, options, paced: bool, protocol: Protocol = None,
-                 profile: str = 'packed'):
+                 profile: str = 'packed', flood_bus=None):
         self.bus, self.fs, self.opt, self.paced = bus, float(sample_rate), options, paced
         self.proto = protocol or Protocol()
         self.frames = SampleFrames(profile, self.proto.db, self.fs)
         self._setpoint_ids = {self.frames.codecs[n].frame_id for n in self.frames.setpoint_names}
         self._fb = ([], [], [])           # measured x, f and applied u not yet sent
         self._fb_first = 0                # sequence of the first of them
+        # bus_flood faults: another node on the same bus (paced only), owed frames carried between wake-ups
+        self.flood_bus, self._flood_owed, self._flood_at = flood_bus, 0.0, None
         # one stream per noise source, so idle-time draws (temperature) never shift the sensor noise and paced
         # and fast runs stay identical
         rng_x, rng_f, rng_t = (np.random.default_rng([options.seed, k]) for k in range(3))
@@ -121,6 +124,8 @@ class SimController:
         while not self._stop.is_set():
             if self.paced:
                 now = time.monotonic()
+                if self.flood_bus is not None:
+                    self._flood(now)
                 if self.state in STREAMING:
                     if deadline is None:
                         deadline = now
@@ -427,6 +432,28 @@ class SimController:
                 self._held.append((self.ticks + delay, m))
             else:
                 self._put(m)
+
+    def _flood(self, now: float):
+        """bus_flood faults: the other node sends its frames for the time since the last call (its own transmit
+        queue full is its problem: those frames are simply not sent).
+        """
+        active = [f for f in self.faults.faults if f.type == 'bus_flood' and f.active(self.fault_time())]
+        last, self._flood_at = self._flood_at, now
+        if not active or last is None:
+            self._flood_owed = 0.0
+            return
+        medium = self.flood_bus.medium
+        duration = frame_time(8, medium.bitrate)
+        for f in active:
+            self._flood_owed += f.load * (now - last) / duration
+            msg = can.Message(arbitration_id=f.frame_id, data=bytes(8), is_extended_id=False)
+            while self._flood_owed >= 1.0:
+                self._flood_owed -= 1.0
+                try:
+                    self.flood_bus.send(msg)
+                except can.CanOperationError:
+                    self._flood_owed = 0.0
+                    break
 
     def _put(self, msg):
         """Hand a frame to the bus; a full transmit queue (an overloaded bus) loses it, as a controller's

@@ -41,7 +41,8 @@ class FaultInjector:
         if name in ('ControllerHeartbeat', 'ControllerStatus') and self.silent(t):
             return []
         for f in self.faults:
-            if f.type in ('stuck_sensor', 'silent_controller') or name not in f.frames or not f.active(t):
+            if f.type in ('stuck_sensor', 'silent_controller', 'bus_flood') or name not in f.frames \
+                    or not f.active(t):
                 continue
             if f.probability < 1.0 and self.rng.random() >= f.probability:
                 continue
