@@ -14,6 +14,8 @@
 
 """Fault injection on the simulated rig: each fault is detected by the driver and ends in the safe ramp
 (the controller's applied command moves smoothly back to rest). Limits and bad frames too."""
+import time
+
 import numpy as np
 import pytest
 
@@ -148,3 +150,66 @@ def test_abort_ramp_respects_the_host_velocity_limit():
     ramp = r.block_index == -1
     v = np.abs(contiguous_diffs(r.sequence, r.setpoint)) * r.sample_rate
     assert np.max(v[ramp[1:]]) <= 0.005 + 1e-4
+
+
+def test_bus_overload_mid_run_faults_safely_and_counts_the_loss():
+    """Paced, on the timed bus: from 0.6 s another node floods the bus with frames of higher priority than the
+    rig's stream. The controller's frames queue, then its transmit queue overflows and samples are lost; the
+    driver counts every one, faults and the rig ramps to rest inside its limits. The next program runs on the
+    same rig once the flood is gone."""
+    flood = {'type': 'bus_flood', 'start': 0.6, 'duration': 0.4, 'load': 1.0, 'frame_id': 0x0F0}
+    cfg = {'paced': True, 'watchdog_timeout': 0.25, 'sim': {'faults': [flood]}}
+    with open_rig(cfg) as rig:
+        assert rig.wait_ready(5.0)
+        r = run_program(PROG, cfg, rig=rig)
+        st = r.final_status
+        assert not r.completed and st.state == 'fault'
+        assert st.faults & (FAULT_BUS | FAULT_WATCHDOG), st.fault_messages
+        assert rig.sim.counters['tx_dropped'] > 0
+        assert 0.55 < r.time[np.flatnonzero(r.block_index == -1)[0]] < 0.6 + 0.35   # ramp within 0.35 s
+        assert np.max(np.abs(contiguous_diffs(r.sequence, r.setpoint))) * r.sample_rate <= PROGRAM_V * 1.001
+        assert st.extra['bus_load_measured'] is not None
+        deadline = time.monotonic() + 1.0            # the flood ends at 1.0 s of rig time (idle time counts)
+        while time.monotonic() < deadline:
+            rig.driver.poll()
+            time.sleep(0.002)
+        # every sample the rig took and the host never received is counted lost (nothing silently missing)
+        st = rig.driver.status
+        assert st.frames_lost > 0 and st.samples_received + st.frames_lost == rig.sim.next_seq
+        # the rig ramped to rest at 0 (on the host's abort, whose identifier beats the flood, or on its own watchdog)
+        assert rig.sim.state in ('idle', 'fault') and rig.sim.u == 0.0 and abs(rig.sim.actuator.x) < 5e-6
+        assert st.state == 'fault'
+        assert rig.driver.reset() == ''
+        again = run_program(PROG, cfg, rig=rig)
+        assert again.completed and again.final_status.frames_lost == st.frames_lost, again.message
+
+
+def test_setpoints_of_an_aborted_stream_never_restart_the_rig():
+    """Setpoint frames still queued on the bus when a stream is aborted reach the controller after its ramp: it
+    takes none until the host announces the next stream (HostStreamStart), and none below that stream's start."""
+    with open_rig(FAST) as rig:
+        assert rig.wait_ready(5.0)
+        drv, sim = rig.driver, rig.sim
+        x = 1e-3 * np.sin(2 * np.pi * 5 * np.arange(400) / 1000.0) * np.minimum(np.arange(400) / 200, 1) ** 2
+        assert drv.queue_setpoints(0, x)
+        stale = drv.frames.encode_setpoints(400, (x[:100] * 0 + 2e-3).tolist())   # queued, not yet on the bus
+        for _ in range(50):
+            drv.poll()
+        drv.abort('test abort')
+        for _ in range(2000):
+            drv.poll()
+            if sim.state == 'idle':
+                break
+        assert sim.state == 'idle' and sim.u == 0.0
+        ticks = sim.next_seq
+        for msg in stale:                           # they arrive now, after the ramp
+            drv.bus.send(msg)
+        for _ in range(50):
+            drv.poll()
+        assert sim.state == 'idle' and sim.next_seq == ticks and sim.counters['setpoints_stale'] == len(stale)
+        first = drv.next_sequence
+        assert first >= 400                         # the next stream starts after every setpoint ever sent
+        assert drv.queue_setpoints(first, np.zeros(50))
+        for _ in range(200):
+            drv.poll()
+        assert sim.next_seq == first + 50 and sim.counters['setpoints_stale'] == len(stale)

@@ -54,6 +54,8 @@ class Rig:
         """Stop the simulator (thread or process), shut both bus ends down and close the raw CAN log."""
         if self.sim is not None:
             self.sim.stop()
+            if self.sim.flood_bus is not None:
+                self.sim.flood_bus.shutdown()
         if self.process is not None:
             self.process.terminate()
             try:

@@ -88,6 +88,7 @@ class RigDriver:
         # frames the bus did not take yet (its transmit queue was full), sent in order by poll()
         self._outbox = collections.deque()
         self._outbox_since = None        # when the oldest of them was first refused
+        self._sent_end = 0               # after the last setpoint ever sent: a new stream starts at or after it
         self._handlers = {'ControllerStatus': self._on_status, 'ControllerHeartbeat': self._on_heartbeat,
                           'Temperature': self._on_temperature}
         # stream bookkeeping
@@ -199,11 +200,16 @@ class RigDriver:
             self._jump_to = first     # an idle controller starts at the first setpoint it gets
         v = (self._last_applied - self._prev_applied) * self.fs if self.controller_state == 'running' else 0.0
         grant = StreamGrant(next(self._stream_ids), owner, first, self._last_applied, v)
+        self._announce_stream(first)
         self._stream = GrantedStream(grant, first, self._last_applied, v, self._clock())
         self._host_stop = False
         self._event('info', f'stream {grant.stream_id} opened for {owner or "a local client"}: first setpoint '
                             f'at sample {first}, from {grant.position * 1e3:.4f} mm')
         return grant
+
+    def _announce_stream(self, first: int):
+        """HostStreamStart: the controller takes setpoints from `first` on (and, after a ramp, no older ones)."""
+        self._send(self.proto.encode('HostStreamStart', {'HS_FirstSequence': first % (1 << 32)}))
 
     def end_stream(self, stream_id: int):
         """The owner's last batch is queued: running dry afterwards is the end of the program."""
@@ -276,6 +282,7 @@ class RigDriver:
                 self._next_hb_seq = last + self._hb_every
             send(msg)
         s.queued_end = first_sequence + x.size
+        self._sent_end = max(self._sent_end, s.queued_end)
         s.last_queued, s.last_velocity = float(x[-1]), float(v[-1])
         self.counters['setpoints_sent'] += int(x.size)
         return True
@@ -283,6 +290,7 @@ class RigDriver:
     def _local_stream(self, first_sequence):
         grant = self.open_stream('', 0)
         grant.first_sequence = first_sequence
+        self._announce_stream(first_sequence)
         self._stream.queued_end = first_sequence
         if self._jump_to is not None:
             self._jump_to = first_sequence
@@ -519,6 +527,15 @@ class RigDriver:
         self.controller_faults = int(sig['ST_Faults'])
         ref = self.controller_sequence if self.controller_sequence >= 0 else (self._expected or 0)
         self.controller_sequence = unwrap(int(sig['ST_LastSequence']), ref, STATUS_SEQ_MOD)
+        if self.controller_state in ('idle', 'fault') and self._expected is not None \
+                and self.controller_sequence + 1 > self._expected:
+            # the controller stopped ticking after samples whose frames never arrived (feedback goes out before
+            # this status: its identifier wins arbitration): they are lost, not merely late
+            lost = self.controller_sequence + 1 - self._expected
+            self.counters['frames_lost'] += lost
+            self._flush_pending()
+            self._pend_lost += lost
+            self._expected = self.controller_sequence + 1
 
     def _on_heartbeat(self, sig, msg):
         code = int(sig['HB_State'])
@@ -689,7 +706,7 @@ class RigDriver:
         """The first sample index no setpoint or sample has used yet (where a new stream may start)."""
         s = self._stream
         return max(self._expected or 0, self.controller_sequence + 1, s.queued_end if s else 0,
-                   self._jump_to or 0)
+                   self._jump_to or 0, self._sent_end)
 
     def close(self, ramp: bool = True):
         """Command the ramp to rest (unless ramp=False), then shut the bus down."""

@@ -42,7 +42,7 @@ from .protocol import DBC_PATH, Protocol
 
 FD_LENGTHS = (0, 1, 2, 3, 4, 5, 6, 7, 8, 12, 16, 20, 24, 32, 48, 64)
 # frames sent only on events (not counted in the load)
-EVENT_FRAMES = ('HostCommand', 'HostLimits')
+EVENT_FRAMES = ('HostCommand', 'HostLimits', 'HostStreamStart')
 SAMPLE_FRAMES = {name for names in (*SETPOINT_FRAMES.values(), *FEEDBACK_FRAMES.values()) for name in names}
 
 

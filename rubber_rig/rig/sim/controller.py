@@ -67,6 +67,9 @@ class SimController:
         self._setpoint_ids = {self.frames.codecs[n].frame_id for n in self.frames.setpoint_names}
         self._fb = ([], [], [])           # measured x, f and applied u not yet sent
         self._fb_first = 0                # sequence of the first of them
+        # setpoints start a stream from idle only at or after this sample (HostStreamStart); after a ramp to rest
+        # none until the host announces the next stream
+        self.accept_from = 0
         # bus_flood faults: another node on the same bus (paced only), owed frames carried between wake-ups
         self.flood_bus, self._flood_owed, self._flood_at = flood_bus, 0.0, None
         # one stream per noise source, so idle-time draws (temperature) never shift the sensor noise and paced
@@ -93,7 +96,8 @@ class SimController:
         self.last_host_hb = 0
         # the host's limits for the controller's own ramps (HostLimits frame); until then: no bounds
         self.lower, self.upper, self.decel_max = -math.inf, math.inf, DECEL_MAX
-        self.counters = {'underruns': 0, 'setpoints_late': 0, 'frames_bad': 0, 'overruns': 0, 'tx_dropped': 0}
+        self.counters = {'underruns': 0, 'setpoints_late': 0, 'frames_bad': 0, 'overruns': 0, 'tx_dropped': 0,
+                         'setpoints_stale': 0}
         self._held = []                   # (release_tick, message) for delayed frames
         self._hb = self._st = self._tc = 0
         per = lambda s: max(1, round(s * self.fs))  # noqa: E731
@@ -221,7 +225,9 @@ class SimController:
         if decoded is None:
             return
         name, sig = decoded
-        if name == 'HostHeartbeat':
+        if name == 'HostStreamStart':
+            self.accept_from = int(sig['HS_FirstSequence'])
+        elif name == 'HostHeartbeat':
             self.last_host_hb = self.ticks
         elif name == 'HostLimits':
             lo, hi = float(sig['HL_DisplacementMin']), float(sig['HL_DisplacementMax'])
@@ -247,7 +253,14 @@ class SimController:
             return
         if self.state in ('ramping_down', 'fault'):
             return
-        seq = unwrap(seq, self.next_seq, self.frames.setpoint_modulus)
+        if self.state == 'idle':
+            seq = unwrap(seq, self.accept_from if math.isfinite(self.accept_from) else self.next_seq,
+                         self.frames.setpoint_modulus)
+            if seq < self.accept_from:   # left over from an aborted stream, or no stream announced
+                self.counters['setpoints_stale'] += 1
+                return
+        else:
+            seq = unwrap(seq, self.next_seq, self.frames.setpoint_modulus)
         if self.state == 'idle':
             self.buffer.clear()
             self.next_seq = seq
@@ -377,6 +390,7 @@ class SimController:
         self.ticks += 1
         if self.state == 'ramping_down' and self.ramp.done:
             self._send_feedback()
+            self.accept_from = math.inf
             self.state = 'fault' if self.fault_bits else 'idle'
             self.buffer.clear()
             for _, m in self._held:   # delayed frames still go out once the rig stops ticking
