@@ -28,8 +28,8 @@ from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, Protocol, crc8
 def test_dbc_defines_the_rig_frames_with_units_and_counters():
     db = cantools.database.load_file(str(DBC_PATH))
     names = {m.name for m in db.messages}
-    assert names == {'HostCommand', 'HostLimits', 'HostStreamStart', 'Setpoint', 'SetpointPacked', 'Feedback', 'FeedbackPacked',
-                     'FeedbackApplied', 'FeedbackMeasured', 'ControllerStatus', 'Temperature',
+    assert names == {'HostCommand', 'HostLimits', 'HostStreamStart', 'Setpoint', 'SetpointPacked', 'Feedback',
+                     'FeedbackPacked', 'FeedbackApplied', 'FeedbackMeasured', 'ControllerStatus', 'Temperature',
                      'ControllerHeartbeat', 'HostHeartbeat'}
     assert db.version == 'rubber_rig 3'
     packed = db.get_message_by_name('FeedbackPacked')
