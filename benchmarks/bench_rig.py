@@ -12,13 +12,20 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Rig benchmark: 60 s programs at 1 kHz and 5 kHz through driver + simulated rig on the in-process python-can
-virtual bus (every sample: setpoint frame out, feedback frame back, both DBC-encoded and decoded, seed-000
-specimen). Reports samples, lost frames, achieved rate and per-sample cost.
+"""Rig benchmark: driver + simulated rig (seed-000 specimen) without ROS, for each frame profile of the CAN
+protocol (rubber_rig.rig.can.frames: packed CAN FD, single-sample CAN FD, classic 8-byte CAN).
 
-    .venv/bin/python benchmarks/bench_rig.py                 # fast (as fast as possible) at 1 kHz and 5 kHz
-    .venv/bin/python benchmarks/bench_rig.py --paced 1000    # also a real-time run at 1 kHz (takes 60 s)
-    .venv/bin/python benchmarks/bench_rig.py --duration 10   # shorter
+1. What each bus profile carries (the protocol's load from the DBC, worst-case bit stuffing).
+2. Cost per sample of the frame path: fast (as fast as possible) runs of a sine program through driver and
+   simulated controller, every frame encoded, sent over python-can's virtual bus, decoded. Side by side in one
+   run: the single-sample frames (protocol 2's only profile) and the packed frames. The marginal cost per
+   sample (a long minus a short run: rig start-up and shutdown excluded) and the whole-run cost are reported.
+3. With --paced: real-time runs on the simulated bus with bit timing (rubber_rig.rig.can.simbus), reporting the
+   bus load measured on it, frames lost and the controller's transmit-queue drops.
+
+    .venv/bin/python benchmarks/bench_rig.py                  # tables 1 and 2 (60 s programs)
+    .venv/bin/python benchmarks/bench_rig.py --paced 10000    # also 10 kHz in real time on the timed bus
+    .venv/bin/python benchmarks/bench_rig.py --duration 10    # shorter
 
 Exit status 1 if any run lost a frame or did not complete.
 """
@@ -33,7 +40,7 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from rubber_rig.excitation import Program  # noqa: E402
-from rubber_rig.rig import run_program  # noqa: E402
+from rubber_rig.rig import open_rig, run_program  # noqa: E402
 from rubber_rig.rig.can.timing import protocol_load  # noqa: E402
 
 
@@ -44,24 +51,36 @@ def program(duration: float) -> Program:
                                   f'amplitude: 0.5 mm, cycles: {cycles}, taper_cycles: 1}}\n')
 
 
-def run(rate: float, duration: float, paced: bool) -> dict:
+def run(rate: float, duration: float, paced: bool, profile: str, fd: bool = True, bitrate: int = 1_000_000) -> dict:
     prog = program(duration)
     # the paced simulator shares this process (and its GIL) with the host loop on a loaded machine: a wall-clock
     # heartbeat watchdog of 1 s keeps a starved thread from aborting the run (hardware has its own CPU)
-    cfg = {'paced': paced, 'sample_rate': rate, 'watchdog_timeout': 1.0 if paced else 0.25}
+    cfg = {'paced': paced, 'sample_rate': rate, 'watchdog_timeout': 1.0 if paced else 0.25, 'profile': profile,
+           'fd': fd, 'bitrate': bitrate, 'max_bus_load': 1.0}
     c0, t0 = time.process_time(), time.perf_counter()
-    r = run_program(prog, cfg)
+    with open_rig(cfg) as rig:
+        r = run_program(prog, cfg, rig=rig)
+        load = rig.driver.status.extra['bus_load_measured']
+        sim = dict(rig.sim.counters)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     n = int(r.sequence.size)
     st = r.final_status
-    return dict(rate=rate, mode='paced' if paced else 'fast', samples=n, expected=prog.n_samples(rate),
-                lost=st.frames_lost, late=st.frames_late, malformed=st.frames_malformed, completed=r.completed,
-                wall=wall, achieved=n / wall, wall_us=wall / n * 1e6, cpu_us=cpu / n * 1e6,
-                realtime=(n / rate) / wall, message=r.message)
+    return dict(rate=rate, profile=profile, mode='paced' if paced else 'fast', samples=n,
+                expected=prog.n_samples(rate), lost=st.frames_lost, late=st.frames_late, malformed=st.frames_malformed,
+                completed=r.completed, wall=wall, cpu=cpu, achieved=n / wall, wall_us=wall / n * 1e6,
+                cpu_us=cpu / n * 1e6, realtime=(n / rate) / wall, message=r.message, load=load,
+                expected_load=st.extra['bus_load'], tx_dropped=sim.get('tx_dropped', 0))
 
 
-PROFILES = (('classic 500 kbit/s', 500_000, None, False), ('classic 1 Mbit/s', 1_000_000, None, False),
-            ('FD 1/5 Mbit/s', 1_000_000, 5_000_000, True), ('FD 1/8 Mbit/s', 1_000_000, 8_000_000, True))
+PROFILES = (('classic 500 kbit/s', 500_000, None, False, 'classic'),
+            ('classic 1 Mbit/s', 1_000_000, None, False, 'classic'),
+            ('FD 1/5 single', 1_000_000, 5_000_000, True, 'single'),
+            ('FD 1/5 packed', 1_000_000, 5_000_000, True, 'packed'),
+            ('FD 1/8 packed', 1_000_000, 8_000_000, True, 'packed'))
+# cost runs: (profile, rate, fd, bitrate) side by side
+COST_RUNS = (('single', 1000.0), ('single', 2000.0), ('classic', 1000.0), ('packed', 1000.0), ('packed', 2000.0),
+             ('packed', 5000.0), ('packed', 10000.0))
+TODAY_US = 93.0   # protocol 2 (single-sample frames), the issue's figure on this machine
 
 
 def bus_profiles(rates) -> None:
@@ -70,9 +89,9 @@ def bus_profiles(rates) -> None:
     """
     print('bus load of the protocol (rubber_rig.rig.can.timing, worst-case bit stuffing):')
     print(f"{'profile':>20} " + ' '.join(f'{r:>8.0f}' for r in rates) + f" {'@50 %':>8} {'@70 %':>8} {'full':>8}")
-    for name, bitrate, data_bitrate, fd in PROFILES:
+    for name, bitrate, data_bitrate, fd, profile in PROFILES:
         try:
-            loads = [protocol_load(r, bitrate, data_bitrate, fd=fd) for r in rates]
+            loads = [protocol_load(r, bitrate, data_bitrate, fd=fd, profile=profile) for r in rates]
         except ValueError as exc:
             print(f'{name:>20}  cannot carry it: {str(exc).split(": ", 1)[1]}')
             continue
@@ -82,27 +101,51 @@ def bus_profiles(rates) -> None:
     print()
 
 
+def cost_table(duration: float) -> bool:
+    """Cost per sample of driver + simulated controller for each profile, side by side in this run."""
+    print(f'cost per sample, driver + simulated controller, fast runs of a {duration:g} s sine program on the virtual '
+          f'bus, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}')
+    print(f"{'profile':>8} {'rate':>6} {'samples':>8} {'lost':>5} {'wall s':>7} {'x real time':>11} "
+          f"{'us/sample':>9} {'marginal us/sample':>18} {'cpu us/sample':>13} {'vs 93 us':>8}")
+    ok, marginal = True, {}
+    for profile, rate in COST_RUNS:
+        fd = profile != 'classic'
+        short = run(rate, 2.0, False, profile, fd)
+        m = run(rate, duration, False, profile, fd)
+        ok &= m['completed'] and m['lost'] == 0 and m['samples'] >= m['expected']
+        us = (m['wall'] - short['wall']) / (m['samples'] - short['samples']) * 1e6
+        marginal[(profile, rate)] = us
+        print(f"{profile:>8} {rate:6.0f} {m['samples']:8d} {m['lost']:5d} {m['wall']:7.2f} {m['realtime']:11.2f} "
+              f"{m['wall_us']:9.1f} {us:18.1f} {m['cpu_us']:13.1f} {TODAY_US / us:7.1f}x", flush=True)
+    for rate in (1000.0, 2000.0):
+        if ('single', rate) in marginal and ('packed', rate) in marginal:
+            print(f'  at {rate:.0f} Hz: packed {marginal[("packed", rate)]:.1f} us vs single '
+                  f'{marginal[("single", rate)]:.1f} us per sample '
+                  f'({marginal[("single", rate)] / marginal[("packed", rate)]:.1f}x)')
+    print()
+    return ok
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--duration', type=float, default=60.0, help='program length [s] (default 60)')
-    ap.add_argument('--rates', type=float, nargs='*', default=[1000.0, 3000.0],
-                    help='sample rates [Hz] (the default bus, CAN FD 1/5 Mbit/s, carries at most ~3.4 kHz at 70 %%)')
-    ap.add_argument('--paced', type=float, nargs='*', default=[], help='also run these rates paced (real time)')
+    ap.add_argument('--paced', type=float, nargs='*', default=[],
+                    help='also run these rates paced (real time, packed frames on the timed 1/5 Mbit/s bus)')
     args = ap.parse_args(argv)
-    bus_profiles(sorted(set(args.rates) | set(args.paced) | {1000.0, 2000.0, 5000.0, 10000.0}))
-    runs = [(r, False) for r in args.rates] + [(r, True) for r in args.paced]
-    print(f'rig benchmark: {args.duration:g} s sine program, driver + simulated rig (seed 000) on the in-process '
-          f'virtual bus, {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.2f}')
-    print(f"{'rate':>7} {'mode':>5} {'samples':>8} {'lost':>5} {'late':>5} {'bad':>4} {'wall s':>7} "
-          f"{'achieved/s':>10} {'x real time':>11} {'us/sample':>9} {'cpu us/sample':>13}")
-    run(1000.0, 1.0, False)   # warm-up: imports, model set-up, DBC load are not per-sample costs
-    ok = True
-    for rate, paced in runs:
-        m = run(rate, args.duration, paced)
+    bus_profiles([500.0, 1000.0, 2000.0, 5000.0, 10000.0])
+    run(1000.0, 1.0, False, 'packed')   # warm-up: imports, model set-up, DBC load are not per-sample costs
+    ok = cost_table(args.duration)
+    if args.paced:
+        print(f'paced runs on the simulated CAN FD 1/5 Mbit/s bus with bit timing, packed frames, '
+              f'{args.duration:g} s program')
+        print(f"{'rate':>7} {'samples':>8} {'lost':>5} {'late':>5} {'bad':>4} {'bus load':>8} {'expected':>8} "
+              f"{'tx dropped':>10} {'cpu us/sample':>13}")
+    for rate in args.paced:
+        m = run(rate, args.duration, True, 'packed')
         ok &= m['completed'] and m['lost'] == 0 and m['samples'] >= m['expected']
-        print(f"{m['rate']:7.0f} {m['mode']:>5} {m['samples']:8d} {m['lost']:5d} {m['late']:5d} "
-              f"{m['malformed']:4d} {m['wall']:7.2f} {m['achieved']:10.0f} {m['realtime']:11.2f} "
-              f"{m['wall_us']:9.1f} {m['cpu_us']:13.1f}", flush=True)
+        print(f"{m['rate']:7.0f} {m['samples']:8d} {m['lost']:5d} {m['late']:5d} {m['malformed']:4d} "
+              f"{m['load'] * 100:7.1f}% {m['expected_load'] * 100:7.1f}% {m['tx_dropped']:10d} {m['cpu_us']:13.1f}",
+              flush=True)
         if not m['completed']:
             print(f"        not completed: {m['message']}")
     print('zero lost frames, all runs complete' if ok else 'FAILED: lost frames or incomplete run')

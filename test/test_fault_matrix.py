@@ -168,8 +168,8 @@ def wait_at_rest(op, timeout=10.0, hold_ok=False):
     ok = op.wait_status(lambda s: s.state in states and (not s.stream_owner or hold_ok), timeout)
     assert ok, f'rig not at rest: {op.status.state_name}, {op.status.last_event}'
     # and every sample up to the rest has arrived (the last partial batch follows max_batch_delay later)
-    assert op.wait_for(lambda: op.last_sequence + 1 >= op.status.next_sequence, 5.0), \
-        (op.last_sequence, op.status.next_sequence)
+    assert op.wait_for(lambda: op.last_sequence >= op.status.last_sample, 5.0), \
+        (op.last_sequence, op.status.last_sample)
     return op.status
 
 

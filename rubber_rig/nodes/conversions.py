@@ -162,6 +162,7 @@ def status_msg(snapshot: Any, limits: Any, sample_rate: float, t: float) -> RigS
     msg.temperature = float('nan') if temperature is None else float(temperature)
     extra = _get(snapshot, 'extra', None) or {}
     msg.next_sequence = int(extra.get('next_sequence', 0))
+    msg.last_sample = int(_get(snapshot, 'controller_sequence', -1))
     msg.position = float(extra.get('position', 0.0))
     msg.stream_owner = str(extra.get('stream_owner', ''))
     msg.stream_id = int(extra.get('stream_id', 0))

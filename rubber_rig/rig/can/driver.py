@@ -268,8 +268,9 @@ class RigDriver:
             self._fault(FAULT_STREAM, f'setpoints for sample {first_sequence} arrived after the rig passed it '
                                       f'(at {self.controller_sequence}): the stream is late')
             return False
-        if s.queued_end == s.grant.first_sequence and (self._expected is None or self._expected >= s.queued_end):
-            self._last_fb_wall = self._clock()   # pipeline was empty: the feedback clock starts now
+        pipeline_empty = self._expected is None or self._expected >= s.queued_end or self._jump_to is not None
+        if s.queued_end == s.grant.first_sequence and pipeline_empty:
+            self._last_fb_wall = self._clock()   # pipeline was empty (or idle rig): the feedback clock starts now
         if self._next_hb_seq is None or self._next_hb_seq < first_sequence - self._hb_every:
             self._next_hb_seq = first_sequence
         send, per = self._send, self.frames.setpoints_per_frame
@@ -613,7 +614,9 @@ class RigDriver:
             self._fault(FAULT_WATCHDOG, f'no feedback for {now - self._last_fb_wall:.3f} s with setpoints queued')
             return
         if self._expected is not None and not self._aborting:
-            lag = (self.controller_sequence + 1 - self._expected) / self.fs
+            # an idle rig starting a new stream jumps to its first sample: the samples before it are not owed
+            expected = max(self._expected, self._jump_to or 0)
+            lag = (self.controller_sequence + 1 - expected) / self.fs
             if lag > cfg.watchdog_timeout:
                 self._fault(FAULT_WATCHDOG, f'feedback {lag:.3f} s behind the controller (stalled or delayed)')
                 return
