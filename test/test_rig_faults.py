@@ -158,7 +158,8 @@ def test_bus_overload_mid_run_faults_safely_and_counts_the_loss():
     driver counts every one, faults and the rig ramps to rest inside its limits. The next program runs on the
     same rig once the flood is gone."""
     flood = {'type': 'bus_flood', 'start': 0.6, 'duration': 0.4, 'load': 1.0, 'frame_id': 0x0F0}
-    cfg = {'paced': True, 'watchdog_timeout': 0.25, 'sim': {'faults': [flood]}}
+    # a transmit queue of 128 frames (SocketCAN's default is 10, high-rate setups use 1000) fills within the flood
+    cfg = {'paced': True, 'watchdog_timeout': 0.25, 'tx_queue': 128, 'sim': {'faults': [flood]}}
     with open_rig(cfg) as rig:
         assert rig.wait_ready(5.0)
         r = run_program(PROG, cfg, rig=rig)

@@ -180,8 +180,12 @@ class RigConfig:
     profile: str = setting('', "frames that carry the samples: 'packed' (CAN FD, several samples per frame), "
                            "'single' (CAN FD, one sample per frame), 'classic' (8-byte classic CAN frames); empty: "
                            'packed on CAN FD, classic on classic CAN', choices=('', ) + PROFILES, name='can.profile')
-    tx_queue: int = setting(128, 'frames each node of the simulated bus holds waiting for the bus (its transmit '
-                            'queue; a full queue refuses frames: the driver keeps them, the controller loses them)',
+    bus_timing: bool = setting(True, 'paced sim backend: frames take the time the configured bus needs, in '
+                               'identifier-priority order (false: python-can virtual bus, every frame at once)',
+                               name='can.bus_timing')
+    tx_queue: int = setting(1000, 'frames each node of the simulated bus holds waiting for the bus (its transmit '
+                            'queue, like SocketCAN txqueuelen; a full queue refuses frames: the driver keeps them, '
+                            'the controller loses them)',
                             range=(1, 100000), name='can.tx_queue')
     max_bus_load: float = setting(0.7, 'highest bus load the protocol may need at sample_rate (worst-case bit '
                                   'stuffing); a faster rate is refused before the bus opens', range=(0.05, 1.0),
@@ -253,7 +257,8 @@ class RigConfig:
             except CanLogError as exc:
                 raise ConfigError('can_log', str(exc)) from None
         self.sim.check()
-        if any(f.type == 'bus_flood' for f in self.sim.faults) and not (self.backend == 'sim' and self.paced):
+        if any(f.type == 'bus_flood' for f in self.sim.faults) and not (self.backend == 'sim' and self.paced
+                                                                        and self.bus_timing):
             raise ConfigError('sim.faults', 'bus_flood needs the timed bus of the paced sim backend (backend sim, '
                               'paced true)')
 

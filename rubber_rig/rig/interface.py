@@ -123,12 +123,12 @@ def _open(cfg: RigConfig, proto: Protocol, tap) -> Rig:
     logged = (lambda bus: LoggingBus(bus, tap)) if tap is not None else (lambda bus: bus)
     if cfg.backend == 'sim':
         medium = flood = None
-        if cfg.paced:   # real time: frames take the time the configured bus needs for them
+        if cfg.paced and cfg.bus_timing:   # real time: frames take the time the configured bus needs for them
             medium = BusMedium(cfg.bitrate, cfg.data_bitrate, cfg.fd, tx_queue=cfg.tx_queue, name=sim_channel_name())
             bus, sim_bus = medium.attach('host'), medium.attach('controller')
             if any(f.type == 'bus_flood' for f in cfg.sim.faults):
                 flood = medium.attach('flood')
-        else:           # as fast as possible: no time, so no bus timing (python-can's virtual bus)
+        else:   # as fast as possible (no time, so no bus timing) or asked for: python-can's virtual bus
             channel = sim_channel_name()
             bus, sim_bus = open_bus(cfg, channel), open_bus(cfg, channel)
         try:
