@@ -17,8 +17,11 @@
     .venv/bin/python benchmarks/bench_suite.py --rate 1000 --duration 600          # the 10-minute 1 kHz run
     .venv/bin/python benchmarks/bench_suite.py --rate 1000,2000,3000 --duration 60  # highest zero-loss rate
     .venv/bin/python benchmarks/bench_suite.py --processes ...                      # one process per node
+    .venv/bin/python benchmarks/bench_suite.py --rate 10000 --duration 60           # packed CAN FD at 10 kHz
+    .venv/bin/python benchmarks/bench_suite.py --rate 1000 --classic --profile classic   # a classic CAN bus
 
-rig_driver (simulated rig over python-can's virtual bus), excitation (a 5 Hz, 1 mm sine, open loop),
+rig_driver (simulated rig on the simulated CAN bus with bit timing: CAN FD 1/5 Mbit/s with packed frames unless
+--bitrate, --data-bitrate, --classic, --profile say otherwise; the bus load measured on it is reported), excitation (a 5 Hz, 1 mm sine, open loop),
 element_model and recorder run as the main job runs them (one process, one SingleThreadedExecutor thread per
 node) or, with --processes, as separate processes started from the installed executables like ros2 launch
 does. A monitor node subscribes like any client.
@@ -62,7 +65,19 @@ def driver_extra(args) -> dict:
     extra = {'backend': 'udp_multicast', 'spawn_sim': True} if args.spawn_sim else {}
     if args.poll_period:
         extra['poll_period'] = args.poll_period
+    for key, value in (('profile', args.profile), ('bitrate', args.bitrate), ('data_bitrate', args.data_bitrate)):
+        if value:
+            extra[key] = value
+    if args.classic:
+        extra['fd'] = False
     return extra
+
+
+def bus_name(args) -> str:
+    bitrate = (args.bitrate or 1_000_000) / 1e6
+    if args.classic:
+        return f'classic {bitrate:g} Mbit/s'
+    return f'CAN FD {bitrate:g}/{(args.data_bitrate or 5_000_000) / 1e6:g} Mbit/s'
 
 
 def cpu_seconds(children: bool = False) -> float:
@@ -123,6 +138,8 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         # The graph lists the recorder's subscriptions as soon as they exist; across processes, DDS endpoint
         # matching can take a moment longer, and messages published before it completes never reach them.
         launcher.wait_for(lambda: False, 2.0 if args.processes else 0.2)
+        medium = driver.rig.medium if driver is not None and driver.rig is not None else None
+        busy0 = medium.stats['busy_time'] if medium is not None else None
         cpu0, cpu0c, t0 = cpu_seconds(), cpu_seconds(True), time.monotonic()
         goal = mon.send_program(text, amplitude_control=False)
         if not launcher.wait_for(goal.done, 30.0) or not goal.result().accepted:
@@ -130,6 +147,10 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         result = goal.result().get_result_async()
         launcher.wait_for(result.done, args.duration * 3 + 60.0)
         wall = time.monotonic() - t0
+        # the bus's busy fraction over the run, measured on the simulated bus with bit timing
+        bus_load = (medium.stats['busy_time'] - busy0) / wall if medium is not None else None
+        tx_dropped = (driver.rig.sim.counters.get('tx_dropped', 0) if driver is not None and driver.rig
+                      and driver.rig.sim else None)
         launcher.wait_for(lambda: False, 1.0)   # last batches
         cpu = cpu_seconds() - cpu0
         stop = mon.recorder(RecorderControl.Request.STOP)
@@ -178,7 +199,9 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         'program_samples_without_prediction': int(np.sum(~np.isfinite(rec.prediction[inside]))),
         'first_sequences_without_prediction': rec.sequence[inside][~np.isfinite(rec.prediction[inside])][:5].tolist(),
         'live': live, 'frames_lost': int(status.frames_lost), 'frames_late': int(status.frames_late),
-        'latency': latency, 'cpu_cores': cpu / wall, 'sim_counters': sim, 'recording': str(mcap),
+        'latency': latency, 'cpu_cores': cpu / wall, 'bus_load': bus_load, 'tx_dropped': tx_dropped,
+        'profile': args.profile or ('classic' if args.classic else 'packed'), 'sim_counters': sim,
+        'recording': str(mcap),
         'loss_reasons': reasons,
         'zero_loss': not reasons,
     }
@@ -192,6 +215,11 @@ def main(argv=None) -> int:
     parser.add_argument('--batch-size', type=int, help='samples per batch (default: rig_driver 10 ms of samples, '
                         'excitation rate/20, at least 20)')
     parser.add_argument('--poll-period', type=float, help='rig_driver poll_period [s] (default: its parameter)')
+    parser.add_argument('--profile', choices=('packed', 'single', 'classic'), help='CAN frame profile (default: '
+                        'packed on CAN FD, classic with --classic)')
+    parser.add_argument('--bitrate', type=int, help='CAN (arbitration) bitrate [bit/s] (default 1 Mbit/s)')
+    parser.add_argument('--data-bitrate', type=int, help='CAN FD data bitrate [bit/s] (default 5 Mbit/s)')
+    parser.add_argument('--classic', action='store_true', help='a classic CAN bus (no FD)')
     parser.add_argument('--processes', action='store_true', help='one process per node instead of one thread each')
     parser.add_argument('--spawn-sim', action='store_true', help="simulated rig in a process of its own, on "
                         "python-can's udp_multicast bus over loopback (instead of a thread on the virtual bus)")
@@ -225,16 +253,21 @@ def main(argv=None) -> int:
                   f" ms, p99 {lat.get('p99_ms', float('nan')):.1f} ms; first sample median "
                   f"{lat1.get('median_ms', float('nan')):.1f} ms, p99 {lat1.get('p99_ms', float('nan')):.1f} ms; "
                   f"CPU {r['cpu_cores']:.2f} cores; "
+                  + (f"bus load {r['bus_load'] * 100:.1f} % (controller frames dropped {r['tx_dropped']}); "
+                     if r['bus_load'] is not None else '') +
                   f"{'ZERO LOSS' if r['zero_loss'] else 'LOSS: ' + ', '.join(r['loss_reasons'])}", flush=True)
-    print('\n| rate [Hz] | batch | mode | duration [s] | samples | lost (rec) | gaps (live) | starved | '
-          'latency first sample median / p99 [ms] | last sample median / p99 [ms] | CPU [cores] | zero loss |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|')
+    print('\n| rate [Hz] | bus, frames | batch | mode | duration [s] | samples | lost (rec) | gaps (live) | starved | '
+          'bus load (measured) | latency first sample median / p99 [ms] | last sample median / p99 [ms] | '
+          'CPU [cores] | zero loss |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
     for r in results:
         lat = r['latency'].get('last_sample', {})
         lat1 = r['latency'].get('first_sample', {})
         gaps = sum(v['gaps'] for v in r['live'].values())
-        print(f"| {r['rate']:g} | {r['batch_size']} | {r['mode']} | {r['duration_s']:.0f} | {r['samples_recorded']} | "
-              f"{r['recording_samples_lost']} | {gaps} | {r['starved_samples']} | "
+        load = f"{r['bus_load'] * 100:.1f} %" if r['bus_load'] is not None else 'n/a'
+        print(f"| {r['rate']:g} | {bus_name(args)}, {r['profile']} | {r['batch_size']} | {r['mode']} | "
+              f"{r['duration_s']:.0f} | {r['samples_recorded']} | "
+              f"{r['recording_samples_lost']} | {gaps} | {r['starved_samples']} | {load} | "
               f"{lat1.get('median_ms', float('nan')):.1f} / {lat1.get('p99_ms', float('nan')):.1f} | "
               f"{lat.get('median_ms', float('nan')):.1f} / {lat.get('p99_ms', float('nan')):.1f} | "
               f"{r['cpu_cores']:.2f} | {'yes' if r['zero_loss'] else 'NO'} |")

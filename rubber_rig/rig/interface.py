@@ -33,12 +33,15 @@ class Rig:
     """An open rig: `driver` (RigDriver) plus, for the "sim" backend, the in-process simulated controller
     (`sim`) on the other end of the same virtual bus, or a spawned simulator process (`process`).
     A paced in-process simulator runs in a thread; an unpaced one is advanced by driver.poll().
-    `can_log`: the CanLogTap writing the driver's frames (config.can_log), or None.
+    `can_log`: the CanLogTap writing the driver's frames (config.can_log), or None. `medium`: the simulated bus
+    with bit timing of a paced "sim" rig (rubber_rig.rig.can.simbus.BusMedium), or None.
     """
 
-    def __init__(self, config: RigConfig, driver: RigDriver, sim=None, sim_bus=None, process=None, can_log=None):
+    def __init__(self, config: RigConfig, driver: RigDriver, sim=None, sim_bus=None, process=None, can_log=None,
+                 medium=None):
         self.config, self.driver, self.sim, self._sim_bus, self.process = config, driver, sim, sim_bus, process
         self.can_log = can_log
+        self.medium = medium   # the simulated bus with timing (BusMedium), or None
 
     def wait_ready(self, timeout: float = 10.0) -> bool:
         """Poll until the controller has announced itself (state no longer 'unconfigured'); wall timeout [s]."""
@@ -145,7 +148,7 @@ def _open(cfg: RigConfig, proto: Protocol, tap) -> Rig:
             sim.start()              # real time: the simulator keeps its own clock in a thread
         else:
             driver.pump = sim.pump   # as fast as possible: the driver's poll() lets the simulator catch up
-        rig = Rig(cfg, driver, sim=sim, sim_bus=sim_bus, can_log=tap)
+        rig = Rig(cfg, driver, sim=sim, sim_bus=sim_bus, can_log=tap, medium=medium)
     else:
         process = None
         if cfg.spawn_sim:
