@@ -21,7 +21,8 @@
     .venv/bin/python benchmarks/bench_suite.py --rate 1000 --classic --profile classic   # a classic CAN bus
 
 rig_driver (simulated rig on the simulated CAN bus with bit timing: CAN FD 1/5 Mbit/s with packed frames unless
---bitrate, --data-bitrate, --classic, --profile say otherwise; the bus load measured on it is reported), excitation (a 5 Hz, 1 mm sine, open loop),
+--bitrate, --data-bitrate, --classic, --profile say otherwise; the bus load measured on it is reported),
+excitation (a 5 Hz, 1 mm sine, open loop),
 element_model and recorder run as the main job runs them (one process, one SingleThreadedExecutor thread per
 node) or, with --processes, as separate processes started from the installed executables like ros2 launch
 does. A monitor node subscribes like any client.
