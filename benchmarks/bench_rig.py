@@ -59,8 +59,10 @@ def run(rate: float, duration: float, paced: bool, profile: str, fd: bool = True
            'fd': fd, 'bitrate': bitrate, 'max_bus_load': 1.0}
     c0, t0 = time.process_time(), time.perf_counter()
     with open_rig(cfg) as rig:
+        busy0, w0 = (rig.medium.stats['busy_time'], time.perf_counter()) if rig.medium else (None, None)
         r = run_program(prog, cfg, rig=rig)
-        load = rig.driver.status.extra['bus_load_measured']
+        # busy fraction of the bus over the run, measured on the simulated bus with bit timing (paced)
+        load = (rig.medium.stats['busy_time'] - busy0) / (time.perf_counter() - w0) if rig.medium else None
         sim = dict(rig.sim.counters)
     wall, cpu = time.perf_counter() - t0, time.process_time() - c0
     n = int(r.sequence.size)

@@ -66,11 +66,12 @@ def driver_extra(args) -> dict:
     extra = {'backend': 'udp_multicast', 'spawn_sim': True} if args.spawn_sim else {}
     if args.poll_period:
         extra['poll_period'] = args.poll_period
-    for key, value in (('profile', args.profile), ('bitrate', args.bitrate), ('data_bitrate', args.data_bitrate)):
+    for key, value in (('can.profile', args.profile), ('can.bitrate', args.bitrate),
+                       ('can.data_bitrate', args.data_bitrate)):
         if value:
             extra[key] = value
     if args.classic:
-        extra['fd'] = False
+        extra['can.fd'] = False
     return extra
 
 

@@ -103,12 +103,16 @@ def test_packing_follows_the_rate_and_a_broken_count_is_malformed():
         frames.decode_feedback(bad)
 
 
-def test_a_classic_measured_frame_without_its_applied_frame_completes_no_sample():
+def test_classic_pairs_complete_in_either_order_and_a_lost_partner_completes_nothing():
     frames = SampleFrames('classic', DB)
-    applied, measured = frames.encode_feedback(300, [1e-4], [5.0], [1e-4])
-    assert frames.decode_feedback(measured) is None                   # its applied frame was lost
-    assert frames.decode_feedback(applied) is None                    # waits for its pair
-    assert frames.decode_feedback(measured)[0] == 300
-    other = frames.encode_feedback(301, [1e-4], [5.0], [1e-4])[1]
-    frames.decode_feedback(applied)
-    assert frames.decode_feedback(other) is None                      # pair of another tick: no sample
+    pairs = [frames.encode_feedback(300 + k, [1e-4 * k], [5.0 * k], [2e-4 * k]) for k in range(4)]
+    # priority order on the bus: every FeedbackApplied (0x182) before the FeedbackMeasured (0x183) frames
+    out = [frames.decode_feedback(a) for a, _ in pairs] + [frames.decode_feedback(m) for _, m in pairs]
+    done = [o for o in out if o is not None]
+    assert [d[0] for d in done] == [300, 301, 302, 303]
+    assert [d[3][0] for d in done] == pytest.approx([0.0, 2e-4, 4e-4, 6e-4])
+    assert frames.decode_feedback(pairs[1][1]) is None                # measured again, applied already used
+    lone = frames.encode_feedback(310, [1e-4], [5.0], [1e-4])
+    assert frames.decode_feedback(lone[1]) is None                    # its applied frame was lost: no sample
+    later = frames.encode_feedback(310 + 256, [2e-4], [6.0], [3e-4])
+    assert frames.decode_feedback(later[0])[0] == 310 + 256           # ... the same slot 256 later pairs anew

@@ -126,28 +126,31 @@ def test_a_29_bit_identifier_lengthens_the_frame(clock, media):
     assert b.recv(0).is_extended_id
 
 
-def test_the_lowest_identifier_wins_arbitration_and_equal_identifiers_keep_their_order(clock, media):
+def test_the_lowest_identifier_wins_arbitration_between_nodes_each_node_sends_in_order(clock, media):
     medium = media(bitrate=1e6, fd=False, clock=clock)
-    a, b, c = medium.attach('a'), medium.attach('b'), medium.attach('c')
+    a, b, e, c = medium.attach('a'), medium.attach('b'), medium.attach('e'), medium.attach('c')
     d = frame_time(8, 1e6)
     b.send(frame(0x100))                    # on the bus from T0 to T0 + d
     clock.t = T0 + 10e-6
     a.send(frame(0x300))
     a.send(frame(0x250, data=b'first..8'))
     a.send(frame(0x200))
-    a.send(frame(0x250, data=b'second.8'))
-    assert a.frames_queued == 4
+    e.send(frame(0x280))
+    e.send(frame(0x250, data=b'second.8'))
+    assert a.frames_queued == 3 and e.frames_queued == 2
     clock.t = T0 + 1.0
     got = drain(c)
+    # heads after 0x100: a 0x300, e 0x280 -> 0x280; then a 0x300 vs e 0x250 -> 0x250; then a's queue in order
     assert [(m.arbitration_id, bytes(m.data)) for m in got] == [
-        (0x100, bytes(8)), (0x200, bytes(8)), (0x250, b'first..8'), (0x250, b'second.8'), (0x300, bytes(8))]
+        (0x100, bytes(8)), (0x280, bytes(8)), (0x250, b'second.8'), (0x300, bytes(8)), (0x250, b'first..8'),
+        (0x200, bytes(8))]
     # back to back: each frame ends one frame duration [s] after the previous (timestamps on time.time()'s
     # scale resolve 0.24 us)
     ends = [m.timestamp - got[0].timestamp for m in got]
-    assert ends == pytest.approx([0, d, 2 * d, 3 * d, 4 * d], abs=5e-7)
-    assert a.max_queue_delay == pytest.approx(4 * d - 10e-6)   # 0x300 waited for 0x100 and three of its own
-    assert medium.stats['max_queue_delay'] == pytest.approx(4 * d - 10e-6)
-    assert [m.arbitration_id for m in drain(a)] == [0x100] and len(drain(b)) == 4
+    assert ends == pytest.approx([0, d, 2 * d, 3 * d, 4 * d, 5 * d], abs=5e-7)
+    assert a.max_queue_delay == pytest.approx(5 * d - 10e-6)   # 0x200 waited for 0x100, e's two and a's two
+    assert medium.stats['max_queue_delay'] == pytest.approx(5 * d - 10e-6)
+    assert [m.arbitration_id for m in drain(a)] == [0x100, 0x280, 0x250] and len(drain(b)) == 5
 
 
 @pytest.mark.parametrize('late, order', [(0.0, [0x100, 0x050, 0x300]), (1e-6, [0x100, 0x300, 0x050])],

@@ -340,8 +340,20 @@ class RigDriverNode(LifecycleNode):
     def publish_diagnostics(self) -> None:
         status = self._last_status or self.status_message()
         hw = f'{self.config.backend}:{self.config.channel or self.get_fully_qualified_name()}'
-        extra = {'bus_load_pct': f'{self.rig.driver.bus_load * 100:.1f}'} if self.rig is not None else {}
-        self.pub_diag.publish(conv.diagnostics_msg(status, hw, extra, name=self.get_fully_qualified_name()))
+        self.pub_diag.publish(conv.diagnostics_msg(status, hw, self.bus_diagnostics(),
+                                                   name=self.get_fully_qualified_name()))
+
+    def bus_diagnostics(self) -> dict:
+        """The bus's lines of /diagnostics: the load the protocol needs at this rate (worst-case stuffing), the
+        load measured on the simulated bus (when it has bit timing) and the frame profile.
+        """
+        if self.rig is None:
+            return {}
+        extra = {'bus_load_pct': f'{self.rig.driver.bus_load * 100:.1f}', 'can_profile': self.config.frame_profile}
+        measured = self.rig.driver.status.extra['bus_load_measured']
+        if measured is not None:
+            extra['bus_load_measured_pct'] = f'{measured * 100:.1f}'
+        return extra
 
     def on_reset(self, request, response):
         if self.rig is None:

@@ -74,7 +74,9 @@ class SampleFrames:
             self.setpoints_per_frame = self.feedback_slots = 1
         self.feedback_per_frame = self.feedback_pack(fs)
         self._sp, self._fb = sp, fb
-        self._applied = None     # classic: (sequence, command) of the FeedbackApplied frame awaiting its pair
+        # classic: frames waiting for their pair, by the low 8 bits of the sequence (a lost partner leaves an
+        # entry that the frame of the same slot 256 samples later replaces)
+        self._applied, self._measured = {}, {}
 
     def feedback_pack(self, fs: float) -> int:
         """Samples per feedback frame at sample rate fs [Hz]: as many as FEEDBACK_PACK_TIME holds (at least 1, at
@@ -141,8 +143,8 @@ class SampleFrames:
 
     def decode_feedback(self, msg):
         """(sequence mod feedback_modulus, x, f, u lists) of the samples a feedback frame completes, or None
-        (classic: a FeedbackApplied frame waits for its FeedbackMeasured pair; a measured frame whose applied
-        frame was lost completes nothing, so the sample counts as lost). MalformedFrame if it is broken.
+        (classic: the first frame of a tick's pair waits for the other; a sample whose partner frame was lost is
+        never completed, so it counts as lost). MalformedFrame if it is broken.
         """
         codec = self.by_id[msg.arbitration_id]
         why = codec.check(msg.data)
@@ -156,10 +158,18 @@ class SampleFrames:
             return v[0], v[2:2 + 3 * n:3], v[3:3 + 3 * n:3], v[4:4 + 3 * n:3]
         if self.profile == 'single':
             return v[0], [v[1]], [v[2]], [v[3]]
+        # classic: the two frames of a tick pair up by sequence, in either order (a controller with several
+        # frames queued sends them by identifier priority: all FeedbackApplied before their FeedbackMeasured)
         if codec.name == 'FeedbackApplied':
-            self._applied = (v[0], v[1])
+            seq, u = v
+            measured = self._measured.pop(seq % 256, None)
+            if measured is not None:
+                return seq, [measured[0]], [measured[1]], [u]
+            self._applied[seq % 256] = (seq, u)
             return None
-        applied, self._applied = self._applied, None
-        if applied is None or applied[0] % 256 != v[0]:
+        seq8, x, f = v
+        applied = self._applied.pop(seq8, None)
+        if applied is None:
+            self._measured[seq8] = (x, f)
             return None
-        return applied[0], [v[1]], [v[2]], [applied[1]]
+        return applied[0], [x], [f], [applied[1]]

@@ -20,10 +20,11 @@ interface, the medium behaves like a loaded CAN bus:
 
 * each frame occupies the bus for its duration (:func:`rubber_rig.rig.can.timing.frame_time`, worst-case bit
   stuffing; CAN FD frames with bit-rate switch run their data phase at the data bitrate);
-* frames go out one at a time. When the bus becomes free, arbitration picks, among the frames queued on all
-  nodes at that moment, the one with the lowest identifier (bitwise, as on the wire: an 11-bit identifier beats
-  a 29-bit one with the same base identifier, a data frame beats a remote frame); equal identifiers go in the
-  order they were queued;
+* frames go out one at a time. Each node sends its own frames in the order it queued them (a FIFO transmit
+  queue, as SocketCAN's); when the bus becomes free, arbitration picks, among the frames at the head of each
+  node's queue at that moment, the one with the lowest identifier (bitwise, as on the wire: an 11-bit
+  identifier beats a 29-bit one with the same base identifier, a data frame beats a remote frame); equal
+  identifiers go in the order they were queued;
 * a frame reaches every other node when its transmission ends, never earlier, with that moment as timestamp;
 * each node's transmit queue holds ``tx_queue`` frames; a send on a full queue fails like SocketCAN's ENOBUFS,
   so an offered load above the bus capacity first delays frames, then loses them.
@@ -147,7 +148,8 @@ class BusMedium:
             if self._inflight is not None:
                 busy += now - self._inflight[1]
             return {'frames_transmitted': self._transmitted, 'frames_dropped': self._dropped,
-                    'frames_discarded': self._discarded, 'frames_queued': len(self._heap), 'busy_time': busy,
+                    'frames_discarded': self._discarded, 'frames_queued': sum(n._queued for n in self._nodes),
+                    'busy_time': busy,
                     'max_queue_delay': self._max_delay, 'nodes': len(self._nodes), 'time': now}
 
     # --- the schedule (all below run with self._lock held) ---
@@ -207,6 +209,10 @@ class BusMedium:
                 self._complete()
             _, _, enqueued, duration, node, frame = heapq.heappop(heap)
             node._queued -= 1
+            txq = node._txq
+            txq.popleft()
+            if txq:   # the node's next frame is its new head in the arbitration
+                heapq.heappush(heap, txq[0])
             delay = t - enqueued
             if delay > node._max_delay:
                 node._max_delay = delay
@@ -228,7 +234,12 @@ class BusMedium:
             self._complete()
 
     def _enqueue(self, node: 'TimedBus', now: float, duration: float, frame: tuple, key: int):
-        heapq.heappush(self._heap, (key, next(self._counter), now, duration, node, frame))
+        # each node sends its frames in the order it queued them (a FIFO transmit queue, as SocketCAN's); only the
+        # head of each node's queue takes part in the arbitration between nodes
+        entry = (key, next(self._counter), now, duration, node, frame)
+        node._txq.append(entry)
+        if len(node._txq) == 1:
+            heapq.heappush(self._heap, entry)
         node._queued += 1
         if self._next_arb == _INF:
             # the bus was idle or about to be: this frame makes a new arrival possible, so wake the receivers
@@ -241,6 +252,7 @@ class BusMedium:
             return
         self._heap = [entry for entry in self._heap if entry[4] is not node]
         heapq.heapify(self._heap)
+        node._txq.clear()
         self._discarded += node._queued
         node._queued = 0
         # without the discarded frames the next moment is when the bus is free and a remaining frame is queued
@@ -277,6 +289,7 @@ class TimedBus(can.BusABC):
     def __init__(self, medium: BusMedium, name: str = '', can_filters=None, **kwargs):
         self.medium = medium
         self._rx = deque()                  # (arrival [s] on the medium's clock, frame), in arrival order
+        self._txq = deque()                 # heap entries of the frames waiting for the bus, in queued order
         self._queued = 0
         self._sent = 0
         self._dropped = 0
