@@ -452,6 +452,8 @@ def test_rig_driver_node_reports_the_bus_profile_and_its_measured_load(ros_conte
         assert diag['can_profile'] == 'classic' and 42.0 < float(diag['bus_load_pct']) < 44.0
         # idle: heartbeats, status and temperature only (about 80 frames/s of 8 bytes: ~2 % at 500 kbit/s)
         assert 0.5 < float(diag['bus_load_measured_pct']) < 12.0
+        status = node.status_message()                      # RigStatus carries the measured load too
+        assert status.bus_load == pytest.approx(float(diag['bus_load_measured_pct']) / 100, abs=0.01)
     finally:
         node.close()
         node.destroy_node()

@@ -164,6 +164,8 @@ def status_msg(snapshot: Any, limits: Any, sample_rate: float, t: float) -> RigS
     msg.next_sequence = int(extra.get('next_sequence', 0))
     msg.last_sample = int(_get(snapshot, 'controller_sequence', -1))
     msg.position = float(extra.get('position', 0.0))
+    measured = extra.get('bus_load_measured')
+    msg.bus_load = float(measured if measured is not None else extra.get('bus_load', math.nan))
     msg.stream_owner = str(extra.get('stream_owner', ''))
     msg.stream_id = int(extra.get('stream_id', 0))
     msg.setpoints_refused = int(extra.get('setpoints_refused', 0))
