@@ -108,11 +108,12 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
     from rubber_rig.nodes.excitation_node import READY_STATES
     from rubber_rig.nodes.launcher import InProcessLauncher
     from rubber_rig.nodes.monitor import SuiteMonitor
+    from rubber_rig.nodes.rig_driver_node import BATCH_PERIOD
     from rubber_rig.recording import load_recording
 
     # setpoints: ~20 messages/s; samples: rig_driver's own default (10 ms of samples) unless --batch-size
     batch = args.batch_size or max(20, int(round(rate / 20)))
-    sample_batch = args.batch_size or max(1, round(0.01 * rate))
+    sample_batch = args.batch_size or max(1, round(BATCH_PERIOD * rate))
     domain = args.domain_id if args.domain_id is not None else 150 + os.getpid() % 50
     text = program_text(args.duration)
     program = Program.from_yaml_text(text)

@@ -495,10 +495,8 @@ class RigDriver:
             seq, xs, fs, us, n = seq + skip, xs[skip:], fs[skip:], us[skip:], n - skip
         if seq > self._expected:
             lost = seq - self._expected
-            self.counters['frames_lost'] += lost
+            self._count_lost(lost)
             self._bad_event(lost)
-            self._flush_pending()
-            self._pend_lost += lost
             if lost / self.fs > self.cfg.lost_burst_max:
                 self._fault(FAULT_BUS, f'{lost} consecutive samples lost ({lost / self.fs * 1e3:.1f} ms > '
                                        f'{self.cfg.lost_burst_max * 1e3:g} ms)')
@@ -522,6 +520,12 @@ class RigDriver:
                     self._fault(FAULT_SENSOR, why)
                     break
 
+    def _count_lost(self, lost: int):
+        """`lost` samples before the next one received: counted, and carried by the next SampleBlock."""
+        self.counters['frames_lost'] += lost
+        self._flush_pending()
+        self._pend_lost += lost
+
     def _on_status(self, sig, msg):
         code = int(sig['ST_State'])
         self._set_controller_state(STATES[code] if code < len(STATES) else 'fault')
@@ -532,10 +536,7 @@ class RigDriver:
                 and self.controller_sequence + 1 > self._expected:
             # the controller stopped ticking after samples whose frames never arrived (feedback goes out before
             # this status: its identifier wins arbitration): they are lost, not merely late
-            lost = self.controller_sequence + 1 - self._expected
-            self.counters['frames_lost'] += lost
-            self._flush_pending()
-            self._pend_lost += lost
+            self._count_lost(self.controller_sequence + 1 - self._expected)
             self._expected = self.controller_sequence + 1
 
     def _on_heartbeat(self, sig, msg):

@@ -65,8 +65,9 @@ class SampleFrames:
         self.by_id = {c.frame_id: c for c in self.codecs.values()}
         sp = self.codecs[self.setpoint_names[0]]
         fb = self.codecs[self.feedback_names[0]]
-        self.setpoint_modulus = 1 << (8 * sp._layout[0][1])
-        self.feedback_modulus = 1 << (8 * fb._layout[0][1])
+        # the first signal of every sample frame is its sequence number
+        self.setpoint_modulus = 1 << db.get_message_by_name(sp.name).signals[0].length
+        self.feedback_modulus = 1 << db.get_message_by_name(fb.name).signals[0].length
         if profile == 'packed':
             self.setpoints_per_frame = len(sp.names) - 2
             self.feedback_slots = (len(fb.names) - 2) // 3
