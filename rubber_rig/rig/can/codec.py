@@ -18,13 +18,10 @@
 cantools builds a dict per frame and (through python-can) a deep copy per send: tens of microseconds per frame,
 more than the element model costs per sample. The sample frames of rubber_rig.dbc only hold byte-aligned
 little-endian integers with a scale, so :class:`ByteCodec` reads the layout (start, length, sign, scale, offset)
-from the cantools Message and packs values with plain integer arithmetic, or decodes a whole stack of frames at
-once with numpy. cantools stays the definition: a codec refuses a message it cannot represent exactly, and
-test_rig_codec checks both agree on every field.
+from the cantools Message and packs values with plain integer arithmetic. cantools stays the definition: a codec
+refuses a message it cannot represent exactly, and test_rig_codec checks both agree on every field.
 """
 from __future__ import annotations
-
-import numpy as np
 
 __all__ = ['ByteCodec', 'crc8']
 
@@ -77,16 +74,6 @@ class ByteCodec:
             lo, hi = (-(1 << (s.length - 1)), (1 << (s.length - 1)) - 1) if s.is_signed else (0, (1 << s.length) - 1)
             self._layout.append((s.start // 8, nbytes, bool(s.is_signed), float(s.scale), float(s.offset), lo, hi))
         self._integer = [sc == 1.0 and off == 0.0 for _, _, _, sc, off, _, _ in self._layout]
-        # numpy decode: one gather per byte width
-        self._groups = []
-        for nbytes in sorted({n for _, n, *_ in self._layout}):
-            cols = [i for i, (_, n, *_) in enumerate(self._layout) if n == nbytes]
-            idx = np.array([[self._layout[i][0] + k for k in range(nbytes)] for i in cols])
-            signed = np.array([self._layout[i][2] for i in cols])
-            scale = np.array([self._layout[i][3] for i in cols])
-            offset = np.array([self._layout[i][4] for i in cols])
-            self._groups.append((np.array(cols), idx, nbytes, signed, scale, offset))
-        self._shifts = {n: (8 * np.arange(n)).astype(np.int64) for n in {g[2] for g in self._groups}}
 
     def encode(self, values) -> bytearray:
         """Payload (length bytes, CRC filled in) for physical `values` in the order of `names`; signals after
@@ -114,15 +101,4 @@ class ByteCodec:
         for (start, nbytes, signed, scale, offset, _, _), integer in zip(self._layout, self._integer, strict=True):
             raw = int.from_bytes(data[start:start + nbytes], 'little', signed=signed)
             out.append(raw if integer else raw * scale + offset)
-        return out
-
-    def decode_many(self, payloads: np.ndarray) -> np.ndarray:
-        """Physical values, shape (n_frames, n_signals), from payloads of shape (n_frames, length) uint8."""
-        d = np.asarray(payloads, dtype=np.uint8)
-        out = np.empty((d.shape[0], len(self._layout)))
-        for cols, idx, nbytes, signed, scale, offset in self._groups:
-            raw = (d[:, idx].astype(np.int64) << self._shifts[nbytes]).sum(axis=2)
-            top = np.int64(1) << (8 * nbytes - 1)
-            raw = np.where(signed & (raw >= top), raw - 2 * top, raw)
-            out[:, cols] = raw * scale + offset
         return out
