@@ -449,8 +449,7 @@ class RigDriver:
             try:
                 samples = self.frames.decode_feedback(msg)
             except MalformedFrame:
-                self.counters['frames_malformed'] += 1
-                self._bad_event(1)
+                self._malformed()
                 return
             if samples is not None:
                 self._on_samples(*samples, msg.timestamp)
@@ -458,8 +457,7 @@ class RigDriver:
         try:
             decoded = self.proto.decode(msg)
         except MalformedFrame:
-            self.counters['frames_malformed'] += 1
-            self._bad_event(1)
+            self._malformed()
             return
         if decoded is None:
             self.counters['frames_unknown'] += 1
@@ -519,6 +517,11 @@ class RigDriver:
                 if why:
                     self._fault(FAULT_SENSOR, why)
                     break
+
+    def _malformed(self):
+        """A frame with a wrong length or CRC: counted, and a bad-frame event."""
+        self.counters['frames_malformed'] += 1
+        self._bad_event(1)
 
     def _count_lost(self, lost: int):
         """`lost` samples before the next one received: counted, and carried by the next SampleBlock."""

@@ -330,16 +330,9 @@ class SimController:
             u, x, force = u[:n], x[:n], np.asarray(force)[:n]
             self.actuator.x, self.actuator.v = x[-1], v[n - 1]
         xm, fm = self.disp_sensor.read_many(x), self.force_sensor.read_many(force)
-        fx, ff, fu = self._fb
-        if not fx:
-            self._fb_first = seq
         # a frame cannot carry NaN: an invalid channel reads 0 and the status frame carries the sensor fault
-        fx.extend(np.where(np.isfinite(xm), xm, 0.0).tolist())
-        ff.extend(np.where(np.isfinite(fm), fm, 0.0).tolist())
-        fu.extend(u)
-        per = self.frames.feedback_per_frame
-        while len(self._fb[0]) >= per:
-            self._send_feedback(per)
+        self._queue_feedback(seq, np.where(np.isfinite(xm), xm, 0.0).tolist(),
+                             np.where(np.isfinite(fm), fm, 0.0).tolist(), u)
         self.u_prev, self.u = (u[-2] if n > 1 else self.u), u[-1]
         self.next_seq += n
         self.ticks += n
@@ -378,14 +371,8 @@ class SimController:
                 sensor.stuck_value = None
         xm, fm = self.disp_sensor.read(x), self.force_sensor.read(force)
         # a frame cannot carry NaN: an invalid channel reads 0 and the status frame carries the sensor fault
-        fx, ff, fu = self._fb
-        if not fx:
-            self._fb_first = self.next_seq
-        fx.append(xm if math.isfinite(xm) else 0.0)
-        ff.append(fm if math.isfinite(fm) else 0.0)
-        fu.append(u)
-        if len(fx) >= self.frames.feedback_per_frame:
-            self._send_feedback()
+        self._queue_feedback(self.next_seq, [xm if math.isfinite(xm) else 0.0], [fm if math.isfinite(fm) else 0.0],
+                             [u])
         self.next_seq += 1
         self.ticks += 1
         if self.state == 'ramping_down' and self.ramp.done:
@@ -407,6 +394,20 @@ class SimController:
         if self._idle_since is not None:
             idle += int((time.monotonic() - self._idle_since) * self.fs)
         return (self.ticks + idle) / self.fs
+
+    def _queue_feedback(self, first: int, xm: list, fm: list, u: list):
+        """Samples first, first + 1, ... (measured displacement and force, applied command) for the feedback
+        frames; every frame that is full goes out now.
+        """
+        fx, ff, fu = self._fb
+        if not fx:
+            self._fb_first = first
+        fx.extend(xm)
+        ff.extend(fm)
+        fu.extend(u)
+        per = self.frames.feedback_per_frame
+        while len(self._fb[0]) >= per:
+            self._send_feedback(per)
 
     def _send_feedback(self, count: int = None):
         """Send the first `count` samples not yet sent (default: all; a packed frame may carry fewer than it
