@@ -34,6 +34,10 @@ UNITS = {
     'time': {'s': 1.0, 'ms': 1e-3, 'us': 1e-6, 'µs': 1e-6, 'min': 60.0},
     'stiffness': {'N/m': 1.0, 'N/mm': 1e3, 'kN/m': 1e3, 'kN/mm': 1e6, 'MN/m': 1e6},
     'damping': {'Ns/m': 1.0, 'kNs/m': 1e3, 'Ns/mm': 1e3},
+    'stiffness2': {'N/m^2': 1.0, 'N/mm^2': 1e6, 'kN/mm^2': 1e9},
+    'stiffness3': {'N/m^3': 1.0, 'N/mm^3': 1e9, 'kN/mm^3': 1e12},
+    'stiffness5': {'N/m^5': 1.0, 'N/mm^5': 1e15, 'kN/mm^5': 1e18},
+    'slowness': {'s/m': 1.0, 's/mm': 1e3},
     'temperature': {'degC': 0.0, 'C': 0.0, '°C': 0.0, 'K': -273.15},
     'number': {},
 }

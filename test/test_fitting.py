@@ -309,10 +309,14 @@ def test_cli_fit_json_and_yaml(recordings, tmp_path, capsys):
     data = json.loads(capsys.readouterr().out)
     f = data['fits'][0]
     assert f['temperature'] == -40.0 and len(f['blocks']) == 8
-    assert set(f['params']) == set(PARAM_NAMES)
-    assert all(abs(v) < TOL[k] for k, v in f['param_errors'].items())
+    assert set(f['parameters']) == set(PARAM_NAMES)
+    assert set(f['errors']) == set(PARAM_NAMES) and all(abs(v) < TOL[k] for k, v in f['errors'].items())
     assert {'e_k', 'e_c'} <= set(f['blocks'][0]['simulated'])
-    assert out.exists() and 'fit_m40C' in out.read_text()
+    assert data['model'] == 'zener_berg' and isinstance(data['warnings'], list) and data['chi2_per_dof'] > 0
+    assert set(data['uncertainty']) == set(PARAM_NAMES)
+    from rubber_rig.models.modelfile import load_model_file
+    fitted = load_model_file(out)
+    assert fitted.values() == pytest.approx(f['parameters'], rel=1e-12)
 
 
 def test_cli_fit_bad_input_is_a_clear_error(tmp_path, capsys):

@@ -112,7 +112,7 @@ def test_parallel_spec_and_branch_sum():
         {'type': 'linear_spring', 'k': 1e6}, {'type': 'maxwell', 'k': 2e5, 'c': 1e3},
         {'type': 'fractional_zener', 'k0': 1e6, 'k_inf': 2e6, 'tau': 0.01, 'alpha': 0.5},
         {'type': 'berg', 'f_fmax': 100.0, 'x2': 1e-4}, {'type': 'smooth_coulomb', 'f_c': 20.0, 'a': 10.0},
-        {'type': 'polynomial_spring', 'coefficients': [0, 0, 0, 1e10]},
+        {'type': 'polynomial_spring', 'k3': 1e10},
         {'type': 'two_order_fractional', 'k1': 1e5, 'k2': 5e4, 'c1': 2e3, 'c2': 1e3, 'alpha': 0.5, 'beta': 0.8},
         {'type': 'dashpot', 'c': 10.0}, {'type': 'tangent_spring', 'k_t': 1e5, 'd_t': 0.01},
         {'type': 'zener', 'k0': 1e5, 'k_inf': 2e5, 'tau': 0.1}]}

@@ -12,18 +12,23 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Identify seed-000 model parameters from MCAP recordings (one table row per temperature).
+"""Identify a rubber-element model from MCAP recordings or a K_dyn / C_eq table, with honest uncertainty.
 
 Examples:
-  rubber-rig fit run_20C.mcap run_m40C.mcap -o params.yaml
-  rubber-rig fit run.mcap --method harmonic --w-k 100 --w-c 1 --json > fit.json
-Each recording is split into blocks (recorded block index / program, or detected steady segments),
-the first --settle-cycles cycles of each block are skipped, and K_dyn, loss angle, D, energy and C_eq
-are measured per block. The fit minimises seed 000 Eq. 29 (differential evolution + least-squares
-polish); --method time (default) then refines on the raw force-displacement loops. Recordings at the
-same temperature (metadata or temperature channel, 0.5 degC bins) are fitted together. The
-parameters are written as YAML in the format of rubber_rig/models/data/swing_arm_joint.yaml.
-Tables print in the papers' units (mm, kN, kN/mm); YAML and --json are SI.
+  rubber-rig fit run_20C.mcap run_m40C.mcap -o fit.yaml
+  rubber-rig fit run.mcap --model zener_berg --model zener_berg_cubic      # rank two models (AIC/BIC)
+  rubber-rig fit run.mcap --model my_bushing.yaml --load-cell-delay 0.2ms --json > fit.json
+  rubber-rig fit table.csv --model pad                                     # from a K_dyn/C_eq table
+  rubber-rig fit pad_run.mcap --per-block                                  # seed 004: per block + trend
+--model takes a model file (rubber-rig models explains the format), a named model (rubber-rig models) or a
+parameter set; default zener_berg (seed 000). Each recording is split into blocks; the fit searches the
+model's first harmonics globally (seed 000 Eq. 29) and, with --method time (default), refines on the raw
+loops with the load-cell delay as a parameter. Every number comes with a 1-sigma uncertainty and a 95 %
+interval (the larger of the noise-based one, inflated by the lack of fit, and the bootstrap over blocks,
+linearised), chi2/dof against the load-cell noise the recording shows, and warnings: misfit, per-block
+errors, systematic residual patterns, parameters the data cannot identify, an estimated load-cell delay.
+The fitted model is written as a model file with the uncertainties beside the values (one file per
+temperature). Tables print in the papers' units (mm, kN, kN/mm); YAML and --json are SI.
 """
 from __future__ import annotations
 
@@ -34,26 +39,56 @@ from pathlib import Path
 
 import numpy as np
 
-PAPER_UNITS = {'k0': (1e-6, 'kN/mm'), 'k_inf': (1e-6, 'kN/mm'), 'tau': (1.0, 's'), 'alpha': (1.0, '-'),
-               'x2': (1e3, 'mm'), 'f_fmax': (1e-3, 'kN')}
+from rubber_rig.units import to_si
+
+# parameter dimension -> (factor from SI, unit) for the printed tables
+PAPER_UNITS = {'stiffness': (1e-6, 'kN/mm'), 'force': (1e-3, 'kN'), 'length': (1e3, 'mm'),
+               'thickness': (1e3, 'mm'), 'damping': (1e-3, 'kNs/m'), 'time': (1.0, 's'), 'order': (1.0, '-'),
+               'k2': (1e-9, 'kN/mm^2'), 'k3': (1e-12, 'kN/mm^3'), 'k5': (1e-18, 'kN/mm^5'),
+               'slowness': (1e-3, 's/mm'), 'frac_alpha': (1.0, 'SI'), 'frac_beta': (1.0, 'SI'),
+               'delay': (1e3, 'ms')}
 
 
 def add_arguments(parser):
-    parser.add_argument('recordings', nargs='+', help='MCAP recordings (files or split-file directories)')
-    parser.add_argument('--output', '-o', default='fit_params.yaml',
-                        help='parameter YAML to write (default fit_params.yaml; "-" for none)')
+    parser.add_argument('recordings', nargs='+', help='MCAP recordings (files or split-file directories) or '
+                                                      'one CSV table of K_dyn and C_eq')
+    parser.add_argument('--model', '-m', action='append', default=None, metavar='FILE|NAME',
+                        help='model to fit: a model file, a named model or a parameter set (default zener_berg); '
+                             'give several to rank them by AIC/BIC')
+    parser.add_argument('--output', '-o', default='fit.yaml',
+                        help='model file to write (default fit.yaml; several temperatures: fit_20C.yaml, ...; '
+                             'several models: the selected one; "-" for none)')
     parser.add_argument('--method', choices=('harmonic', 'time'), default='time',
-                        help='harmonic: Eq. 29 only; time (default): Eq. 29, then refined on the raw loops')
+                        help='harmonic: Eq. 29 only; time (default): then refined on the raw loops')
+    parser.add_argument('--load-cell-delay', default=None,
+                        help='known load-cell delay (calibration), e.g. 0.2ms; default: the recording\'s rig '
+                             'configuration, else 0')
+    parser.add_argument('--load-cell-gain', type=float, default=None,
+                        help='known load-cell gain (calibration: reading / true force); default: the '
+                             'recording\'s rig configuration, else 1')
+    parser.add_argument('--no-delay-estimate', action='store_true',
+                        help='do not estimate a residual load-cell delay in the time-domain fit')
+    parser.add_argument('--per-block', action='store_true',
+                        help='seed 004: identify K1, K3 and the elliptic damping b per block and fit their '
+                             'trend over frequency and amplitude (Eq. 7)')
     parser.add_argument('--w-k', type=float, default=100.0, help='weight of the K_dyn errors in Eq. 29 (100)')
     parser.add_argument('--w-c', type=float, default=1.0, help='weight of the C_eq errors in Eq. 29 (1)')
     parser.add_argument('--settle-cycles', type=int, default=3, help='cycles skipped at the start of each block (3)')
     parser.add_argument('--min-cycles', type=int, default=2, help='fewest analysed cycles for a block to count (2)')
     parser.add_argument('--seed', type=int, default=0, help='random seed of differential evolution')
-    parser.add_argument('--prefix', default='fit', help='parameter-set names: <prefix>_20C, <prefix>_m40C, ...')
     parser.add_argument('--temperature', type=float, default=None,
                         help='temperature [degC] of all recordings (overrides metadata/channel)')
     parser.add_argument('--json', action='store_true', help='machine-readable result on stdout (SI)')
     parser.add_argument('--no-progress', action='store_true', help='no progress bar on stderr')
+
+
+def check_arguments(args):
+    if args.per_block and (args.model or args.method != 'time'):
+        return '--per-block identifies seed 004 coefficients per block; it takes no --model or --method'
+    tables = [p for p in args.recordings if str(p).lower().endswith('.csv')]
+    if tables and len(args.recordings) > 1:
+        return 'give either one CSV table or MCAP recordings, not both'
+    return None
 
 
 def _jsonable(v):
@@ -64,8 +99,8 @@ def _jsonable(v):
     if isinstance(v, (np.floating, float)):
         f = float(v)
         return f if math.isfinite(f) else None
-    if isinstance(v, np.integer):
-        return int(v)
+    if isinstance(v, (np.integer, np.bool_)):
+        return v.item()
     return v
 
 
@@ -88,67 +123,155 @@ def load_runs(paths, temperature=None):
     return runs, messages
 
 
-def print_table(fits, out=None):
-    from rubber_rig.fitting.identify import PARAM_NAMES
+def _unit(fit, name):
+    from rubber_rig.fitting.modelfit import DELAY
+    if name == DELAY:
+        return PAPER_UNITS['delay']
+    return PAPER_UNITS.get(fit.model.param_spec(name).scale, (1.0, 'SI'))
+
+
+def _t(temp):
+    return 'unknown temperature' if temp is None else f'{temp:g} degC'
+
+
+def print_fit(fit, out=None):
     out = out or sys.stdout
-    head = ' '.join(f'{n + " [" + PAPER_UNITS[n][1] + "]":>16}' for n in PARAM_NAMES)
-    print(f'{"T [degC]":>9} {head}', file=out)
+    print(f'{fit.model.name or "model"} at {_t(fit.temperature)}: {len(fit.blocks)} blocks from '
+          f'{", ".join(fit.runs)}; method {fit.method}; {fit.timings.get("total_s", math.nan):.1f} s', file=out)
+    truth = fit.truth or {}
+    head = f'  {"parameter":18s} {"value":>12s} {"+-1 sigma":>11s} {"95 % interval":>27s} {"unit":>8s}'
+    print(head + ('  vs true  in 95 %?' if truth else ''), file=out)
+    for name, u in fit.uncertainty.items():
+        f, unit = _unit(fit, name)
+        lo, hi = u['interval_95']
+        line = (f'  {name:18s} {u["value"] * f:12.5g} {u["sigma"] * f:11.3g} '
+                f'{"[" + format(lo * f, ".5g") + ", " + format(hi * f, ".5g") + "]":>27s} {unit:>8s}')
+        if name in truth:
+            ok = lo <= truth[name] <= hi
+            line += f'  {100 * (u["value"] / truth[name] - 1):+7.2f} %  {"yes" if ok else "NO"}'
+        print(line, file=out)
+    sigma = ', '.join(f'{v:.3g} N' for v in fit.noise.values()) or 'not measured'
+    print(f'  chi2/dof = {fit.chi2_per_dof:.3g} ({fit.n_points} points, load-cell noise {sigma}); '
+          f'AIC {fit.aic:.1f}, BIC {fit.bic:.1f}', file=out)
+    sk, sc = fit.max_errors('simulated' if fit.method == 'time' else 'analytic')
+    print(f'  max |error| per block: K_dyn {100 * sk:.2f} %, C_eq {100 * sc:.2f} %', file=out)
+    lc = fit.load_cell
+    if lc.get('delay') or lc.get('gain', 1.0) != 1.0:
+        print(f'  load-cell calibration applied ({lc.get("calibration_source")}): delay '
+              f'{1e3 * lc["delay"]:.3f} ms, gain {lc["gain"]:.5g}', file=out)
+    for n in fit.notes:
+        print(f'  note: {n}', file=out)
+    for w in fit.warnings:
+        print(f'  WARNING: {w}', file=out)
+    if not fit.warnings:
+        print('  no warnings: the model describes these data to their noise level', file=out)
+
+
+def _out_path(base, fit, n_fits):
+    base = Path(base)
+    if n_fits == 1:
+        return base
+    from rubber_rig.fitting.paramfile import set_name
+    return base.with_name(f'{base.stem}_{set_name(fit.temperature, "").lstrip("_")}{base.suffix or ".yaml"}')
+
+
+def _write(fits, output, sources):
+    written = []
+    if not output or output == '-':
+        return written
     for f in fits:
-        t = 'unknown' if f.temperature is None else f'{f.temperature:g}'
-        vals = ' '.join(f'{f.params[n] * PAPER_UNITS[n][0]:>16.4g}' for n in PARAM_NAMES)
-        print(f'{t:>9} {vals}', file=out)
-        sig = f.uncertainty.get('relative_sigma', {})
-        print(f'{"+-1sigma":>9} ' + ' '.join(f'{100 * sig.get(n, float("nan")):>15.2f}%' for n in PARAM_NAMES),
-              file=out)
-        if f.true_params:
-            print(f'{"vs true":>9} ' + ' '.join(
-                f'{100 * (f.params[n] / f.true_params[n] - 1):>+15.2f}%' for n in PARAM_NAMES), file=out)
-    print(file=out)
-    for f in fits:
-        t = 'unknown temperature' if f.temperature is None else f'{f.temperature:g} degC'
-        sk, sc = f.max_errors('simulated')
-        ak, ac = f.max_errors('analytic')
-        print(f'{t}: {len(f.blocks)} blocks from {", ".join(f.runs)}; method {f.method}; '
-              f'Eq. 29 = {f.eq29:.3g}; {f.timings.get("total_s", float("nan")):.1f} s', file=out)
-        print(f'  max |error| per block: K_dyn {100 * sk:.2f} %, C_eq {100 * sc:.2f} % (model run on the measured '
-              f'displacement); analytic {100 * ak:.2f} %, {100 * ac:.2f} %', file=out)
-        print(f'  {"f [Hz]":>7} {"x0 [mm]":>7} {"K_dyn [kN/mm]":>13} {"e_K [%]":>8} '
-              f'{"C_eq [kN s/m]":>13} {"e_C [%]":>8}', file=out)
-        for q in f.quality:
-            e = q.get('simulated', q['analytic'])
-            print(f'  {q["frequency"]:7.3g} {q["amplitude"] * 1e3:7.3g} {q["measured"]["k_dyn"] * 1e-6:13.4g} '
-                  f'{100 * e["e_k"]:8.2f} {q["measured"]["c_eq"] * 1e-3:13.4g} {100 * e["e_c"]:8.2f}', file=out)
+        path = _out_path(output, f, len(fits))
+        f.model.meta = {k: v for k, v in f.model.meta.items() if k not in ('description',)}
+        if f.temperature is not None:
+            f.model.meta['temperature'] = f.temperature
+        f.model.meta['fit'] = {'recordings': f.runs, 'method': f.method, 'chi2_per_dof': f.chi2_per_dof,
+                               'warnings': list(f.warnings), 'load_cell': f.load_cell}
+        header = (f'# rubber-rig fit {" ".join(sources)}\n# SI units; sigma = 1 sigma, interval_95 = 95 % '
+                  'interval (see rubber-rig fit --help)')
+        f.model.dump(path, results=f.uncertainty, header=header)
+        written.append(str(path))
+    return written
+
+
+def _per_block(args, runs, messages):
+    from rubber_rig.fitting.blocktrend import fit_blocks, fit_trend, per_block_report
+    from rubber_rig.fitting.identification import split_runs
+    groups, msgs = split_runs(runs, args.settle_cycles, args.min_cycles)
+    messages += msgs
+    out = []
+    for temp, items in groups.items():
+        rows = fit_blocks(items)
+        trends = [fit_trend(rows, name) for name in ('K1', 'K3', 'b')]
+        out.append({'temperature': temp, 'blocks': rows, 'trends': trends})
+        if not args.json:
+            print(f'{_t(temp)}:')
+            print(per_block_report(rows, trends))
+    if args.json:
+        json.dump(_jsonable({'per_block': out, 'messages': messages}), sys.stdout, indent=1)
+        sys.stdout.write('\n')
+    else:
+        for m in messages:
+            print(f'note: {m}')
+    return 0
 
 
 def run(args) -> int:
-    from rubber_rig.fitting.paramfile import write_fit_file
-    from rubber_rig.fitting.pipeline import fit_runs
+    from rubber_rig.fitting.identification import compare_models, fit_model
     from rubber_rig.fitting.progress import ProgressBar
-    runs, messages = load_runs(args.recordings, args.temperature)
-    if not runs:
-        raise ValueError('no readable recording: ' + '; '.join(messages))
-    bar = ProgressBar(enabled=not args.no_progress and sys.stderr.isatty())
+    from rubber_rig.fitting.table import fit_table
+    models = args.model or ['zener_berg']
+    delay = None if args.load_cell_delay is None else to_si(args.load_cell_delay, 'time')
+    table = str(args.recordings[0]).lower().endswith('.csv')
+    messages = []
+    if not table:
+        runs, messages = load_runs(args.recordings, args.temperature)
+        if not runs:
+            raise ValueError('no readable recording: ' + '; '.join(messages))
+        if args.per_block:
+            return _per_block(args, runs, messages)
+    bar = ProgressBar(enabled=not args.no_progress and not args.json and sys.stderr.isatty())
+    by_model = {}
     try:
-        fits, fit_messages = fit_runs(runs, method=args.method, w_k=args.w_k, w_c=args.w_c,
-                                      settle_cycles=args.settle_cycles, min_cycles=args.min_cycles,
-                                      seed=args.seed, progress=bar)
+        for model in models:
+            if table:
+                fits, msgs = fit_table(args.recordings[0], model, w_k=args.w_k, w_c=args.w_c, seed=args.seed)
+            else:
+                fits, msgs = fit_model(runs, model, method=args.method, load_cell_delay=delay,
+                                       load_cell_gain=args.load_cell_gain, estimate_delay=not args.no_delay_estimate,
+                                       settle_cycles=args.settle_cycles, min_cycles=args.min_cycles, seed=args.seed,
+                                       w_k=args.w_k, w_c=args.w_c, progress=bar)
+            by_model[model] = fits
+            messages += [m for m in msgs if m not in messages]
     finally:
         bar.close()
-    messages += fit_messages
-    for f in fits:
-        messages += [f'{f.temperature} degC: {m}' for m in f.messages]
-    written = None
-    if args.output and args.output != '-':
-        written = str(write_fit_file(args.output, fits, prefix=args.prefix,
-                                     source=f'rubber-rig fit {" ".join(Path(p).name for p in args.recordings)}'))
+    comparison = compare_models(by_model) if len(by_model) > 1 else []
+    selected = comparison[0]['selected'] if comparison else models[0]
+    fits = by_model[selected]
+    written = _write(fits, args.output, [Path(p).name for p in args.recordings])
     if args.json:
-        out = {'fits': [f.as_dict() for f in fits], 'messages': messages, 'output': written}
+        first = fits[0]
+        warnings = [w if len(fits) == 1 else f'{_t(f.temperature)}: {w}' for f in fits for w in f.warnings]
+        out = {'model': selected, 'parameters': first.parameters, 'uncertainty': first.uncertainty,
+               'warnings': warnings, 'chi2_per_dof': first.chi2_per_dof,
+               'fits': [f.as_dict() for f in fits], 'comparison': comparison,
+               'candidates': {m: [f.as_dict() for f in fl] for m, fl in by_model.items() if m != selected},
+               'messages': messages, 'output': written}
         json.dump(_jsonable(out), sys.stdout, indent=1)
         sys.stdout.write('\n')
-    else:
-        print_table(fits)
-        for m in messages:
-            print(f'note: {m}')
-        if written:
-            print(f'parameters written to {written}')
+        return 0
+    for model, mfits in by_model.items():
+        for f in mfits:
+            print_fit(f)
+            print()
+    for c in comparison:
+        print(f'model comparison at {_t(c["temperature"])} (AIC = chi2 + 2k, BIC = chi2 + k ln n):')
+        for r in c['ranking']:
+            print(f'  {r["model"]:24s} k={r["n_params"]:2d} chi2/dof={r["chi2_per_dof"]:8.3g} '
+                  f'dAIC={r["delta_aic"]:9.1f} dBIC={r["delta_bic"]:9.1f} weight={r["akaike_weight"]:.3f} '
+                  f'warnings={r["warnings"]}')
+        print(f'  {c["verdict"]}')
+    for m in messages:
+        print(f'note: {m}')
+    for w in written:
+        print(f'model written to {w}')
     return 0

@@ -36,10 +36,12 @@ COMMANDS = {
     'bench': 'rubber_rig.cli.bench',
     'props': 'rubber_rig.cli.props',
     'fit': 'rubber_rig.cli.fit',
+    'models': 'rubber_rig.cli.models',
     'report': 'rubber_rig.cli.report',
     'recover': 'rubber_rig.cli.recover',
     'info': 'rubber_rig.cli.info',
     'canlog': 'rubber_rig.cli.canlog',
+    'simulate': 'rubber_rig.cli.simulate',
 }
 
 

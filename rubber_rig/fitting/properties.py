@@ -37,32 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from rubber_rig.models.fractional import zener_complex_stiffness
-from rubber_rig.models.friction import berg_energy, berg_peak_force  # noqa: F401  (re-exported)
-
-# Gauss-Legendre nodes on [-pi/2, pi/2] for the ascending branch x = x0 sin(theta).
-# The integrand is smooth (analytic in theta for x0 > 0), so 48 nodes give ~1e-12 relative error.
-_GL_X, _GL_W = np.polynomial.legendre.leggauss(48)
-_THETA = 0.5 * np.pi * _GL_X
-_WEIGHT = 0.5 * np.pi * _GL_W
-_SIN = np.sin(_THETA)
-_COS = np.cos(_THETA)
-
-
-def friction_first_harmonic(f_fmax, x2, x0):
-    """Complex first-harmonic stiffness of the steady Berg loop under x = x0 sin(wt).
-
-    Returns K_f = (b1 + j a1) / x0 where F_f(t) ~ b1 sin(wt) + a1 cos(wt). Rate independent.
-    """
-    f_fmax, x2, x0 = np.broadcast_arrays(*(np.asarray(v, float) for v in (f_fmax, x2, x0)))
-    mu0 = berg_peak_force(1.0, x2, x0)[..., None]          # F_f0 / F_fmax
-    x2e, x0e = x2[..., None], x0[..., None]
-    d = x0e * (_SIN + 1.0)                                  # x - x_s on the ascending branch
-    g = -mu0 + d / (x2e * (1.0 + mu0) + d) * (1.0 + mu0)    # F_f / F_fmax, Eq. 16 with mu = -mu0
-    # Full cycle = ascending branch + its odd mirror: sin-coefficient doubles, cos-coefficient doubles.
-    b1 = (2.0 / np.pi) * np.sum(_WEIGHT * g * _SIN, axis=-1)
-    a1 = (2.0 / np.pi) * np.sum(_WEIGHT * g * _COS, axis=-1)
-    return f_fmax * (b1 + 1j * a1) / x0
-
+from rubber_rig.models.friction import berg_energy, berg_peak_force, friction_first_harmonic  # noqa: F401  (re-exported)
 
 def measured_style_properties(k0, k_inf, tau, alpha, x2, f_fmax, frequency, amplitude):
     """K_dyn (first harmonic), loss angle, D, energy per cycle and C_eq of the seed-000 model.

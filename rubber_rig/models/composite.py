@@ -17,11 +17,13 @@ from __future__ import annotations
 
 import copy
 import math
+from pathlib import Path
 
 import numpy as np
 
 from . import elements as el
-from .friction import BergFriction, SmoothCoulomb, check_reversal_threshold
+from .friction import BergFriction, check_reversal_threshold
+from .modelfile import ModelSpec, is_model_file, load_model_file, parse_model
 from .params import (
     KelvinVoigtParams,
     TangentMaxwellBergParams,
@@ -165,22 +167,6 @@ def kelvin_voigt_model(params: KelvinVoigtParams, dt: float) -> ParallelModel:
 
 
 # element specs for {"model": "parallel", "elements": [{"type": ..., ...}, ...]}
-ELEMENT_TYPES = {
-    'linear_spring': lambda dt, k: el.LinearSpring(k),
-    'polynomial_spring': lambda dt, coefficients: el.PolynomialSpring(coefficients),
-    'odd_polynomial_spring': lambda dt, k_odd: el.PolynomialSpring.odd(k_odd),
-    'tangent_spring': lambda dt, k_t, d_t: el.TangentSpring(k_t, d_t),
-    'dashpot': lambda dt, c: el.Dashpot(c, dt),
-    'maxwell': lambda dt, k, c: el.Maxwell(k, c, dt),
-    'zener': lambda dt, k0, k_inf, tau: el.Zener(k0, k_inf, tau, dt),
-    'fractional_zener': lambda dt, scheme='default', **p: _fractional_element(
-        ZenerBergParams(x2=1.0, f_fmax=1.0, **p).validate(), dt, scheme),
-    'two_order_fractional': lambda dt, **p: el.TwoOrderFractional(dt=dt, **p),
-    'berg': lambda dt, f_fmax, x2, reversal_threshold=0.0: BergFriction(f_fmax, x2, dt, reversal_threshold),
-    'smooth_coulomb': lambda dt, f_c, a: SmoothCoulomb(f_c, a, dt),
-}
-
-
 def _from_params(params, dt, scheme, friction_reversal_threshold=0.0):
     if isinstance(params, ZenerBergParams):
         return zener_berg_model(params, dt, scheme, friction_reversal_threshold)
@@ -222,6 +208,27 @@ def _check_threshold(value) -> float:
     return check_reversal_threshold(v, value, 'friction_reversal_threshold')
 
 
+def _model_spec(source):
+    """The ModelSpec of a model-file source (ModelSpec, mapping with ``elements`` or ``model_file``, model-file
+    path), else None (a parameter-set source)."""
+    if isinstance(source, ModelSpec):
+        return source
+    if isinstance(source, dict):
+        if 'model_file' in source:
+            extra = set(source) - {'model_file', 'scheme', 'friction_reversal_threshold', 'temperature'}
+            if extra:
+                raise ValueError(f'a specimen given by model_file takes no {", ".join(sorted(extra))}: '
+                                 'put them in the model file')
+            return load_model_file(source['model_file'])
+        if 'elements' in source:
+            return parse_model({k: v for k, v in source.items() if k not in ('scheme', 'friction_reversal_threshold')},
+                               'model spec')
+        return None
+    if isinstance(source, (str, Path)) and is_model_file(source):
+        return load_model_file(source)
+    return None
+
+
 def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_threshold: float = 0.0) -> ParallelModel:
     """Model object at sample period ``dt`` [s].
 
@@ -229,7 +236,8 @@ def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_t
     :class:`KelvinVoigtParams`; a parameter-set name; or a dict
     ``{"model": "fractional_zener_berg", "parameter_set": "swing_arm_joint_20C"}``,
     ``{"model": "fractional_zener_berg", "temperature": -10}``, ``{"model": "fractional_zener_berg", "values": {...}}``,
-    ``{"model": "parallel", "elements": [{"type": "berg", "f_fmax": 4570, "x2": 1.41e-3}, ...]}``.
+    ``{"elements": [{"type": "berg", "f_fmax": "4.57 kN", "x2": "1.41 mm"}, ...]}`` (a model file's mapping,
+    see :mod:`.modelfile`), ``{"model_file": "specimen.yaml"}``, a :class:`ModelSpec` or a model-file path.
     ``scheme`` (fractional operator): 'default' (sum of exponentials), 'paper' (GL, N_t = 200,
     h = 1 ms) or 'gl' / ``{"name": "gl", "n_terms": N_t, "h": h}``. A dict spec may carry its own
     ``"scheme"``.
@@ -246,21 +254,10 @@ def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_t
         scheme = params_or_spec.get('scheme', scheme)
         friction_reversal_threshold = params_or_spec.get('friction_reversal_threshold', friction_reversal_threshold)
     friction_reversal_threshold = _check_threshold(friction_reversal_threshold)
-    if isinstance(params_or_spec, dict):
-        if params_or_spec.get('model') == 'parallel':
-            elems = []
-            for e in params_or_spec.get('elements', []):
-                e = dict(e)
-                kind = e.pop('type', None)
-                if kind not in ELEMENT_TYPES:
-                    raise ValueError(f'unknown element type {kind!r}; known: {sorted(ELEMENT_TYPES)}')
-                if kind == 'berg':
-                    e.setdefault('reversal_threshold', friction_reversal_threshold)
-                try:
-                    elems.append(ELEMENT_TYPES[kind](float(dt), **e))
-                except TypeError as exc:
-                    raise ValueError(f'bad parameters for element {kind!r}: {exc}') from None
-            return ParallelModel(elems, dt, 'parallel')
+    spec = _model_spec(params_or_spec)
+    if spec is not None:
+        return ParallelModel(spec.build_elements(float(dt), friction_reversal_threshold), dt, spec.name or 'parallel',
+                             spec)
     return _from_params(resolve_params(params_or_spec), float(dt), scheme, friction_reversal_threshold)
 
 

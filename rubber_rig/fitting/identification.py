@@ -1,0 +1,311 @@
+"""From recordings to identified models: any model file, load-cell calibration, verdict and model ranking.
+
+    runs -> load-cell calibration (delay, gain) -> blocks -> per temperature: harmonic global search
+         -> time-domain refinement (optionally with the load-cell delay as a parameter) -> uncertainty
+         -> per-block quality -> warnings (`verdict`)
+
+`fit_model` identifies one model, `compare_models` several on the same data and ranks them by AIC and BIC
+(chi^2 in units of the measured noise, so both count the data the same way for every candidate).
+"""
+from __future__ import annotations
+
+import copy
+import math
+import time
+
+import numpy as np
+
+from rubber_rig.models.modelfile import ModelSpec, named_model, parse_model, resolve_model
+
+from .blocks import noise_level, split_blocks
+from .metrics import window_properties
+from .modelfit import (
+    DELAY,
+    BlockTargets,
+    ModelFit,
+    TimeProblem,
+    coordinates,
+    covariance,
+    fit_harmonic_model,
+    fit_time_model,
+    harmonic_residuals,
+    jacobian,
+    physical_uncertainty,
+)
+from .verdict import notes, verdict
+
+METHODS = ('harmonic', 'time')
+
+
+def load_cell_calibration(run, delay=None, gain=None) -> tuple:
+    """(delay [s], gain [-], source) for ``run``: the given values, else the recording's rig configuration
+    (``load_cell_delay``, ``load_cell_gain``), else (0, 1)."""
+    cfg = (run.metadata or {}).get('rig_config') or {}
+    cfg = cfg if isinstance(cfg, dict) else {}
+    source = 'given'
+    if delay is None:
+        delay, source = cfg.get('load_cell_delay'), 'recording metadata'
+    if gain is None:
+        gain = cfg.get('load_cell_gain')
+    delay = 0.0 if delay is None else float(delay)
+    gain = 1.0 if gain is None else float(gain)
+    if not (math.isfinite(delay) and abs(delay) < 1.0):
+        raise ValueError(f'{run.name}: load-cell delay must be a finite time below 1 s, got {delay!r}')
+    if not (math.isfinite(gain) and gain > 0):
+        raise ValueError(f'{run.name}: load-cell gain must be > 0, got {gain!r}')
+    return delay, gain, source
+
+
+def corrected_force(force, dt, delay, gain):
+    """The specimen force from a load cell that reads gain x the force of ``delay`` s earlier:
+    F(t) = F_measured(t + delay) / gain, linear interpolation; the last samples repeat the edge."""
+    f = np.asarray(force, float)
+    if delay:
+        n = np.arange(f.size, dtype=float)
+        f = np.interp(n + delay / dt, n, f)
+    return f / gain
+
+
+def _calibrated(run, delay, gain):
+    d, g, source = load_cell_calibration(run, delay, gain)
+    if d == 0.0 and g == 1.0:
+        return run, {'delay': 0.0, 'gain': 1.0, 'source': 'none'}
+    out = copy.copy(run)
+    out.force = corrected_force(run.force, run.dt, d, g)
+    return out, {'delay': d, 'gain': g, 'source': source}
+
+
+def _temp_key(t):
+    return None if t is None else round(float(t) * 2.0) / 2.0
+
+
+def split_runs(runs, settle_cycles=3, min_cycles=2):
+    """{temperature key: [(run, blocks)]} and messages."""
+    groups, messages = {}, []
+    for run in runs:
+        messages.extend(run.messages)
+        if not run.usable():
+            messages.append(f'{run.name}: no displacement or no force channel; not fitted')
+            continue
+        rep = split_blocks(run.displacement, run.force, run.dt, block_index=run.block_index,
+                           program_blocks=run.program_blocks, settle_cycles=settle_cycles,
+                           min_cycles=min_cycles, recording=run.name)
+        messages.extend(rep.messages)
+        if rep.blocks:
+            groups.setdefault(_temp_key(run.temperature), []).append((run, rep.blocks))
+    return groups, messages
+
+
+def block_quality(spec: ModelSpec, blocks, forces: dict, runs: dict, gain_delay=(1.0, 0.0)) -> list:
+    """Per block: measured K_dyn, C_eq and the model's (analytic first harmonic and the model run over the
+    measured displacement, ``forces`` recording -> model force), relative errors as seed 000 Eq. 28."""
+    t = BlockTargets.from_blocks(blocks, {})
+    gain, delay = gain_delay
+    k = spec.first_harmonic(t.frequency, t.amplitude, t.mean) * gain * np.exp(-2j * np.pi * t.frequency * delay)
+    rows = []
+    for i, b in enumerate(blocks):
+        w = 2 * np.pi * b.frequency
+        row = {'recording': b.recording, 'block': b.index, 'frequency': b.frequency, 'amplitude': b.amplitude,
+               'mean': b.mean, 'cycles': b.cycles,
+               'measured': {'k_dyn': b.k_dyn, 'c_eq': b.c_eq, 'loss_angle': b.loss_angle, 'energy': b.energy},
+               'analytic': {'k_dyn': float(abs(k[i])), 'c_eq': float(k[i].imag / w),
+                            'e_k': float(abs(k[i]) / b.k_dyn - 1), 'e_c': float(k[i].imag / w / b.c_eq - 1)}}
+        force = forces.get(b.recording)
+        if force is not None:
+            run = runs[b.recording]
+            hp = window_properties(run.displacement, force, run.dt, b.start, b.stop, b.frequency)
+            row['simulated'] = {'k_dyn': hp['k_dyn'], 'c_eq': hp['c_eq'],
+                                'e_k': hp['k_dyn'] / b.k_dyn - 1, 'e_c': hp['c_eq'] / b.c_eq - 1}
+        rows.append(row)
+    return rows
+
+
+def truth_of(spec: ModelSpec, runs) -> dict | None:
+    """The true values of ``spec``'s parameters when a recording's metadata holds its specimen as a model
+    (simulated recordings) with the same elements in the same order; else None."""
+    for run in runs:
+        specimen = (run.metadata or {}).get('specimen')
+        if not isinstance(specimen, dict):
+            continue
+        try:
+            if 'elements' in specimen:
+                true = parse_model(specimen, run.name)
+            elif 'parameter_set' in specimen:
+                true = named_model(specimen['parameter_set'])
+            else:
+                continue
+        except ValueError:
+            continue
+        if [e.type for e in true.elements] != [e.type for e in spec.elements]:
+            return None
+        tv = true.values()
+        return {n: tv[n] for n, _, _ in spec.free() if n in tv}
+    return None
+
+
+def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay=True, w_k=100.0, w_c=1.0,
+              seed=0, points_per_block=200, progress=None, calibration=None) -> ModelFit:
+    """Identify ``spec``'s free parameters from [(run, blocks)] of one specimen state."""
+    t0 = time.perf_counter()
+    blocks = [b for _, bl in items for b in bl]
+    runs = {run.name: run for run, _ in items}
+    noise = {run.name: noise_level(run.force) for run, _ in items}
+    targets = BlockTargets.from_blocks(blocks, noise)
+    dt = min(run.dt for run, _ in items)
+    free = spec.free()
+    n_free = len(free) + (1 if estimate_delay and method == 'time' else 0)
+    if 2 * len(blocks) < n_free + 1:
+        raise ValueError(f'{len(blocks)} usable blocks give {2 * len(blocks)} numbers (K_dyn, C_eq); the model has '
+                         f'{n_free} free parameters: record more blocks over frequency and amplitude')
+    # harmonic global search without the delay (a first-harmonic phase shift is indistinguishable from
+    # loss at few frequencies); the time stage adds it
+    hc = coordinates(spec, targets, dt, delay=False)
+    if progress:
+        progress(0.05, 'global search (first harmonics)')
+    z_h, ls_h = fit_harmonic_model(spec, hc, targets, w_k, w_c, seed=seed)
+    values = hc.values(z_h)
+    timings = {'harmonic_s': time.perf_counter() - t0}
+    messages = []
+    if method == 'harmonic':
+        unc, corr, chi2, dof = harmonic_uncertainty(hc, z_h, ls_h, targets, w_k, w_c)
+        coords, z, n_points, delay = hc, z_h, 2 * len(blocks), 0.0
+        problem = TimeProblem(spec.with_values(values), [(run, bl) for run, bl in items], points_per_block)
+    else:
+        problem = TimeProblem(spec, [(run, bl) for run, bl in items], points_per_block)
+        coords = coordinates(spec, targets, dt, delay=estimate_delay)
+        start = dict(values)
+        if estimate_delay:
+            start[DELAY] = 0.0
+        if progress:
+            progress(0.4, 'time-domain fit')
+        ls, _ = fit_time_model(problem, coords, coords.z_of(start))
+        z = ls.x
+        if ls.status == 0:
+            messages.append('time-domain fit stopped before converging (evaluation limit)')
+        timings['time_fit_s'] = time.perf_counter() - t0 - timings['harmonic_s']
+        if progress:
+            progress(0.8, 'uncertainty')
+
+        def fun(zz):
+            return problem.residuals(coords.values(zz))
+        r = fun(z)
+        jac = jacobian(fun, z)
+        cov_n, cov_b, chi2, dof = covariance(jac, r, problem.block_rows, n_offsets=len(blocks))
+        unc, corr = physical_uncertainty(coords, z, cov_n, cov_b)
+        values = coords.values(z)
+        n_points = problem.m
+        delay = float(values.get(DELAY, 0.0))
+    fitted = spec.with_values({k: v for k, v in values.items() if k != DELAY})
+    params = {n: float(values[n]) for n in coords.names}
+    forces = dict(zip(runs, problem.predict(values), strict=True)) if method == 'time' else \
+        dict(zip(runs, problem.predict({}), strict=True))
+    quality = block_quality(fitted, blocks, forces, runs, (1.0, delay))
+    cal = calibration or {}
+    fit = ModelFit(model=fitted, temperature=temperature, runs=list(runs), blocks=blocks, method=method,
+                   parameters=params, uncertainty=unc, correlation=corr.tolist(), chi2=float(chi2), dof=int(dof),
+                   n_points=int(n_points), noise=noise,
+                   load_cell={'delay': cal.get('delay', 0.0), 'gain': cal.get('gain', 1.0),
+                              'calibration_source': cal.get('source', 'none'),
+                              'delay_estimated': params.get(DELAY), 'delay_sigma': unc.get(DELAY, {}).get('sigma')},
+                   quality=quality, messages=messages)
+    fit.bounds_hit = _at_bounds(coords, z, ls_h if method == 'harmonic' else None)
+    fit.truth = truth_of(spec, [run for run, _ in items])
+    fit.warnings = verdict(fit, coords)
+    fit.notes = notes(fit)
+    fit.timings = {**timings, 'total_s': time.perf_counter() - t0}
+    return fit
+
+
+def harmonic_uncertainty(coords, z, ls, targets, w_k, w_c):
+    """(uncertainty, correlation, chi2, dof) of a harmonic (Eq. 29) fit. The weighted relative errors have no
+    noise scale of their own, so their scatter s^2 = sum r^2 / dof scales the covariance (a misfit widens it,
+    a fit closer than the weights suggest narrows it), with the blocks as clusters as in the time domain.
+    chi2 is in units of the blocks' measurement noise when it is known (``targets.rel_sigma_*`` > 0), else
+    the weighted sum itself."""
+    nb = len(targets)
+    rows = [[i, i + nb] for i in range(nb)]
+    cov_n, cov_b, chi2_w, dof = covariance(ls.jac, ls.fun, rows)
+    s2 = chi2_w / max(dof, 1)
+    unc, corr = physical_uncertainty(coords, z, cov_n / max(1.0, s2) * s2, cov_b)
+    if np.all(targets.rel_sigma_k > 0) and np.all(targets.rel_sigma_c > 0):
+        chi2 = float(np.sum((ls.fun[:nb] / np.sqrt(w_k) / targets.rel_sigma_k) ** 2)
+                     + np.sum((ls.fun[nb:] / np.sqrt(w_c) / targets.rel_sigma_c) ** 2))
+    else:
+        chi2 = chi2_w
+    return unc, corr, chi2, dof
+
+
+def _at_bounds(coords, z, _ls=None) -> list:
+    span = coords.hi - coords.lo
+    near = (z - coords.lo < 1e-3 * span) | (coords.hi - z < 1e-3 * span)
+    return [n for n, k, hit in zip(coords.names, coords.kinds, near, strict=True) if hit and k != 'order']
+
+
+def fit_model(runs, model='zener_berg', method='time', load_cell_delay=None, load_cell_gain=None,
+              estimate_delay=True, settle_cycles=3, min_cycles=2, seed=0, w_k=100.0, w_c=1.0,
+              progress=None) -> tuple:
+    """Identify ``model`` (model file, named model, parameter set or ModelSpec) from ``runs`` (RunData), one
+    fit per temperature. Returns (fits, messages)."""
+    if method not in METHODS:
+        raise ValueError(f'unknown fit method {method!r} (use one of {", ".join(METHODS)})')
+    spec = resolve_model(model)
+    if not spec.free():
+        raise ValueError(f'model {spec.name or model!r}: every parameter is fixed; nothing to fit')
+    calibrated, cals = [], {}
+    for run in runs:
+        if run.usable():
+            run, cal = _calibrated(run, load_cell_delay, load_cell_gain)
+            cals[run.name] = cal
+        calibrated.append(run)
+    groups, messages = split_runs(calibrated, settle_cycles, min_cycles)
+    if not groups:
+        raise ValueError('no usable blocks in any recording: ' + '; '.join(messages))
+    fits = []
+    order = sorted(groups.items(), key=lambda kv: (kv[0] is None, kv[0] or 0))
+    for n, (temp, items) in enumerate(order):
+        def stage(frac, what, n=n, temp=temp):
+            if progress is not None:
+                progress((n + frac) / len(order), f'{_label(temp)}: {what}')
+        try:
+            fit = fit_group(spec, items, temp, method, estimate_delay, w_k, w_c, seed, progress=stage,
+                            calibration=cals.get(items[0][0].name))
+        except ValueError as exc:
+            messages.append(f'{_label(temp)}: not fitted: {exc}')
+            continue
+        fits.append(fit)
+    if progress is not None:
+        progress(1.0, 'done')
+    if not fits:
+        raise ValueError('nothing could be fitted: ' + '; '.join(messages))
+    return fits, messages
+
+
+def compare_models(fits_by_model: dict) -> list:
+    """Rank candidate models fitted to the same data: per temperature, rows sorted by AIC with
+    delta AIC / delta BIC to the best and Akaike weights, and a sentence saying what the data support."""
+    temps = {}
+    for name, fits in fits_by_model.items():
+        for f in fits:
+            temps.setdefault(f.temperature, []).append((name, f))
+    out = []
+    for temp, rows in temps.items():
+        rows.sort(key=lambda nf: nf[1].aic)
+        best_aic, best_bic = rows[0][1].aic, min(f.bic for _, f in rows)
+        weights = np.exp(-0.5 * np.array([f.aic - best_aic for _, f in rows]))
+        weights /= weights.sum()
+        table = [{'model': name, 'n_params': f.n_params, 'chi2_per_dof': f.chi2_per_dof, 'aic': f.aic, 'bic': f.bic,
+                  'delta_aic': f.aic - best_aic, 'delta_bic': f.bic - best_bic, 'akaike_weight': float(w),
+                  'warnings': len(f.warnings)} for (name, f), w in zip(rows, weights, strict=True)]
+        by_bic = min(rows, key=lambda nf: nf[1].bic)[0]
+        second = table[1]['delta_aic'] if len(table) > 1 else math.inf
+        strength = 'decisively' if second > 10 else 'clearly' if second > 4 else 'weakly'
+        verdict_text = (f'{_label(temp)}: the data support {table[0]["model"]} {strength} '
+                        f'(next best delta AIC {second:.1f})'
+                        + ('' if by_bic == table[0]['model'] else f'; BIC prefers {by_bic}'))
+        out.append({'temperature': temp, 'ranking': table, 'selected': table[0]['model'], 'selected_bic': by_bic,
+                    'verdict': verdict_text})
+    return out
+
+
+def _label(temp):
+    return 'unknown temperature' if temp is None else f'{temp:g} degC'

@@ -1,0 +1,422 @@
+"""Identify any composite model (a model file) from recordings, with an honest uncertainty.
+
+    blocks (split_blocks) -> harmonic global search (first harmonics of the model, exact, see
+    rubber_rig.models.catalogue) -> time-domain refinement on the loops -> uncertainty -> verdict
+
+Search coordinates. Every free parameter gets a coordinate the optimisers see: ln p for positive
+parameters (scale free), p / scale for signed ones, p itself for fractional orders (0.05..1], and
+ln(p - p_ref) for a parameter that must stay above another (K_inf >= K0). Search ranges scale with the
+data (``SCALES``): stiffnesses with the measured K_dyn, forces with the measured force amplitude, lengths
+with the displacement amplitude, times with the inverse measured frequencies.
+
+Objectives.
+* harmonic: seed 000 Eq. 28-29 with the model's first harmonics (w_K e_K^2 + w_C e_C^2 per block), a
+  vectorised differential evolution over the whole population, then least squares;
+* time: the model is run over the measured displacement (low-passed, Berg deadband at the noise, see
+  `timefit.model_input`) and its force is compared with the measured force at up to
+  ``points_per_block`` samples per block, in units of the load-cell noise sigma_F the recording shows
+  (`blocks.noise_level`), a force offset per block removed: r = (F_model - F_measured - offset) / sigma_F.
+  With the right model these residuals are the sensor noise, so chi^2 / dof = sum r^2 / (m - n - blocks)
+  is near 1 and anything above says the model misses something the data show.
+* The load cell's delay d can be a parameter: the model force is compared at t - d (harmonic: K e^{-jwd}).
+
+Uncertainty (1 sigma of each parameter). With J the Jacobian of r in the search coordinates:
+* noise: (J^T J)^-1 inflated by max(1, chi^2/dof), the lack of fit (a misfit widens every interval);
+* blocks: the cluster-robust (sandwich) covariance with the blocks as clusters, the linearised bootstrap
+  over blocks: (J^T J)^-1 [sum_b J_b^T r_b r_b^T J_b] (J^T J)^-1 B/(B-1). It sees misfit that is
+  systematic within a block (a model error, a wrong delay) even when chi^2 cannot tell it from noise;
+and the reported sigma is the larger of the two, per parameter, carried to physical units through the
+coordinates (delta method); 95 % intervals are +-1.96 sigma.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import differential_evolution, least_squares
+
+from rubber_rig.models.composite import ParallelModel
+from rubber_rig.models.modelfile import ModelSpec
+
+from .blocks import noise_level, split_blocks
+from .metrics import window_properties
+from .timefit import run_input
+
+DELAY = 'load_cell_delay'
+Z95 = 1.959964
+
+
+@dataclass
+class BlockTargets:
+    """Measured block properties (SI) with their noise sigmas (relative, from the load-cell noise)."""
+
+    frequency: np.ndarray
+    amplitude: np.ndarray
+    mean: np.ndarray
+    k_dyn: np.ndarray
+    c_eq: np.ndarray
+    rel_sigma_k: np.ndarray
+    rel_sigma_c: np.ndarray
+
+    @classmethod
+    def from_blocks(cls, blocks, noise: dict):
+        """``noise``: recording name -> load-cell noise sigma [N]. The first harmonic of N samples of white
+        noise sigma has a sigma of sigma sqrt(2/N) per component."""
+        get = {k: np.array([getattr(b, k) for b in blocks], float)
+               for k in ('frequency', 'amplitude', 'mean', 'k_dyn', 'c_eq')}
+        n = np.array([max(b.stop - b.start, 1) for b in blocks], float)
+        s = np.array([noise.get(b.recording, 0.0) for b in blocks], float) * np.sqrt(2.0 / n)
+        f1 = get['k_dyn'] * get['amplitude']                       # force first-harmonic amplitude [N]
+        loss = get['c_eq'] * 2 * np.pi * get['frequency'] * get['amplitude']
+        return cls(**get, rel_sigma_k=s / f1, rel_sigma_c=s / np.maximum(loss, 1e-30))
+
+    def __len__(self):
+        return self.frequency.size
+
+
+# ---- search coordinates ----------------------------------------------------------------------------
+
+def _scales(t: BlockTargets, dt: float) -> dict:
+    kmax, kmin = float(t.k_dyn.max()), float(t.k_dyn.min())
+    amax = float(t.amplitude.max())
+    reach = float(np.max(t.amplitude + np.abs(t.mean)))
+    fmin, fmax = float(t.frequency.min()), float(t.frequency.max())
+    fmax_force = float(np.max(t.k_dyn * t.amplitude))
+    wmin, wmax = 2 * np.pi * fmin, 2 * np.pi * fmax
+    # kind -> (scale, lo, hi): log coordinates search [lo, hi]; signed ones [-hi, hi] x scale
+    return {
+        'stiffness': (kmax, 1e-3 * kmin, 3.0 * kmax),
+        'force': (fmax_force, 1e-3 * fmax_force, 5.0 * fmax_force),
+        'length': (amax, 1e-2 * amax, 50.0 * amax),
+        'thickness': (reach, 1.02 * reach, 1e3 * reach),
+        'time': (1.0 / wmin, 1e-2 / wmax, 1e2 / wmin),
+        'damping': (kmax / wmin, 1e-5 * kmax / wmax, 10.0 * kmax / wmin),
+        'k2': (kmax / amax, None, 30.0),
+        'k3': (kmax / amax ** 2, None, 30.0),
+        'k5': (kmax / amax ** 4, None, 30.0),
+        'frac_alpha': (kmax, 1e-5 * kmax / wmax, 10.0 * kmax * max(1.0, 1.0 / wmin)),
+        'frac_beta': (kmax, 1e-5 * kmax / wmax, 10.0 * kmax * max(1.0, 1.0 / wmin)),
+        'slowness': (1.0 / (wmax * amax), 1e-1 / (wmax * amax), 1e4 / (wmin * amax)),
+        'order': (1.0, 0.05, 1.0),
+        'delay': (dt, -2e-3, 2e-3),
+    }
+
+
+@dataclass
+class Coordinates:
+    """The optimiser's coordinates of the free parameters (see the module docstring)."""
+
+    names: list
+    kinds: list          # 'log' | 'lin' | 'order' | 'above' | 'delay'
+    scales: list
+    ref: list            # index of the parameter an 'above' one must exceed, else None
+    lo: np.ndarray
+    hi: np.ndarray
+
+    def values(self, z) -> dict:
+        """Physical values of coordinates ``z`` (shape (n,) or (n, S)): name -> float or array (S, 1)."""
+        z = np.asarray(z, float)
+        col = (lambda v: v[:, None]) if z.ndim == 2 else (lambda v: float(v))
+        raw = {}
+        for i, (name, kind, s) in enumerate(zip(self.names, self.kinds, self.scales, strict=True)):
+            if kind == 'log':
+                raw[name] = np.exp(z[i])
+            elif kind in ('lin', 'delay'):
+                raw[name] = z[i] * s
+            elif kind == 'order':
+                raw[name] = z[i]
+        for i, name in enumerate(self.names):
+            if self.kinds[i] == 'above':
+                raw[name] = raw[self.names[self.ref[i]]] + np.exp(z[i])
+        return {k: col(v) for k, v in raw.items()}
+
+    def z_of(self, values: dict) -> np.ndarray:
+        z = np.empty(len(self.names))
+        for i, (name, kind, s) in enumerate(zip(self.names, self.kinds, self.scales, strict=True)):
+            v = float(values[name])
+            if kind == 'log':
+                z[i] = math.log(v)
+            elif kind in ('lin', 'delay'):
+                z[i] = v / s
+            elif kind == 'order':
+                z[i] = v
+            else:
+                z[i] = math.log(max(v - float(values[self.names[self.ref[i]]]), 1e-9 * abs(v)))
+        return np.clip(z, self.lo, self.hi)
+
+
+def coordinates(spec: ModelSpec, t: BlockTargets, dt: float, delay: bool = False) -> Coordinates:
+    """Search coordinates and ranges of the free parameters of ``spec`` for the data ``t``."""
+    sc = _scales(t, dt)
+    names, kinds, scales, refs, lo, hi = [], [], [], [], [], []
+    free = [n for n, _, _ in spec.free()]
+    for name in free:
+        p = spec.param_spec(name)
+        scale, a, b = sc[p.scale]
+        ref = None
+        if p.scale == 'order':
+            kind, zlo, zhi = 'order', a, min(b, p.upper or b)
+        elif p.signed:
+            kind, zlo, zhi = 'lin', -b, b
+        elif p.above and _sibling(spec, name, p.above) in free:
+            kind, ref = 'above', free.index(_sibling(spec, name, p.above))
+            zlo, zhi = math.log(1e-4 * sc['stiffness'][0]), math.log(b)
+        else:
+            kind, zlo, zhi = 'log', math.log(a), math.log(b)
+        names.append(name)
+        kinds.append(kind)
+        scales.append(scale)
+        refs.append(ref)
+        lo.append(zlo)
+        hi.append(zhi)
+    if delay:
+        _, a, b = sc['delay']
+        names.append(DELAY)
+        kinds.append('delay')
+        scales.append(dt)
+        refs.append(None)
+        lo.append(a / dt)
+        hi.append(b / dt)
+    return Coordinates(names, kinds, scales, refs, np.array(lo), np.array(hi))
+
+
+def _sibling(spec, name, other):
+    """The model's name of parameter ``other`` of the element that has parameter ``name``."""
+    prefix = name.rpartition('.')[0]
+    for n, i, p in spec.parameters():
+        if p == other and (not prefix or n.startswith(prefix + '.')) and n.rpartition('.')[0] == prefix:
+            return n
+    return other
+
+
+# ---- harmonic objective ----------------------------------------------------------------------------
+
+def harmonic_residuals(z, spec: ModelSpec, coords: Coordinates, t: BlockTargets, w_k=100.0, w_c=1.0,
+                       gain=1.0, delay=0.0):
+    """Seed 000 Eq. 28 residuals sqrt(w) e with the model's first harmonics; z (n,) -> (2B,), (n, S) -> (S, 2B)."""
+    v = coords.values(z)
+    w = 2 * np.pi * t.frequency
+    d = v.pop(DELAY, delay)
+    with np.errstate(all='ignore'):
+        k = spec.first_harmonic(t.frequency, t.amplitude, t.mean, v) * gain * np.exp(-1j * w * d)
+        e_k = np.abs(k) / t.k_dyn - 1.0
+        e_c = (k.imag / w) / t.c_eq - 1.0
+    r = np.concatenate([np.sqrt(w_k) * e_k, np.sqrt(w_c) * e_c], axis=-1)
+    return np.where(np.isfinite(r), r, 1e3)
+
+
+def fit_harmonic_model(spec, coords, t, w_k=100.0, w_c=1.0, seed=0, maxiter=300, popsize=15, start=None):
+    """Global search (differential evolution, vectorised) + least squares. Returns (z, least_squares result)."""
+    bounds = list(zip(coords.lo, coords.hi, strict=True))
+
+    def cost(z):
+        r = harmonic_residuals(z, spec, coords, t, w_k, w_c)
+        return np.sum(r * r, axis=-1)
+
+    x0 = None if start is None else coords.z_of(start)
+    de = differential_evolution(cost, bounds, seed=seed, maxiter=maxiter, popsize=popsize, tol=1e-8,
+                                polish=False, vectorized=True, updating='deferred', x0=x0)
+    ls = least_squares(harmonic_residuals, de.x, bounds=(coords.lo, coords.hi), args=(spec, coords, t, w_k, w_c),
+                       method='trf', xtol=1e-12, ftol=1e-12, gtol=1e-12, max_nfev=2000)
+    return ls.x, ls
+
+
+# ---- time-domain objective -------------------------------------------------------------------------
+
+class TimeProblem:
+    """Force residuals in units of the load-cell noise, over the analysed cycles of every block."""
+
+    def __init__(self, spec: ModelSpec, runs_blocks, points_per_block=200):
+        self.spec = spec
+        self.items = []
+        self.block_rows = []       # slices of the residual vector, one per block
+        row = 0
+        for run, blocks in runs_blocks:
+            if not blocks:
+                continue
+            end, x, h = run_input(run, blocks)
+            sigma = max(noise_level(run.force[:end]), 1e-9 * float(np.max(np.abs(run.force[:end]))))
+            windows = []
+            for b in blocks:
+                step = max(1, (b.stop - b.start) // points_per_block)
+                idx = np.arange(b.start, b.stop, step)
+                windows.append(idx)
+                self.block_rows.append(slice(row, row + idx.size))
+                row += idx.size
+            self.items.append((run, x, h, run.force[:end], windows, sigma))
+        self.m = row
+
+    @property
+    def noise(self) -> dict:
+        return {run.name: sigma for run, _, _, _, _, sigma in self.items}
+
+    def model(self, values, run_dt, h) -> ParallelModel:
+        spec = self.spec.with_values({k: v for k, v in values.items() if k != DELAY})
+        return ParallelModel(spec.build_elements(run_dt, h), run_dt, spec.name, spec)
+
+    def predict(self, values) -> list:
+        return [self.model(values, run.dt, h).run(x) for run, x, h, _, _, _ in self.items]
+
+    def residuals_from(self, predictions, delay=0.0):
+        out = []
+        for (run, _, _, force, windows, sigma), pred in zip(self.items, predictions, strict=True):
+            shift = delay / run.dt
+            for idx in windows:
+                if shift:
+                    pos = np.clip(idx - shift, 0, pred.size - 1.000001)
+                    i0 = pos.astype(int)
+                    frac = pos - i0
+                    p = pred[i0] * (1 - frac) + pred[i0 + 1] * frac
+                else:
+                    p = pred[idx]
+                e = p - force[idx]
+                out.append((e - e.mean()) / sigma)
+        r = np.concatenate(out)
+        return np.where(np.isfinite(r), r, 1e6)
+
+    def residuals(self, values):
+        values = dict(values)
+        delay = float(values.get(DELAY, 0.0))
+        try:
+            preds = self.predict(values)
+        except ValueError:     # parameters the elements refuse (e.g. beyond an asymptote): far from the data
+            return np.full(self.m, 1e6)
+        return self.residuals_from(preds, delay)
+
+
+def fit_time_model(problem: TimeProblem, coords: Coordinates, start_z, span=1.0, max_nfev=80):
+    """Least squares on the time-domain residuals from ``start_z`` within +-span of it (log coordinates)."""
+    lo = np.maximum(coords.lo, start_z - span)
+    hi = np.minimum(coords.hi, start_z + span)
+    lo = np.where(np.array(coords.kinds) == 'order', np.maximum(coords.lo, start_z - 0.3), lo)
+    hi = np.where(np.array(coords.kinds) == 'order', np.minimum(coords.hi, start_z + 0.3), hi)
+    delay_kind = np.array(coords.kinds) == 'delay'
+    lo, hi = np.where(delay_kind, coords.lo, lo), np.where(delay_kind, coords.hi, hi)
+    z0 = np.clip(start_z, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
+
+    def fun(z):
+        return problem.residuals(coords.values(z))
+
+    ls = least_squares(fun, z0, bounds=(lo, hi), method='trf', diff_step=1e-4, xtol=1e-10, ftol=1e-10,
+                       gtol=1e-10, max_nfev=max_nfev)
+    return ls, (lo, hi)
+
+
+# ---- uncertainty -----------------------------------------------------------------------------------
+
+def jacobian(fun, z, eps=1e-3):
+    cols = []
+    for i in range(z.size):
+        up, down = z.copy(), z.copy()
+        up[i] += eps
+        down[i] -= eps
+        cols.append((fun(up) - fun(down)) / (2 * eps))
+    return np.column_stack(cols)
+
+
+def covariance(jac, r, block_rows, n_offsets=0):
+    """(noise covariance inflated by the lack of fit, block-robust covariance, chi2, dof) in coordinates."""
+    m, n = jac.shape
+    dof = max(m - n - n_offsets, 1)
+    chi2 = float(r @ r)
+    bread = np.linalg.pinv(jac.T @ jac)
+    cov_noise = bread * max(1.0, chi2 / dof)
+    meat = np.zeros((n, n))
+    for rows in block_rows:
+        g = jac[rows].T @ r[rows]
+        meat += np.outer(g, g)
+    nb = len(block_rows)
+    cov_blocks = bread @ meat @ bread * (nb / max(nb - 1, 1))
+    return cov_noise, cov_blocks, chi2, dof
+
+
+def physical_uncertainty(coords: Coordinates, z, cov_noise, cov_blocks):
+    """Per parameter: value, sigma (larger of noise and blocks), both sigmas, 95 % interval; correlation."""
+    def phys(zz):
+        v = coords.values(zz)
+        return np.array([v[n] for n in coords.names])
+
+    p0 = phys(z)
+    tj = np.column_stack([(phys(z + e) - phys(z - e)) / 2e-6 for e in np.eye(z.size) * 1e-6])
+    cn = tj @ cov_noise @ tj.T
+    cb = tj @ cov_blocks @ tj.T
+    sn, sb = np.sqrt(np.clip(np.diag(cn), 0, None)), np.sqrt(np.clip(np.diag(cb), 0, None))
+    sigma = np.maximum(sn, sb)
+    out = {}
+    for i, name in enumerate(coords.names):
+        rel = sigma[i] / abs(p0[i]) if p0[i] else math.inf
+        out[name] = {'value': float(p0[i]), 'sigma': float(sigma[i]), 'relative_sigma': float(rel),
+                     'sigma_noise': float(sn[i]), 'sigma_blocks': float(sb[i]),
+                     'interval_95': [float(p0[i] - Z95 * sigma[i]), float(p0[i] + Z95 * sigma[i])]}
+    cov = np.where(np.outer(sn, sn) > 0, cn, 0.0)
+    with np.errstate(invalid='ignore', divide='ignore'):
+        corr = cov / np.outer(sn, sn)
+    return out, np.nan_to_num(corr)
+
+
+# ---- result ----------------------------------------------------------------------------------------
+
+@dataclass
+class ModelFit:
+    """One identification (one temperature) of one model."""
+
+    model: ModelSpec               # the fitted model (values replaced)
+    temperature: float | None
+    runs: list
+    blocks: list
+    method: str
+    parameters: dict               # free parameter name -> value (SI), load_cell_delay included if estimated
+    uncertainty: dict              # name -> {sigma, relative_sigma, interval_95, sigma_noise, sigma_blocks}
+    correlation: list
+    chi2: float
+    dof: int
+    n_points: int
+    noise: dict                    # recording -> load-cell noise sigma [N]
+    load_cell: dict                # delay [s], gain [-], delay_estimated
+    quality: list = field(default_factory=list)
+    warnings: list = field(default_factory=list)
+    messages: list = field(default_factory=list)
+    timings: dict = field(default_factory=dict)
+    truth: dict | None = None
+    bounds_hit: list = field(default_factory=list)   # parameters that ended at a search bound
+    notes: list = field(default_factory=list)        # not defects, worth knowing (correlated pairs)
+
+    @property
+    def chi2_per_dof(self) -> float:
+        return self.chi2 / max(self.dof, 1)
+
+    @property
+    def n_params(self) -> int:
+        return len(self.parameters)
+
+    @property
+    def aic(self) -> float:
+        return self.chi2 + 2 * self.n_params
+
+    @property
+    def bic(self) -> float:
+        return self.chi2 + self.n_params * math.log(max(self.n_points, 1))
+
+    def max_errors(self, kind='simulated'):
+        ek = [abs(q[kind]['e_k']) for q in self.quality if kind in q]
+        ec = [abs(q[kind]['e_c']) for q in self.quality if kind in q]
+        return (max(ek) if ek else math.nan), (max(ec) if ec else math.nan)
+
+    def as_dict(self) -> dict:
+        out = {'model': self.model.name, 'temperature': self.temperature, 'recordings': self.runs,
+               'method': self.method, 'parameters': self.parameters, 'uncertainty': self.uncertainty,
+               'warnings': self.warnings, 'notes': self.notes, 'chi2_per_dof': self.chi2_per_dof, 'chi2': self.chi2, 'dof': self.dof,
+               'n_points': self.n_points, 'n_params': self.n_params, 'aic': self.aic, 'bic': self.bic,
+               'noise': {'force_sigma': self.noise}, 'load_cell': self.load_cell,
+               'correlation': {'names': list(self.uncertainty), 'matrix': self.correlation},
+               'model_file': self.model.to_dict(self.uncertainty), 'blocks': self.quality,
+               'timings': self.timings, 'messages': self.messages}
+        if self.truth:
+            out['truth'] = self.truth
+            out['errors'] = {k: self.parameters[k] / self.truth[k] - 1.0 for k in self.parameters
+                             if self.truth.get(k)}
+            out['covered'] = {k: bool(u['interval_95'][0] <= self.truth[k] <= u['interval_95'][1])
+                              for k, u in self.uncertainty.items() if k in self.truth}
+        return out

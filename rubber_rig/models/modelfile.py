@@ -1,0 +1,367 @@
+"""Model files: a specimen or a fitted model as YAML, elements in parallel, values with units.
+
+    name: bushing_20C                      # optional
+    temperature: 20 degC                   # optional, what the values are valid at
+    elements:
+      - {type: fractional_zener, k0: 12.29 kN/mm, k_inf: 14.01 kN/mm, tau: 0.043 s, alpha: 0.659}
+      - {type: berg, x2: 1.41 mm, f_fmax: 4.57 kN, fixed: [x2]}
+      - {type: polynomial_spring, k3: 6e11 N/m^3}
+
+A value is a number (SI) or a string with a unit of its parameter's dimension (``rubber-rig models``
+lists them); ``fixed`` names the parameters a fit keeps. ``rubber-rig fit`` writes the same layout in
+SI with ``sigma`` (1 sigma) and ``interval_95`` beside the values of each element; reading ignores them.
+"""
+from __future__ import annotations
+
+import copy
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from rubber_rig.units import to_si
+
+from .catalogue import OPERATING_POINT_TYPES, build_operating_point_spring, element_type
+from .params import ParameterValueError, load_parameter_set, parameter_set_info
+
+_RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma')
+
+
+@dataclass
+class ElementSpec:
+    """One element: its catalogue ``type``, parameter ``values`` (SI floats), ``fixed`` names, ``options``."""
+
+    type: str
+    values: dict
+    fixed: frozenset = frozenset()
+    options: dict = field(default_factory=dict)
+
+    @property
+    def fittable(self) -> bool:
+        return self.type not in OPERATING_POINT_TYPES
+
+
+@dataclass
+class ModelSpec:
+    """Elements in parallel (seed 000 Eq. 1), as a model file describes them."""
+
+    elements: list
+    name: str = ''
+    meta: dict = field(default_factory=dict)
+
+    # ---- parameters ------------------------------------------------------------------------------
+    def labels(self) -> list:
+        """Element labels: the type, numbered (type_1, type_2) when a type occurs more than once."""
+        types = [e.type for e in self.elements]
+        return [f'{t}_{types[:i + 1].count(t)}' if types.count(t) > 1 else t for i, t in enumerate(types)]
+
+    def parameters(self) -> list:
+        """(name, element index, parameter name) of every parameter, in file order. ``name`` is the bare
+        parameter name when it is unique in the model, else ``label.param``."""
+        raw = [(i, p) for i, e in enumerate(self.elements) if e.fittable for p in e.values]
+        bare = [p for _, p in raw]
+        labels = self.labels()
+        return [(p if bare.count(p) == 1 else f'{labels[i]}.{p}', i, p) for i, p in raw]
+
+    def free(self) -> list:
+        """The parameters a fit adjusts: all but the fixed ones."""
+        return [t for t in self.parameters() if t[2] not in self.elements[t[1]].fixed]
+
+    def values(self) -> dict:
+        return {n: self.elements[i].values[p] for n, i, p in self.parameters()}
+
+    def param_spec(self, name):
+        for n, i, p in self.parameters():
+            if n == name:
+                return element_type(self.elements[i].type).param(p)
+        raise KeyError(name)
+
+    def with_values(self, values: dict) -> 'ModelSpec':
+        """A copy with some parameters (by ``parameters()`` name) replaced."""
+        out = copy.deepcopy(self)
+        for n, i, p in out.parameters():
+            if n in values:
+                out.elements[i].values[p] = float(values[n])
+        return out
+
+    def validate(self) -> 'ModelSpec':
+        for n, i, p in self.parameters():
+            spec = element_type(self.elements[i].type).param(p)
+            v = self.elements[i].values[p]
+            if not math.isfinite(v):
+                raise ParameterValueError(n, f'must be finite, got {v}')
+            if not spec.signed and v <= 0:
+                raise ParameterValueError(n, f'must be > 0 [{spec.unit}], got {v:g}')
+            if spec.upper is not None and v > spec.upper:
+                raise ParameterValueError(n, f'must be <= {spec.upper:g}, got {v:g}')
+            if spec.above and v < self.elements[i].values[spec.above]:
+                raise ParameterValueError(n, f'({v:g} {spec.unit}) must be >= {spec.above} '
+                                             f'({self.elements[i].values[spec.above]:g} {spec.unit})')
+        return self
+
+    # ---- physics ---------------------------------------------------------------------------------
+    def build_elements(self, dt: float, reversal_threshold: float | None = None) -> list:
+        """Streaming/batch element objects at sample period ``dt`` [s]. ``reversal_threshold`` [m], when
+        given, is the reversal deadband of every element that has one and sets none itself."""
+        out = []
+        for e in self.elements:
+            if not e.fittable:
+                out.append(build_operating_point_spring(e.values, dt))
+                continue
+            t = element_type(e.type)
+            opts = dict(e.options)
+            if reversal_threshold is not None and 'reversal_threshold' in t.options:
+                opts.setdefault('reversal_threshold', reversal_threshold)
+            out.append(t.build(e.values, float(dt), opts))
+        return out
+
+    def first_harmonic(self, frequency, amplitude, mean=0.0, values: dict | None = None):
+        """Complex first-harmonic stiffness [N/m] of the whole model under x = mean + A sin(2 pi f t)
+        (see :mod:`.catalogue`). ``values``: {parameter name: array} overriding the model's values; arrays
+        broadcast against ``frequency``/``amplitude`` (a fit passes a population as shape (S, 1)).
+        """
+        f, a, m = (np.asarray(v, float) for v in (frequency, amplitude, mean))
+        total = 0j
+        by_element = [dict(e.values) for e in self.elements]
+        for name, i, p in self.parameters():
+            if values is not None and name in values:
+                by_element[i][p] = values[name]
+        for e, v in zip(self.elements, by_element, strict=True):
+            if not e.fittable:
+                raise ValueError(f'{e.type} has operating-point coefficients: no single first harmonic')
+            total = total + element_type(e.type).first_harmonic(v, f, a, m)
+        return total
+
+    # ---- files -----------------------------------------------------------------------------------
+    def to_dict(self, results: dict | None = None) -> dict:
+        """The model-file mapping in SI; ``results`` {parameter name: {sigma, interval_95}} goes beside
+        the values of each element."""
+        elements = []
+        names = {(i, p): n for n, i, p in self.parameters()}
+        for i, e in enumerate(self.elements):
+            d = {'type': e.type}
+            d.update({p: float(v) if not isinstance(v, (list, tuple)) else _plain(v) for p, v in e.values.items()})
+            if e.fixed:
+                d['fixed'] = sorted(e.fixed)
+            d.update(_plain(e.options))
+            if results:
+                for key in _RESULT_KEYS:
+                    got = {p: results[names[(i, p)]][key] for p in e.values
+                           if (i, p) in names and key in results.get(names[(i, p)], {})}
+                    if got:
+                        d[key] = _plain(got)
+            elements.append(d)
+        out = {}
+        if self.name:
+            out['name'] = self.name
+        out.update(_plain(self.meta))
+        out['elements'] = elements
+        return out
+
+    def dump(self, path, results=None, header: str = '') -> Path:
+        path = Path(path)
+        text = yaml.safe_dump(self.to_dict(results), sort_keys=False, width=110, default_flow_style=None)
+        path.write_text((header + '\n' if header else '') + text, encoding='utf-8')
+        return path
+
+
+def _plain(v):
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_plain(x) for x in v]
+    if isinstance(v, (np.floating, np.integer)):
+        return v.item()
+    return v
+
+
+def _value(raw, spec, where):
+    if isinstance(raw, dict):
+        raw = raw.get('value')
+    try:
+        return to_si(raw, spec.dimension)
+    except ValueError as exc:
+        raise ValueError(f'{where}: {exc} [{spec.unit}]') from None
+
+
+def _element(entry, where) -> ElementSpec:
+    if not isinstance(entry, dict) or 'type' not in entry:
+        raise ValueError(f'{where}: expected a mapping with a "type", e.g. {{type: berg, x2: 1.4 mm, f_fmax: 4.6 kN}}')
+    entry = dict(entry)
+    kind = entry.pop('type')
+    for key in _RESULT_KEYS:
+        entry.pop(key, None)
+    fixed = entry.pop('fixed', [])
+    if isinstance(fixed, str):
+        fixed = [fixed]
+    if kind in OPERATING_POINT_TYPES:
+        return ElementSpec(kind, _operating_point_values(entry, where), frozenset())
+    t = element_type(kind)
+    values, options = {}, {}
+    for key, raw in entry.items():
+        if key in t.options:
+            options[key] = _option(key, raw, where)
+            continue
+        try:
+            spec = t.param(key)
+        except KeyError:
+            raise ValueError(f'{where}: unknown parameter {key!r} of {t.name}; its parameters: '
+                             f'{", ".join(p.name for p in t.params)}'
+                             + (f'; options: {", ".join(t.options)}' if t.options else '')) from None
+        values[key] = _value(raw, spec, f'{where}.{key}')
+        if isinstance(raw, dict) and raw.get('fixed'):
+            fixed = list(fixed) + [key]
+    missing = [p.name for p in t.params if not p.optional and p.name not in values]
+    if missing:
+        raise ValueError(f'{where}: {t.name} needs {", ".join(missing)}')
+    if not values:
+        raise ValueError(f'{where}: {t.name} needs at least one of {", ".join(p.name for p in t.params)}')
+    bad = sorted(set(fixed) - set(values))
+    if bad:
+        raise ValueError(f'{where}.fixed: {", ".join(bad)} is not a parameter of this element')
+    return ElementSpec(t.name, values, frozenset(fixed), options)
+
+
+def _option(key, raw, where):
+    if key in ('amplitude', 'center', 'reversal_threshold'):
+        try:
+            return to_si(raw, 'length')
+        except ValueError as exc:
+            raise ValueError(f'{where}.{key}: {exc}') from None
+    return raw
+
+
+def _operating_point_values(entry, where) -> dict:
+    out = {}
+    for key, raw in entry.items():
+        if key == 'k_odd':
+            if not isinstance(raw, (list, tuple)) or not raw:
+                raise ValueError(f'{where}.k_odd: expected a list of coefficients (numbers or tables, SI)')
+            out[key] = list(raw)
+        elif key in ('amplitude', 'reversal_threshold'):
+            out[key] = _option(key, raw, where)
+        elif key == 'frequency':
+            out[key] = to_si(raw, 'frequency')
+        else:
+            raise ValueError(f'{where}: unknown key {key!r} of operating_point_spring')
+    return out
+
+
+def parse_model(data, origin: str = 'model') -> ModelSpec:
+    """A :class:`ModelSpec` from a model-file mapping; errors name ``origin`` and the entry."""
+    if not isinstance(data, dict) or not isinstance(data.get('elements'), list) or not data['elements']:
+        raise ValueError(f'{origin}: a model file needs "elements", a list of elements in parallel, e.g. '
+                         '[{type: berg, x2: 1.4 mm, f_fmax: 4.6 kN}] (rubber-rig models lists the types)')
+    elements = [_element(e, f'{origin}: elements[{i}]') for i, e in enumerate(data['elements'])]
+    meta = {k: v for k, v in data.items() if k not in ('elements', 'name', 'model')}
+    if 'temperature' in meta:
+        meta['temperature'] = to_si(meta['temperature'], 'temperature')
+    spec = ModelSpec(elements, str(data.get('name', '')), meta)
+    try:
+        return spec.validate()
+    except ValueError as exc:
+        raise ValueError(f'{origin}: {exc}') from None
+
+
+def is_model_file(path) -> bool:
+    """True when ``path`` is a YAML file with an ``elements`` list (not a parameter-set table)."""
+    p = Path(str(path)).expanduser()
+    if p.suffix not in ('.yaml', '.yml') or not p.is_file():
+        return False
+    try:
+        data = yaml.safe_load(p.read_text(encoding='utf-8'))
+    except yaml.YAMLError:
+        return False
+    return isinstance(data, dict) and 'elements' in data
+
+
+def load_model_file(path) -> ModelSpec:
+    path = Path(str(path)).expanduser()
+    if not path.is_file():
+        raise FileNotFoundError(f'no such model file: {path}')
+    try:
+        data = yaml.safe_load(path.read_text(encoding='utf-8'))
+    except yaml.YAMLError as exc:
+        raise ValueError(f'{path}: not valid YAML ({exc})') from None
+    spec = parse_model(data, str(path))
+    spec.name = spec.name or path.stem
+    return spec
+
+
+def spec_from_params(params, name: str = '') -> ModelSpec:
+    """The model of a parameter dataclass (ZenerBergParams, TangentMaxwellBergParams, KelvinVoigtParams)."""
+    v = params.as_dict()
+    kind = type(params).__name__
+    if kind == 'ZenerBergParams':
+        els = [ElementSpec('fractional_zener', {k: v[k] for k in ('k0', 'k_inf', 'tau', 'alpha')}),
+               ElementSpec('berg', {'x2': v['x2'], 'f_fmax': v['f_fmax']})]
+    elif kind == 'TangentMaxwellBergParams':
+        els = [ElementSpec('dzierzek', {'k_t': v['k_t'], 'd_t': v['d_t']}),
+               ElementSpec('maxwell', {'k': v['k1'], 'c': v['c1']}), ElementSpec('maxwell', {'k': v['k2'], 'c': v['c2']}),
+               ElementSpec('berg', {'x2': v['x2'], 'f_fmax': v['f_fmax']})]
+    elif kind == 'KelvinVoigtParams':
+        els = [ElementSpec('linear_spring', {'k': v['k']}), ElementSpec('dashpot', {'c': v['c']})]
+    else:
+        raise ValueError(f'cannot describe {kind} as a model file')
+    return ModelSpec(els, name)
+
+
+# Named models: starting structures for `rubber-rig fit --model NAME` (values are typical magnitudes; a fit
+# starts from the data, not from them) and the specimens of the acceptance benchmark.
+_SEED000 = [{'type': 'fractional_zener', 'k0': '12.29 kN/mm', 'k_inf': '14.01 kN/mm', 'tau': '0.043 s',
+             'alpha': 0.659}, {'type': 'berg', 'x2': '1.41 mm', 'f_fmax': '4.57 kN'}]
+NAMED_MODELS = {
+    'zener_berg': ('seed 000: fractional Zener + Berg (6 parameters)', _SEED000),
+    'zener_berg_cubic': ('seed 000 + cubic spring (7 parameters)',
+                         _SEED000 + [{'type': 'polynomial_spring', 'k3': '6e11 N/m^3'}]),
+    'seed003': ('seed 003 style: polynomial spring (k1, k3) + two-order fractional + Berg',
+                [{'type': 'polynomial_spring', 'k1': '2 kN/mm', 'k3': '5e11 N/m^3'},
+                 {'type': 'two_order_fractional', 'k1': '6 kN/mm', 'k2': '3 kN/mm', 'c1': 600.0, 'c2': 150.0,
+                  'alpha': 0.3, 'beta': 0.6},
+                 {'type': 'berg', 'x2': '0.3 mm', 'f_fmax': '0.8 kN'}]),
+    'pad': ('seed 004 at one operating point: odd polynomial spring (k1, k3) + elliptic damping',
+            [{'type': 'polynomial_spring', 'k1': '2.5 kN/mm', 'k3': '4.8 kN/mm^3'},
+             {'type': 'elliptic_damping', 'b': '0.34 kN'}]),
+    'tangent_maxwell_berg': ('seed 001 combined model: Dzierzek tangent spring + 2 Maxwell + Berg',
+                             [{'type': 'dzierzek', 'k_t': '1 kN/mm', 'd_t': '10 mm'},
+                              {'type': 'maxwell', 'k': '0.5 kN/mm', 'c': '2 kNs/m'},
+                              {'type': 'maxwell', 'k': '0.3 kN/mm', 'c': '0.1 kNs/m'},
+                              {'type': 'berg', 'x2': '0.5 mm', 'f_fmax': '0.3 kN'}]),
+    'kelvin_voigt': ('linear spring + dashpot', [{'type': 'linear_spring', 'k': '13 kN/mm'},
+                                                 {'type': 'dashpot', 'c': '20 kNs/m'}]),
+    'maxwell_berg': ('linear spring + Maxwell + Berg', [{'type': 'linear_spring', 'k': '12 kN/mm'},
+                                                         {'type': 'maxwell', 'k': '2 kN/mm', 'c': '10 kNs/m'},
+                                                         {'type': 'berg', 'x2': '1 mm', 'f_fmax': '4 kN'}]),
+}
+
+
+def named_model(name: str) -> ModelSpec:
+    """A named model (``NAMED_MODELS``) or a shipped parameter set (e.g. swing_arm_joint_20C) as a ModelSpec."""
+    if name in NAMED_MODELS:
+        doc, elements = NAMED_MODELS[name]
+        return parse_model({'name': name, 'description': doc, 'elements': elements}, name)
+    try:
+        params = load_parameter_set(name)
+    except ValueError:
+        raise ValueError(f'unknown model {name!r}: give a model file (.yaml with "elements") or one of '
+                         f'{", ".join(NAMED_MODELS)}, or a parameter set (rubber-rig props --list)') from None
+    info = parameter_set_info(name)
+    spec = spec_from_params(params, name)
+    if math.isfinite(info['temperature']):
+        spec.meta['temperature'] = info['temperature']
+    return spec
+
+
+def resolve_model(source) -> ModelSpec:
+    """A ModelSpec from a ModelSpec, a model file path, a named model, a parameter set or a mapping."""
+    if isinstance(source, ModelSpec):
+        return source
+    if isinstance(source, dict):
+        return parse_model(source)
+    if is_model_file(source):
+        return load_model_file(source)
+    if str(source).endswith(('.yaml', '.yml')) and not Path(str(source)).expanduser().is_file():
+        raise FileNotFoundError(f'no such model file: {source}')
+    return named_model(str(source))
