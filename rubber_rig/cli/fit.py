@@ -259,7 +259,7 @@ def run(args) -> int:
         json.dump(_jsonable(out), sys.stdout, indent=1)
         sys.stdout.write('\n')
         return 0
-    for model, mfits in by_model.items():
+    for mfits in by_model.values():
         for f in mfits:
             print_fit(f)
             print()

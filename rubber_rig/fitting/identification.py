@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """From recordings to identified models: any model file, load-cell calibration, verdict and model ranking.
 
     runs -> load-cell calibration (delay, gain) -> blocks -> per temperature: harmonic global search
@@ -28,7 +42,6 @@ from .modelfit import (
     covariance,
     fit_harmonic_model,
     fit_time_model,
-    harmonic_residuals,
     jacobian,
     physical_uncertainty,
 )
@@ -39,7 +52,8 @@ METHODS = ('harmonic', 'time')
 
 def load_cell_calibration(run, delay=None, gain=None) -> tuple:
     """(delay [s], gain [-], source) for ``run``: the given values, else the recording's rig configuration
-    (``load_cell_delay``, ``load_cell_gain``), else (0, 1)."""
+    (``load_cell_delay``, ``load_cell_gain``), else (0, 1).
+    """
     cfg = (run.metadata or {}).get('rig_config') or {}
     cfg = cfg if isinstance(cfg, dict) else {}
     source = 'given'
@@ -58,7 +72,8 @@ def load_cell_calibration(run, delay=None, gain=None) -> tuple:
 
 def corrected_force(force, dt, delay, gain):
     """The specimen force from a load cell that reads gain x the force of ``delay`` s earlier:
-    F(t) = F_measured(t + delay) / gain, linear interpolation; the last samples repeat the edge."""
+    F(t) = F_measured(t + delay) / gain, linear interpolation; the last samples repeat the edge.
+    """
     f = np.asarray(force, float)
     if delay:
         n = np.arange(f.size, dtype=float)
@@ -98,7 +113,8 @@ def split_runs(runs, settle_cycles=3, min_cycles=2):
 
 def block_quality(spec: ModelSpec, blocks, forces: dict, runs: dict, gain_delay=(1.0, 0.0)) -> list:
     """Per block: measured K_dyn, C_eq and the model's (analytic first harmonic and the model run over the
-    measured displacement, ``forces`` recording -> model force), relative errors as seed 000 Eq. 28."""
+    measured displacement, ``forces`` recording -> model force), relative errors as seed 000 Eq. 28.
+    """
     t = BlockTargets.from_blocks(blocks, {})
     gain, delay = gain_delay
     k = spec.first_harmonic(t.frequency, t.amplitude, t.mean) * gain * np.exp(-2j * np.pi * t.frequency * delay)
@@ -122,7 +138,8 @@ def block_quality(spec: ModelSpec, blocks, forces: dict, runs: dict, gain_delay=
 
 def truth_of(spec: ModelSpec, runs) -> dict | None:
     """The true values of ``spec``'s parameters when a recording's metadata holds its specimen as a model
-    (simulated recordings) with the same elements in the same order; else None."""
+    (simulated recordings) with the same elements in the same order; else None.
+    """
     for run in runs:
         specimen = (run.metadata or {}).get('specimen')
         if not isinstance(specimen, dict):
@@ -221,7 +238,8 @@ def harmonic_uncertainty(coords, z, ls, targets, w_k, w_c):
     noise scale of their own, so their scatter s^2 = sum r^2 / dof scales the covariance (a misfit widens it,
     a fit closer than the weights suggest narrows it), with the blocks as clusters as in the time domain.
     chi2 is in units of the blocks' measurement noise when it is known (``targets.rel_sigma_*`` > 0), else
-    the weighted sum itself."""
+    the weighted sum itself.
+    """
     nb = len(targets)
     rows = [[i, i + nb] for i in range(nb)]
     cov_n, cov_b, chi2_w, dof = covariance(ls.jac, ls.fun, rows)
@@ -245,7 +263,8 @@ def fit_model(runs, model='zener_berg', method='time', load_cell_delay=None, loa
               estimate_delay=True, settle_cycles=3, min_cycles=2, seed=0, w_k=100.0, w_c=1.0,
               progress=None) -> tuple:
     """Identify ``model`` (model file, named model, parameter set or ModelSpec) from ``runs`` (RunData), one
-    fit per temperature. Returns (fits, messages)."""
+    fit per temperature. Returns (fits, messages).
+    """
     if method not in METHODS:
         raise ValueError(f'unknown fit method {method!r} (use one of {", ".join(METHODS)})')
     spec = resolve_model(model)
@@ -282,7 +301,8 @@ def fit_model(runs, model='zener_berg', method='time', load_cell_delay=None, loa
 
 def compare_models(fits_by_model: dict) -> list:
     """Rank candidate models fitted to the same data: per temperature, rows sorted by AIC with
-    delta AIC / delta BIC to the best and Akaike weights, and a sentence saying what the data support."""
+    delta AIC / delta BIC to the best and Akaike weights, and a sentence saying what the data support.
+    """
     temps = {}
     for name, fits in fits_by_model.items():
         for f in fits:

@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Identify any composite model (a model file) from recordings, with an honest uncertainty.
 
     blocks (split_blocks) -> harmonic global search (first harmonics of the model, exact, see
@@ -31,7 +45,6 @@ coordinates (delta method); 95 % intervals are +-1.96 sigma.
 from __future__ import annotations
 
 import math
-import time
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -40,8 +53,7 @@ from scipy.optimize import differential_evolution, least_squares
 from rubber_rig.models.composite import ParallelModel
 from rubber_rig.models.modelfile import ModelSpec
 
-from .blocks import noise_level, split_blocks
-from .metrics import window_properties
+from .blocks import noise_level
 from .timefit import run_input
 
 DELAY = 'load_cell_delay'
@@ -63,7 +75,8 @@ class BlockTargets:
     @classmethod
     def from_blocks(cls, blocks, noise: dict):
         """``noise``: recording name -> load-cell noise sigma [N]. The first harmonic of N samples of white
-        noise sigma has a sigma of sigma sqrt(2/N) per component."""
+        noise sigma has a sigma of sigma sqrt(2/N) per component.
+        """
         get = {k: np.array([getattr(b, k) for b in blocks], float)
                for k in ('frequency', 'amplitude', 'mean', 'k_dyn', 'c_eq')}
         n = np.array([max(b.stop - b.start, 1) for b in blocks], float)
@@ -185,8 +198,8 @@ def coordinates(spec: ModelSpec, t: BlockTargets, dt: float, delay: bool = False
 def _sibling(spec, name, other):
     """The model's name of parameter ``other`` of the element that has parameter ``name``."""
     prefix = name.rpartition('.')[0]
-    for n, i, p in spec.parameters():
-        if p == other and (not prefix or n.startswith(prefix + '.')) and n.rpartition('.')[0] == prefix:
+    for n, _, p in spec.parameters():
+        if p == other and n.rpartition('.')[0] == prefix:
             return n
     return other
 
@@ -407,7 +420,8 @@ class ModelFit:
     def as_dict(self) -> dict:
         out = {'model': self.model.name, 'temperature': self.temperature, 'recordings': self.runs,
                'method': self.method, 'parameters': self.parameters, 'uncertainty': self.uncertainty,
-               'warnings': self.warnings, 'notes': self.notes, 'chi2_per_dof': self.chi2_per_dof, 'chi2': self.chi2, 'dof': self.dof,
+               'warnings': self.warnings, 'notes': self.notes, 'chi2_per_dof': self.chi2_per_dof, 'chi2': self.chi2,
+               'dof': self.dof,
                'n_points': self.n_points, 'n_params': self.n_params, 'aic': self.aic, 'bic': self.bic,
                'noise': {'force_sigma': self.noise}, 'load_cell': self.load_cell,
                'correlation': {'names': list(self.uncertainty), 'matrix': self.correlation},

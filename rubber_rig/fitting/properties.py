@@ -37,7 +37,12 @@ from __future__ import annotations
 import numpy as np
 
 from rubber_rig.models.fractional import zener_complex_stiffness
-from rubber_rig.models.friction import berg_energy, berg_peak_force, friction_first_harmonic  # noqa: F401  (re-exported)
+from rubber_rig.models.friction import (  # noqa: F401  (re-exported)
+    berg_energy,
+    berg_peak_force,
+    friction_first_harmonic,
+)
+
 
 def measured_style_properties(k0, k_inf, tau, alpha, x2, f_fmax, frequency, amplitude):
     """K_dyn (first harmonic), loss angle, D, energy per cycle and C_eq of the seed-000 model.

@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """The verdict of a fit: a warning for everything that makes the numbers less than they look.
 
 Each warning is one sentence a test engineer can act on. A clean fit has none. Thresholds:
@@ -72,7 +86,7 @@ def misfit_warnings(fit) -> list:
     lf = np.log([q['frequency'] for q in rows])
     amp = np.array([q['amplitude'] for q in rows])
     for name, e, limit in (('K_dyn', ek, PATTERN_K), ('C_eq', ec, PATTERN_C)):
-        for what, x, unit in (('frequency', lf, ''), ('amplitude', amp, '')):
+        for what, x in (('frequency', lf), ('amplitude', amp)):
             change, se = _trend(e, x)
             if abs(change) > limit and abs(change) > 4 * se:
                 out.append(f'systematic {name} residual with {what}: the model error changes by '
@@ -85,11 +99,11 @@ def identifiability_warnings(fit, coords) -> list:
     names = list(fit.uncertainty)
     corr = np.asarray(fit.correlation)
     for i, j in correlated_pairs(fit):
-        if max(fit.uncertainty[names[i]]['relative_sigma'], fit.uncertainty[names[j]]['relative_sigma']) \
-                > CORRELATED_SIGMA:
+        worst = max(fit.uncertainty[names[i]]['relative_sigma'], fit.uncertainty[names[j]]['relative_sigma'])
+        if worst > CORRELATED_SIGMA:
             out.append(f'{names[i]} and {names[j]} cannot be told apart by these data (correlation '
-                           f'{corr[i, j]:+.3f}): only a combination of them is identified; widen the frequency/'
-                           'amplitude range or fix one')
+                       f'{corr[i, j]:+.3f}, +-{100 * worst:.0f} % at 1 sigma): only a combination of them is '
+                       'identified; widen the frequency/amplitude range or fix one')
     for k, u in fit.uncertainty.items():
         if k == DELAY:
             continue

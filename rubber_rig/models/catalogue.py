@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """The element catalogue: every element type a model file may use, with its parameters, units and sources.
 
 One :class:`ElementType` per type names its parameters (:class:`ParamSpec`: SI unit, the unit
@@ -156,7 +170,8 @@ TYPES = {t.name: t for t in (
         _zener_build, _zener_fh, 'viscoelastic',
         {'scheme': "fractional operator: 'default' (sum of exponentials), 'paper' (GL, N_t = 200, h = 1 ms), 'gl'"}),
     ElementType(
-        'zener', 'standard linear solid: K0 parallel to a Maxwell branch (K_inf - K0, tau)', 'seed 000 Eq. 4, alpha = 1',
+        'zener', 'standard linear solid: K0 parallel to a Maxwell branch (K_inf - K0, tau)',
+        'seed 000 Eq. 4, alpha = 1',
         (_stiffness('k0', 'static stiffness'), _stiffness('k_inf', 'high-frequency stiffness', above='k0'),
          ParamSpec('tau', 's', 'time', 'relaxation time', 'time')),
         _zener_build, lambda v, f, a, m: _zener_fh({**v, 'alpha': 1.0}, f, a, m), 'viscoelastic'),

@@ -1,3 +1,17 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
 """Model files: a specimen or a fitted model as YAML, elements in parallel, values with units.
 
     name: bushing_20C                      # optional
@@ -59,7 +73,8 @@ class ModelSpec:
 
     def parameters(self) -> list:
         """(name, element index, parameter name) of every parameter, in file order. ``name`` is the bare
-        parameter name when it is unique in the model, else ``label.param``."""
+        parameter name when it is unique in the model, else ``label.param``.
+        """
         raw = [(i, p) for i, e in enumerate(self.elements) if e.fittable for p in e.values]
         bare = [p for _, p in raw]
         labels = self.labels()
@@ -104,7 +119,8 @@ class ModelSpec:
     # ---- physics ---------------------------------------------------------------------------------
     def build_elements(self, dt: float, reversal_threshold: float | None = None) -> list:
         """Streaming/batch element objects at sample period ``dt`` [s]. ``reversal_threshold`` [m], when
-        given, is the reversal deadband of every element that has one and sets none itself."""
+        given, is the reversal deadband of every element that has one and sets none itself.
+        """
         out = []
         for e in self.elements:
             if not e.fittable:
@@ -137,7 +153,8 @@ class ModelSpec:
     # ---- files -----------------------------------------------------------------------------------
     def to_dict(self, results: dict | None = None) -> dict:
         """The model-file mapping in SI; ``results`` {parameter name: {sigma, interval_95}} goes beside
-        the values of each element."""
+        the values of each element.
+        """
         elements = []
         names = {(i, p): n for n, i, p in self.parameters()}
         for i, e in enumerate(self.elements):
@@ -299,7 +316,8 @@ def spec_from_params(params, name: str = '') -> ModelSpec:
                ElementSpec('berg', {'x2': v['x2'], 'f_fmax': v['f_fmax']})]
     elif kind == 'TangentMaxwellBergParams':
         els = [ElementSpec('dzierzek', {'k_t': v['k_t'], 'd_t': v['d_t']}),
-               ElementSpec('maxwell', {'k': v['k1'], 'c': v['c1']}), ElementSpec('maxwell', {'k': v['k2'], 'c': v['c2']}),
+               ElementSpec('maxwell', {'k': v['k1'], 'c': v['c1']}),
+               ElementSpec('maxwell', {'k': v['k2'], 'c': v['c2']}),
                ElementSpec('berg', {'x2': v['x2'], 'f_fmax': v['f_fmax']})]
     elif kind == 'KelvinVoigtParams':
         els = [ElementSpec('linear_spring', {'k': v['k']}), ElementSpec('dashpot', {'c': v['c']})]
@@ -331,9 +349,9 @@ NAMED_MODELS = {
                               {'type': 'berg', 'x2': '0.5 mm', 'f_fmax': '0.3 kN'}]),
     'kelvin_voigt': ('linear spring + dashpot', [{'type': 'linear_spring', 'k': '13 kN/mm'},
                                                  {'type': 'dashpot', 'c': '20 kNs/m'}]),
-    'maxwell_berg': ('linear spring + Maxwell + Berg', [{'type': 'linear_spring', 'k': '12 kN/mm'},
-                                                         {'type': 'maxwell', 'k': '2 kN/mm', 'c': '10 kNs/m'},
-                                                         {'type': 'berg', 'x2': '1 mm', 'f_fmax': '4 kN'}]),
+    'maxwell_berg': ('linear spring + Maxwell + Berg',
+                     [{'type': 'linear_spring', 'k': '12 kN/mm'}, {'type': 'maxwell', 'k': '2 kN/mm', 'c': '10 kNs/m'},
+                      {'type': 'berg', 'x2': '1 mm', 'f_fmax': '4 kN'}]),
 }
 
 
