@@ -254,3 +254,90 @@ def test_rig_status_is_latched_with_limits_and_rate(suite):
     assert status.limits.displacement_max == pytest.approx(5e-3)
     assert status.state in (RigStatus.STATE_RUNNING, RigStatus.STATE_HOLDING, RigStatus.STATE_IDLE)
     assert status.faults == 0
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_element_model_runs_a_model_file_and_refuses_a_bad_one_at_run_time(tmp_path):
+    """element_model as its own process with parameter_set:=<model file> (fractional Zener + Berg + cubic spring),
+    fed sample batches from outside: the prediction is the file's model run on the sent displacement (to
+    round-off), with the model's four branches; model_parameters names the file and its SI values. A bad model
+    file set at run time is refused with a reason naming the file and the problem, and the model keeps running."""
+    from pathlib import Path
+
+    from rcl_interfaces.msg import Parameter as ParameterMsg
+    from rcl_interfaces.msg import ParameterType, ParameterValue
+    from rcl_interfaces.srv import SetParameters
+
+    from msg_defs.msg import ModelPrediction, RigSampleBatch
+    from rubber_rig.models import build_model
+    from rubber_rig.nodes.processes import Operator, SuiteProcesses
+
+    from support.suite import domain_id
+    config = Path(__file__).resolve().parents[1] / 'config' / 'rig_sim.yaml'
+    model_file = tmp_path / 'bushing_cubic.yaml'
+    model_file.write_text('elements:\n'
+                          '  - {type: fractional_zener, k0: 12.29 kN/mm, k_inf: 14.01 kN/mm, tau: 0.043 s, '
+                          'alpha: 0.659}\n'
+                          '  - {type: berg, x2: 1.41 mm, f_fmax: 4.57 kN}\n'
+                          '  - {type: polynomial_spring, k3: 6e11 N/m^3}\n')
+    bad_file = tmp_path / 'bad.yaml'
+    bad_file.write_text('elements:\n  - {type: berg, x2: 1.41 kN, f_fmax: 4.57 kN}\n')
+    ns, dt, size = '/model_file', 1e-3, 50
+    t = np.arange(3000) * dt
+    x = 1e-3 * np.sin(2 * np.pi * 2.0 * t) + np.random.default_rng(7).normal(0.0, DISP_NOISE, t.size)
+    reference = build_model(str(model_file), dt, friction_reversal_threshold=2e-6)   # rig_sim.yaml's deadband
+    expected, expected_branches = reference.run(x, return_branches=True)
+
+    procs = SuiteProcesses(config, ns, domain_id(), tmp_path / 'logs',
+                           {'element_model': {'parameter_set': str(model_file)}})
+    procs.start('element_model')
+    op = None
+    try:
+        assert procs.wait_started('element_model', 30.0), procs.log('element_model')[-3000:]
+        op = Operator(ns, domain_id(), name='model_file_operator')
+        preds, params = [], []
+        op.node.create_subscription(ModelPrediction, topics.PREDICTION, preds.append, topics.STREAM_QOS)
+        op.node.create_subscription(ModelParameters, topics.MODEL_PARAMETERS, params.append, topics.LATCHED_QOS)
+        pub = op.node.create_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
+        assert op.wait_for(lambda: params and pub.get_subscription_count() >= 1, 20.0), 'element_model not connected'
+        p = params[-1]
+        assert p.parameter_set == str(model_file), p.parameter_set
+        assert p.model_name == 'fractional_zener + berg + polynomial_spring'
+        values = dict(zip(p.names, p.values, strict=True))
+        assert values == pytest.approx({'k0': 12.29e6, 'k_inf': 14.01e6, 'tau': 0.043, 'alpha': 0.659,
+                                        'x2': 1.41e-3, 'f_fmax': 4570.0, 'k3': 6e11}, rel=1e-12)
+
+        def send(lo, hi):
+            for i in range(lo, hi, size):
+                xb = x[i:i + size]
+                pub.publish(conv.sample_batch_msg(i, i * dt, dt, xb, np.zeros(xb.size), xb, 20.0, 0, 0))
+
+        def predicted_up_to(n):
+            return lambda: preds and preds[-1].first_sequence + len(preds[-1].predicted_force) >= n
+
+        half = x.size // 2
+        send(0, half)
+        assert op.wait_for(predicted_up_to(half), 20.0), 'no prediction for the first half'
+        # the bad file at run time: refused, naming the file and the problem
+        r = op.call('element_model/set_parameters', SetParameters, SetParameters.Request(parameters=[ParameterMsg(
+            name='parameter_set', value=ParameterValue(type=ParameterType.PARAMETER_STRING,
+                                                       string_value=str(bad_file)))]))
+        assert r is not None and not r.results[0].successful
+        reason = r.results[0].reason
+        assert 'parameter_set' in reason and str(bad_file) in reason and 'x2' in reason, reason
+        send(half, x.size)                      # the model file's model keeps running, state and all
+        assert op.wait_for(predicted_up_to(x.size), 20.0), 'no prediction after the refused change'
+        seq, got = by_sequence(preds, 'predicted_force')
+        np.testing.assert_array_equal(seq, np.arange(x.size))
+        np.testing.assert_allclose(got, expected, rtol=1e-10, atol=1e-6)
+        m = preds[len(preds) // 2]
+        assert [b.name for b in m.branches] == ['elastic_1', 'viscous', 'friction', 'elastic_2']
+        lo = m.first_sequence
+        for b, ref in zip(m.branches, expected_branches[:, lo:lo + size], strict=True):
+            np.testing.assert_allclose(conv.as_array(b.force), ref, rtol=1e-10, atol=1e-6)
+        assert params[-1].parameter_set == str(model_file)        # nothing else was published
+    finally:
+        if op is not None:
+            op.close()
+        procs.stop_all()

@@ -200,7 +200,7 @@ def _per_block(args, runs, messages):
     messages += msgs
     out = []
     for temp, items in groups.items():
-        rows = fit_blocks(items)
+        rows = fit_blocks([(run, blocks) for run, blocks, _ in items])
         trends = [fit_trend(rows, name) for name in ('K1', 'K3', 'b')]
         out.append({'temperature': temp, 'blocks': rows, 'trends': trends})
         if not args.json:

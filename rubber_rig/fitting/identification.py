@@ -94,8 +94,23 @@ def _temp_key(t):
     return None if t is None else round(float(t) * 2.0) / 2.0
 
 
+def quasi_static_windows(run) -> list:
+    """Sample ranges (start, stop) of the run's triangle blocks (block index + recorded program)."""
+    if run.block_index is None or not run.program_blocks:
+        return []
+    bi = np.asarray(run.block_index)
+    change = np.flatnonzero(np.diff(bi) != 0) + 1
+    bounds = np.concatenate([[0], change, [bi.size]])
+    out = []
+    for s, e in zip(bounds[:-1], bounds[1:], strict=True):
+        k = int(bi[s])
+        if 0 <= k < len(run.program_blocks) and run.program_blocks[k].get('waveform') == 'triangle' and e - s > 10:
+            out.append((int(s), int(e)))
+    return out
+
+
 def split_runs(runs, settle_cycles=3, min_cycles=2):
-    """{temperature key: [(run, blocks)]} and messages."""
+    """{temperature key: [(run, blocks, quasi-static windows)]} and messages."""
     groups, messages = {}, []
     for run in runs:
         messages.extend(run.messages)
@@ -107,7 +122,7 @@ def split_runs(runs, settle_cycles=3, min_cycles=2):
                            min_cycles=min_cycles, recording=run.name)
         messages.extend(rep.messages)
         if rep.blocks:
-            groups.setdefault(_temp_key(run.temperature), []).append((run, rep.blocks))
+            groups.setdefault(_temp_key(run.temperature), []).append((run, rep.blocks, quasi_static_windows(run)))
     return groups, messages
 
 
@@ -164,11 +179,11 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
               seed=0, points_per_block=200, progress=None, calibration=None) -> ModelFit:
     """Identify ``spec``'s free parameters from [(run, blocks)] of one specimen state."""
     t0 = time.perf_counter()
-    blocks = [b for _, bl in items for b in bl]
-    runs = {run.name: run for run, _ in items}
-    noise = {run.name: noise_level(run.force) for run, _ in items}
+    blocks = [b for _, bl, _ in items for b in bl]
+    runs = {run.name: run for run, _, _ in items}
+    noise = {run.name: noise_level(run.force) for run, _, _ in items}
     targets = BlockTargets.from_blocks(blocks, noise)
-    dt = min(run.dt for run, _ in items)
+    dt = min(run.dt for run, _, _ in items)
     free = spec.free()
     n_free = len(free) + (1 if estimate_delay and method == 'time' else 0)
     if 2 * len(blocks) < n_free + 1:
@@ -186,9 +201,9 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     if method == 'harmonic':
         unc, corr, chi2, dof = harmonic_uncertainty(hc, z_h, ls_h, targets, w_k, w_c)
         coords, z, n_points, delay = hc, z_h, 2 * len(blocks), 0.0
-        problem = TimeProblem(spec.with_values(values), [(run, bl) for run, bl in items], points_per_block)
+        problem = TimeProblem(spec.with_values(values), items, points_per_block)
     else:
-        problem = TimeProblem(spec, [(run, bl) for run, bl in items], points_per_block)
+        problem = TimeProblem(spec, items, points_per_block)
         coords = coordinates(spec, targets, dt, delay=estimate_delay)
         start = dict(values)
         if estimate_delay:
@@ -207,15 +222,17 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
             return problem.residuals(coords.values(zz))
         r = fun(z)
         jac = jacobian(fun, z)
-        cov_n, cov_b, chi2, dof = covariance(jac, r, problem.block_rows, n_offsets=len(blocks))
+        cov_n, cov_b, chi2, dof = covariance(jac, r, problem.block_rows, n_offsets=len(problem.block_rows))
         unc, corr = physical_uncertainty(coords, z, cov_n, cov_b)
         values = coords.values(z)
         n_points = problem.m
         delay = float(values.get(DELAY, 0.0))
     fitted = spec.with_values({k: v for k, v in values.items() if k != DELAY})
     params = {n: float(values[n]) for n in coords.names}
-    forces = dict(zip(runs, problem.predict(values), strict=True)) if method == 'time' else \
-        dict(zip(runs, problem.predict({}), strict=True))
+    predicted = problem.predict(values) if method == 'time' else problem.predict({})
+    # the model as the load cell would have seen it: at t - delay when a delay was estimated
+    forces = {name: corrected_force(f, runs[name].dt, -delay, 1.0) if delay else f
+              for name, f in zip(runs, predicted, strict=True)}
     quality = block_quality(fitted, blocks, forces, runs, (1.0, delay))
     cal = calibration or {}
     fit = ModelFit(model=fitted, temperature=temperature, runs=list(runs), blocks=blocks, method=method,
@@ -226,7 +243,7 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
                               'delay_estimated': params.get(DELAY), 'delay_sigma': unc.get(DELAY, {}).get('sigma')},
                    quality=quality, messages=messages)
     fit.bounds_hit = _at_bounds(coords, z, ls_h if method == 'harmonic' else None)
-    fit.truth = truth_of(spec, [run for run, _ in items])
+    fit.truth = truth_of(spec, [run for run, _, _ in items])
     fit.warnings = verdict(fit, coords)
     fit.notes = notes(fit)
     fit.timings = {**timings, 'total_s': time.perf_counter() - t0}

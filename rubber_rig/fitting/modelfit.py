@@ -242,19 +242,24 @@ class TimeProblem:
     """Force residuals in units of the load-cell noise, over the analysed cycles of every block."""
 
     def __init__(self, spec: ModelSpec, runs_blocks, points_per_block=200):
+        """runs_blocks: [(RunData, [BlockResult])] or [(RunData, [BlockResult], [(start, stop)])]: the
+        optional third item are sample ranges of quasi-static blocks (triangles) that join the residual
+        like blocks (seed 000 Section 3 step 1, seed 001 Eq. 9: they pin the friction element down)."""
         self.spec = spec
         self.items = []
-        self.block_rows = []       # slices of the residual vector, one per block
+        self.block_rows = []       # slices of the residual vector, one per block or quasi-static window
         row = 0
-        for run, blocks in runs_blocks:
+        for item in runs_blocks:
+            run, blocks = item[0], item[1]
+            extra = list(item[2]) if len(item) > 2 else []
             if not blocks:
                 continue
-            end, x, h = run_input(run, blocks)
+            end, x, h = run_input(run, blocks, max((s for _, s in extra), default=0))
             sigma = max(noise_level(run.force[:end]), 1e-9 * float(np.max(np.abs(run.force[:end]))))
             windows = []
-            for b in blocks:
-                step = max(1, (b.stop - b.start) // points_per_block)
-                idx = np.arange(b.start, b.stop, step)
+            for start, stop in [(b.start, b.stop) for b in blocks] + [(a, min(s, end)) for a, s in extra]:
+                step = max(1, (stop - start) // points_per_block)
+                idx = np.arange(start, stop, step)
                 windows.append(idx)
                 self.block_rows.append(slice(row, row + idx.size))
                 row += idx.size

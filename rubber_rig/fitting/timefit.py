@@ -75,12 +75,12 @@ def model_input(x, dt, f_max):
     return y, h
 
 
-def run_input(run, blocks):
+def run_input(run, blocks, until: int = 0):
     """(end, x, h): the model input (`model_input`, at the blocks' highest frequency) for the measured
-    displacement of ``run`` (RunData) up to the closing sample of the last of its ``blocks``,
-    i.e. samples [0, end).
+    displacement of ``run`` (RunData) up to the closing sample of the last of its ``blocks`` (or to
+    sample ``until`` if that is later), i.e. samples [0, end).
     """
-    end = min(max(b.stop for b in blocks) + 1, run.displacement.size)
+    end = min(max(max(b.stop for b in blocks) + 1, until), run.displacement.size)
     x, h = model_input(run.displacement[:end], run.dt, max(b.frequency for b in blocks))
     return end, x, h
 

@@ -210,7 +210,8 @@ def _check_threshold(value) -> float:
 
 def _model_spec(source):
     """The ModelSpec of a model-file source (ModelSpec, mapping with ``elements`` or ``model_file``, model-file
-    path), else None (a parameter-set source)."""
+    path), else None (a parameter-set source).
+    """
     if isinstance(source, ModelSpec):
         return source
     if isinstance(source, dict):

@@ -334,8 +334,10 @@ NAMED_MODELS = {
     'zener_berg': ('seed 000: fractional Zener + Berg (6 parameters)', _SEED000),
     'zener_berg_cubic': ('seed 000 + cubic spring (7 parameters)',
                          _SEED000 + [{'type': 'polynomial_spring', 'k3': '6e11 N/m^3'}]),
-    'seed003': ('seed 003 style: polynomial spring (k1, k3) + two-order fractional + Berg',
-                [{'type': 'polynomial_spring', 'k1': '2 kN/mm', 'k3': '5e11 N/m^3'},
+    # the polynomial has no linear term: the two-order model's k1 is the static stiffness (two linear terms
+    # in parallel are one parameter to any data)
+    'seed003': ('seed 003 style: cubic spring + two-order fractional + Berg',
+                [{'type': 'polynomial_spring', 'k3': '5e11 N/m^3'},
                  {'type': 'two_order_fractional', 'k1': '6 kN/mm', 'k2': '3 kN/mm', 'c1': 600.0, 'c2': 150.0,
                   'alpha': 0.3, 'beta': 0.6},
                  {'type': 'berg', 'x2': '0.3 mm', 'f_fmax': '0.8 kN'}]),

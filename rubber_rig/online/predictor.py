@@ -33,12 +33,19 @@ prediction is NaN; the model continues from the last finite sample, so the predi
 a run without the bad samples. A batch whose sequence goes backwards (a restarted driver) starts the model
 afresh; batches the node cannot use at all (mismatched array lengths, a sample period that is not a finite
 positive number) are refused before they get here (``batch_problem``).
+
+Model files: ``parameter_set`` may also name a model file (a .yaml with an ``elements`` list, see
+rubber_rig.models.modelfile): the predictor then runs that composite model (:class:`ModelFileParams`; the
+friction reversal deadband applies to its Berg elements unless an element sets its own ``reversal_threshold``)
+and its branches are the model's own (``branch_names``, e.g. elastic_1, viscous, friction, elastic_2). The
+temperature sources stay seed 000 (fractional Zener + Berg) only.
 """
 from __future__ import annotations
 
 import math
 from collections import deque
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -50,6 +57,7 @@ from rubber_rig.models import (
     parameter_set_info,
     parameters_at_temperature,
 )
+from rubber_rig.models.modelfile import ModelSpec, is_model_file, load_model_file
 from rubber_rig.models.params import ParameterValueError
 
 SOURCES = ('parameter_set', 'temperature', 'rig_temperature', 'values')
@@ -66,19 +74,83 @@ class ChoiceError(ValueError):
         self.field = field
 
 
+@dataclass(frozen=True, eq=False)
+class ModelFileParams:
+    """The model a model file describes (``parameter_set: FILE.yaml`` with an ``elements`` list): what the
+    predictor runs in place of :class:`ZenerBergParams`. ``as_dict()`` {parameter name: SI value}, names as
+    :meth:`ModelSpec.parameters` gives them (bare, or ``label.param`` where a name repeats; an
+    operating_point_spring's coefficient tables are not among them).
+    """
+
+    path: str                 # as given in parameter_set
+    spec: ModelSpec
+
+    @property
+    def model_name(self) -> str:
+        """The element types in parallel, e.g. 'fractional_zener + berg + polynomial_spring'."""
+        return ' + '.join(e.type for e in self.spec.elements)
+
+    @property
+    def temperature(self) -> float:
+        """[degC] the file says its values are valid at (its ``temperature``), NaN when it says none."""
+        t = self.spec.meta.get('temperature')
+        return math.nan if t is None else float(t)
+
+    def as_dict(self) -> dict:
+        return {k: float(v) for k, v in self.spec.values().items()}
+
+    def __str__(self) -> str:
+        values = ', '.join(f'{k}={v:.6g}' for k, v in self.as_dict().items())
+        return f'model file {self.path} ({self.spec.name}: {self.model_name}; {values})'
+
+
+def load_model_choice_file(path: str) -> ModelFileParams:
+    """A model file as :class:`ModelFileParams`; raises :class:`ChoiceError` ('parameter_set') naming the file
+    and the problem (missing, not YAML, unknown element type or parameter, missing value, bad unit, bad value).
+    """
+    full = str(Path(path).expanduser())
+    if not Path(full).is_file():
+        raise ChoiceError('parameter_set', f'parameter set {path!r}: no such file'
+                          + (f' ({full})' if full != str(path) else ''))
+    try:
+        spec = load_model_file(path)
+    except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
+        raise ChoiceError('parameter_set', f'model file {path!r}: {_why(exc, path)}') from None
+    return ModelFileParams(str(path), spec)
+
+
+def _why(exc: Exception, path: str) -> str:
+    """The message of a file's error without the file name it often starts with (the caller names the file)."""
+    why = str(exc).strip('"\'') if isinstance(exc, KeyError) else str(exc)
+    for prefix in (str(Path(str(path).split(':')[0]).expanduser()) + ': ', str(path) + ': '):
+        if why.startswith(prefix):
+            return why[len(prefix):]
+    return why
+
+
+def _names_model_file(name: str) -> bool:
+    """True when ``name`` is meant as a model file: a .yaml/.yml file with an ``elements`` list, or a .yaml/.yml
+    path that does not exist and has no ``:SET`` (a parameter table would need the file as well).
+    """
+    if is_model_file(name):
+        return True
+    return str(name).endswith(('.yaml', '.yml')) and not Path(str(name)).expanduser().exists()
+
+
 @dataclass(frozen=True)
 class ModelChoice:
     """Which parameters the model runs with (what the element_model node's parameters select)."""
 
     source: str = 'parameter_set'                 # one of SOURCES
-    parameter_set: str = 'swing_arm_joint_20C'
+    parameter_set: str = 'swing_arm_joint_20C'     # a shipped set, FILE.yaml[:SET] (parameter table) or a model file
     temperature: float = 20.0                     # [degC] for source 'temperature' (start value for 'rig_temperature')
     values: dict = field(default_factory=dict)    # k0, k_inf, tau, alpha, x2, f_fmax [SI] for source 'values'
     model: str = 'fractional_zener_berg'
     friction_reversal_threshold: float = DEFAULT_REVERSAL_THRESHOLD   # [m] Berg reversal deadband, 0 = paper's rule
 
-    def resolve(self, temperature: float | None = None) -> tuple[ZenerBergParams, str, float]:
-        """(validated parameters, parameter-set name or '', temperature [degC] or NaN).
+    def resolve(self, temperature: float | None = None) -> tuple[ZenerBergParams | ModelFileParams, str, float]:
+        """(validated parameters, parameter-set name or '', temperature [degC] or NaN); the parameters are a
+        :class:`ModelFileParams` when ``parameter_set`` is a model file.
 
         Raises :class:`ChoiceError` whose ``field`` is the field of this choice that is wrong
         ('values.alpha', 'parameter_set', 'temperature', 'source', 'friction_reversal_threshold').
@@ -91,10 +163,14 @@ class ModelChoice:
             raise ChoiceError('friction_reversal_threshold', 'parameter friction_reversal_threshold must be a '
                               f'finite displacement >= 0 [m], got {d!r}')
         if self.source == 'parameter_set':
+            if _names_model_file(self.parameter_set):
+                p = load_model_choice_file(self.parameter_set)
+                return p, self.parameter_set, p.temperature
             try:   # a file set may be missing, unreadable, not YAML or hold bad values: all are a ValueError here
                 p = load_parameter_set(self.parameter_set)
             except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
-                raise ChoiceError('parameter_set', f'parameter set {self.parameter_set!r}: {exc}') from None
+                raise ChoiceError('parameter_set', f'parameter set {self.parameter_set!r}: '
+                                  f'{_why(exc, self.parameter_set)}') from None
             if not isinstance(p, ZenerBergParams):
                 raise ChoiceError('parameter_set', f'parameter set {self.parameter_set!r} is not a '
                                   'fractional_zener_berg parameter set')
@@ -160,6 +236,11 @@ class OnlinePredictor:
     def branch_names(self) -> list[str]:
         return list(self.model.branch_names) if self.model is not None else []
 
+    @property
+    def model_name(self) -> str:
+        """'fractional_zener_berg', or a model file's element types ('fractional_zener + berg + ...')."""
+        return self.params.model_name if isinstance(self.params, ModelFileParams) else 'fractional_zener_berg'
+
     def process(self, first_sequence: int, dt: float, x: np.ndarray,
                 temperature: float | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Predicted force and branch forces [n_branch, n] for one batch of measured displacement.
@@ -203,8 +284,11 @@ class OnlinePredictor:
 
     # -- internals --------------------------------------------------------------------------------------
     def _rebuild(self, dt: float) -> None:
-        self.model = build_model({'model': 'fractional_zener_berg', 'values': self.params.as_dict()}, dt,
-                                 friction_reversal_threshold=self.choice.friction_reversal_threshold)
+        if isinstance(self.params, ModelFileParams):
+            source = self.params.spec
+        else:
+            source = {'model': 'fractional_zener_berg', 'values': self.params.as_dict()}
+        self.model = build_model(source, dt, friction_reversal_threshold=self.choice.friction_reversal_threshold)
         if self.dt is not None and math.isclose(dt, self.dt, rel_tol=1e-9) and self._history:
             self.model.run(np.concatenate(list(self._history)), return_branches=False)  # warm up (see module doc)
         else:

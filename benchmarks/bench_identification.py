@@ -1,0 +1,275 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Acceptance benchmark of identification (issue 12): does every fit tell the truth.
+
+For each case a specimen is simulated with `rubber-rig simulate` (simulated rig, CAN path, 80 Hz actuator,
+20 N load-cell noise, 0.2 um displacement noise, 1 kHz) over ``--seeds`` noise seeds, recorded to MCAP and
+fitted with `rubber-rig fit`'s code with the true model and the seed-000 model. Per case and fitted model
+the table reports the largest median |parameter error|, the share of (seed, parameter) pairs whose 95 %
+interval covers the truth (worst parameter and all), the median chi2/dof, the share of seeds with at least
+one warning, how often AIC and BIC pick the true model, and the slowest fit.
+
+Cases: seed 000 at 20, 0, -20, -40 degC; seed 000 + cubic spring (6e11 N/m^3); a seed-003-style specimen
+(cubic spring + two-order fractional + Berg, sine grid 1-50 Hz x 0.2/0.3/0.5 mm); seed 004's pad around two
+preloads (operating-point spring with Table 3's K1(f, A) trend + elliptic damping; the true structure is
+identified per block); load cell 0.2 ms late; load cell +1 % gain (without and with the calibration
+input); only 0.5-4 Hz with the cubic spring and the late load cell.
+
+Targets: true model -> every parameter inside its 95 % interval in >= 90 % of the seeds and no warning;
+wrong model or late load cell -> a warning every time; AIC/BIC pick the true model.
+
+    .venv/bin/python benchmarks/bench_identification.py [--seeds 20] [--cases all|NAME,...] [--jobs 2]
+"""
+from __future__ import annotations
+
+import argparse
+import contextlib
+import io
+import json
+import math
+import os
+import sys
+import time
+from multiprocessing import Pool
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+GRID = 'seed000_grid'
+SEED003_PROGRAM = {'name': 'seed003_grid', 'defaults': {'taper_cycles': 2, 'cycles': 8, 'mean': 0.0},
+                   'blocks': [{'name': 'sine', 'waveform': 'sine', 'amplitude': ['0.2 mm', '0.3 mm', '0.5 mm'],
+                               'frequency': ['1 Hz', '2 Hz', '5 Hz', '10 Hz', '20 Hz', '30 Hz', '40 Hz',
+                                             '50 Hz']}]}
+LOWBAND_PROGRAM = {'name': 'low_band', 'defaults': {'taper_cycles': 2, 'cycles': 8, 'mean': 0.0},
+                   'blocks': [{'name': 'sine', 'waveform': 'sine', 'amplitude': ['0.5 mm', '1 mm'],
+                               'frequency': ['0.5 Hz', '1 Hz', '2 Hz', '3 Hz', '4 Hz']}]}
+PAD_PROGRAM = {'name': 'pad_two_preloads', 'defaults': {'taper_cycles': 2, 'cycles': 10}, 'blocks': [
+    {'name': 'preload_0.9mm', 'waveform': 'ramp', 'target': '-0.9 mm', 'rate': '0.5 mm/s'},
+    {'name': 'settle_1', 'waveform': 'hold', 'duration': '2 s'},
+    {'name': 'pad', 'waveform': 'sine', 'mean': '-0.9 mm', 'amplitude': ['0.3 mm', '0.5 mm'],
+     'frequency': ['2 Hz', '4 Hz', '6 Hz', '8 Hz', '10 Hz']},
+    {'name': 'preload_1.3mm', 'waveform': 'ramp', 'target': '-1.3 mm', 'rate': '0.5 mm/s'},
+    {'name': 'settle_2', 'waveform': 'hold', 'duration': '2 s'},
+    {'name': 'pad', 'waveform': 'sine', 'mean': '-1.3 mm', 'amplitude': ['0.3 mm', '0.5 mm'],
+     'frequency': ['2 Hz', '4 Hz', '6 Hz', '8 Hz', '10 Hz']},
+    {'name': 'unload', 'waveform': 'ramp', 'target': '0 mm', 'rate': '0.5 mm/s'}]}
+
+
+def _seed000(temp_name, extra=()):
+    from rubber_rig.models.modelfile import named_model
+    d = named_model(f'swing_arm_joint_{temp_name}').to_dict()
+    d['elements'] += list(extra)
+    return d
+
+
+def _pad_specimen():
+    from rubber_rig.models.pad import seed004_pad_spec
+    spec = seed004_pad_spec()
+    k1, k3 = spec['k_odd']
+    return {'name': 'seed004_pad', 'elements': [
+        {'type': 'operating_point_spring', 'k_odd': [[list(r) for r in k1] if not np.isscalar(k1) else k1, k3],
+         'frequency': 2.0, 'amplitude': 0.3e-3, 'reversal_threshold': 2e-6},
+        {'type': 'elliptic_damping', 'b': '0.34 kN', 'reversal_threshold': 2e-6}]}
+
+
+CUBIC = {'type': 'polynomial_spring', 'k3': '6e11 N/m^3'}
+# name -> (specimen (mapping or callable), program, simulate options, [(fit label, model, fit options)], true label)
+CASES = {
+    **{f'seed000_{t}': (lambda t=t: _seed000(t), GRID, {}, [('zener_berg', 'zener_berg', {}),
+                                                          ('zener_berg_cubic', 'zener_berg_cubic', {})],
+                        'zener_berg') for t in ('20C', '0C', 'm20C', 'm40C')},
+    'cubic': (lambda: _seed000('20C', [CUBIC]), GRID, {},
+              [('zener_berg_cubic', 'zener_berg_cubic', {}), ('zener_berg', 'zener_berg', {})], 'zener_berg_cubic'),
+    'seed003': (lambda: dict(__import__('rubber_rig.models.modelfile', fromlist=['x']).named_model('seed003')
+                             .to_dict()), SEED003_PROGRAM, {},
+                [('seed003', 'seed003', {}), ('zener_berg', 'zener_berg', {})], 'seed003'),
+    'pad': (_pad_specimen, PAD_PROGRAM, {}, [('per_block', 'per_block', {}), ('zener_berg', 'zener_berg', {})],
+            'per_block'),
+    'late_0.2ms': (lambda: _seed000('20C'), GRID, {'load_cell_delay': '0.2ms'},
+                   [('zener_berg', 'zener_berg', {}), ('zener_berg, no delay estimate', 'zener_berg',
+                                                        {'estimate_delay': False})], 'zener_berg'),
+    'gain_+1%': (lambda: _seed000('20C'), GRID, {'load_cell_gain': '1.01'},
+                 [('zener_berg, no calibration', 'zener_berg', {}),
+                  ('zener_berg, --load-cell-gain 1.01', 'zener_berg', {'load_cell_gain': 1.01})], None),
+    'low_band': (lambda: _seed000('20C', [CUBIC]), LOWBAND_PROGRAM, {'load_cell_delay': '0.2ms'},
+                 [('zener_berg', 'zener_berg', {}), ('zener_berg_cubic', 'zener_berg_cubic', {})], None),
+}
+
+
+def simulate(case, seed, out_dir: Path) -> Path:
+    from rubber_rig.cli.main import main
+    specimen, program, sim_opts, _, _ = CASES[case]
+    d = out_dir / case
+    d.mkdir(parents=True, exist_ok=True)
+    model_file = d / 'specimen.yaml'
+    if not model_file.exists():
+        model_file.write_text(yaml.safe_dump(specimen() if callable(specimen) else specimen, sort_keys=False))
+    if isinstance(program, dict):
+        prog_file = d / 'program.yaml'
+        if not prog_file.exists():
+            prog_file.write_text(yaml.safe_dump(program, sort_keys=False))
+        program = str(prog_file)
+    path = d / f'seed{seed:02d}.mcap'
+    if not path.exists():
+        args = ['simulate', '--model', str(model_file), '--program', program, '-o', str(path), '--seed', str(seed),
+                '--force-noise', '20N']
+        if 'load_cell_delay' in sim_opts:
+            args += ['--load-cell-delay', sim_opts['load_cell_delay']]
+        if 'load_cell_gain' in sim_opts:
+            args += ['--load-cell-gain', sim_opts['load_cell_gain']]
+        with contextlib.redirect_stdout(io.StringIO()):
+            rc = main(args)
+        if rc != 0:
+            raise RuntimeError(f'simulate {case} seed {seed} failed ({rc})')
+    return path
+
+
+def per_block_rows(run):
+    """Per-block seed-004 identification vs the specimen's operating-point coefficients."""
+    from rubber_rig.fitting.blocktrend import fit_blocks
+    from rubber_rig.fitting.identification import split_runs
+    from rubber_rig.models.pad import trend_value
+    groups, _ = split_runs([run])
+    items = [(r, b) for g in groups.values() for r, b, _ in g]
+    rows = fit_blocks(items)
+    spec = run.metadata['specimen']['elements']
+    k1, k3 = spec[0]['k_odd']
+    b_true = float(spec[1]['b'])
+    out = []
+    for r in rows:
+        truth = {'K1': float(trend_value(k1, r['frequency'], r['amplitude'])),
+                 'K3': float(trend_value(k3, r['frequency'], r['amplitude'])), 'b': b_true}
+        for k, tv in truth.items():
+            out.append((k, r[k] / tv - 1, abs(r[k] - tv) <= 1.96 * r['sigma'][k], r['chi2_per_dof']))
+    return out
+
+
+def fit_task(task):
+    case, seed, out_dir = task
+    from rubber_rig.fitting.data import load_run
+    from rubber_rig.fitting.identification import compare_models, fit_model
+    t0 = time.perf_counter()
+    path = simulate(case, seed, Path(out_dir))
+    sim_s = time.perf_counter() - t0
+    run = load_run(path)
+    _, _, _, fits, true_label = CASES[case]
+    results, by_model = [], {}
+    for label, model, opts in fits:
+        t1 = time.perf_counter()
+        if model == 'per_block':
+            rows = per_block_rows(run)
+            cover = {f'{k}#{i}': c for i, (k, _, c, _) in enumerate(rows)}
+            chi = float(np.median([c2 for *_, c2 in rows]))
+            results.append({'case': case, 'seed': seed, 'fit': label, 'true': label == true_label,
+                            'errors': {}, 'max_abs_error': float(max(abs(e) for _, e, _, _ in rows)),
+                            'covered': cover, 'chi2_per_dof': chi, 'warnings': [], 'fit_s': time.perf_counter() - t1,
+                            'sim_s': sim_s})
+            continue
+        fitted, _ = fit_model([run], model, **opts)
+        f = fitted[0]
+        by_model[label] = fitted
+        d = f.as_dict()
+        errors = d.get('errors', {})
+        covered = d.get('covered', {})
+        results.append({'case': case, 'seed': seed, 'fit': label, 'true': label == true_label,
+                        'errors': errors, 'max_abs_error': max((abs(v) for v in errors.values()), default=math.nan),
+                        'covered': covered, 'chi2_per_dof': f.chi2_per_dof, 'warnings': f.warnings,
+                        'delay_ms': 1e3 * (f.parameters.get('load_cell_delay') or 0.0),
+                        'fit_s': time.perf_counter() - t1, 'sim_s': sim_s})
+    if len(by_model) > 1 and true_label in by_model:
+        comp = compare_models(by_model)[0]
+        for r in results:
+            r['aic_true'] = comp['selected'] == true_label
+            r['bic_true'] = comp['selected_bic'] == true_label
+    return results
+
+
+def summarise(rows):
+    table = []
+    keys = []
+    for r in rows:
+        if (r['case'], r['fit']) not in keys:
+            keys.append((r['case'], r['fit']))
+    for case, fit in keys:
+        rs = [r for r in rows if r['case'] == case and r['fit'] == fit]
+        names = sorted({k for r in rs for k in r['errors']})
+        med = {k: float(np.median([abs(r['errors'][k]) for r in rs if k in r['errors']])) for k in names}
+        worst_param = max(med, key=med.get) if med else ''
+        cover_all = [c for r in rs for c in r['covered'].values()]
+        params = sorted({k.split('#')[0] for r in rs for k in r['covered']})
+        cov_by_param = {p: float(np.mean([c for r in rs for k, c in r['covered'].items() if k.split('#')[0] == p]))
+                        for p in params}
+        table.append({
+            'case': case, 'fit': fit, 'true_model': rs[0]['true'], 'seeds': len(rs),
+            'worst_median_error': (worst_param, med.get(worst_param, math.nan)) if med else
+            ('per block', float(np.median([r['max_abs_error'] for r in rs]))),
+            'coverage_all': float(np.mean(cover_all)) if cover_all else math.nan,
+            'coverage_worst_param': (min(cov_by_param, key=cov_by_param.get), min(cov_by_param.values()))
+            if cov_by_param else ('', math.nan),
+            'chi2_per_dof': float(np.median([r['chi2_per_dof'] for r in rs])),
+            'warned': float(np.mean([bool(r['warnings']) for r in rs])),
+            'aic_true': float(np.mean([r['aic_true'] for r in rs])) if 'aic_true' in rs[0] else math.nan,
+            'bic_true': float(np.mean([r['bic_true'] for r in rs])) if 'bic_true' in rs[0] else math.nan,
+            'fit_s_max': float(max(r['fit_s'] for r in rs)),
+            'example_warning': next((r['warnings'][0] for r in rs if r['warnings']), ''),
+        })
+    return table
+
+
+def print_table(table, out=sys.stdout):
+    print('| case | fitted model | true? | seeds | worst median abs error | 95 % coverage all / worst param | '
+          'chi2/dof (median) | seeds warned | AIC / BIC pick true | slowest fit |', file=out)
+    print('|---|---|---|---|---|---|---|---|---|---|', file=out)
+    for t in table:
+        wp, we = t['worst_median_error']
+        cp, cv = t['coverage_worst_param']
+        pick = '' if math.isnan(t['aic_true']) else f'{100 * t["aic_true"]:.0f} % / {100 * t["bic_true"]:.0f} %'
+        print(f'| {t["case"]} | {t["fit"]} | {"yes" if t["true_model"] else "no"} | {t["seeds"]} | '
+              f'{wp} {100 * we:.2f} % | {100 * t["coverage_all"]:.0f} % / {cp} {100 * cv:.0f} % | '
+              f'{t["chi2_per_dof"]:.3g} | {100 * t["warned"]:.0f} % | {pick} | {t["fit_s_max"]:.1f} s |', file=out)
+    print(file=out)
+    for t in table:
+        if t['example_warning']:
+            print(f'- {t["case"]} / {t["fit"]}: "{t["example_warning"]}"', file=out)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument('--seeds', type=int, default=20)
+    ap.add_argument('--cases', default='all', help=f'comma-separated subset of {", ".join(CASES)}')
+    ap.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1))
+    ap.add_argument('--dir', default='/tmp/rubber_rig_bench_identification', help='recordings (reused)')
+    ap.add_argument('--json', default=None, help='also write all rows to this JSON file')
+    args = ap.parse_args(argv)
+    cases = list(CASES) if args.cases == 'all' else args.cases.split(',')
+    unknown = [c for c in cases if c not in CASES]
+    if unknown:
+        ap.error(f'unknown case(s) {unknown}; known: {", ".join(CASES)}')
+    tasks = [(c, s, args.dir) for c in cases for s in range(args.seeds)]
+    t0 = time.perf_counter()
+    with Pool(args.jobs) as pool:
+        rows = [r for rs in pool.imap(fit_task, tasks) for r in rs]
+    table = summarise(rows)
+    print(f'identification benchmark: {args.seeds} noise seeds per case, 20 N load-cell noise, 1 kHz, '
+          f'{time.perf_counter() - t0:.0f} s wall, {args.jobs} jobs')
+    print_table(table)
+    if args.json:
+        Path(args.json).write_text(json.dumps({'rows': rows, 'table': table}, indent=1, default=str))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
