@@ -34,12 +34,15 @@ wrong model or late load cell -> a warning every time; AIC/BIC pick the true mod
 """
 from __future__ import annotations
 
+import os
+
+if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse
 import contextlib
 import io
 import json
 import math
-import os
 import sys
 import time
 from multiprocessing import Pool
@@ -75,6 +78,11 @@ def _seed000(temp_name, extra=()):
     return d
 
 
+def _named(name):
+    from rubber_rig.models.modelfile import named_model
+    return named_model(name).to_dict()
+
+
 def _pad_specimen():
     from rubber_rig.models.pad import seed004_pad_spec
     spec = seed004_pad_spec()
@@ -88,19 +96,18 @@ def _pad_specimen():
 CUBIC = {'type': 'polynomial_spring', 'k3': '6e11 N/m^3'}
 # name -> (specimen (mapping or callable), program, simulate options, [(fit label, model, fit options)], true label)
 CASES = {
-    **{f'seed000_{t}': (lambda t=t: _seed000(t), GRID, {}, [('zener_berg', 'zener_berg', {}),
-                                                          ('zener_berg_cubic', 'zener_berg_cubic', {})],
+    **{f'seed000_{t}': (lambda t=t: _seed000(t), GRID, {},
+                        [('zener_berg', 'zener_berg', {}), ('zener_berg_cubic', 'zener_berg_cubic', {})],
                         'zener_berg') for t in ('20C', '0C', 'm20C', 'm40C')},
     'cubic': (lambda: _seed000('20C', [CUBIC]), GRID, {},
               [('zener_berg_cubic', 'zener_berg_cubic', {}), ('zener_berg', 'zener_berg', {})], 'zener_berg_cubic'),
-    'seed003': (lambda: dict(__import__('rubber_rig.models.modelfile', fromlist=['x']).named_model('seed003')
-                             .to_dict()), SEED003_PROGRAM, {},
+    'seed003': (lambda: _named('seed003'), SEED003_PROGRAM, {},
                 [('seed003', 'seed003', {}), ('zener_berg', 'zener_berg', {})], 'seed003'),
     'pad': (_pad_specimen, PAD_PROGRAM, {}, [('per_block', 'per_block', {}), ('zener_berg', 'zener_berg', {})],
             'per_block'),
     'late_0.2ms': (lambda: _seed000('20C'), GRID, {'load_cell_delay': '0.2ms'},
-                   [('zener_berg', 'zener_berg', {}), ('zener_berg, no delay estimate', 'zener_berg',
-                                                        {'estimate_delay': False})], 'zener_berg'),
+                   [('zener_berg', 'zener_berg', {}),
+                    ('zener_berg, no delay estimate', 'zener_berg', {'estimate_delay': False})], 'zener_berg'),
     'gain_+1%': (lambda: _seed000('20C'), GRID, {'load_cell_gain': '1.01'},
                  [('zener_berg, no calibration', 'zener_berg', {}),
                   ('zener_berg, --load-cell-gain 1.01', 'zener_berg', {'load_cell_gain': 1.01})], None),

@@ -89,3 +89,12 @@ def _finite(number, given, dimension: str) -> float:
     if not math.isfinite(x):
         raise ValueError(f'must be a finite {dimension}, got {given!r}')
     return x
+
+
+# a model parameter's scale (rubber_rig.models.catalogue.ParamSpec.scale) -> (factor from SI, unit) of the
+# papers' tables (mm, kN, kN/mm), for printed tables and reports
+PAPER_UNITS = {'stiffness': (1e-6, 'kN/mm'), 'force': (1e-3, 'kN'), 'length': (1e3, 'mm'),
+               'thickness': (1e3, 'mm'), 'damping': (1e-3, 'kNs/m'), 'time': (1.0, 's'), 'order': (1.0, '-'),
+               'k2': (1e-9, 'kN/mm^2'), 'k3': (1e-12, 'kN/mm^3'), 'k5': (1e-18, 'kN/mm^5'),
+               'slowness': (1e-3, 's/mm'), 'frac_alpha': (1.0, 'SI'), 'frac_beta': (1.0, 'SI'),
+               'delay': (1e3, 'ms')}

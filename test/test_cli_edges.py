@@ -185,13 +185,13 @@ def test_props_time_method_total_cost_is_bounded():
 def test_props_non_finite_closed_forms_are_shown_not_crashed():
     """Within the physical range the closed forms of a parameter set can still lose precision (Berg's
     element far beyond its x2): the table shows '-', JSON null, and stderr says where."""
-    proc = cli('props', '-p', 'seed000_20C', '-f', '1Hz', '-a', '10cm', '1mm')
+    proc = cli('props', '--kdyn', 'eq24', '-p', 'seed000_20C', '-f', '1Hz', '-a', '10cm', '1mm')
     assert proc.returncode == 0 and 'Traceback' not in proc.stderr, proc.stderr
     rows = proc.stdout.strip().splitlines()[2:]
     assert len(rows) == 2
     assert rows[0].split()[2] == '-' and rows[1].split()[2] != '-'
     assert 'warning' in proc.stderr and '100 mm' in proc.stderr
-    js = cli('props', '-p', 'seed000_20C', '-f', '1Hz', '-a', '10cm', '--json')
+    js = cli('props', '--kdyn', 'eq24', '-p', 'seed000_20C', '-f', '1Hz', '-a', '10cm', '--json')
     assert js.returncode == 0 and '"k_dyn": null' in js.stdout
 
 

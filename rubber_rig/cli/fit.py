@@ -41,13 +41,6 @@ import numpy as np
 
 from rubber_rig.units import to_si
 
-# parameter dimension -> (factor from SI, unit) for the printed tables
-PAPER_UNITS = {'stiffness': (1e-6, 'kN/mm'), 'force': (1e-3, 'kN'), 'length': (1e3, 'mm'),
-               'thickness': (1e3, 'mm'), 'damping': (1e-3, 'kNs/m'), 'time': (1.0, 's'), 'order': (1.0, '-'),
-               'k2': (1e-9, 'kN/mm^2'), 'k3': (1e-12, 'kN/mm^3'), 'k5': (1e-18, 'kN/mm^5'),
-               'slowness': (1e-3, 's/mm'), 'frac_alpha': (1.0, 'SI'), 'frac_beta': (1.0, 'SI'),
-               'delay': (1e3, 'ms')}
-
 
 def add_arguments(parser):
     parser.add_argument('recordings', nargs='+', help='MCAP recordings (files or split-file directories) or '
@@ -123,18 +116,12 @@ def load_runs(paths, temperature=None):
     return runs, messages
 
 
-def _unit(fit, name):
-    from rubber_rig.fitting.modelfit import DELAY
-    if name == DELAY:
-        return PAPER_UNITS['delay']
-    return PAPER_UNITS.get(fit.model.param_spec(name).scale, (1.0, 'SI'))
-
-
 def _t(temp):
     return 'unknown temperature' if temp is None else f'{temp:g} degC'
 
 
 def print_fit(fit, out=None):
+    from rubber_rig.fitting.modelfit import paper_unit
     out = out or sys.stdout
     print(f'{fit.model.name or "model"} at {_t(fit.temperature)}: {len(fit.blocks)} blocks from '
           f'{", ".join(fit.runs)}; method {fit.method}; {fit.timings.get("total_s", math.nan):.1f} s', file=out)
@@ -142,7 +129,7 @@ def print_fit(fit, out=None):
     head = f'  {"parameter":18s} {"value":>12s} {"+-1 sigma":>11s} {"95 % interval":>27s} {"unit":>8s}'
     print(head + ('  vs true  in 95 %?' if truth else ''), file=out)
     for name, u in fit.uncertainty.items():
-        f, unit = _unit(fit, name)
+        f, unit = paper_unit(fit.model, name)
         lo, hi = u['interval_95']
         line = (f'  {name:18s} {u["value"] * f:12.5g} {u["sigma"] * f:11.3g} '
                 f'{"[" + format(lo * f, ".5g") + ", " + format(hi * f, ".5g") + "]":>27s} {unit:>8s}')

@@ -82,11 +82,15 @@ def corrected_force(force, dt, delay, gain):
 
 
 def _calibrated(run, delay, gain):
+    """The run with its force divided by the known gain, and the calibration. A known delay is not taken out
+    of the data (interpolating between samples would filter the noise and fake a lower noise level): the fit
+    compares the model at t - delay instead.
+    """
     d, g, source = load_cell_calibration(run, delay, gain)
     if d == 0.0 and g == 1.0:
         return run, {'delay': 0.0, 'gain': 1.0, 'source': 'none'}
     out = copy.copy(run)
-    out.force = corrected_force(run.force, run.dt, d, g)
+    out.force = np.asarray(run.force, float) / g
     return out, {'delay': d, 'gain': g, 'source': source}
 
 
@@ -126,27 +130,32 @@ def split_runs(runs, settle_cycles=3, min_cycles=2):
     return groups, messages
 
 
-def block_quality(spec: ModelSpec, blocks, forces: dict, runs: dict, gain_delay=(1.0, 0.0)) -> list:
+def block_quality(spec: ModelSpec, blocks, forces: dict, runs: dict, measured: dict | None = None) -> list:
     """Per block: measured K_dyn, C_eq and the model's (analytic first harmonic and the model run over the
     measured displacement, ``forces`` recording -> model force), relative errors as seed 000 Eq. 28.
+    ``measured``: recording -> force to measure the blocks on again (e.g. corrected for an estimated delay).
     """
     t = BlockTargets.from_blocks(blocks, {})
-    gain, delay = gain_delay
-    k = spec.first_harmonic(t.frequency, t.amplitude, t.mean) * gain * np.exp(-2j * np.pi * t.frequency * delay)
+    k = spec.first_harmonic(t.frequency, t.amplitude, t.mean)
     rows = []
     for i, b in enumerate(blocks):
         w = 2 * np.pi * b.frequency
+        kd, ce = b.k_dyn, b.c_eq
+        if measured and b.recording in measured:
+            run = runs[b.recording]
+            hp = window_properties(run.displacement, measured[b.recording], run.dt, b.start, b.stop, b.frequency)
+            kd, ce = hp['k_dyn'], hp['c_eq']
         row = {'recording': b.recording, 'block': b.index, 'frequency': b.frequency, 'amplitude': b.amplitude,
                'mean': b.mean, 'cycles': b.cycles,
-               'measured': {'k_dyn': b.k_dyn, 'c_eq': b.c_eq, 'loss_angle': b.loss_angle, 'energy': b.energy},
+               'measured': {'k_dyn': kd, 'c_eq': ce, 'loss_angle': b.loss_angle, 'energy': b.energy},
                'analytic': {'k_dyn': float(abs(k[i])), 'c_eq': float(k[i].imag / w),
-                            'e_k': float(abs(k[i]) / b.k_dyn - 1), 'e_c': float(k[i].imag / w / b.c_eq - 1)}}
+                            'e_k': float(abs(k[i]) / kd - 1), 'e_c': float(k[i].imag / w / ce - 1)}}
         force = forces.get(b.recording)
         if force is not None:
             run = runs[b.recording]
             hp = window_properties(run.displacement, force, run.dt, b.start, b.stop, b.frequency)
             row['simulated'] = {'k_dyn': hp['k_dyn'], 'c_eq': hp['c_eq'],
-                                'e_k': hp['k_dyn'] / b.k_dyn - 1, 'e_c': hp['c_eq'] / b.c_eq - 1}
+                                'e_k': hp['k_dyn'] / kd - 1, 'e_c': hp['c_eq'] / ce - 1}
         rows.append(row)
     return rows
 
@@ -182,16 +191,18 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     blocks = [b for _, bl, _ in items for b in bl]
     runs = {run.name: run for run, _, _ in items}
     noise = {run.name: noise_level(run.force) for run, _, _ in items}
-    targets = BlockTargets.from_blocks(blocks, noise)
+    known = {name: cal.get('delay', 0.0) for name, cal in (calibration or {}).items()}
+    targets = BlockTargets.from_blocks(blocks, noise, known)
     dt = min(run.dt for run, _, _ in items)
     free = spec.free()
     n_free = len(free) + (1 if estimate_delay and method == 'time' else 0)
     if 2 * len(blocks) < n_free + 1:
         raise ValueError(f'{len(blocks)} usable blocks give {2 * len(blocks)} numbers (K_dyn, C_eq); the model has '
                          f'{n_free} free parameters: record more blocks over frequency and amplitude')
-    # harmonic global search without the delay (a first-harmonic phase shift is indistinguishable from
-    # loss at few frequencies); the time stage adds it
-    hc = coordinates(spec, targets, dt, delay=False)
+    # the harmonic global search has the delay too (a late load cell adds a phase w d that would otherwise
+    # push the loss parameters far from the optimum the time-domain refinement starts near)
+    with_delay = estimate_delay and method == 'time'
+    hc = coordinates(spec, targets, dt, delay=with_delay)
     if progress:
         progress(0.05, 'global search (first harmonics)')
     z_h, ls_h = fit_harmonic_model(spec, hc, targets, w_k, w_c, seed=seed)
@@ -201,13 +212,11 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     if method == 'harmonic':
         unc, corr, chi2, dof = harmonic_uncertainty(hc, z_h, ls_h, targets, w_k, w_c)
         coords, z, n_points, delay = hc, z_h, 2 * len(blocks), 0.0
-        problem = TimeProblem(spec.with_values(values), items, points_per_block)
+        problem = TimeProblem(spec.with_values(values), items, points_per_block, known)
     else:
-        problem = TimeProblem(spec, items, points_per_block)
+        problem = TimeProblem(spec, items, points_per_block, known)
         coords = coordinates(spec, targets, dt, delay=estimate_delay)
         start = dict(values)
-        if estimate_delay:
-            start[DELAY] = 0.0
         if progress:
             progress(0.4, 'time-domain fit')
         ls, _ = fit_time_model(problem, coords, coords.z_of(start))
@@ -230,11 +239,15 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     fitted = spec.with_values({k: v for k, v in values.items() if k != DELAY})
     params = {n: float(values[n]) for n in coords.names}
     predicted = problem.predict(values) if method == 'time' else problem.predict({})
-    # the model as the load cell would have seen it: at t - delay when a delay was estimated
-    forces = {name: corrected_force(f, runs[name].dt, -delay, 1.0) if delay else f
-              for name, f in zip(runs, predicted, strict=True)}
-    quality = block_quality(fitted, blocks, forces, runs, (1.0, delay))
-    cal = calibration or {}
+    forces = dict(zip(runs, predicted, strict=True))
+    # with an estimated delay the blocks are compared as the specimen behaved: the measured force corrected
+    # for it (compared as measured, a late load cell's phase would remove most of the loss at high frequency
+    # and turn small absolute differences into large relative C_eq errors)
+    total = {name: delay + known.get(name, 0.0) for name in runs}
+    measured = {name: corrected_force(run.force, run.dt, total[name], 1.0) for name, run in runs.items()
+                if total[name]} or None
+    quality = block_quality(fitted, blocks, forces, runs, measured=measured)
+    cal = next(iter((calibration or {}).values()), {})
     fit = ModelFit(model=fitted, temperature=temperature, runs=list(runs), blocks=blocks, method=method,
                    parameters=params, uncertainty=unc, correlation=corr.tolist(), chi2=float(chi2), dof=int(dof),
                    n_points=int(n_points), noise=noise,
@@ -304,7 +317,7 @@ def fit_model(runs, model='zener_berg', method='time', load_cell_delay=None, loa
                 progress((n + frac) / len(order), f'{_label(temp)}: {what}')
         try:
             fit = fit_group(spec, items, temp, method, estimate_delay, w_k, w_c, seed, progress=stage,
-                            calibration=cals.get(items[0][0].name))
+                            calibration={run.name: cals[run.name] for run, _, _ in items})
         except ValueError as exc:
             messages.append(f'{_label(temp)}: not fitted: {exc}')
             continue

@@ -52,6 +52,7 @@ from scipy.optimize import differential_evolution, least_squares
 
 from rubber_rig.models.composite import ParallelModel
 from rubber_rig.models.modelfile import ModelSpec
+from rubber_rig.units import PAPER_UNITS
 
 from .blocks import noise_level
 from .timefit import run_input
@@ -71,11 +72,13 @@ class BlockTargets:
     c_eq: np.ndarray
     rel_sigma_k: np.ndarray
     rel_sigma_c: np.ndarray
+    delay: np.ndarray | float = 0.0     # known load-cell delay [s] of each block's recording (calibration)
 
     @classmethod
-    def from_blocks(cls, blocks, noise: dict):
+    def from_blocks(cls, blocks, noise: dict, delays: dict | None = None):
         """``noise``: recording name -> load-cell noise sigma [N]. The first harmonic of N samples of white
-        noise sigma has a sigma of sigma sqrt(2/N) per component.
+        noise sigma has a sigma of sigma sqrt(2/N) per component. ``delays``: recording name -> known
+        load-cell delay [s].
         """
         get = {k: np.array([getattr(b, k) for b in blocks], float)
                for k in ('frequency', 'amplitude', 'mean', 'k_dyn', 'c_eq')}
@@ -83,7 +86,8 @@ class BlockTargets:
         s = np.array([noise.get(b.recording, 0.0) for b in blocks], float) * np.sqrt(2.0 / n)
         f1 = get['k_dyn'] * get['amplitude']                       # force first-harmonic amplitude [N]
         loss = get['c_eq'] * 2 * np.pi * get['frequency'] * get['amplitude']
-        return cls(**get, rel_sigma_k=s / f1, rel_sigma_c=s / np.maximum(loss, 1e-30))
+        delay = np.array([(delays or {}).get(b.recording, 0.0) for b in blocks], float)
+        return cls(**get, rel_sigma_k=s / f1, rel_sigma_c=s / np.maximum(loss, 1e-30), delay=delay)
 
     def __len__(self):
         return self.frequency.size
@@ -206,14 +210,15 @@ def _sibling(spec, name, other):
 
 # ---- harmonic objective ----------------------------------------------------------------------------
 
-def harmonic_residuals(z, spec: ModelSpec, coords: Coordinates, t: BlockTargets, w_k=100.0, w_c=1.0,
-                       gain=1.0, delay=0.0):
-    """Seed 000 Eq. 28 residuals sqrt(w) e with the model's first harmonics; z (n,) -> (2B,), (n, S) -> (S, 2B)."""
+def harmonic_residuals(z, spec: ModelSpec, coords: Coordinates, t: BlockTargets, w_k=100.0, w_c=1.0):
+    """Seed 000 Eq. 28 residuals sqrt(w) e with the model's first harmonics as the load cell sees them (known
+    delay ``t.delay`` plus an estimated one); z (n,) -> (2B,), (n, S) -> (S, 2B).
+    """
     v = coords.values(z)
     w = 2 * np.pi * t.frequency
-    d = v.pop(DELAY, delay)
+    d = v.pop(DELAY, 0.0) + t.delay
     with np.errstate(all='ignore'):
-        k = spec.first_harmonic(t.frequency, t.amplitude, t.mean, v) * gain * np.exp(-1j * w * d)
+        k = spec.first_harmonic(t.frequency, t.amplitude, t.mean, v) * np.exp(-1j * w * d)
         e_k = np.abs(k) / t.k_dyn - 1.0
         e_c = (k.imag / w) / t.c_eq - 1.0
     r = np.concatenate([np.sqrt(w_k) * e_k, np.sqrt(w_c) * e_c], axis=-1)
@@ -241,12 +246,15 @@ def fit_harmonic_model(spec, coords, t, w_k=100.0, w_c=1.0, seed=0, maxiter=300,
 class TimeProblem:
     """Force residuals in units of the load-cell noise, over the analysed cycles of every block."""
 
-    def __init__(self, spec: ModelSpec, runs_blocks, points_per_block=200):
+    def __init__(self, spec: ModelSpec, runs_blocks, points_per_block=200, delays: dict | None = None):
         """runs_blocks: [(RunData, [BlockResult])] or [(RunData, [BlockResult], [(start, stop)])]: the
         optional third item are sample ranges of quasi-static blocks (triangles) that join the residual
-        like blocks (seed 000 Section 3 step 1, seed 001 Eq. 9: they pin the friction element down)."""
+        like blocks (seed 000 Section 3 step 1, seed 001 Eq. 9: they pin the friction element down).
+        ``delays``: recording name -> known load-cell delay [s]: the model is compared at t - delay.
+        """
         self.spec = spec
         self.items = []
+        self.base_delay = []       # known load-cell delay [s] per item
         self.block_rows = []       # slices of the residual vector, one per block or quasi-static window
         row = 0
         for item in runs_blocks:
@@ -264,6 +272,7 @@ class TimeProblem:
                 self.block_rows.append(slice(row, row + idx.size))
                 row += idx.size
             self.items.append((run, x, h, run.force[:end], windows, sigma))
+            self.base_delay.append(float((delays or {}).get(run.name, 0.0)))
         self.m = row
 
     @property
@@ -279,8 +288,9 @@ class TimeProblem:
 
     def residuals_from(self, predictions, delay=0.0):
         out = []
-        for (run, _, _, force, windows, sigma), pred in zip(self.items, predictions, strict=True):
-            shift = delay / run.dt
+        for item, pred, base in zip(self.items, predictions, self.base_delay, strict=True):
+            run, _, _, force, windows, sigma = item
+            shift = (delay + base) / run.dt
             for idx in windows:
                 if shift:
                     pos = np.clip(idx - shift, 0, pred.size - 1.000001)
@@ -372,6 +382,13 @@ def physical_uncertainty(coords: Coordinates, z, cov_noise, cov_blocks):
     with np.errstate(invalid='ignore', divide='ignore'):
         corr = cov / np.outer(sn, sn)
     return out, np.nan_to_num(corr)
+
+
+def paper_unit(spec: ModelSpec, name: str) -> tuple:
+    """(factor from SI, unit) of parameter ``name`` of ``spec`` in the papers' units (kN/mm, mm, kN, ms ...)."""
+    if name == DELAY:
+        return PAPER_UNITS['delay']
+    return PAPER_UNITS.get(spec.param_spec(name).scale, (1.0, 'SI'))
 
 
 # ---- result ----------------------------------------------------------------------------------------

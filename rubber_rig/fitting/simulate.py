@@ -14,8 +14,8 @@
 
 """Simulated-rig recordings for fitting: run a program on the simulated rig and record it to MCAP.
 
-Used by the fitting tests and benchmark (and handy for trying `rubber-rig fit` without a rig): the
-program runs on `rubber_rig.rig`'s simulated servo-hydraulic rig through the real CAN path, and the
+Used by `rubber-rig simulate`, the fitting tests and benchmark (handy for trying `rubber-rig fit` without a
+rig): the program runs on `rubber_rig.rig`'s simulated servo-hydraulic rig through the real CAN path, and the
 samples are written by `rubber_rig.recording.RecordingWriter` exactly as the recorder node writes
 them (RigSampleBatch on `samples`, SetpointBatch with the block index on `setpoints`, and the
 `rubber_rig` metadata record: specimen, temperature, program, rig configuration).
@@ -45,28 +45,34 @@ def _program_text(program) -> str:
 
 
 def run_simulated(program, specimen: dict, temperature: float, *, force_noise=10.0, displacement_noise=0.2e-6,
-                  sample_rate=1000.0, seed=0, sim_options: dict = None):
-    """Run `program` (name, path, YAML text or mapping) on the simulated rig, unpaced.
+                  sample_rate=1000.0, seed=0, sim_options: dict = None, config_options: dict = None):
+    """Run `program` (name, path, YAML text or mapping) on the simulated rig, unpaced (as fast as it computes).
 
-    Returns (RunResult, program YAML text, rig configuration dict).
+    sim_options: further SimOptions fields (e.g. force_delay, force_gain, force_offset); config_options: further
+    top-level RigConfig fields (e.g. load_cell_delay, load_cell_gain). Returns (RunResult, program YAML text,
+    rig configuration dict).
     """
     text = _program_text(program)
     prog = Program.from_yaml_text(text, name='program')
     sim = {'specimen': dict(specimen), 'force_noise': float(force_noise),
            'displacement_noise': float(displacement_noise), 'temperature': float(temperature), 'seed': int(seed)}
     sim.update(sim_options or {})
-    config = {'backend': 'sim', 'paced': False, 'sample_rate': float(sample_rate), 'sim': sim}
+    config = {'backend': 'sim', 'paced': False, 'sample_rate': float(sample_rate)}
+    config.update(config_options or {})
+    config['sim'] = sim
     return run_program(prog, config), text, config
 
 
 def write_recording(path, result, program_text: str, specimen: dict, temperature: float, config: dict = None,
-                    batch: int = 100, channels=('displacement', 'force', 'setpoint')):
+                    batch: int = 100, channels=('displacement', 'force', 'setpoint'), metadata: dict = None):
     """Write a RunResult as an MCAP recording. `channels` chooses which sample arrays are real; a
-    left-out channel is written as NaN (how a missing transducer shows up), for fault tests.
+    left-out channel is written as NaN (how a missing transducer shows up), for fault tests. `metadata`:
+    further keys of the rubber_rig metadata record (they win over the ones written here, e.g. 'source').
     """
     path = Path(path)
     meta = {'specimen': dict(specimen), 'temperature': float(temperature), 'program': program_text,
             'rig_config': config or {}, 'source': 'rubber_rig.fitting.simulate'}
+    meta.update(metadata or {})
     fs = float(result.sample_rate)
     period = 1.0 / fs
     n = len(result.time)

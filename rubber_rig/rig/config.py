@@ -103,8 +103,9 @@ class SimOptions:
     specimen: element-model spec for rubber_rig.models.build_model (default seed-000 at 20 degC), or
     {"model": "linear", "stiffness": N/m, "damping": N s/m}. The actuator is a second-order position loop
     (natural frequency [Hz], damping ratio) with a velocity limit [m/s]. Sensors: noise (std), offset,
-    resolution; temperature [degC]. host_timeout [s]: host heartbeat silence after which the controller ramps
-    to rest on its own.
+    resolution; temperature [degC]. The load cell reports force_gain x the true force of force_delay [s]
+    earlier (a delay line, linear interpolation between samples) + force_offset + noise, quantised.
+    host_timeout [s]: host heartbeat silence after which the controller ramps to rest on its own.
     """
 
     specimen: dict = field(default_factory=lambda: {'model': 'fractional_zener_berg', 'temperature': 20.0})
@@ -121,6 +122,10 @@ class SimOptions:
     force_noise: float = setting(2.0, 'load cell noise, standard deviation', units='N', range=(0.0, 1e4))
     force_offset: float = setting(0.0, 'load cell offset', units='N', range=(-1e5, 1e5))
     force_resolution: float = setting(0.01, 'load cell resolution', units='N', range=(1e-9, 100.0))
+    force_delay: float = setting(0.0, 'load cell delay: it reports the true force of this long ago (linear '
+                                 'interpolation between samples)', units='s', range=(0.0, 0.1))
+    force_gain: float = setting(1.0, 'load cell gain: it reports gain x the true force (+ offset + noise)',
+                                units='-', range=(0.01, 100.0))
     temperature: float = setting(20.0, 'specimen temperature reported on the temperature channel', units='degC',
                                  range=(-60.0, 150.0))
     temperature_noise: float = setting(0.02, 'temperature channel noise', units='K', range=(0.0, 10.0))
@@ -143,6 +148,10 @@ class SimOptions:
         for name in ('displacement_noise', 'force_noise', 'temperature_noise'):
             if getattr(self, name) < 0:
                 raise ConfigError(f'{path}.{name}', "must be >= 0")
+        if not 0 <= self.force_delay <= 0.1:
+            raise ConfigError(f'{path}.force_delay', f"{self.force_delay!r} s outside 0..0.1")
+        if not (math.isfinite(self.force_gain) and self.force_gain > 0):
+            raise ConfigError(f'{path}.force_gain', f"must be > 0, got {self.force_gain!r}")
         for i, f in enumerate(self.faults):
             f.check(f'{path}.faults[{i}]')
 
@@ -164,6 +173,9 @@ class RigConfig:
     ('hold'), with a stream fault either way. paced: the simulated
     rig runs in real time (True) or as fast as setpoints arrive (False) - identical waveform and physics.
     can_log: file the driver logs every CAN frame it sends and receives to ('' = off; rubber_rig.rig.can.canlog).
+    load_cell_delay [s], load_cell_gain [-]: the load cell's calibration, what the lab knows about it (it reads
+    gain x the force of delay s earlier): recorded in the recording's metadata (rig_config) and applied by
+    `rubber-rig fit`; they change nothing on the rig (the simulated load cell is sim.force_delay/force_gain).
     max_bus_load: the bus (bitrate, data_bitrate, fd; the simulated rig stands for the same bus) must carry the
     protocol at sample_rate within this load (rubber_rig.rig.can.timing), or the configuration is refused.
     """
@@ -210,6 +222,11 @@ class RigConfig:
                               'process on that bus')
     can_log: str = setting('', 'raw CAN log: every frame the driver sends and receives, written by python-can '
                            '(format by suffix: .blf Vector BLF, .asc Vector ASC, .log candump -L); empty: off')
+    load_cell_delay: float = setting(0.0, "the load cell's known delay (it reads the force of this long ago): "
+                                     'recorded in the metadata, applied by rubber-rig fit', units='s',
+                                     range=(0.0, 0.1))
+    load_cell_gain: float = setting(1.0, "the load cell's known gain (it reads gain x the force): recorded in "
+                                    'the metadata, applied by rubber-rig fit', units='-', range=(0.01, 100.0))
     sim: SimOptions = setting(doc='simulated rig', nested=SimOptions, default_factory=SimOptions)
 
     @classmethod
@@ -250,6 +267,10 @@ class RigConfig:
                               "displacement limits")
         if self.bus_error_max < 0:
             raise ConfigError('bus_error_max', "must be >= 0")
+        if not 0 <= self.load_cell_delay <= 0.1:
+            raise ConfigError('load_cell_delay', f"{self.load_cell_delay!r} s outside 0..0.1")
+        if not (math.isfinite(self.load_cell_gain) and self.load_cell_gain > 0):
+            raise ConfigError('load_cell_gain', f"must be > 0, got {self.load_cell_gain!r}")
         self._check_bus_load()
         if self.can_log:
             try:

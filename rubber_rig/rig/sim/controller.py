@@ -44,7 +44,7 @@ from ..can.protocol import (
 )
 from ..can.timing import frame_time
 from .faults import FaultInjector
-from .plant import Actuator, Sensor
+from .plant import Actuator, DelayLine, Sensor
 from .specimen import build_specimen
 
 STREAMING = ('running', 'holding', 'ramping_down')
@@ -80,7 +80,12 @@ class SimController:
         self.specimen = build_specimen(options.specimen, 1.0 / self.fs)
         self.disp_sensor = Sensor(options.displacement_noise, options.displacement_offset,
                                   options.displacement_resolution, rng_x)
-        self.force_sensor = Sensor(options.force_noise, options.force_offset, options.force_resolution, rng_f)
+        self.force_sensor = Sensor(options.force_noise, options.force_offset, options.force_resolution, rng_f,
+                                   gain=options.force_gain)
+        # the load cell reads the true force of force_delay ago (None: no delay, the true force as it is)
+        delay = options.force_delay * self.fs
+        delay = float(round(delay)) if abs(delay - round(delay)) < 1e-9 else delay
+        self.force_delay = DelayLine(delay) if delay > 0 else None
         self.temp_rng = rng_t
         self.faults = FaultInjector(options.faults, self.fs, options.seed)
         self.state, self.fault_bits = 'idle', 0
@@ -329,6 +334,8 @@ class SimController:
                 buffer[seq + k] = u[k]
             u, x, force = u[:n], x[:n], np.asarray(force)[:n]
             self.actuator.x, self.actuator.v = x[-1], v[n - 1]
+        if self.force_delay is not None:
+            force = self.force_delay.run(force)
         xm, fm = self.disp_sensor.read_many(x), self.force_sensor.read_many(force)
         # a frame cannot carry NaN: an invalid channel reads 0 and the status frame carries the sensor fault
         self._queue_feedback(seq, np.where(np.isfinite(xm), xm, 0.0).tolist(),
@@ -363,6 +370,8 @@ class SimController:
         force = self.specimen.step(x)
         if not math.isfinite(force) and not self.fault_bits & FAULT_SENSOR:
             self.abort(0.0, FAULT_SENSOR)   # the load cell channel went invalid: a controller stops on that
+        if self.force_delay is not None:
+            force = self.force_delay.step(force)
         stuck = self.faults.stuck(t)
         for name, sensor in (('displacement', self.disp_sensor), ('force', self.force_sensor)):
             if name in stuck and sensor.stuck_value is None:

@@ -67,13 +67,57 @@ class Actuator:
         return xs, vs
 
 
-class Sensor:
-    """Transducer with Gaussian noise (std), offset and resolution (quantisation step), all in its unit.
-    Noise is drawn in blocks from a seeded generator so runs are reproducible.
+class DelayLine:
+    """A transducer's delay of `delay` samples (>= 0, fractional: linear interpolation between the two samples
+    around it): step(v) and run(values) return the input of `delay` samples ago, run() exactly as repeated
+    step() calls. Before the first input the line holds that first input (the rig stood still).
     """
 
-    def __init__(self, noise: float, offset: float, resolution: float, rng: np.random.Generator, block=4096):
-        self.noise, self.offset, self.res = noise, offset, resolution
+    def __init__(self, delay: float):
+        if not (math.isfinite(delay) and delay >= 0):
+            raise ValueError(f'delay must be a finite number of samples >= 0, got {delay!r}')
+        self.whole = int(math.floor(delay))
+        self.frac = float(delay - self.whole)
+        self.size = self.whole + 2                # inputs kept: the newest and the two around the delay
+        self._hist = None                         # the last `size` inputs, oldest first
+
+    def _start(self, first: float):
+        if self._hist is None:
+            self._hist = [float(first)] * self.size
+
+    def step(self, value: float) -> float:
+        self._start(value)
+        hist = self._hist
+        hist.append(float(value))
+        del hist[0]
+        a, b = hist[-1 - self.whole], hist[-2 - self.whole]
+        return a if self.frac == 0.0 else (1.0 - self.frac) * a + self.frac * b
+
+    def run(self, values) -> np.ndarray:
+        values = np.asarray(values, dtype=float)
+        if values.size == 0:
+            return values.copy()
+        self._start(values[0])
+        line = np.concatenate([np.asarray(self._hist, dtype=float), values])
+        end = line.size
+        a = line[self.size - self.whole:end - self.whole]
+        b = line[self.size - self.whole - 1:end - self.whole - 1]
+        self._hist = line[-self.size:].tolist()
+        if self.frac == 0.0:
+            return a.copy()
+        with np.errstate(invalid='ignore', over='ignore'):
+            return (1.0 - self.frac) * a + self.frac * b
+
+
+class Sensor:
+    """Transducer with gain, Gaussian noise (std), offset and resolution (quantisation step), all in its unit:
+    reads gain x true + offset + noise, quantised. Noise is drawn in blocks from a seeded generator so runs are
+    reproducible.
+    """
+
+    def __init__(self, noise: float, offset: float, resolution: float, rng: np.random.Generator, block=4096,
+                 gain: float = 1.0):
+        self.noise, self.offset, self.res, self.gain = noise, offset, resolution, gain
         self._rng, self._block = rng, block
         self._buf, self._i = np.empty(0), 0
         self.stuck_value = None
@@ -91,7 +135,7 @@ class Sensor:
             self._buf, self._i = self._rng.standard_normal(self._block) * self.noise, 0
         n = float(self._buf[self._i])   # Python floats: an overflow is inf, without a numpy warning
         self._i += 1
-        counts = (true_value + self.offset + n) / self.res
+        counts = (self.gain * true_value + self.offset + n) / self.res
         if not math.isfinite(counts):
             return math.nan
         return round(counts) * self.res
@@ -112,7 +156,7 @@ class Sensor:
             self._i += take
             done += take
         with np.errstate(over='ignore', invalid='ignore'):
-            counts = (true_values + self.offset + noise) / self.res
+            counts = (self.gain * true_values + self.offset + noise) / self.res
             out = np.round(counts) * self.res
         out[~np.isfinite(counts)] = np.nan
         return out

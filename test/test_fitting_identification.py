@@ -1,0 +1,202 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Identification that tells the truth: any model file, chi2 against the measured noise, intervals that cover
+the truth, warnings for misfit and a late load cell, AIC/BIC ranking, load-cell calibration, K_dyn/C_eq tables.
+
+Recordings come from `rubber-rig simulate` (simulated rig, CAN path, 20 N load-cell noise) of a short
+seed-000 grid, so every test checks the fit against a known truth."""
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from rubber_rig.cli.main import main
+from rubber_rig.fitting.data import load_run
+from rubber_rig.fitting.identification import compare_models, fit_model, quasi_static_windows
+from rubber_rig.fitting.table import fit_table, read_table
+from rubber_rig.models.modelfile import named_model
+
+PROGRAM = {'name': 'short_grid', 'defaults': {'taper_cycles': 1, 'cycles': 6, 'mean': 0.0},
+           'blocks': [{'name': 'sine', 'waveform': 'sine', 'amplitude': ['0.5 mm', '1 mm'],
+                       'frequency': ['0.5 Hz', '2 Hz', '6 Hz', '14 Hz']}]}
+SEED000 = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
+
+
+@pytest.fixture(scope='module')
+def sims(tmp_path_factory):
+    d = tmp_path_factory.mktemp('ident')
+    program = d / 'program.yaml'
+    program.write_text(yaml.safe_dump(PROGRAM))
+    cubic = named_model('swing_arm_joint_20C').to_dict()
+    cubic['elements'].append({'type': 'polynomial_spring', 'k3': 6e11})
+    (d / 'cubic.yaml').write_text(yaml.safe_dump(cubic))
+    tri = {'name': 'triangle_then_grid', 'defaults': {'taper_cycles': 1, 'cycles': 6, 'mean': 0.0},
+           'blocks': [{'name': 'quasi_static', 'waveform': 'triangle', 'rate': '1 mm/s',
+                       'amplitude': ['0.1 mm', '2 mm'], 'cycles': 2}] + PROGRAM['blocks']}
+    (d / 'tri.yaml').write_text(yaml.safe_dump(tri))
+    cases = {'base': ('swing_arm_joint_20C', program, []),
+             'cubic': (d / 'cubic.yaml', program, []),
+             'late': ('swing_arm_joint_20C', program, ['--load-cell-delay', '0.5ms']),
+             'gain': ('swing_arm_joint_20C', program, ['--load-cell-gain', '1.01']),
+             'triangle': ('swing_arm_joint_20C', d / 'tri.yaml', [])}
+    out = {}
+    for name, (model, prog, extra) in cases.items():
+        path = d / f'{name}.mcap'
+        assert main(['simulate', '--model', str(model), '--program', str(prog), '-o', str(path), '--seed', '3',
+                     '--force-noise', '20N', *extra]) == 0
+        out[name] = path
+    return out
+
+
+def _covered(fit, names):
+    return {k: fit.uncertainty[k]['interval_95'][0] <= fit.truth[k] <= fit.uncertainty[k]['interval_95'][1]
+            for k in names}
+
+
+def test_the_true_model_fits_to_the_noise_with_intervals_that_cover_the_truth_and_no_warning(sims):
+    fits, _ = fit_model([load_run(sims['base'])], 'zener_berg')
+    f = fits[0]
+    assert f.temperature == 20.0 and set(f.truth) == set(SEED000)
+    assert 0.85 < f.chi2_per_dof < 1.25
+    assert f.noise[sims['base'].name] == pytest.approx(20.0, rel=0.1)      # the noise the recording shows
+    assert all(_covered(f, SEED000).values()), f.as_dict()['errors']
+    assert f.warnings == []
+    # sigma is the larger of the noise-based and the block-bootstrap one, and both are finite and positive
+    for k in SEED000:
+        u = f.uncertainty[k]
+        assert u['sigma'] == max(u['sigma_noise'], u['sigma_blocks']) and 0 < u['relative_sigma'] < 0.1
+    assert abs(f.parameters['load_cell_delay']) < 4 * f.uncertainty['load_cell_delay']['sigma']
+
+
+def test_a_missing_cubic_spring_is_a_misfit_warning_and_aic_bic_pick_the_model_that_has_it(sims):
+    run = load_run(sims['cubic'])
+    by_model = {m: fit_model([run], m)[0] for m in ('zener_berg', 'zener_berg_cubic')}
+    wrong, right = by_model['zener_berg'][0], by_model['zener_berg_cubic'][0]
+    assert wrong.chi2_per_dof > 3 and any(w.startswith('misfit beyond noise') for w in wrong.warnings)
+    assert right.chi2_per_dof < 1.25 and right.warnings == []
+    assert all(_covered(right, right.truth).values())
+    ranking = compare_models(by_model)[0]
+    assert ranking['selected'] == ranking['selected_bic'] == 'zener_berg_cubic'
+    assert ranking['ranking'][1]['delta_aic'] > 10 and 'zener_berg_cubic' in ranking['verdict']
+
+
+def test_a_late_load_cell_is_estimated_and_warned_and_a_calibration_removes_it(sims):
+    run = load_run(sims['late'])
+    f = fit_model([run], 'zener_berg')[0][0]
+    d, s = f.parameters['load_cell_delay'], f.uncertainty['load_cell_delay']['sigma']
+    assert abs(d - 0.5e-3) < max(3 * s, 0.05e-3)
+    assert any(w.startswith('load-cell delay estimated') for w in f.warnings)
+    assert all(_covered(f, SEED000).values())
+    # without the delay parameter the fit is wrong and says so
+    blind = fit_model([run], 'zener_berg', estimate_delay=False)[0][0]
+    assert blind.warnings and blind.chi2_per_dof > f.chi2_per_dof
+    # the calibration input: applied before fitting, nothing left to estimate, no warning
+    cal = fit_model([run], 'zener_berg', load_cell_delay=0.5e-3)[0][0]
+    assert cal.load_cell['delay'] == 0.5e-3 and cal.warnings == []
+    assert abs(cal.parameters['load_cell_delay']) < 4 * cal.uncertainty['load_cell_delay']['sigma']
+
+
+def test_a_load_cell_gain_needs_the_calibration_input(sims):
+    run = load_run(sims['gain'])
+    raw = fit_model([run], 'zener_berg')[0][0]
+    assert raw.parameters['k0'] / raw.truth['k0'] - 1 == pytest.approx(0.01, abs=0.004)   # undetectable: +1 %
+    cal = fit_model([run], 'zener_berg', load_cell_gain=1.01)[0][0]
+    assert all(_covered(cal, SEED000).values())
+
+
+def test_triangle_blocks_join_the_time_domain_fit(sims):
+    run = load_run(sims['triangle'])
+    windows = quasi_static_windows(run)
+    assert len(windows) == 2 and (windows[1][1] - windows[1][0]) * run.dt > 15.0      # 2 cycles of 8 mm at 1 mm/s
+    f = fit_model([run], 'zener_berg')[0][0]
+    base = fit_model([load_run(sims['base'])], 'zener_berg')[0][0]
+    assert all(_covered(f, SEED000).values()) and f.warnings == []
+    i, j = list(f.uncertainty).index('x2'), list(f.uncertainty).index('f_fmax')
+    # the quasi-static loops at a small and a large amplitude pin the friction element: x2 and F_fmax less
+    # correlated and better determined than from the sines alone
+    assert f.n_points > base.n_points
+    assert abs(f.correlation[i][j]) < abs(base.correlation[i][j])
+    assert f.uncertainty['x2']['relative_sigma'] < base.uncertainty['x2']['relative_sigma']
+
+
+def test_cli_fit_json_has_the_verdict_and_writes_a_model_file(sims, tmp_path, capsys):
+    out = tmp_path / 'fit.yaml'
+    assert main(['fit', str(sims['cubic']), '--model', 'zener_berg', '--model', 'zener_berg_cubic', '-o', str(out),
+                 '--json', '--no-progress']) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data['model'] == 'zener_berg_cubic' and data['warnings'] == [] and 0.8 < data['chi2_per_dof'] < 1.3
+    assert set(data['parameters']) == set(SEED000) | {'k3', 'load_cell_delay'}
+    assert data['comparison'][0]['selected'] == 'zener_berg_cubic'
+    assert data['candidates']['zener_berg'][0]['warnings']
+    written = yaml.safe_load(out.read_text())
+    assert written['elements'][2]['type'] == 'polynomial_spring' and 'sigma' in written['elements'][2]
+    assert main(['fit', str(sims['cubic']), '--model', 'zener_berg', '-o', '-', '--no-progress']) == 0
+    text = capsys.readouterr().out
+    assert 'WARNING: misfit beyond noise' in text and '95 % interval' in text
+
+
+def test_cli_models_lists_types_and_fit_rejects_an_unknown_model(sims, capsys):
+    assert main(['models', '--json']) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert {'fractional_zener', 'berg', 'elliptic_damping'} <= {e['type'] for e in data['element_types']}
+    assert main(['fit', str(sims['base']), '--model', 'no_such_model', '-o', '-', '--no-progress']) == 2
+    assert 'no_such_model' in capsys.readouterr().err
+
+
+def _table(tmp_path, rel_noise=0.005, seed=0, sigma=True):
+    spec = named_model('swing_arm_joint_0C')
+    rng = np.random.default_rng(seed)
+    lines = ['frequency [Hz], amplitude [mm], temperature [degC], k_dyn [kN/mm], c_eq [kNs/m]'
+             + (', k_dyn_sigma [kN/mm], c_eq_sigma [kNs/m]' if sigma else '')]
+    for f in (0.5, 1, 2, 4, 6, 8, 10, 14):
+        for a in (0.5, 1.0):
+            k = spec.first_harmonic(f, a * 1e-3)
+            kd, ce = abs(k) * 1e-6, k.imag / (2 * np.pi * f) * 1e-3
+            kd_m = kd * (1 + 0.2 * rel_noise * rng.standard_normal())
+            ce_m = ce * (1 + rel_noise * rng.standard_normal())
+            row = f'{f}, {a}, 0, {kd_m:.8g}, {ce_m:.8g}'
+            lines.append(row + (f', {0.2 * rel_noise * kd:.6g}, {rel_noise * ce:.6g}' if sigma else ''))
+    path = tmp_path / 'table.csv'
+    path.write_text('\n'.join(lines) + '\n')
+    return path, spec.values()
+
+
+def test_a_kdyn_ceq_table_is_fitted_with_honest_intervals(tmp_path):
+    covered, chi = [], []
+    for seed in range(5):
+        path, truth = _table(tmp_path, seed=seed)
+        f = fit_table(path, 'zener_berg')[0][0]
+        chi.append(f.chi2_per_dof)
+        covered += [u['interval_95'][0] <= truth[k] <= u['interval_95'][1] for k, u in f.uncertainty.items()]
+    assert np.mean(covered) >= 0.85 and 0.4 < np.median(chi) < 2.0
+    path, truth = _table(tmp_path, sigma=False)
+    fits, messages = fit_table(path, 'zener_berg')
+    assert any('no k_dyn_sigma' in m for m in messages) and fits[0].parameters['k0'] == pytest.approx(truth['k0'],
+                                                                                                      rel=0.02)
+
+
+@pytest.mark.parametrize('text, match', [
+    ('frequency [Hz], amplitude [mm], k_dyn [kN/mm]\n1, 1, 10\n', 'missing column.*c_eq'),
+    ('frequency [Hz], amplitude [mm], k_dyn [kN/mm], c_eq [kNs/m], mass [kg]\n', "unknown column 'mass"),
+    ('frequency [Hz], amplitude [kN], k_dyn [kN/mm], c_eq [kNs/m]\n1, 1, 10, 3\n', 'table.csv:2: column amplitude'),
+    ('frequency [Hz], amplitude [mm], k_dyn [kN/mm], c_eq [kNs/m]\n1, 1, -10, 3\n', 'k_dyn must be > 0'),
+    ('frequency [Hz], amplitude [mm], k_dyn [kN/mm], c_eq [kNs/m]\n', 'no data rows'),
+])
+def test_bad_tables_name_the_line_and_column(tmp_path, text, match):
+    path = tmp_path / 'table.csv'
+    path.write_text(text)
+    with pytest.raises(ValueError, match=match):
+        read_table(path)
