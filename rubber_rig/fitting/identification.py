@@ -130,10 +130,12 @@ def split_runs(runs, settle_cycles=3, min_cycles=2):
     return groups, messages
 
 
-def block_quality(spec: ModelSpec, blocks, forces: dict, runs: dict, measured: dict | None = None) -> list:
+def block_quality(spec: ModelSpec, blocks, forces: dict, runs: dict, measured: dict | None = None,
+                  sigmas=None) -> list:
     """Per block: measured K_dyn, C_eq and the model's (analytic first harmonic and the model run over the
     measured displacement, ``forces`` recording -> model force), relative errors as seed 000 Eq. 28.
     ``measured``: recording -> force to measure the blocks on again (e.g. corrected for an estimated delay).
+    ``sigmas``: (relative 1-sigma of K_dyn, of C_eq) per block from the load-cell noise, stored with each row.
     """
     t = BlockTargets.from_blocks(blocks, {})
     k = spec.first_harmonic(t.frequency, t.amplitude, t.mean)
@@ -156,6 +158,8 @@ def block_quality(spec: ModelSpec, blocks, forces: dict, runs: dict, measured: d
             hp = window_properties(run.displacement, force, run.dt, b.start, b.stop, b.frequency)
             row['simulated'] = {'k_dyn': hp['k_dyn'], 'c_eq': hp['c_eq'],
                                 'e_k': hp['k_dyn'] / kd - 1, 'e_c': hp['c_eq'] / ce - 1}
+        if sigmas is not None:
+            row['measured']['rel_sigma_k'], row['measured']['rel_sigma_c'] = float(sigmas[0][i]), float(sigmas[1][i])
         rows.append(row)
     return rows
 
@@ -246,7 +250,8 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     total = {name: delay + known.get(name, 0.0) for name in runs}
     measured = {name: corrected_force(run.force, run.dt, total[name], 1.0) for name, run in runs.items()
                 if total[name]} or None
-    quality = block_quality(fitted, blocks, forces, runs, measured=measured)
+    quality = block_quality(fitted, blocks, forces, runs, measured=measured,
+                            sigmas=(targets.rel_sigma_k, targets.rel_sigma_c))
     cal = next(iter((calibration or {}).values()), {})
     fit = ModelFit(model=fitted, temperature=temperature, runs=list(runs), blocks=blocks, method=method,
                    parameters=params, uncertainty=unc, correlation=corr.tolist(), chi2=float(chi2), dof=int(dof),

@@ -338,7 +338,7 @@ NAMED_MODELS = {
     # in parallel are one parameter to any data)
     'seed003': ('seed 003 style: cubic spring + two-order fractional + Berg',
                 [{'type': 'polynomial_spring', 'k3': '5e11 N/m^3'},
-                 {'type': 'two_order_fractional', 'k1': '6 kN/mm', 'k2': '3 kN/mm', 'c1': 600.0, 'c2': 150.0,
+                 {'type': 'two_order_fractional', 'k1': '6 kN/mm', 'k2': '3 kN/mm', 'c1': 2.5e5, 'c2': 8.5e5,
                   'alpha': 0.3, 'beta': 0.6},
                  {'type': 'berg', 'x2': '0.3 mm', 'f_fmax': '0.8 kN'}]),
     'pad': ('seed 004 at one operating point: odd polynomial spring (k1, k3) + elliptic damping',
