@@ -28,6 +28,7 @@ import math
 import time
 
 import numpy as np
+import yaml
 
 from rubber_rig.models.modelfile import ModelSpec, named_model, parse_model, resolve_model
 
@@ -52,22 +53,32 @@ METHODS = ('harmonic', 'time')
 
 def load_cell_calibration(run, delay=None, gain=None) -> tuple:
     """(delay [s], gain [-], source) for ``run``: the given values, else the recording's rig configuration
-    (``load_cell_delay``, ``load_cell_gain``), else (0, 1).
+    (``load_cell_delay``, ``load_cell_gain``: the simulated rig's ``rig_config`` mapping, or the recorder's
+    ``metadata.rig_configuration`` YAML/JSON text a launch file sets), else (0, 1).
     """
-    cfg = (run.metadata or {}).get('rig_config') or {}
+    meta = run.metadata or {}
+    cfg = meta.get('rig_config') or meta.get('rig_configuration') or {}
+    if isinstance(cfg, str):
+        try:
+            cfg = yaml.safe_load(cfg)
+        except yaml.YAMLError:
+            cfg = {}
     cfg = cfg if isinstance(cfg, dict) else {}
-    source = 'given'
-    if delay is None:
-        delay, source = cfg.get('load_cell_delay'), 'recording metadata'
-    if gain is None:
-        gain = cfg.get('load_cell_gain')
+    sources = []
+    if delay is None and cfg.get('load_cell_delay') is not None:
+        delay = cfg['load_cell_delay']
+        sources.append('recording metadata')
+    if gain is None and cfg.get('load_cell_gain') is not None:
+        gain = cfg['load_cell_gain']
+        sources.append('recording metadata')
+    given = (delay is not None or gain is not None) and not sources
     delay = 0.0 if delay is None else float(delay)
     gain = 1.0 if gain is None else float(gain)
     if not (math.isfinite(delay) and abs(delay) < 1.0):
         raise ValueError(f'{run.name}: load-cell delay must be a finite time below 1 s, got {delay!r}')
     if not (math.isfinite(gain) and gain > 0):
         raise ValueError(f'{run.name}: load-cell gain must be > 0, got {gain!r}')
-    return delay, gain, source
+    return delay, gain, 'given' if given else (sources[0] if sources else 'none')
 
 
 def corrected_force(force, dt, delay, gain):
@@ -223,8 +234,9 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
         start = dict(values)
         if progress:
             progress(0.4, 'time-domain fit')
-        ls, _ = fit_time_model(problem, coords, coords.z_of(start))
+        ls, (lo, hi) = fit_time_model(problem, coords, coords.z_of(start))
         z = ls.x
+        limited = _at_bounds(coords, z, lo, hi)
         if ls.status == 0:
             messages.append('time-domain fit stopped before converging (evaluation limit)')
         timings['time_fit_s'] = time.perf_counter() - t0 - timings['harmonic_s']
@@ -260,7 +272,9 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
                               'calibration_source': cal.get('source', 'none'),
                               'delay_estimated': params.get(DELAY), 'delay_sigma': unc.get(DELAY, {}).get('sigma')},
                    quality=quality, messages=messages)
-    fit.bounds_hit = _at_bounds(coords, z, ls_h if method == 'harmonic' else None)
+    fit.bounds_hit = _at_bounds(coords, z, coords.lo, coords.hi)
+    if method == 'time':
+        fit.refinement_limited = [n for n in limited if n not in fit.bounds_hit]
     fit.truth = truth_of(spec, [run for run, _, _ in items])
     fit.warnings = verdict(fit, coords)
     fit.notes = notes(fit)
@@ -269,28 +283,36 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
 
 
 def harmonic_uncertainty(coords, z, ls, targets, w_k, w_c):
-    """(uncertainty, correlation, chi2, dof) of a harmonic (Eq. 29) fit. The weighted relative errors have no
-    noise scale of their own, so their scatter s^2 = sum r^2 / dof scales the covariance (a misfit widens it,
-    a fit closer than the weights suggest narrows it), with the blocks as clusters as in the time domain.
-    chi2 is in units of the blocks' measurement noise when it is known (``targets.rel_sigma_*`` > 0), else
-    the weighted sum itself.
+    """(uncertainty, correlation, chi2, dof) of a harmonic (Eq. 29) fit.
+
+    With the blocks' measurement noise known (``targets.rel_sigma_*`` > 0): chi2 is in units of it, and the
+    covariance of the weighted estimator is the sandwich (J^T W J)^-1 J^T W S W J (J^T W J)^-1 with the
+    noise covariance S inflated by max(1, chi2/dof). Without it (a table without sigma columns) the
+    scatter s^2 = sum r^2 / dof of the weighted errors scales (J^T W J)^-1 and chi2 is that weighted sum.
+    Either way the blocks are clusters for the bootstrap-like covariance, as in the time domain.
     """
     nb = len(targets)
     rows = [[i, i + nb] for i in range(nb)]
-    cov_n, cov_b, chi2_w, dof = covariance(ls.jac, ls.fun, rows)
-    s2 = chi2_w / max(dof, 1)
-    unc, corr = physical_uncertainty(coords, z, cov_n / max(1.0, s2) * s2, cov_b)
+    jac, r = ls.jac, ls.fun
+    cov_n, cov_b, chi2_w, dof = covariance(jac, r, rows)
+    bread = np.linalg.pinv(jac.T @ jac)
     if np.all(targets.rel_sigma_k > 0) and np.all(targets.rel_sigma_c > 0):
-        chi2 = float(np.sum((ls.fun[:nb] / np.sqrt(w_k) / targets.rel_sigma_k) ** 2)
-                     + np.sum((ls.fun[nb:] / np.sqrt(w_c) / targets.rel_sigma_c) ** 2))
+        # residual i is sqrt(w_i) e_i with e_i's noise sigma_i: in noise units r_i / (sqrt(w_i) sigma_i)
+        scale = np.concatenate([np.sqrt(w_k) * targets.rel_sigma_k, np.sqrt(w_c) * targets.rel_sigma_c])
+        chi2 = float(np.sum((r / scale) ** 2))
+        meat = (jac * scale[:, None] ** 2).T @ jac
+        cov_noise = bread @ meat @ bread * max(1.0, chi2 / max(dof, 1))
     else:
         chi2 = chi2_w
+        cov_noise = bread * chi2_w / max(dof, 1)
+    unc, corr = physical_uncertainty(coords, z, cov_noise, cov_b)
     return unc, corr, chi2, dof
 
 
-def _at_bounds(coords, z, _ls=None) -> list:
+def _at_bounds(coords, z, lo, hi) -> list:
+    """Free parameters (fractional orders excepted: 1 is a legitimate value) within 0.1 % of a bound."""
     span = coords.hi - coords.lo
-    near = (z - coords.lo < 1e-3 * span) | (coords.hi - z < 1e-3 * span)
+    near = (z - lo < 1e-3 * span) | (hi - z < 1e-3 * span)
     return [n for n, k, hit in zip(coords.names, coords.kinds, near, strict=True) if hit and k != 'order']
 
 

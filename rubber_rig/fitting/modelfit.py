@@ -416,6 +416,7 @@ class ModelFit:
     timings: dict = field(default_factory=dict)
     truth: dict | None = None
     bounds_hit: list = field(default_factory=list)   # parameters that ended at a search bound
+    refinement_limited: list = field(default_factory=list)   # ... at the time-domain fit's range around its start
     notes: list = field(default_factory=list)        # not defects, worth knowing (correlated pairs)
 
     @property

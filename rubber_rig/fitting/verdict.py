@@ -121,6 +121,10 @@ def identifiability_warnings(fit, coords) -> list:
     for k in fit.bounds_hit:
         out.append(f'{k} ended at the edge of its search range: the optimum may lie beyond it, '
                    'or the model structure does not suit the data')
+    if fit.refinement_limited:
+        out.append(f'the time-domain fit stopped at the edge of its range around the first-harmonic estimate '
+                   f'({", ".join(fit.refinement_limited)}): the loops and the first harmonics disagree, a sign of '
+                   'a model or data problem')
     return out
 
 
