@@ -200,3 +200,28 @@ def test_bad_tables_name_the_line_and_column(tmp_path, text, match):
     path.write_text(text)
     with pytest.raises(ValueError, match=match):
         read_table(path)
+
+
+def test_cli_per_block_identifies_the_pad_coefficients(tmp_path, capsys):
+    """Seed 004: K1, K3 and b per block around a preload, then their trend (`fit --per-block`)."""
+    program = {'name': 'pad_short', 'defaults': {'taper_cycles': 1, 'cycles': 6}, 'blocks': [
+        {'name': 'preload', 'waveform': 'ramp', 'target': '-1.1 mm', 'rate': '1 mm/s'},
+        {'name': 'settle', 'waveform': 'hold', 'duration': '1 s'},
+        {'name': 'pad', 'waveform': 'sine', 'mean': '-1.1 mm', 'amplitude': ['0.3 mm', '0.5 mm'],
+         'frequency': ['2 Hz', '6 Hz']},
+        {'name': 'unload', 'waveform': 'ramp', 'target': '0 mm', 'rate': '1 mm/s'}]}
+    (tmp_path / 'program.yaml').write_text(yaml.safe_dump(program))
+    rec = tmp_path / 'pad.mcap'
+    assert main(['simulate', '--model', 'pad', '--program', str(tmp_path / 'program.yaml'), '-o', str(rec),
+                 '--force-noise', '5N']) == 0
+    capsys.readouterr()
+    assert main(['fit', str(rec), '--per-block', '--json', '--no-progress']) == 0
+    data = json.loads(capsys.readouterr().out)
+    rows = data['per_block'][0]['blocks']
+    truth = named_model('pad').values()        # k1 2.5 kN/mm, k3 4.8 kN/mm^3, b 0.34 kN at every block
+    assert len(rows) == 4
+    for r in rows:
+        assert r['K1'] == pytest.approx(truth['k1'], rel=0.03)
+        assert r['K3'] == pytest.approx(truth['k3'], rel=0.1)
+        assert r['b'] == pytest.approx(truth['b'], rel=0.05)
+    assert {t['name'] for t in data['per_block'][0]['trends']} == {'K1', 'K3', 'b'}
