@@ -148,3 +148,16 @@ def test_the_first_harmonic_of_every_type_is_what_the_element_does_on_a_sine(ele
         measured, spec = _measured_first_harmonic(element, f, a, mean)
         exact = spec.first_harmonic(f, a, mean)
         assert abs(exact - measured) < 5e-3 * abs(exact), (element['type'], f, a, exact, measured)
+
+
+def test_the_simulated_rig_takes_a_model_file_as_its_specimen(tmp_path):
+    from rubber_rig.rig.config import ConfigError
+    from rubber_rig.rig.sim.specimen import build_specimen
+    path = tmp_path / 'bushing.yaml'
+    path.write_text(CUBIC)
+    x = 1e-3 * np.sin(2 * np.pi * 3.0 * np.arange(1000) * 1e-3)
+    np.testing.assert_array_equal(build_specimen({'model_file': str(path)}, 1e-3).run(x),
+                                  build_model(str(path), 1e-3).run(x))
+    (tmp_path / 'bad.yaml').write_text('elements: [{type: berg, x2: 1 kN, f_fmax: 4 kN}]\n')
+    with pytest.raises(ConfigError, match='sim.specimen.*bad.yaml.*x2'):
+        build_specimen({'model_file': str(tmp_path / 'bad.yaml')}, 1e-3)
