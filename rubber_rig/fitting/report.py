@@ -17,9 +17,8 @@
 The model is any composite model (`ReportModel`: a model file written by `rubber-rig fit`, with its
 uncertainties and fit record, a hand-written model file, or a seed-000 parameter set). Its force is the
 model run over the measured displacement exactly as the fit runs it (`timefit.run_input`: low-pass and
-Berg reversal deadband; `ParallelModel` of the model's elements), shifted by the load-cell delay the fit
-estimated (model compared at t - d); the measured force carries the load-cell calibration (delay, gain)
-the fit applied (`identification.corrected_force`).
+Berg reversal deadband; `ParallelModel` of the model's elements), compared at t - d with d the load-cell
+delay of the fit (calibration + estimate); the measured force is divided by the calibration gain.
 
 Figures (matplotlib, Agg backend; mm, kN, kN/mm and kN s/m like the papers):
   loops.png      hysteresis loops per block, measured on top of the model, and under each loop the
@@ -55,7 +54,7 @@ from rubber_rig.models.modelfile import ModelSpec, load_model_file, spec_from_pa
 from rubber_rig.units import to_si
 
 from .blocks import noise_level
-from .identification import corrected_force, load_cell_calibration
+from .identification import load_cell_calibration
 from .identify import PARAM_NAMES
 from .metrics import window_properties
 from .modelfit import DELAY, Z95, paper_unit
@@ -81,6 +80,7 @@ class ReportModel:
     results: dict = field(default_factory=dict)
     fit: dict | None = None
     source: str = ''
+    known_delay: float = 0.0     # the load-cell calibration delay [s] (`calibrated_run` sets it)
 
     @property
     def load_cell(self) -> dict:
@@ -88,10 +88,15 @@ class ReportModel:
         return lc if isinstance(lc, dict) else {}
 
     @property
-    def delay(self) -> float:
-        """The load-cell delay [s] the fit estimated (0 when it did not)."""
+    def estimated_delay(self) -> float:
+        """The load-cell delay [s] the fit estimated beyond the calibration (0 when it did not)."""
         d = self.load_cell.get('delay_estimated')
         return float(d) if d is not None and math.isfinite(float(d)) else 0.0
+
+    @property
+    def delay(self) -> float:
+        """The whole load-cell delay [s] the model is compared with: calibration + estimate, as in the fit."""
+        return self.known_delay + self.estimated_delay
 
     @property
     def is_zener_berg(self) -> bool:
@@ -162,9 +167,11 @@ def parameter_set_model(values: dict, name: str = '', source: str = '', temperat
 
 
 def calibrated_run(run, model: ReportModel | None):
-    """(run, {delay, gain, source}): ``run`` with the load-cell calibration the model's fit applied to the
-    measured force (`identification.corrected_force`); without a fit record, the recording's rig
-    configuration as `rubber-rig fit` uses by default. ``run`` itself when there is nothing to correct.
+    """(run, {delay, gain, source}): ``run`` with the measured force divided by the calibration gain the
+    model's fit applied (without a fit record, the recording's rig configuration, as `rubber-rig fit` uses by
+    default); the calibration delay goes to the model (``model.known_delay``: the model is compared at
+    t - delay, as in the fit, instead of interpolating the measured force, which would filter its noise).
+    ``run`` itself when there is nothing to correct.
     """
     lc = model.load_cell if model is not None else {}
     if 'delay' in lc or 'gain' in lc:
@@ -173,10 +180,12 @@ def calibrated_run(run, model: ReportModel | None):
     else:
         d, g, source = load_cell_calibration(run)
     info = {'delay': d, 'gain': g, 'source': source}
-    if d == 0.0 and g == 1.0:
+    if model is not None:
+        model.known_delay = d
+    if g == 1.0:
         return run, info
     out = copy.copy(run)
-    out.force = corrected_force(run.force, run.dt, d, g)
+    out.force = np.asarray(run.force, float) / g
     return out, info
 
 
@@ -555,7 +564,7 @@ def _param_table(model: ReportModel):
     rows = [(name, labels[i], spec.elements[i].values[p], p in spec.elements[i].fixed)
             for name, i, p in spec.parameters()]
     if DELAY in res:
-        rows.append((DELAY, 'load cell', model.delay, False))
+        rows.append((DELAY, 'load cell', model.estimated_delay, False))
     parts = ['<table class="params"><tr><th class="l">parameter</th><th class="l">element</th><th>value</th>'
              '<th>&plusmn;1 sigma</th><th>&plusmn;1 sigma [%]</th><th>95 % interval</th><th class="l">unit</th></tr>']
     for name, label, value, fixed in rows:
@@ -589,7 +598,7 @@ def _fit_box(model: ReportModel):
              + (f', recordings {esc(", ".join(map(str, fit["recordings"])))}' if fit.get('recordings') else '')
              + '.</p>']
     if lc.get('delay_estimated') is not None:
-        parts.append(f'<p>Load-cell delay estimated by the fit: {_g(1e3 * model.delay, ".4g")} ms '
+        parts.append(f'<p>Load-cell delay estimated by the fit: {_g(1e3 * model.estimated_delay, ".4g")} ms '
                      f'(&plusmn;{_g(1e3 * float(lc.get("delay_sigma") or math.nan), ".3g")} ms); the model force '
                      'is compared at t - delay.</p>')
     warnings = fit.get('warnings') or []
