@@ -46,7 +46,7 @@ from .modelfit import (
     jacobian,
     physical_uncertainty,
 )
-from .verdict import notes, verdict
+from .verdict import MISFIT_CHI2, notes, verdict
 
 METHODS = ('harmonic', 'time')
 
@@ -235,6 +235,17 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
         if progress:
             progress(0.4, 'time-domain fit')
         ls, (lo, hi) = fit_time_model(problem, coords, coords.z_of(start))
+        dof_t = max(problem.m - len(coords.names) - len(problem.block_rows), 1)
+        if float(ls.fun @ ls.fun) / dof_t > MISFIT_CHI2:
+            # a misfit may be a wrong basin of the first-harmonic search (e.g. a large negative cubic term
+            # standing in for friction): try other starts, refine the most promising if it beats this one
+            better = _other_start(spec, hc, targets, problem, coords, seed, w_k, w_c, float(ls.fun @ ls.fun),
+                                  coords.values(ls.x))
+            if better is not None:
+                ls2, bounds2 = fit_time_model(problem, coords, better)
+                if ls2.fun @ ls2.fun < ls.fun @ ls.fun:
+                    ls, (lo, hi) = ls2, bounds2
+                    messages.append('a second start of the global search gave the better fit')
         z = ls.x
         limited = _at_bounds(coords, z, lo, hi)
         if ls.status == 0:
@@ -280,6 +291,24 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     fit.notes = notes(fit)
     fit.timings = {**timings, 'total_s': time.perf_counter() - t0}
     return fit
+
+
+def _other_start(spec, hc, targets, problem, coords, seed, w_k, w_c, chi2_now, current):
+    """Coordinates of the best alternative start for the time-domain fit, or None: two more global searches
+    on the first harmonics (other seeds; one seeded with the current optimum with its signed terms at zero),
+    each judged by one model run over the loops.
+    """
+    best, best_chi2 = None, chi2_now
+    zeroed = {n: (0.0 if k == 'lin' else current[n]) for n, k in zip(hc.names, hc.kinds, strict=True)}
+    for k, hint in ((1, zeroed), (2, None)):
+        z_alt, _ = fit_harmonic_model(spec, hc, targets, w_k, w_c, seed=seed + k, start=hint)
+        start = hc.values(z_alt)
+        start.setdefault(DELAY, 0.0)
+        z0 = coords.z_of({n: start.get(n, 0.0) for n in coords.names})
+        r = problem.residuals(coords.values(z0))
+        if float(r @ r) < best_chi2:
+            best, best_chi2 = z0, float(r @ r)
+    return best
 
 
 def harmonic_uncertainty(coords, z, ls, targets, w_k, w_c):
