@@ -259,7 +259,7 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
         r = fun(z)
         jac = jacobian(fun, z)
         cov_n, cov_b, chi2, dof = covariance(jac, r, problem.block_rows, n_offsets=len(problem.block_rows))
-        unc, corr = physical_uncertainty(coords, z, cov_n, cov_b)
+        unc, corr = physical_uncertainty(coords, z, cov_n, cov_b, len(problem.block_rows))
         values = coords.values(z)
         n_points = problem.m
         delay = float(values.get(DELAY, 0.0))
@@ -334,7 +334,7 @@ def harmonic_uncertainty(coords, z, ls, targets, w_k, w_c):
     else:
         chi2 = chi2_w
         cov_noise = bread * chi2_w / max(dof, 1)
-    unc, corr = physical_uncertainty(coords, z, cov_noise, cov_b)
+    unc, corr = physical_uncertainty(coords, z, cov_noise, cov_b, nb)
     return unc, corr, chi2, dof
 
 
