@@ -93,7 +93,7 @@ def corrected_force(force, dt, delay, gain):
     return f / gain
 
 
-def _calibrated(run, delay, gain):
+def calibrate(run, delay=None, gain=None):
     """The run with its force divided by the known gain, and the calibration. A known delay is not taken out
     of the data (interpolating between samples would filter the noise and fake a lower noise level): the fit
     compares the model at t - delay instead.
@@ -360,7 +360,7 @@ def fit_model(runs, model='zener_berg', method='time', load_cell_delay=None, loa
     calibrated, cals = [], {}
     for run in runs:
         if run.usable():
-            run, cal = _calibrated(run, load_cell_delay, load_cell_gain)
+            run, cal = calibrate(run, load_cell_delay, load_cell_gain)
             cals[run.name] = cal
         calibrated.append(run)
     groups, messages = split_runs(calibrated, settle_cycles, min_cycles)

@@ -38,7 +38,6 @@ analysed samples of the block and sigma_F = `blocks.noise_level` of the (calibra
 from __future__ import annotations
 
 import base64
-import copy
 import html
 import io
 import math
@@ -54,7 +53,7 @@ from rubber_rig.models.modelfile import ModelSpec, load_model_file, spec_from_pa
 from rubber_rig.units import to_si
 
 from .blocks import noise_level
-from .identification import load_cell_calibration
+from .identification import calibrate, corrected_force
 from .identify import PARAM_NAMES
 from .metrics import window_properties
 from .modelfit import DELAY, Z95, paper_unit
@@ -175,17 +174,12 @@ def calibrated_run(run, model: ReportModel | None):
     """
     lc = model.load_cell if model is not None else {}
     if 'delay' in lc or 'gain' in lc:
-        d, g = float(lc.get('delay') or 0.0), float(lc.get('gain') or 1.0)
-        source = f'fit record ({lc.get("calibration_source", "?")})'
+        out, info = calibrate(run, float(lc.get('delay') or 0.0), float(lc.get('gain') or 1.0))
+        info['source'] = f'fit record ({lc.get("calibration_source", "?")})'
     else:
-        d, g, source = load_cell_calibration(run)
-    info = {'delay': d, 'gain': g, 'source': source}
+        out, info = calibrate(run)
     if model is not None:
-        model.known_delay = d
-    if g == 1.0:
-        return run, info
-    out = copy.copy(run)
-    out.force = np.asarray(run.force, float) / g
+        model.known_delay = info['delay']
     return out, info
 
 
@@ -195,11 +189,7 @@ def model_force(model: ReportModel, run, blocks) -> np.ndarray:
     """
     _, x, h = run_input(run, blocks)
     f = ParallelModel(model.spec.build_elements(run.dt, h), run.dt, model.spec.name, model.spec).run(x)
-    shift = model.delay / run.dt
-    if shift:
-        n = np.arange(f.size, dtype=float)
-        f = np.interp(np.clip(n - shift, 0, f.size - 1), n, f)
-    return f
+    return corrected_force(f, run.dt, -model.delay, 1.0) if model.delay else f
 
 
 def block_quality(model: ReportModel | None, blocks, run, force, sigma_f) -> list:

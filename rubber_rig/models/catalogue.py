@@ -101,9 +101,12 @@ def _quad_elastic(force, amplitude, mean):
     return (2.0 / _N_QUAD) * np.sum(force(x) * _SIN, axis=-1) / a[..., 0] + 0j
 
 
+_POLY_TERMS = (('preload', 0), ('k1', 1), ('k2', 2), ('k3', 3), ('k5', 5))   # parameter -> power of x
+
+
 def _poly_force(v, x):
     out = 0.0
-    for name, power in (('preload', 0), ('k1', 1), ('k2', 2), ('k3', 3), ('k5', 5)):
+    for name, power in _POLY_TERMS:
         c = v.get(name)
         if c is not None:
             out = out + np.asarray(c, float)[..., None] * x ** power
@@ -116,7 +119,7 @@ def _poly_fh(v, f, a, m):
 
 def _poly_build(v, dt, opts):
     coeffs = [0.0] * 6
-    for name, power in (('preload', 0), ('k1', 1), ('k2', 2), ('k3', 3), ('k5', 5)):
+    for name, power in _POLY_TERMS:
         coeffs[power] = float(v.get(name, 0.0))
     while len(coeffs) > 1 and coeffs[-1] == 0.0:
         coeffs.pop()
@@ -141,18 +144,23 @@ def _zener_fh(v, f, a, m):
     return zener_complex_stiffness(w, *(np.asarray(v[k], float) for k in ('k0', 'k_inf', 'tau', 'alpha'))) + 0 * a
 
 
-def _zener_build(v, dt, opts):
-    scheme = opts.get('scheme', 'default')
-    name = scheme.get('name', 'default') if isinstance(scheme, dict) else scheme
-    extra = {k: val for k, val in scheme.items() if k != 'name'} if isinstance(scheme, dict) else {}
-    args = (v['k0'], v['k_inf'], v['tau'], v.get('alpha', 1.0), dt)
+def fractional_element(k0, k_inf, tau, alpha, dt, scheme='default'):
+    """The fractional Zener element with the fractional operator ``scheme``: 'default' (sum of exponentials),
+    'paper' (GL, N_t = 200, h = 1 ms, seed 000 Eq. 15) or 'gl' / {"name": "gl", "n_terms": N_t, "h": h}.
+    """
+    opts = dict(scheme) if isinstance(scheme, dict) else {'name': scheme}
+    name = opts.pop('name', 'default')
     if name == 'default':
-        return el.FractionalZener(*args, **extra)
+        return el.FractionalZener(k0, k_inf, tau, alpha, dt, **opts)
     if name in ('gl', 'paper'):
         if name == 'paper':   # seed 000 Eq. 15: N_t = 200, h = 1 ms
-            extra = {'n_terms': 200, 'h': 1e-3, **extra}
-        return el.FractionalZenerGL(*args, **extra)
+            opts = {'n_terms': 200, 'h': 1e-3, **opts}
+        return el.FractionalZenerGL(k0, k_inf, tau, alpha, dt, **opts)
     raise ValueError(f"unknown fractional scheme {name!r}: use 'default', 'gl' or 'paper'")
+
+
+def _zener_build(v, dt, opts):
+    return fractional_element(v['k0'], v['k_inf'], v['tau'], v.get('alpha', 1.0), dt, opts.get('scheme', 'default'))
 
 
 _ORDER = dict(unit='-', dimension='number', scale='order', upper=1.0)

@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from . import elements as el
+from .catalogue import fractional_element
 from .friction import BergFriction, check_reversal_threshold
 from .modelfile import ModelSpec, is_model_file, load_model_file, parse_model
 from .params import (
@@ -121,21 +122,6 @@ class ParallelModel:
         return np.concatenate([e.complex_stiffness(frequency, amplitude) for e in self.elements])
 
 
-def _fractional_element(p: ZenerBergParams, dt, scheme):
-    if isinstance(scheme, dict):
-        opts = dict(scheme)
-        name = opts.pop('name', 'default')
-    else:
-        name, opts = scheme, {}
-    if name == 'default':
-        return el.FractionalZener(p.k0, p.k_inf, p.tau, p.alpha, dt, **opts)
-    if name in ('gl', 'paper'):
-        if name == 'paper':   # seed 000 Eq. 15: N_t = 200, h = 1 ms
-            opts = {'n_terms': 200, 'h': 1e-3, **opts}
-        return el.FractionalZenerGL(p.k0, p.k_inf, p.tau, p.alpha, dt, **opts)
-    raise ValueError(f"unknown fractional scheme {name!r}: use 'default', 'gl' or 'paper'")
-
-
 def zener_berg_model(params: ZenerBergParams, dt: float, scheme='default',
                      friction_reversal_threshold: float = 0.0) -> ParallelModel:
     """Seed 000's nonlinear rubber spring: fractional Zener + Berg; branches ('elastic', 'viscous', 'friction').
@@ -143,7 +129,7 @@ def zener_berg_model(params: ZenerBergParams, dt: float, scheme='default',
     ``friction_reversal_threshold`` [m]: Berg's reversal deadband (see :mod:`.friction`), 0 = the paper's rule.
     """
     params.validate()
-    return ParallelModel([_fractional_element(params, dt, scheme),
+    return ParallelModel([fractional_element(params.k0, params.k_inf, params.tau, params.alpha, dt, scheme),
                           BergFriction(params.f_fmax, params.x2, dt, friction_reversal_threshold)],
                          dt, 'fractional_zener_berg', params)
 

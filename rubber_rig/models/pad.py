@@ -432,7 +432,20 @@ def _elliptic_off_size(b, ratio):
     return np.where(r <= 1.0, inside, b / np.where(r > 0, r, 1))
 
 
-class EllipticDamping:
+class _TrackedElement:
+    """An element whose whole state is its operating point: a :class:`CycleTracker` at ``self.tracker``."""
+
+    def reset(self, x0: float = 0.0):
+        self.tracker.reset(x0)
+
+    def get_state(self):
+        return self.tracker.get_state()
+
+    def set_state(self, state):
+        self.tracker.set_state(state)
+
+
+class EllipticDamping(_TrackedElement):
     """Seed 004's elliptic damping force (Eq. 4), branch 'viscous'.
 
         F_c = s b(f, A) sqrt(max(0, 1 - ((x - x0) / A)^2))   [N],
@@ -472,15 +485,6 @@ class EllipticDamping:
         self.fixed = amplitude is not None and center is not None
         tr = self.tracker
         self.amplitude, self.center, self.frequency = tr.default_amplitude, tr.default_center, tr.default_frequency
-
-    def reset(self, x0: float = 0.0):
-        self.tracker.reset(x0)
-
-    def get_state(self):
-        return self.tracker.get_state()
-
-    def set_state(self, state):
-        self.tracker.set_state(state)
 
     def step(self, x: float):
         x = float(x)
@@ -582,7 +586,7 @@ def odd_polynomial_first_harmonic(k_odd, amplitude, mean=0.0):
     return polynomial_first_harmonic(coefficients, amplitude, mean)
 
 
-class OperatingPointSpring:
+class OperatingPointSpring(_TrackedElement):
     """Seed 004's elastic force (Eq. 5, 7), branch 'elastic'.
 
         F_k = sum_i K_(2i-1)(f, A) x^(2i-1)   [N],
@@ -621,15 +625,6 @@ class OperatingPointSpring:
         if needs_f and self.frequency is None:
             raise ValueError(f'parameter frequency (default f [Hz]) is required: {", ".join(needs_f)} depend(s) on '
                              f'frequency, which is unknown until two reversals have been seen')
-
-    def reset(self, x0: float = 0.0):
-        self.tracker.reset(x0)
-
-    def get_state(self):
-        return self.tracker.get_state()
-
-    def set_state(self, state):
-        self.tracker.set_state(state)
 
     def coefficients(self, frequency, amplitude):
         """(K1, K3, ...) in SI at f [Hz] and A [m] (floats or broadcast arrays)."""
