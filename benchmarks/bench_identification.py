@@ -210,7 +210,7 @@ def fit_task(task):
     if len(by_model) > 1 and true_label in by_model:
         comp = compare_models(by_model)[0]
         for r in results:
-            r['aic_true'] = comp['selected'] == true_label
+            r['aic_true'] = comp['selected_aic'] == true_label
             r['bic_true'] = comp['selected_bic'] == true_label
     return results
 

@@ -47,7 +47,7 @@ def add_arguments(parser):
                                                       'one CSV table of K_dyn and C_eq')
     parser.add_argument('--model', '-m', action='append', default=None, metavar='FILE|NAME',
                         help='model to fit: a model file, a named model or a parameter set (default zener_berg); '
-                             'give several to rank them by AIC/BIC')
+                             'give several to rank them by BIC (AIC beside it); the lowest BIC is selected')
     parser.add_argument('--output', '-o', default='fit.yaml',
                         help='model file to write (default fit.yaml; several temperatures: fit_20C.yaml, ...; '
                              'several models: the selected one; "-" for none)')
@@ -254,7 +254,7 @@ def run(args) -> int:
         print(f'model comparison at {_t(c["temperature"])} (AIC = chi2 + 2k, BIC = chi2 + k ln n):')
         for r in c['ranking']:
             print(f'  {r["model"]:24s} k={r["n_params"]:2d} chi2/dof={r["chi2_per_dof"]:8.3g} '
-                  f'dAIC={r["delta_aic"]:9.1f} dBIC={r["delta_bic"]:9.1f} weight={r["akaike_weight"]:.3f} '
+                  f'dBIC={r["delta_bic"]:9.1f} dAIC={r["delta_aic"]:9.1f} BIC weight={r["bic_weight"]:.3f} '
                   f'warnings={r["warnings"]}')
         print(f'  {c["verdict"]}')
     for m in messages:
