@@ -75,7 +75,7 @@ def test_the_true_model_fits_to_the_noise_with_intervals_that_cover_the_truth_an
     assert f.noise[sims['base'].name] == pytest.approx(20.0, rel=0.1)      # the noise the recording shows
     assert all(_covered(f, SEED000).values()), f.as_dict()['errors']
     assert f.warnings == []
-    # sigma is the larger of the noise-based and the block-bootstrap one, and both are finite and positive
+    # sigma is the larger of the noise-based and the block-jackknife one, and both are finite and positive
     for k in SEED000:
         u = f.uncertainty[k]
         assert u['sigma'] == max(u['sigma_noise'], u['sigma_blocks']) and 0 < u['relative_sigma'] < 0.1

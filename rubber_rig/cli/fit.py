@@ -24,7 +24,7 @@ Examples:
 parameter set; default zener_berg (seed 000). Each recording is split into blocks; the fit searches the
 model's first harmonics globally (seed 000 Eq. 29) and, with --method time (default), refines on the raw
 loops with the load-cell delay as a parameter. Every number comes with a 1-sigma uncertainty and a 95 %
-interval (the larger of the noise-based one, inflated by the lack of fit, and the bootstrap over blocks,
+interval (the larger of the noise-based one, inflated by the lack of fit, and the jackknife over blocks,
 linearised), chi2/dof against the load-cell noise the recording shows, and warnings: misfit, per-block
 errors, systematic residual patterns, parameters the data cannot identify, an estimated load-cell delay.
 The fitted model is written as a model file with the uncertainties beside the values (one file per

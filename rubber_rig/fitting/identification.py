@@ -319,7 +319,7 @@ def harmonic_uncertainty(coords, z, ls, targets, w_k, w_c):
     covariance of the weighted estimator is the sandwich (J^T W J)^-1 J^T W S W J (J^T W J)^-1 with the
     noise covariance S inflated by max(1, chi2/dof). Without it (a table without sigma columns) the
     scatter s^2 = sum r^2 / dof of the weighted errors scales (J^T W J)^-1 and chi2 is that weighted sum.
-    Either way the blocks are clusters for the bootstrap-like covariance, as in the time domain.
+    Either way the blocks are clusters for the jackknife covariance, as in the time domain.
     """
     nb = len(targets)
     rows = [[i, i + nb] for i in range(nb)]

@@ -386,7 +386,7 @@ def physical_uncertainty(coords: Coordinates, z, cov_noise, cov_blocks, n_blocks
     """Per parameter: value, sigma (larger of noise and blocks), both sigmas, 95 % interval; correlation.
 
     The interval is +-t sigma with t the 97.5 % quantile of Student's t with n_blocks - 1 degrees of freedom
-    (the block-bootstrap variance is estimated from that many blocks; 1.96 without blocks).
+    (the block jackknife variance is estimated from that many blocks; 1.96 without blocks).
     """
     def phys(zz):
         v = coords.values(zz)
