@@ -14,16 +14,20 @@
 
 """Identification of rubber-element parameters from recordings (pure Python, no rclpy).
 
-data        recordings as arrays: MCAP (rubber_rig.recording), rig runs, plain arrays; missing channels
-blocks      split a recording into blocks (block index channel, or detected steady periodic segments),
-            skip settling cycles, measure frequency, amplitude, mean, K_dyn, loss angle, D, energy, C_eq
-properties  seed-000 model properties evaluated as the rig measures them (first harmonic, loop area)
-identify    seed 000 Eq. 29 by differential evolution + least-squares polish; uncertainty from the Jacobian
-timefit     time-domain refinement on the raw loops (model run over the measured displacement)
-pipeline    recordings -> one parameter set per temperature, with per-block fit quality
-paramfile   the table as YAML in the format of rubber_rig/models/data/swing_arm_joint.yaml
-report      PNG figures + self-contained HTML (seed 000 Fig. 4-7 style)
-simulate    simulated-rig MCAP recordings for tests, benchmarks and demos
+data            recordings as arrays: MCAP (rubber_rig.recording), rig runs, plain arrays; missing channels
+blocks          split a recording into blocks (block index channel, or detected steady periodic segments),
+                skip settling cycles, measure frequency, amplitude, mean, K_dyn, loss angle, D, energy, C_eq
+properties      seed-000 model properties evaluated as the rig measures them (first harmonic, loop area)
+modelfit        any model (rubber_rig.models.modelfile): first-harmonic global search, time-domain least
+                squares against the load-cell noise, noise and block-jackknife covariances
+timefit         the displacement the time-domain fit runs its model on (low-pass, Berg deadband)
+identification  recordings -> one fit per temperature: calibration, quasi-static windows, block quality,
+                model comparison (BIC, AIC beside it)
+verdict         the warnings and notes of a fit (misfit, per-block errors, trends, identifiability, delay)
+table           fits from a CSV of K_dyn / C_eq; blocktrend: seed 004's per-block fit and its trend
+paramfile       seed-000 parameter tables (the shipped sets, older fit output) for reports
+report          PNG figures + self-contained HTML (seed 000 Fig. 4-7 style)
+simulate        simulated-rig MCAP recordings for tests, benchmarks and demos
 
 Design decisions (the figures behind them: benchmarks/bench_fitting.py and the README's fitting section):
 * Eq. 24 is not what a rig measures. Seed 000 combines Berg's element through an equal-peak,

@@ -80,6 +80,18 @@ def noise_level(x) -> float:
     return float(1.4826 * np.median(np.abs(d3 - np.median(d3))) / np.sqrt(20.0))
 
 
+def harmonic_sigma(noise, n_samples, amplitude, frequency):
+    """1-sigma of K_dyn [N/m] and of C_eq [N s/m] measured over ``n_samples`` samples of a block of
+    displacement ``amplitude`` [m] at ``frequency`` [Hz] with white load-cell noise ``noise`` [N] (broadcasts).
+
+    The first harmonic of N samples of white noise sigma has a sigma of sigma sqrt(2/N) per component;
+    K_dyn = |F1| / A and C_eq = Im F1 / (omega A).
+    """
+    s = np.asarray(noise, float) * np.sqrt(2.0 / np.maximum(np.asarray(n_samples, float), 1.0))
+    amplitude = np.asarray(amplitude, float)
+    return s / amplitude, s / (2 * np.pi * np.asarray(frequency, float) * amplitude)
+
+
 def _cycles(x) -> list:
     """The cycles of x, cut as everywhere else (:func:`rubber_rig.analysis.cut_cycles`) about the levels of the
     whole segment. The hysteresis band is 2 % of the largest amplitude but at least 5 noise sigmas, so that

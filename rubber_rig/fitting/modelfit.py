@@ -60,7 +60,7 @@ from rubber_rig.models.composite import ParallelModel
 from rubber_rig.models.modelfile import ModelSpec
 from rubber_rig.units import PAPER_UNITS
 
-from .blocks import noise_level
+from .blocks import harmonic_sigma, noise_level
 from .timefit import run_input
 
 DELAY = 'load_cell_delay'
@@ -82,18 +82,17 @@ class BlockTargets:
 
     @classmethod
     def from_blocks(cls, blocks, noise: dict, delays: dict | None = None):
-        """``noise``: recording name -> load-cell noise sigma [N]. The first harmonic of N samples of white
-        noise sigma has a sigma of sigma sqrt(2/N) per component. ``delays``: recording name -> known
-        load-cell delay [s].
+        """``noise``: recording name -> load-cell noise sigma [N] (`blocks.harmonic_sigma` makes it the
+        blocks' K_dyn and C_eq sigmas). ``delays``: recording name -> known load-cell delay [s].
         """
         get = {k: np.array([getattr(b, k) for b in blocks], float)
                for k in ('frequency', 'amplitude', 'mean', 'k_dyn', 'c_eq')}
-        n = np.array([max(b.stop - b.start, 1) for b in blocks], float)
-        s = np.array([noise.get(b.recording, 0.0) for b in blocks], float) * np.sqrt(2.0 / n)
-        f1 = get['k_dyn'] * get['amplitude']                       # force first-harmonic amplitude [N]
-        loss = get['c_eq'] * 2 * np.pi * get['frequency'] * get['amplitude']
+        n = np.array([b.stop - b.start for b in blocks], float)
+        sk, sc = harmonic_sigma([noise.get(b.recording, 0.0) for b in blocks], n, get['amplitude'], get['frequency'])
         delay = np.array([(delays or {}).get(b.recording, 0.0) for b in blocks], float)
-        return cls(**get, rel_sigma_k=s / f1, rel_sigma_c=s / np.maximum(loss, 1e-30), delay=delay)
+        # |C_eq|: a block whose loss comes out negative (noise, a late load cell) still has its sigma
+        return cls(**get, rel_sigma_k=sk / get['k_dyn'], rel_sigma_c=sc / np.maximum(np.abs(get['c_eq']), 1e-30),
+                   delay=delay)
 
     def __len__(self):
         return self.frequency.size

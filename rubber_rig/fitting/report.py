@@ -31,9 +31,9 @@ Figures (matplotlib, Agg backend; mm, kN, kN/mm and kN s/m like the papers):
   traces.png     displacement, measured and model force, and the force residual over time
   errors.png     per-block relative errors of K_dyn and C_eq (Eq. 28) with the measurement's 1 sigma
 
-Measurement sigmas: the first harmonic of N samples of white noise sigma_F has sigma_F sqrt(2/N) per
-component, so sigma(K_dyn) = sigma_F sqrt(2/N) / A and sigma(C_eq) = sigma_F sqrt(2/N) / (omega A), N the
-analysed samples of the block and sigma_F = `blocks.noise_level` of the (calibrated) force.
+Measurement sigmas: `blocks.harmonic_sigma`, sigma(K_dyn) = sigma_F sqrt(2/N) / A and sigma(C_eq) =
+sigma_F sqrt(2/N) / (omega A), N the analysed samples of the block and sigma_F = `blocks.noise_level` of the
+(calibrated) force.
 """
 from __future__ import annotations
 
@@ -52,11 +52,11 @@ from rubber_rig.models.composite import ParallelModel
 from rubber_rig.models.modelfile import ModelSpec, load_model_file, spec_from_params
 from rubber_rig.units import to_si
 
-from .blocks import noise_level
+from .blocks import harmonic_sigma, noise_level
 from .identification import calibrate, corrected_force
-from .identify import PARAM_NAMES
 from .metrics import window_properties
 from .modelfit import DELAY, Z95, paper_unit
+from .paramfile import PARAM_NAMES
 from .timefit import run_input
 
 FIGURES = ('loops', 'kdyn_ceq', 'ratios', 'traces', 'errors')
@@ -209,11 +209,11 @@ def block_quality(model: ReportModel | None, blocks, run, force, sigma_f) -> lis
     rows = []
     for i, b in enumerate(blocks):
         w = 2 * np.pi * b.frequency
-        s = sigma_f * math.sqrt(2.0 / max(b.stop - b.start, 1))
+        sk, sc = harmonic_sigma(sigma_f, b.stop - b.start, b.amplitude, b.frequency)
         row = {'recording': b.recording, 'block': b.index, 'frequency': b.frequency, 'amplitude': b.amplitude,
                'mean': b.mean, 'cycles': b.cycles,
                'measured': {'k_dyn': b.k_dyn, 'c_eq': b.c_eq, 'loss_angle': b.loss_angle, 'energy': b.energy,
-                            'damping': b.damping, 'sigma_k': s / b.amplitude, 'sigma_c': s / (w * b.amplitude)}}
+                            'damping': b.damping, 'sigma_k': float(sk), 'sigma_c': float(sc)}}
         if analytic is not None:
             kd, ce = float(abs(analytic[i])), float(analytic[i].imag / w)
             row['analytic'] = {'k_dyn': kd, 'c_eq': ce, 'e_k': kd / b.k_dyn - 1, 'e_c': ce / b.c_eq - 1}

@@ -25,7 +25,8 @@ Each warning is one sentence a test engineer can act on. A clean fit has none. T
   trend in ln f or A whose change over the measured range exceeds ``PATTERN_K`` / ``PATTERN_C`` and
   four of its standard errors);
 * unidentifiable parameters: a relative sigma above ``MAX_RELATIVE_SIGMA``; two parameters correlated
-  above ``MAX_CORRELATION`` when that leaves either of them worse than ``CORRELATED_SIGMA`` (a correlation
+  above ``MAX_CORRELATION`` when that leaves either of them worse than ``CORRELATED_SIGMA`` by the
+  noise-based sigma (the information in the data, where the correlation comes from; a correlation
   alone is not a defect: seed 000's x2 and F_fmax correlate at +0.99 on its own test grid and are still
   identified to about 1 %; such pairs are listed in the notes); a signed term whose 95 % interval holds
   0; a parameter at its search bound;
@@ -102,7 +103,9 @@ def identifiability_warnings(fit, coords) -> list:
     names = list(fit.uncertainty)
     corr = np.asarray(fit.correlation)
     for i, j in correlated_pairs(fit):
-        worst = max(fit.uncertainty[names[i]]['relative_sigma'], fit.uncertainty[names[j]]['relative_sigma'])
+        # what the data can tell apart is a property of their information (the noise covariance, which the
+        # correlation comes from too); the block jackknife's scatter has its own warning above 30 %
+        worst = max(_relative_noise_sigma(fit.uncertainty[names[i]]), _relative_noise_sigma(fit.uncertainty[names[j]]))
         if worst > CORRELATED_SIGMA:
             out.append(f'{names[i]} and {names[j]} cannot be told apart by these data (correlation '
                        f'{corr[i, j]:+.3f}, +-{100 * worst:.0f} % at 1 sigma): only a combination of them is '
@@ -126,6 +129,10 @@ def identifiability_warnings(fit, coords) -> list:
                    f'({", ".join(fit.refinement_limited)}): the loops and the first harmonics disagree, a sign of '
                    'a model or data problem')
     return out
+
+
+def _relative_noise_sigma(u) -> float:
+    return u.get('sigma_noise', u['sigma']) / abs(u['value']) if u['value'] else math.inf
 
 
 def correlated_pairs(fit) -> list:
