@@ -219,7 +219,11 @@ def test_harmonic_method_on_recording_meets_the_targets(recordings):
     f = fit_model([run], 'zener_berg', method='harmonic')[0][0]
     for k in PARAM_NAMES:
         assert f.parameters[k] == pytest.approx(run.true_params[k], rel=TOL[k]), k
-    assert 0.3 < f.chi2_per_dof < 3      # the Eq. 29 residual against the blocks' measurement noise
+    # the first harmonics of ideal sines cannot see the 80 Hz actuator's distortion of the 14 Hz blocks, which
+    # 10 N of load-cell noise resolves (K_dyn off by 0.04 %, 3.6 sigma): chi2/dof about 6 against the
+    # blocks' noise, and the fit says so (the time-domain fit sees the measured displacement: test above)
+    assert 1.0 < f.chi2_per_dof < 10
+    assert any(w.startswith('misfit beyond noise') for w in f.warnings) == (f.chi2_per_dof > 1.5)
 
 
 def test_two_temperatures_give_one_model_file_each_loadable_by_the_models(recordings, tmp_path, capsys):
