@@ -169,7 +169,9 @@ def test_paced_run_keeps_the_bus_timestamps(tmp_path):
     prog = Program.from_yaml_text('name: paced\nblocks:\n  - {waveform: sine, frequency: 5 Hz, amplitude: 0.3 mm, '
                                   'cycles: 2}\n')
     path = tmp_path / 'paced.log'
-    r = run_program(prog, {'paced': True, 'can_log': str(path)})
+    # the test is about the log's timestamps; the watchdog (0.1 s by default, tested elsewhere) gets room for a
+    # busy CI host stalling this process, as the other paced runs in the tests do
+    r = run_program(prog, {'paced': True, 'can_log': str(path), 'watchdog_timeout': 1.0})
     assert r.completed, r.message
     log = decode_clean(path)
     np.testing.assert_array_equal(log.sequence, r.sequence)
