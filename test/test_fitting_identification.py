@@ -192,6 +192,9 @@ def test_cli_fit_json_has_the_verdict_and_writes_a_model_file(sims, tmp_path, ca
     assert data['candidates']['zener_berg'][0]['warnings']
     written = yaml.safe_load(out.read_text())
     assert written['elements'][2]['type'] == 'polynomial_spring' and 'sigma' in written['elements'][2]
+    # the report reads the delay's interval from the fit record: the fit's own +-t sigma
+    assert written['fit']['load_cell']['delay_interval_95'] == pytest.approx(
+        data['uncertainty']['load_cell_delay']['interval_95'], rel=1e-9)
     assert main(['fit', str(sims['cubic']), '--model', 'zener_berg', '-o', '-', '--no-progress']) == 0
     text = capsys.readouterr().out
     assert 'WARNING: misfit beyond noise' in text and '95 % interval' in text

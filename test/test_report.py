@@ -160,3 +160,15 @@ def test_report_with_a_shipped_parameter_set(recording, tmp_path, capsys):
     assert len(cells) == 6 and all(abs(float(c[7])) < 1.0 and abs(float(c[8])) < 1.0 for c in cells)
     assert main(['report', str(recording), '--fit', str(shipped), '--set', 'nope', '-o', str(out)]) == 2
     assert 'nope' in capsys.readouterr().err
+
+
+def test_the_delay_interval_is_the_fits_own(tmp_path):
+    from rubber_rig.fitting.modelfit import Z95
+    from rubber_rig.fitting.report import read_model_file
+    path = tmp_path / 'm.yaml'
+    path.write_text(CUBIC_MODEL.replace('delay_sigma: 2.0e-5}',
+                                        'delay_sigma: 2.0e-5, delay_interval_95: [5.84e-5, 1.416e-4]}'))
+    assert read_model_file(path).results['load_cell_delay']['interval_95'] == [5.84e-5, 1.416e-4]   # +-t sigma
+    path.write_text(CUBIC_MODEL)          # written before fits stored it: +-1.96 sigma
+    assert read_model_file(path).results['load_cell_delay']['interval_95'] == pytest.approx(
+        [1e-4 - Z95 * 2e-5, 1e-4 + Z95 * 2e-5], rel=1e-12)

@@ -282,7 +282,8 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
                    n_points=int(n_points), noise=noise,
                    load_cell={'delay': cal.get('delay', 0.0), 'gain': cal.get('gain', 1.0),
                               'calibration_source': cal.get('source', 'none'),
-                              'delay_estimated': params.get(DELAY), 'delay_sigma': unc.get(DELAY, {}).get('sigma')},
+                              'delay_estimated': params.get(DELAY), 'delay_sigma': unc.get(DELAY, {}).get('sigma'),
+                              'delay_interval_95': unc.get(DELAY, {}).get('interval_95')},
                    quality=quality, messages=messages)
     fit.bounds_hit = _at_bounds(coords, z, coords.lo, coords.hi)
     if method == 'time':

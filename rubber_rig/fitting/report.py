@@ -144,7 +144,9 @@ def read_model_file(path) -> ReportModel:
     lc = (fit or {}).get('load_cell') or {}
     if lc.get('delay_estimated') is not None and lc.get('delay_sigma') is not None:
         d, s = float(lc['delay_estimated']), float(lc['delay_sigma'])
-        results[DELAY] = {'sigma': s, 'interval_95': [d - Z95 * s, d + Z95 * s],
+        # the fit's own interval (+-t sigma over its blocks); files written before it stored one: +-1.96 sigma
+        interval = lc.get('delay_interval_95') or [d - Z95 * s, d + Z95 * s]
+        results[DELAY] = {'sigma': s, 'interval_95': [float(v) for v in interval],
                           'relative_sigma': s / abs(d) if d else math.inf}
     return ReportModel(spec, results, fit, str(path))
 

@@ -68,7 +68,6 @@ def _trend(errors, x):
 def misfit_warnings(fit) -> list:
     out = []
     if fit.chi2_per_dof > MISFIT_CHI2:
-        sigma = np.mean(list(fit.noise.values())) if fit.noise else math.nan
         if fit.method == 'harmonic' and fit.runs and fit.noise:
             # the blocks' K_dyn and C_eq against the exact first harmonics of ideal sines: the actuator's
             # distortion and the rig's time scheme differ from those by more than a low noise resolves
@@ -77,6 +76,7 @@ def misfit_warnings(fit) -> list:
                        'motion is not a pure sine) does not describe the data to the noise; the uncertainties '
                        'are inflated by this misfit; --method time runs the model over the measured motion')
         else:
+            sigma = np.mean(list(fit.noise.values())) if fit.noise else math.nan
             out.append(f'misfit beyond noise: chi2/dof = {fit.chi2_per_dof:.3g} (the force residual is '
                        f'{math.sqrt(fit.chi2_per_dof):.2g} x the load-cell noise of {sigma:.3g} N): the model '
                        'does not describe what the data show; the uncertainties are inflated by this misfit')
