@@ -351,7 +351,10 @@ def test_truncated_log_decodes_what_is_there_with_a_warning(logged_runs, tmp_pat
     r, path, _, _ = logged_runs[suffix]
     data = path.read_bytes()
     cut = tmp_path / f'cut{suffix}'
-    cut.write_bytes(data[:int(len(data) * 0.6)])
+    end = int(len(data) * 0.6)
+    if data[end - 1:end] == b'\n':
+        end -= 1     # cut inside a line: a cut at a line end leaves a text log that is complete as far as it goes
+    cut.write_bytes(data[:end])
     with pytest.warns(CanLogWarning, match='truncated|not closed'):
         log = decode_log(cut)
     assert not log.complete and log.warnings

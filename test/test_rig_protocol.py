@@ -30,8 +30,11 @@ def test_dbc_defines_the_rig_frames_with_units_and_counters():
     names = {m.name for m in db.messages}
     assert names == {'HostCommand', 'HostLimits', 'HostStreamStart', 'Setpoint', 'SetpointPacked', 'Feedback',
                      'FeedbackPacked', 'FeedbackApplied', 'FeedbackMeasured', 'ControllerStatus', 'Temperature',
-                     'ControllerHeartbeat', 'HostHeartbeat'}
-    assert db.version == 'rubber_rig 3'
+                     'ControllerHeartbeat', 'HostHeartbeat', 'ControllerIdentity'}
+    assert db.version == 'rubber_rig 4'
+    ident = db.get_message_by_name('ControllerIdentity')
+    assert ident.cycle_time == 1000 and ident.get_signal_by_name('CI_Protocol').length == 8
+    assert ident.get_signal_by_name('CI_VelocityMax').unit == 'm/s'
     packed = db.get_message_by_name('FeedbackPacked')
     assert packed.is_fd and packed.length == 64 and packed.get_signal_by_name('FBP_Sequence').length == 32
     assert {s.unit for s in packed.signals if s.name.startswith('FBP_Force')} == {'N'}
@@ -64,7 +67,8 @@ def test_dbc_protocol_module_and_rig_status_msg_agree():
     commands = db.get_message_by_name('HostCommand').get_signal_by_name('CMD_Code').choices
     assert {str(v): int(k) for k, v in commands.items()} == {
         'NOP': protocol.CMD_NOP, 'ENABLE': protocol.CMD_ENABLE, 'ABORT': protocol.CMD_ABORT,
-        'RESET': protocol.CMD_RESET, 'DISABLE': protocol.CMD_DISABLE, 'HOLD': protocol.CMD_HOLD}
+        'RESET': protocol.CMD_RESET, 'DISABLE': protocol.CMD_DISABLE, 'HOLD': protocol.CMD_HOLD,
+        'IDENTIFY': protocol.CMD_IDENTIFY}
 
     msg = (Path(__file__).resolve().parents[1] / 'msg_defs' / 'msg' / 'RigStatus.msg').read_text()
     constants = {m[1]: int(m[2]) for m in re.finditer(r'^uint\d+\s+((?:STATE|FAULT)_\w+)\s*=\s*(\d+)', msg, re.M)}

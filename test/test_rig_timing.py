@@ -48,8 +48,9 @@ def test_single_sample_frames_fill_a_1_5_mbit_bus_at_about_5_khz():
     setpoint, feedback = load.frames['Setpoint'][1], load.frames['Feedback'][1]
     assert setpoint == pytest.approx(135e-6) and feedback == pytest.approx(frame_time(12, 1e6, 5e6, fd=True))
     assert load.per_sample == pytest.approx(setpoint + feedback)
-    # periodic frames: status 100/s, temperature 10/s and two heartbeats 20/s each, all 8-byte classic
-    assert load.periodic == pytest.approx(150 * 135e-6)
+    # periodic frames: status 100/s, temperature 10/s, two heartbeats 20/s each and the identity 1/s, all 8-byte
+    # classic
+    assert load.periodic == pytest.approx(151 * 135e-6)
     assert load.load == pytest.approx(1000 * load.per_sample + load.periodic)
     assert 4800 < load.max_rate < 5000 and 2300 < load.rate_at(0.5) < 2500
     assert protocol_load(load.max_rate, 1e6, 5e6, profile='single').load == pytest.approx(1.0)

@@ -29,7 +29,7 @@ from ..excitation.limits import LimitError, Limits
 from ..settings import setting
 from .can.canlog import CanLogError, log_format
 from .can.frames import PROFILES, default_profile
-from .can.protocol import cycle_time
+from .can.protocol import PROTOCOL_VERSION, cycle_time
 from .can.timing import protocol_load
 
 
@@ -132,6 +132,12 @@ class SimOptions:
     host_timeout: float = setting(0.5, 'host heartbeat silence after which the controller ramps to rest',
                                   units='s', range=(0.01, 60.0))
     seed: int = setting(0, 'random seed of the simulated sensors', range=(0, 2**31 - 1))
+    protocol_version: int = setting(PROTOCOL_VERSION, 'protocol version the simulated controller states in '
+                                    'ControllerIdentity (another value stands for a controller of another version)',
+                                    range=(0, 255))
+    defects: List[str] = setting(doc='deliberate protocol defects of the simulated controller, each breaking one '
+                                 'requirement of docs/protocol.md (conformance testing only; YAML list, e.g. '
+                                 '[heartbeat_80ms])', yaml_text=True, default_factory=list)
     faults: List[FaultSpec] = setting(
         doc='injected faults of the simulated rig (YAML list, e.g. [{type: silent_controller, start: 2.0}]; types: '
             + ', '.join(FAULT_TYPES) + ')', yaml_text=True, default_factory=list)
@@ -154,6 +160,12 @@ class SimOptions:
             raise ConfigError(f'{path}.force_gain', f"must be > 0, got {self.force_gain!r}")
         for i, f in enumerate(self.faults):
             f.check(f'{path}.faults[{i}]')
+        from .sim.defects import check_defects   # noqa: PLC0415 - rig.sim imports this module
+        why = check_defects(self.defects)
+        if why:
+            raise ConfigError(f'{path}.defects', why)
+        if not 0 <= self.protocol_version <= 255:
+            raise ConfigError(f'{path}.protocol_version', 'within 0..255')
 
 
 @dataclass
@@ -222,6 +234,10 @@ class RigConfig:
                               'process on that bus')
     can_log: str = setting('', 'raw CAN log: every frame the driver sends and receives, written by python-can '
                            '(format by suffix: .blf Vector BLF, .asc Vector ASC, .log candump -L); empty: off')
+    require_identity: bool = setting(True, 'stream only to a controller that identified itself (ControllerIdentity) '
+                                     'with the protocol version of this rubber_rig.dbc')
+    controller_device: int = setting(0, 'device code the controller must state in ControllerIdentity (0: any)',
+                                     range=(0, 65535))
     load_cell_delay: float = setting(0.0, "the load cell's known delay (it reads the force of this long ago): "
                                      'recorded in the metadata, applied by rubber-rig fit', units='s',
                                      range=(0.0, 0.1))

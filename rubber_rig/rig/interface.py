@@ -44,11 +44,15 @@ class Rig:
         self.medium = medium   # the simulated bus with timing (BusMedium), or None
 
     def wait_ready(self, timeout: float = 10.0) -> bool:
-        """Poll until the controller has announced itself (state no longer 'unconfigured'); wall timeout [s]."""
+        """Poll until the controller has announced itself (state no longer 'unconfigured') and, where the
+        configuration requires it, identified itself (ControllerIdentity); wall timeout [s].
+        """
         deadline = time.monotonic() + timeout
+        d = self.driver
         while time.monotonic() < deadline:
-            self.driver.poll()
-            if self.driver.controller_state != 'unconfigured':
+            d.poll()
+            if d.controller_state != 'unconfigured' and (d.controller_identity is not None
+                                                         or not d.cfg.require_identity):
                 return True
             time.sleep(0.002)
         return False

@@ -28,6 +28,7 @@ from .frames import SampleFrames
 from .protocol import (
     CMD_ABORT,
     CMD_HOLD,
+    CMD_IDENTIFY,
     CMD_RESET,
     FAULT_BUS,
     FAULT_DISPLACEMENT_LIMIT,
@@ -38,6 +39,7 @@ from .protocol import (
     FAULT_WATCHDOG,
     STATES,
     STATUS_SEQ_MOD,
+    PROTOCOL_VERSION,
     MalformedFrame,
     Protocol,
     fault_names,
@@ -90,7 +92,10 @@ class RigDriver:
         self._outbox_since = None        # when the oldest of them was first refused
         self._sent_end = 0               # after the last setpoint ever sent: a new stream starts at or after it
         self._handlers = {'ControllerStatus': self._on_status, 'ControllerHeartbeat': self._on_heartbeat,
-                          'Temperature': self._on_temperature}
+                          'Temperature': self._on_temperature, 'ControllerIdentity': self._on_identity}
+        # what the controller said of itself (ControllerIdentity): protocol, device, firmware, host_timeout [s],
+        # velocity_max [m/s]; None until it did
+        self.controller_identity = None
         # stream bookkeeping
         self._stream = None              # GrantedStream of the owner, or None
         self._stream_ids = itertools.count(int(clock() * 1000) % 1_000_000 * 1000 + 1)
@@ -128,6 +133,7 @@ class RigDriver:
         self.pump = None                 # callable run at the start of poll() (in-process fast simulator)
         self._send_host_heartbeat()
         self.send_limits()
+        self._send_command(CMD_IDENTIFY)   # HOST-ID-1: ask who is there before anything streams
 
     # ---- events
     def _event(self, level: str, text: str, headline: bool = True):
@@ -171,6 +177,9 @@ class RigDriver:
             return 'rig fault: ' + '; '.join(self.fault_messages[-3:]) + ' (reset to acknowledge)'
         if self.controller_state == 'unconfigured':
             return 'the controller has not announced itself'
+        why = self._identity_mismatch()
+        if why:
+            return why
         if self._aborting or self.controller_state == 'ramping_down':
             return 'the rig is ramping to rest'
         if self.controller_state == 'fault' or self.controller_faults:
@@ -370,8 +379,7 @@ class RigDriver:
         """
         if self.controller_state == 'ramping_down':
             return 'the rig is still ramping to rest: reset when it is at rest'
-        self._send(self.proto.encode('HostCommand', {'CMD_Code': CMD_RESET, 'CMD_Counter': 0,
-                                                     'CMD_Argument': 0, 'CMD_RampVelocity': 0}))
+        self._send_command(CMD_RESET)
         if self.faults or self.fault_messages:
             self._event('info', 'reset: cleared ' + ('; '.join(self.fault_messages[-3:]) or 'faults'))
         self.faults, self.fault_messages, self._aborting, self._ramp_pending = 0, [], False, False
@@ -379,6 +387,11 @@ class RigDriver:
         self._sensor.clear()
         self.send_limits()
         return ''
+
+    def _send_command(self, code: int):
+        """A HostCommand without argument (RESET, IDENTIFY)."""
+        self._send(self.proto.encode('HostCommand', {'CMD_Code': code, 'CMD_Counter': 0, 'CMD_Argument': 0,
+                                                     'CMD_RampVelocity': 0}))
 
     def _send_host_heartbeat(self):
         self._host_hb_counter = (self._host_hb_counter + 1) % 256
@@ -563,6 +576,34 @@ class RigDriver:
             self._event('info', f'rig at rest at {self._last_applied * 1e3:.4f} mm (controller {state})')
         elif state == 'fault':
             self._event('error', f'controller reports a fault: {", ".join(fault_names(self.controller_faults))}')
+
+    def _identity_mismatch(self) -> str:
+        """'' when the controller may be streamed to (RigConfig.require_identity, controller_device), else why not."""
+        if not self.cfg.require_identity:
+            return ''
+        ident = self.controller_identity
+        if ident is None:
+            return ('the controller has not identified itself (no ControllerIdentity frame: it may not speak rig '
+                    f'protocol version {PROTOCOL_VERSION})')
+        if ident['protocol'] != PROTOCOL_VERSION:
+            return (f"the controller speaks rig protocol version {ident['protocol']}, this host version "
+                    f'{PROTOCOL_VERSION} (rubber_rig.dbc): refusing to stream')
+        if self.cfg.controller_device and ident['device'] != self.cfg.controller_device:
+            return (f"the controller is device 0x{ident['device']:04x}, the configuration expects "
+                    f'0x{self.cfg.controller_device:04x} (controller_device): refusing to stream')
+        return ''
+
+    def _on_identity(self, sig, msg):
+        ident = {'protocol': int(sig['CI_Protocol']), 'device': int(sig['CI_Device']),
+                 'firmware': int(sig['CI_Firmware']), 'host_timeout': float(sig['CI_HostTimeout']),
+                 'velocity_max': float(sig['CI_VelocityMax'])}
+        if ident != self.controller_identity:
+            self.controller_identity = ident
+            why = self._identity_mismatch()
+            self._event('error' if why else 'info', why or (
+                f"controller 0x{ident['device']:04x} firmware {ident['firmware']}, rig protocol version "
+                f"{ident['protocol']}, host timeout {ident['host_timeout']:g} s, rated velocity "
+                f"{ident['velocity_max']:g} m/s"), headline=bool(why))
 
     def _on_temperature(self, sig, msg):
         self.temperature = float(sig['TEMP_Specimen'])

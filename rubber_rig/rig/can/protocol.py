@@ -62,6 +62,11 @@ FAULT_STREAM = _FAULT_BIT['stream']
 _CMD = {name: code for code, name in _choices('HostCommand', 'CMD_Code').items()}
 CMD_NOP, CMD_ENABLE, CMD_ABORT = _CMD['NOP'], _CMD['ENABLE'], _CMD['ABORT']
 CMD_RESET, CMD_DISABLE, CMD_HOLD = _CMD['RESET'], _CMD['DISABLE'], _CMD['HOLD']
+CMD_IDENTIFY = _CMD['IDENTIFY']
+
+# the protocol version: the number in the DBC's VERSION "rubber_rig N"; a controller states the one it implements
+# in ControllerIdentity.CI_Protocol, and the host streams only to a controller of the same version
+PROTOCOL_VERSION = int(str(_DBC.version).rsplit(' ', 1)[-1])
 
 # sequence numbers are the sample index modulo 2**bits of SP_Sequence (single-sample frames) and of
 # ST_LastSequence (status); the packed frames have their own (rubber_rig.rig.can.frames)

@@ -32,8 +32,12 @@ from ..can.protocol import (
     CMD_ABORT,
     CMD_DISABLE,
     CMD_HOLD,
+    CMD_IDENTIFY,
     CMD_RESET,
+    FAULT_CONTROLLER,
+    FAULT_DISPLACEMENT_LIMIT,
     FAULT_SENSOR,
+    FAULT_VELOCITY_LIMIT,
     FAULT_WATCHDOG,
     STATE_CODE,
     STATUS_SEQ_MOD,
@@ -48,6 +52,10 @@ from .plant import Actuator, DelayLine, Sensor
 from .specimen import build_specimen
 
 STREAMING = ('running', 'holding', 'ramping_down')
+DEVICE_CODE = 0x5352      # ControllerIdentity.CI_Device of the simulated controller ('SR')
+FIRMWARE = 1
+IDLE_PERIOD = 0.01        # [s] the idle controller's housekeeping tick (ControllerStatus period)
+LSB = 1e-7                # [m] displacement resolution of the setpoint frames
 
 
 class SimController:
@@ -63,6 +71,7 @@ class SimController:
                  profile: str = 'packed', flood_bus=None):
         self.bus, self.fs, self.opt, self.paced = bus, float(sample_rate), options, paced
         self.proto = protocol or Protocol()
+        self.defects = frozenset(options.defects)   # deliberate protocol defects (conformance testing only)
         self.frames = SampleFrames(profile, self.proto.db, self.fs)
         self._setpoint_ids = {self.frames.codecs[n].frame_id for n in self.frames.setpoint_names}
         self._fb = ([], [], [])           # measured x, f and applied u not yet sent
@@ -105,9 +114,15 @@ class SimController:
                          'setpoints_stale': 0}
         self._held = []                   # (release_tick, message) for delayed frames
         self._hb = self._st = self._tc = 0
+        hb_period = 0.08 if 'heartbeat_80ms' in self.defects else cycle_time('ControllerHeartbeat')
+        self._periods = {'ControllerHeartbeat': hb_period, 'ControllerStatus': cycle_time('ControllerStatus'),
+                         'Temperature': cycle_time('Temperature'), 'ControllerIdentity': cycle_time('ControllerIdentity')}
         per = lambda s: max(1, round(s * self.fs))  # noqa: E731
-        self._hb_every, self._st_every, self._tc_every = (
-            per(cycle_time(name)) for name in ('ControllerHeartbeat', 'ControllerStatus', 'Temperature'))
+        self._hb_every, self._st_every, self._tc_every, self._id_every = (
+            per(self._periods[name]) for name in ('ControllerHeartbeat', 'ControllerStatus', 'Temperature',
+                                                  'ControllerIdentity'))
+        self._idle_due = {}               # frame name -> wall-clock time it is next due while idle (paced)
+        self._jitter_until = 0            # feedback_jitter defect: release tick of the last held feedback frame
         self._stop = threading.Event()
         self._announced = False
         self._thread = None
@@ -129,6 +144,7 @@ class SimController:
         """Serve the bus until stop(): announce, then receive frames and tick."""
         self._housekeeping(force=True)
         next_idle_hk = time.monotonic()
+        self._idle_due = {name: next_idle_hk + period for name, period in self._periods.items()}
         deadline = None
         while not self._stop.is_set():
             if self.paced:
@@ -166,9 +182,9 @@ class SimController:
                     if self._idle_since is None and self.ticks:
                         self._idle_since = now
                     if now >= next_idle_hk:
-                        self._housekeeping(force=True)
-                        next_idle_hk = now + 0.05
-                    timeout = min(0.01, max(0.0, next_idle_hk - now))
+                        self._idle_housekeeping(now)
+                        next_idle_hk = max(next_idle_hk + IDLE_PERIOD, now)
+                    timeout = min(IDLE_PERIOD, max(0.0, next_idle_hk - now))
                 msg = self.bus.recv(timeout)
                 while msg is not None:
                     self._handle(msg)
@@ -234,7 +250,7 @@ class SimController:
             self.accept_from = int(sig['HS_FirstSequence'])
         elif name == 'HostHeartbeat':
             self.last_host_hb = self.ticks
-        elif name == 'HostLimits':
+        elif name == 'HostLimits' and 'ignore_host_limits' not in self.defects:
             lo, hi = float(sig['HL_DisplacementMin']), float(sig['HL_DisplacementMax'])
             if lo < hi:
                 self.lower, self.upper = lo, hi
@@ -245,6 +261,8 @@ class SimController:
                 self.abort(float(sig['CMD_Argument']), 0, float(sig['CMD_RampVelocity']) or None)
             elif code == CMD_HOLD:
                 self.abort(None, 0, float(sig['CMD_RampVelocity']) or None)
+            elif code == CMD_IDENTIFY:
+                self._send_identity()   # CTRL-ID-1
             elif code == CMD_RESET and self.state in ('fault', 'idle'):
                 self.fault_bits = 0
                 self.state = 'idle'
@@ -274,10 +292,33 @@ class SimController:
             self._housekeeping(force=True)
         late = max(0, min(len(values), self.next_seq - seq))
         self.counters['setpoints_late'] += late
+        if self._refuse_setpoints(seq, late, values):
+            return
         if len(self.buffer) < self.frames.setpoint_modulus // 2:
             buffer = self.buffer
             for i in range(late, len(values)):
                 buffer[seq + i] = values[i]
+
+    def _refuse_setpoints(self, seq: int, late: int, values) -> bool:
+        """CTRL-LIM-2 / CTRL-LIM-3: a setpoint outside the host's limits, or one that steps faster than the rated
+        velocity from the setpoint before it, is never applied: the controller faults and ramps to rest. True if
+        the batch was refused.
+        """
+        tol = LSB + 1e-12
+        step_max = (self.opt.actuator_velocity_max * 1.02) / self.fs + 2 * LSB
+        prev = self.buffer.get(seq + late - 1)
+        if prev is None and seq + late == self.next_seq:
+            prev = self.u
+        for i in range(late, len(values)):
+            value = values[i]
+            if not self.lower - tol <= value <= self.upper + tol:
+                self.abort(0.0, FAULT_DISPLACEMENT_LIMIT)
+                return True
+            if prev is not None and abs(value - prev) > step_max:
+                self.abort(0.0, FAULT_VELOCITY_LIMIT)
+                return True
+            prev = value
+        return False
 
     def abort(self, target: float = 0.0, fault_bits: int = 0, velocity_max: float = None):
         """Flush queued setpoints and ramp from the current command and velocity to target [m] (None: stop
@@ -290,8 +331,11 @@ class SimController:
             v = (self.u - self.u_prev) * self.fs
             if target is None:
                 target = float(stopping_positions(self.u, v, self.decel_max, self.fs))
+            velocity = min(velocity_max or self.RAMP_VELOCITY_MAX, self.RAMP_VELOCITY_MAX)
+            if 'slow_ramp' in self.defects:
+                velocity /= 5.0
             self.ramp = SafeRamp(self.u, v, target, self.fs,
-                                 velocity_max=min(velocity_max or self.RAMP_VELOCITY_MAX, self.RAMP_VELOCITY_MAX),
+                                 velocity_max=velocity,
                                  accel_max=RAMP_ACCEL, decel_max=self.decel_max, lower=self.lower, upper=self.upper)
             self.state = 'ramping_down'
         elif self.fault_bits:
@@ -311,7 +355,7 @@ class SimController:
             return 0
         ticks, seq, buffer = self.ticks, self.next_seq, self.buffer
         n = min(limit, self._st_every - ticks % self._st_every, self._hb_every - ticks % self._hb_every,
-                self._tc_every - ticks % self._tc_every,
+                self._tc_every - ticks % self._tc_every, self._id_every - ticks % self._id_every,
                 int(self.opt.host_timeout * self.fs - (ticks - self.last_host_hb)) + 1)
         if n < 2:
             return 0
@@ -363,8 +407,10 @@ class SimController:
                 self.state = 'holding'
             else:
                 self.state = 'running'
-            if self.ticks - self.last_host_hb > self.opt.host_timeout * self.fs:
-                self.abort(0.0, FAULT_WATCHDOG)   # host gone: the controller brings the rig to rest itself
+            if self.ticks - self.last_host_hb > self.opt.host_timeout * self.fs \
+                    and 'keep_setpoint_on_host_silence' not in self.defects:
+                # CTRL-WD-1: host gone, the controller brings the rig to rest itself
+                self.abort(0.0, FAULT_CONTROLLER if 'wrong_fault_bit' in self.defects else FAULT_WATCHDOG)
         self.u_prev, self.u = self.u, u
         x = self.actuator.step(u)
         force = self.specimen.step(x)
@@ -425,7 +471,8 @@ class SimController:
         fx, ff, fu = self._fb
         k = len(fx) if count is None else count
         if k:
-            for m in self.frames.encode_feedback(self._fb_first, fx[:k], ff[:k], fu[:k]):
+            first = self._fb_first & 0xFFFF if 'sequence_16bit' in self.defects else self._fb_first
+            for m in self.frames.encode_feedback(first, fx[:k], ff[:k], fu[:k]):
                 self._transmit('Feedback', m)
             self._fb = (fx[k:], ff[k:], fu[k:])
             self._fb_first += k
@@ -442,9 +489,43 @@ class SimController:
             self._hb = (self._hb + 1) % 256
             self._send('ControllerHeartbeat', {'HB_Counter': self._hb, 'HB_State': code})
         if force or self.ticks % self._tc_every == 0:
-            self._tc = (self._tc + 1) % 256
-            temp = self.temperature + self.opt.temperature_noise * float(self.temp_rng.standard_normal())
-            self._send('Temperature', {'TEMP_Specimen': temp, 'TEMP_Counter': self._tc})
+            self._send_temperature()
+        if force or self.ticks % self._id_every == 0:
+            self._send_identity()
+
+    def _send_temperature(self):
+        self._tc = (self._tc + 1) % 256
+        temp = self.temperature + self.opt.temperature_noise * float(self.temp_rng.standard_normal())
+        self._send('Temperature', {'TEMP_Specimen': temp, 'TEMP_Counter': self._tc})
+
+    def _idle_housekeeping(self, now: float):
+        """Paced, not ticking: each periodic frame at its own period of wall-clock time (CTRL-HB-1, CTRL-ST-1)."""
+        due = self._idle_due
+        for name, period in self._periods.items():
+            at = due.get(name, now)
+            if now + 1e-4 < at:
+                continue
+            due[name] = max(at + period, now)
+            if name == 'ControllerIdentity':
+                self._send_identity()
+            elif name == 'Temperature':
+                self._send_temperature()
+            else:
+                code = STATE_CODE[self.state]
+                if name == 'ControllerStatus':
+                    self._st = (self._st + 1) % 16
+                    self._send(name, {'ST_State': code, 'ST_Counter': self._st, 'ST_Faults': self.fault_bits,
+                                      'ST_LastSequence': (self.next_seq - 1) % STATUS_SEQ_MOD,
+                                      'ST_BufferLevel': min(len(self.buffer), 65535)})
+                else:
+                    self._hb = (self._hb + 1) % 256
+                    self._send(name, {'HB_Counter': self._hb, 'HB_State': code})
+
+    def _send_identity(self):
+        """ControllerIdentity (CTRL-ID-1): protocol version, device, firmware, host timeout, rated velocity."""
+        self._send('ControllerIdentity', {'CI_Protocol': self.opt.protocol_version, 'CI_Device': DEVICE_CODE,
+                                          'CI_Firmware': FIRMWARE, 'CI_HostTimeout': min(self.opt.host_timeout, 2.55),
+                                          'CI_VelocityMax': min(self.opt.actuator_velocity_max, 6.5535)})
 
     def _send(self, name, signals):
         self._transmit(name, self.proto.encode(name, signals))
@@ -452,6 +533,11 @@ class SimController:
     def _transmit(self, name, msg):
         """Put msg on the bus through the fault injector (name: the frame's role, e.g. 'Feedback')."""
         for delay, m in self.faults.transmit(name, msg, self.fault_time()):
+            if name == 'Feedback' and 'feedback_jitter' in self.defects:
+                # 0-8 ms late, never overtaking the frame before it
+                late = int(self.temp_rng.integers(0, int(0.008 * self.fs) + 1))
+                self._jitter_until = max(self._jitter_until, self.ticks + late)
+                delay = self._jitter_until - self.ticks
             if delay:
                 self._held.append((self.ticks + delay, m))
             else:

@@ -38,7 +38,7 @@ class FaultInjector:
 
     def transmit(self, name: str, msg, t: float):
         out = [(0, msg)]
-        if name in ('ControllerHeartbeat', 'ControllerStatus') and self.silent(t):
+        if name in ('ControllerHeartbeat', 'ControllerStatus', 'ControllerIdentity') and self.silent(t):
             return []
         for f in self.faults:
             if f.type in ('stuck_sensor', 'silent_controller', 'bus_flood') or name not in f.frames \

@@ -1,0 +1,306 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""The requirements a recording of the bus alone can show: frame periods and counters, CRCs, feedback rate,
+timing, continuity and sequence width, status consistency, and the host's duties. Run on the live trace of a
+conformance run and on a raw CAN log from a real rig (offline mode) alike.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..can.protocol import FAULT_NAMES, STATES, STATUS_SEQ_MOD, cycle_time, unwrap
+from .report import FAIL, NOT_TESTED, PASS, Results
+from .trace import Trace
+
+PERIODIC = {'ControllerHeartbeat': 'CTRL-HB-1', 'ControllerStatus': 'CTRL-ST-1', 'Temperature': 'CTRL-TEMP-1',
+            'ControllerIdentity': 'CTRL-ID-2'}
+PERIOD_TOLERANCE = 0.10   # the median interval within +-10 % of the DBC cycle time
+GAP_FACTOR = 2.0          # 99 % of the intervals at most twice the cycle time (the host watchdog's margin)
+RATE_TOLERANCE = 0.005    # feedback sample rate within +-0.5 % of the configured rate
+JITTER_MAX = 2e-3         # [s] 99th minus 1st percentile of the feedback arrival delays
+RUN_BREAK = 0.05          # [s] feedback silent this long ends a run (the controller stopped ticking)
+STATUS_LEAD = 0.01        # [s] how far ST_LastSequence may be ahead of the feedback received
+STATE_TICKING = {STATES.index(s) for s in ('running', 'holding', 'ramping_down')}
+NARROW = 1 << 16          # the width a 32-bit sequence must not wrap at
+
+
+@dataclass
+class FeedbackRun:
+    """Feedback frames of one stretch of ticking: arrival time and full sequence of each frame's newest sample."""
+
+    t: list = field(default_factory=list)
+    last: list = field(default_factory=list)
+    next: int = 0
+    offset: int = 0
+    gaps: int = 0
+    lost: int = 0
+    repeats: int = 0
+    narrow_wraps: int = 0
+    crossings: int = 0      # 2**16 boundaries crossed with the right sequence numbers
+    field_wraps: int = 0    # sequence field wrapped at its full width
+
+
+def feedback_runs(trace: Trace) -> list:
+    """The controller's feedback frames grouped into runs, sequences unwrapped and checked for continuity."""
+    runs, cur, prev_raw = [], None, None
+    for f in trace.frames:
+        if f.host is not False or f.samples is None or f.malformed:
+            continue
+        raw, xs = int(f.samples[0]), f.samples[1]
+        n, mod = len(xs), trace.modulus[f.name]
+        if cur is None or f.t - cur.t[-1] > RUN_BREAK:
+            cur = FeedbackRun(next=raw)
+            runs.append(cur)
+            prev_raw = raw
+        full_raw = unwrap(raw, prev_raw, mod)
+        if raw < prev_raw % mod and full_raw > prev_raw:
+            cur.field_wraps += 1
+        full = full_raw + cur.offset
+        if full < cur.next and mod > NARROW and (cur.next - full) % NARROW == 0 and raw % NARROW == 0 \
+                and cur.next % NARROW == 0:
+            cur.narrow_wraps += 1           # restarted at 0 after 65535 in a wider field
+            cur.offset += cur.next - full
+            full = cur.next
+        if full > cur.next:
+            cur.gaps += 1
+            cur.lost += full - cur.next
+        elif full < cur.next:
+            cur.repeats += 1
+        if full // NARROW != (full + n - 1) // NARROW or (full % NARROW == 0 and cur.t and full == cur.next):
+            cur.crossings += 1
+        prev_raw = full_raw
+        cur.next = max(cur.next, full + n)
+        cur.t.append(f.t)
+        cur.last.append(full + n - 1)
+    return runs
+
+
+def check_periodic(trace: Trace, results: Results):
+    """CTRL-HB-1, CTRL-ST-1, CTRL-TEMP-1, CTRL-ID-2: each periodic frame at its DBC cycle time."""
+    for name, rid in PERIODIC.items():
+        period = cycle_time(name)
+        t = np.array([f.t for f in trace.valid(name) if f.host is False])
+        if t.size < 5:
+            results.put(rid, NOT_TESTED, f'{t.size} frames', f'fewer than 5 {name} frames in the trace')
+            continue
+        dt = np.diff(t)
+        med, p99, longest = float(np.median(dt)), float(np.percentile(dt, 99)), float(dt.max())
+        ok = abs(med - period) <= PERIOD_TOLERANCE * period and p99 <= GAP_FACTOR * period
+        why = '' if ok else (f'median interval {med * 1e3:.1f} ms, specified {period * 1e3:.0f} ms +-'
+                             f'{PERIOD_TOLERANCE * 100:.0f} %' if abs(med - period) > PERIOD_TOLERANCE * period
+                             else f'99 % of the intervals must be at most {GAP_FACTOR * period * 1e3:.0f} ms')
+        results.put(rid, PASS if ok else FAIL, f'{name}: median {med * 1e3:.1f} ms, 99th percentile '
+                    f'{p99 * 1e3:.1f} ms, longest {longest * 1e3:.1f} ms ({t.size} frames)', why)
+
+
+def check_counters(trace: Trace, results: Results):
+    """CTRL-HB-2 and CTRL-ST-2: counters step by one, states and fault bits are defined values, HB_State is the
+    state the status frames report.
+    """
+    status = [f for f in trace.valid('ControllerStatus') if f.host is False]
+    hb = [f for f in trace.valid('ControllerHeartbeat') if f.host is False]
+    defined_faults = sum(FAULT_NAMES)
+    for rid, frames, counter, modulus in (('CTRL-ST-2', status, 'ST_Counter', 16),
+                                          ('CTRL-HB-2', hb, 'HB_Counter', 256)):
+        if len(frames) < 2:
+            results.put(rid, NOT_TESTED, f'{len(frames)} frames', 'too few frames in the trace')
+            continue
+        c = np.array([int(f.signals[counter]) for f in frames])
+        skips = int(np.count_nonzero((np.diff(c) - 1) % modulus))
+        states = [int(f.signals['ST_State' if rid == 'CTRL-ST-2' else 'HB_State']) for f in frames]
+        bad_state = sum(1 for s in states if s >= len(STATES))
+        problems = []
+        if skips:
+            problems.append(f'{counter} skipped or repeated {skips} times')
+        if bad_state:
+            problems.append(f'{bad_state} frames with an undefined state')
+        if rid == 'CTRL-ST-2':
+            undefined = sum(1 for f in frames if int(f.signals['ST_Faults']) & ~defined_faults)
+            if undefined:
+                problems.append(f'{undefined} frames with undefined fault bits')
+        else:
+            problems += _heartbeat_state(status, hb)
+        results.put(rid, FAIL if problems else PASS, f'{len(frames)} frames, {skips} counter steps other than +1',
+                    '; '.join(problems))
+
+
+def _heartbeat_state(status: list, hb: list) -> list:
+    """HB_State must be the state of the status frame just before or just after the heartbeat."""
+    if not status:
+        return []
+    ts = np.array([f.t for f in status])
+    st = [int(f.signals['ST_State']) for f in status]
+    wrong = 0
+    for f in hb:
+        k = int(np.searchsorted(ts, f.t))
+        near = {st[i] for i in (k - 1, k) if 0 <= i < len(st)}
+        wrong += int(f.signals['HB_State']) not in near
+    return [f'{wrong} heartbeats state something no status frame around them does'] if wrong else []
+
+
+def check_frames(trace: Trace, results: Results):
+    """CTRL-FRAME-1: every frame of a controller identifier has its DBC length and a valid CRC."""
+    ours = [f for f in trace.frames if f.host is False]
+    bad = sum(1 for f in ours if f.malformed)
+    if not ours:
+        results.put('CTRL-FRAME-1', NOT_TESTED, '', 'no controller frame in the trace')
+        return
+    results.put('CTRL-FRAME-1', FAIL if bad else PASS, f'{bad} of {len(ours)} controller frames malformed',
+                'wrong length or CRC' if bad else '')
+
+
+def check_feedback(trace: Trace, results: Results, runs: list = None):
+    """CTRL-SEQ-1, CTRL-SEQ-2, CTRL-FB-1, CTRL-FB-2 from the runs of feedback frames."""
+    runs = feedback_runs(trace) if runs is None else runs
+    if not runs:
+        for rid in ('CTRL-SEQ-1', 'CTRL-SEQ-2', 'CTRL-FB-1', 'CTRL-FB-2'):
+            results.put(rid, NOT_TESTED, '', 'no feedback frame in the trace')
+        return
+    samples = sum(r.last[-1] - r.last[0] + 1 for r in runs)
+    gaps, lost, repeats = (sum(getattr(r, k) for r in runs) for k in ('gaps', 'lost', 'repeats'))
+    results.put('CTRL-SEQ-1', FAIL if gaps or repeats else PASS,
+                f'{len(runs)} runs, {samples} samples, {gaps} gaps ({lost} samples), {repeats} repeats',
+                'feedback sequences must be contiguous' if gaps or repeats else '')
+    narrow, crossings, wraps = (sum(getattr(r, k) for r in runs) for k in ('narrow_wraps', 'crossings', 'field_wraps'))
+    measured = f'{crossings} crossings of a 2^16 boundary, {wraps} wraps of the sequence field'
+    if narrow:
+        results.put('CTRL-SEQ-2', FAIL, measured, f'the sequence restarted at 0 after 65535 {narrow} times in a '
+                    'field the DBC makes wider (32 bit)')
+    elif crossings or wraps:
+        results.put('CTRL-SEQ-2', PASS, measured)
+    else:
+        results.put('CTRL-SEQ-2', NOT_TESTED, measured, 'the trace never crosses a 2^16 sequence boundary')
+    fs = trace.sample_rate
+    rates, spreads = [], []
+    for r in runs:
+        if len(r.t) < 100 or r.t[-1] - r.t[0] < 0.5:
+            continue
+        seq, t = np.asarray(r.last, dtype=float), np.asarray(r.t)
+        slope, icpt = np.polyfit(seq - seq[0], t, 1)
+        resid = t - (icpt + slope * (seq - seq[0]))
+        rates.append(1.0 / slope)
+        spreads.append(float(np.percentile(resid, 99) - np.percentile(resid, 1)))
+    if not rates:
+        for rid in ('CTRL-FB-1', 'CTRL-FB-2'):
+            results.put(rid, NOT_TESTED, '', 'no feedback run of 0.5 s or more')
+        return
+    worst = max(rates, key=lambda r: abs(r / fs - 1))
+    ok = abs(worst / fs - 1) <= RATE_TOLERANCE
+    results.put('CTRL-FB-1', PASS if ok else FAIL, f'{len(rates)} runs, rate {min(rates):.2f}..{max(rates):.2f} Hz '
+                f'(configured {fs:g} Hz)', '' if ok else f'off by more than {RATE_TOLERANCE * 100:g} %')
+    spread = max(spreads)
+    ok = spread <= JITTER_MAX
+    results.put('CTRL-FB-2', PASS if ok else FAIL, f'arrival jitter (99th - 1st percentile) {spread * 1e3:.2f} ms '
+                f'(worst of {len(spreads)} runs)', '' if ok else f'more than {JITTER_MAX * 1e3:g} ms')
+
+
+def check_status_sequence(trace: Trace, results: Results):
+    """CTRL-ST-3: while ticking, ST_LastSequence is at or ahead of the feedback received, by at most
+    STATUS_LEAD of samples (plus one frame's worth).
+    """
+    lead = int(STATUS_LEAD * trace.sample_rate) + 6
+    last_fb, diffs = None, []
+    for f in trace.frames:
+        if f.host is not False or f.malformed:
+            continue
+        if f.samples is not None:
+            last_fb = int(f.samples[0]) + len(f.samples[1]) - 1
+        elif f.name == 'ControllerStatus' and last_fb is not None and int(f.signals['ST_State']) in STATE_TICKING:
+            d = (int(f.signals['ST_LastSequence']) - last_fb) % STATUS_SEQ_MOD
+            diffs.append(d - STATUS_SEQ_MOD if d >= STATUS_SEQ_MOD // 2 else d)
+    if not diffs:
+        results.put('CTRL-ST-3', NOT_TESTED, '', 'no status frame while the controller was ticking')
+        return
+    lo, hi = min(diffs), max(diffs)
+    ok = lo >= -6 and hi <= lead
+    results.put('CTRL-ST-3', PASS if ok else FAIL, f'ST_LastSequence - last feedback received: {lo}..{hi} samples '
+                f'({len(diffs)} status frames)', '' if ok else f'must be within -6..{lead}')
+
+
+def check_host(trace: Trace, results: Results):
+    """HOST-HB-1, HOST-LIM-1, HOST-STREAM-1 from the host's frames (a log written by the host's driver)."""
+    sp = [f for f in trace.frames if f.host and f.samples is not None and not f.malformed]
+    if not sp:
+        for rid in ('HOST-HB-1', 'HOST-LIM-1', 'HOST-STREAM-1'):
+            results.put(rid, NOT_TESTED, '', 'no host setpoint frame in the trace')
+        return
+    first = sp[0].t
+    limits = [f for f in trace.valid('HostLimits') if f.t <= first]
+    starts = trace.valid('HostStreamStart')
+    if not any(f.t <= first for f in starts):
+        results.put('HOST-LIM-1', NOT_TESTED, '', 'the log starts in the middle of a stream')
+        results.put('HOST-STREAM-1', NOT_TESTED, '', 'the log starts in the middle of a stream')
+    else:
+        results.put('HOST-LIM-1', PASS if limits else FAIL, f'{len(limits)} HostLimits frames before the first '
+                    'setpoint', '' if limits else 'no HostLimits before the first setpoint')
+        unannounced = _unannounced_streams(trace)
+        results.put('HOST-STREAM-1', FAIL if unannounced else PASS, f'{len(starts)} HostStreamStart frames, '
+                    f'{unannounced} streams without one', '')
+    hb = np.array([f.t for f in trace.valid('HostHeartbeat')])
+    period = cycle_time('HostHeartbeat')
+    spans = _spans([f.t for f in sp], 0.1)
+    dts = np.concatenate([np.diff(hb[(hb >= a) & (hb <= b)]) for a, b in spans] + [np.empty(0)])
+    if dts.size < 5:
+        results.put('HOST-HB-1', NOT_TESTED, f'{dts.size} intervals', 'too few host heartbeats while streaming')
+        return
+    p99 = float(np.percentile(dts, 99))
+    ok = p99 <= GAP_FACTOR * period
+    results.put('HOST-HB-1', PASS if ok else FAIL, f'HostHeartbeat while streaming: median {np.median(dts) * 1e3:.1f} '
+                f'ms, 99th percentile {p99 * 1e3:.1f} ms, longest {dts.max() * 1e3:.1f} ms',
+                '' if ok else f'99 % of the intervals must be at most {GAP_FACTOR * period * 1e3:.0f} ms')
+
+
+def _spans(times: list, gap: float) -> list:
+    out = []
+    for t in times:
+        if out and t - out[-1][1] <= gap:
+            out[-1][1] = t
+        else:
+            out.append([t, t])
+    return out
+
+
+def _unannounced_streams(trace: Trace) -> int:
+    """Setpoint runs after the controller came to rest with no HostStreamStart in between."""
+    need, count, prev_state, started = False, 0, None, False
+    for f in trace.frames:
+        if f.malformed or f.host is None:
+            continue
+        if f.name == 'HostStreamStart':
+            need, started = False, True
+        elif f.name == 'ControllerStatus':
+            state = STATES[int(f.signals['ST_State'])] if int(f.signals['ST_State']) < len(STATES) else None
+            if prev_state == 'ramping_down' and state in ('idle', 'fault'):
+                need = True
+            prev_state = state
+        elif f.host and f.samples is not None and started and need:
+            count += 1
+            need = False
+    return count
+
+
+def check_offline(trace: Trace) -> Results:
+    """Every requirement a trace alone can show (Requirement.offline), on `trace`."""
+    results = Results()
+    check_frames(trace, results)
+    check_periodic(trace, results)
+    check_counters(trace, results)
+    check_feedback(trace, results)
+    check_status_sequence(trace, results)
+    check_host(trace, results)
+    return results

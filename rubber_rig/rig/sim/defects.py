@@ -1,0 +1,41 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Deliberate protocol defects of the simulated controller (SimOptions.defects).
+
+Each one breaks one requirement of the rig protocol specification (docs/protocol.md) the way a real controller's
+first firmware tends to, so that `rubber-rig conformance` can be shown to catch it. Never for use on a rig: a
+defect makes the simulated controller unsafe in exactly the way it names.
+"""
+
+# defect name -> (requirement identifiers it breaks, what the controller then does)
+DEFECTS = {
+    'keep_setpoint_on_host_silence': (('CTRL-WD-1',), 'keeps holding the last setpoint when the host falls silent '
+                                      'instead of ramping to rest'),
+    'heartbeat_80ms': (('CTRL-HB-1',), 'sends ControllerHeartbeat every 80 ms instead of 50 ms'),
+    'sequence_16bit': (('CTRL-SEQ-2',), 'counts the packed feedback sequence in 16 bits where the DBC specifies 32'),
+    'ignore_host_limits': (('CTRL-LIM-1', 'CTRL-LIM-2'), 'ignores HostLimits: its own ramps and its setpoint check '
+                           'use no displacement bounds'),
+    'feedback_jitter': (('CTRL-FB-2',), 'sends each feedback frame 0-8 ms late (random, in order)'),
+    'wrong_fault_bit': (('CTRL-FAULT-1',), 'reports host silence with the controller fault bit instead of watchdog'),
+    'slow_ramp': (('CTRL-RAMP-1',), 'ramps to rest at a fifth of the commanded ramp velocity'),
+}
+
+
+def check_defects(names) -> str:
+    """'' when every name is a known defect, else what is wrong (for the configuration error)."""
+    for name in names:
+        if name not in DEFECTS:
+            return f"unknown defect {name!r} (one of: {', '.join(DEFECTS)})"
+    return ''
