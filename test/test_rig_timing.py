@@ -62,8 +62,8 @@ def test_packed_frames_carry_10_khz_within_half_a_1_5_mbit_bus():
     t64 = frame_time(64, 1e6, 5e6, fd=True)
     assert sp == pytest.approx((10000 / 19, t64)) and fb == pytest.approx((10000 / 6, t64))
     assert set(load.frames) == {'SetpointPacked', 'FeedbackPacked', 'ControllerStatus', 'Temperature',
-                                'ControllerHeartbeat', 'HostHeartbeat'}
-    assert load.load == pytest.approx(10000 * t64 * (1 / 19 + 1 / 6) + 150 * 135e-6) and load.load < 0.5
+                                'ControllerHeartbeat', 'HostHeartbeat', 'ControllerIdentity'}
+    assert load.load == pytest.approx(10000 * t64 * (1 / 19 + 1 / 6) + 151 * 135e-6) and load.load < 0.5
     # packing follows the rate (at most 1 ms of samples per frame): at 1 kHz one sample per 64-byte frame
     one = protocol_load(1000.0, 1e6, 5e6)
     assert one.frames['FeedbackPacked'] == pytest.approx((1000, t64))

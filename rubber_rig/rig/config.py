@@ -31,6 +31,7 @@ from .can.canlog import CanLogError, log_format
 from .can.frames import PROFILES, default_profile
 from .can.protocol import PROTOCOL_VERSION, cycle_time
 from .can.timing import protocol_load
+from .conformance.defects import check_defects
 
 
 class ConfigError(ValueError):
@@ -160,7 +161,6 @@ class SimOptions:
             raise ConfigError(f'{path}.force_gain', f"must be > 0, got {self.force_gain!r}")
         for i, f in enumerate(self.faults):
             f.check(f'{path}.faults[{i}]')
-        from .sim.defects import check_defects   # noqa: PLC0415 - rig.sim imports this module
         why = check_defects(self.defects)
         if why:
             raise ConfigError(f'{path}.defects', why)

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Deliberate protocol defects of the simulated controller (SimOptions.defects).
+"""Deliberate protocol defects of the simulated controller (rig.config SimOptions.defects).
 
 Each one breaks one requirement of the rig protocol specification (docs/protocol.md) the way a real controller's
 first firmware tends to, so that `rubber-rig conformance` can be shown to catch it. Never for use on a rig: a

@@ -1,0 +1,19 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+
+"""Conformance of a rig controller to the rig protocol specification (docs/protocol.md): the requirements,
+the checks on a bus trace (live or from a raw CAN log), the online run against a controller, and its reports.
+Kept free of imports here: rig.config reads the simulator's defect table from this package.
+"""
