@@ -42,6 +42,7 @@ COMMANDS = {
     'info': 'rubber_rig.cli.info',
     'canlog': 'rubber_rig.cli.canlog',
     'simulate': 'rubber_rig.cli.simulate',
+    'conformance': 'rubber_rig.cli.conformance',
 }
 
 

@@ -59,6 +59,10 @@ def feedback_runs(trace: Trace) -> list:
     """The controller's feedback frames grouped into runs, sequences unwrapped and checked for continuity."""
     runs, cur, prev_raw = [], None, None
     for f in trace.frames:
+        if f.host is False and f.name == 'ControllerStatus' and not f.malformed \
+                and int(f.signals['ST_State']) not in STATE_TICKING:
+            cur = None    # the controller stopped ticking: the next stream may start anywhere (no gap)
+            continue
         if f.host is not False or f.samples is None or f.malformed:
             continue
         raw, xs = int(f.samples[0]), f.samples[1]
@@ -214,13 +218,15 @@ def check_status_sequence(trace: Trace, results: Results):
     STATUS_LEAD of samples (plus one frame's worth).
     """
     lead = int(STATUS_LEAD * trace.sample_rate) + 6
-    last_fb, diffs = None, []
+    last_fb, last_t, diffs = None, 0.0, []
     for f in trace.frames:
         if f.host is not False or f.malformed:
             continue
         if f.samples is not None:
-            last_fb = int(f.samples[0]) + len(f.samples[1]) - 1
-        elif f.name == 'ControllerStatus' and last_fb is not None and int(f.signals['ST_State']) in STATE_TICKING:
+            last_fb, last_t = int(f.samples[0]) + len(f.samples[1]) - 1, f.t
+        elif f.name == 'ControllerStatus' and int(f.signals['ST_State']) not in STATE_TICKING:
+            last_fb = None     # a new stream starts from scratch
+        elif f.name == 'ControllerStatus' and last_fb is not None and f.t - last_t <= RUN_BREAK:
             d = (int(f.signals['ST_LastSequence']) - last_fb) % STATUS_SEQ_MOD
             diffs.append(d - STATUS_SEQ_MOD if d >= STATUS_SEQ_MOD // 2 else d)
     if not diffs:

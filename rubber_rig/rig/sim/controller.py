@@ -116,12 +116,14 @@ class SimController:
         self._hb = self._st = self._tc = 0
         hb_period = 0.08 if 'heartbeat_80ms' in self.defects else cycle_time('ControllerHeartbeat')
         self._periods = {'ControllerHeartbeat': hb_period, 'ControllerStatus': cycle_time('ControllerStatus'),
-                         'Temperature': cycle_time('Temperature'), 'ControllerIdentity': cycle_time('ControllerIdentity')}
+                         'Temperature': cycle_time('Temperature'),
+                         'ControllerIdentity': cycle_time('ControllerIdentity')}
         per = lambda s: max(1, round(s * self.fs))  # noqa: E731
         self._hb_every, self._st_every, self._tc_every, self._id_every = (
             per(self._periods[name]) for name in ('ControllerHeartbeat', 'ControllerStatus', 'Temperature',
                                                   'ControllerIdentity'))
         self._idle_due = {}               # frame name -> wall-clock time it is next due while idle (paced)
+        self._id_next_tick = 0            # rig tick the next ControllerIdentity is due at while ticking
         self._jitter_until = 0            # feedback_jitter defect: release tick of the last held feedback frame
         self._stop = threading.Event()
         self._announced = False
@@ -143,6 +145,8 @@ class SimController:
     def run_forever(self):
         """Serve the bus until stop(): announce, then receive frames and tick."""
         self._housekeeping(force=True)
+        self._send_identity()
+        self._id_next_tick = self.ticks + self._id_every
         next_idle_hk = time.monotonic()
         self._idle_due = {name: next_idle_hk + period for name, period in self._periods.items()}
         deadline = None
@@ -154,6 +158,9 @@ class SimController:
                 if self.state in STREAMING:
                     if deadline is None:
                         deadline = now
+                        # the identity keeps its period across the change from wall-clock to tick time
+                        due = self._idle_due.get('ControllerIdentity', now)
+                        self._id_next_tick = self.ticks + max(0, round((due - now) * self.fs))
                         if self._idle_since is not None:
                             self.idle_ticks += int((now - self._idle_since) * self.fs)
                             self._idle_since = None
@@ -178,6 +185,8 @@ class SimController:
                     timeout = max(0.0, min(deadline - time.monotonic(), 0.01)) if self.state in STREAMING \
                         else 0.0
                 else:
+                    if deadline is not None:   # stopped ticking: back to wall-clock time
+                        self._idle_due['ControllerIdentity'] = now + max(0, self._id_next_tick - self.ticks) / self.fs
                     deadline = None
                     if self._idle_since is None and self.ticks:
                         self._idle_since = now
@@ -204,6 +213,8 @@ class SimController:
         """
         if not self._announced:
             self._housekeeping(force=True)
+            self._send_identity()
+            self._id_next_tick = self.ticks + self._id_every
             self._announced = True
         msg = self.bus.recv(0)
         while msg is not None:
@@ -355,7 +366,7 @@ class SimController:
             return 0
         ticks, seq, buffer = self.ticks, self.next_seq, self.buffer
         n = min(limit, self._st_every - ticks % self._st_every, self._hb_every - ticks % self._hb_every,
-                self._tc_every - ticks % self._tc_every, self._id_every - ticks % self._id_every,
+                self._tc_every - ticks % self._tc_every, self._id_next_tick - ticks,
                 int(self.opt.host_timeout * self.fs - (ticks - self.last_host_hb)) + 1)
         if n < 2:
             return 0
@@ -490,8 +501,9 @@ class SimController:
             self._send('ControllerHeartbeat', {'HB_Counter': self._hb, 'HB_State': code})
         if force or self.ticks % self._tc_every == 0:
             self._send_temperature()
-        if force or self.ticks % self._id_every == 0:
+        if self.ticks >= self._id_next_tick:
             self._send_identity()
+            self._id_next_tick = self.ticks + self._id_every
 
     def _send_temperature(self):
         self._tc = (self._tc + 1) % 256
@@ -508,6 +520,7 @@ class SimController:
             due[name] = max(at + period, now)
             if name == 'ControllerIdentity':
                 self._send_identity()
+                self._id_next_tick = self.ticks + self._id_every
             elif name == 'Temperature':
                 self._send_temperature()
             else:

@@ -1,0 +1,205 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Check a rig controller against the rig protocol specification (docs/protocol.md).
+
+Online, against a controller on a python-can bus, with small motion inside the envelope you state:
+  rubber-rig conformance --interface socketcan --channel can0 --envelope 1mm --markdown report.md --junit report.xml
+  rubber-rig conformance --sim --envelope 1mm              # the simulated controller, in a process of its own
+  rubber-rig conformance --sim --defect heartbeat_80ms     # ... with a deliberate defect (see docs/protocol.md)
+Offline, from a raw CAN log recorded on a rig (what a log can show: periods, counters, CRCs, feedback rate,
+timing, continuity, sequence width, the host's duties):
+  rubber-rig conformance --log run.blf --rate 1000Hz
+Exit status: 0 every requirement checked passed, 1 a requirement failed, 2 usage error or refusal, 3 the run
+left the envelope and was aborted.
+"""
+import json
+import os
+import subprocess
+import sys
+import time
+
+import can
+
+from rubber_rig.rig.can.bus import open_bus
+from rubber_rig.rig.can.canlog import CanLogError, check_log_path
+from rubber_rig.rig.can.protocol import PROTOCOL_VERSION
+from rubber_rig.rig.config import ConfigError, RigConfig
+from rubber_rig.rig.conformance.active import Aborted, ConformanceRun, Envelope
+from rubber_rig.rig.conformance.defects import DEFECTS
+from rubber_rig.rig.conformance.passive import check_offline
+from rubber_rig.rig.conformance.report import to_junit, to_markdown
+from rubber_rig.rig.conformance.requirements import REQUIREMENTS
+from rubber_rig.rig.conformance.trace import read_log
+from rubber_rig.units import to_si
+
+from .main import CommandError
+
+EXIT_FAIL, EXIT_ABORTED = 1, 3
+
+
+def add_arguments(parser):
+    src = parser.add_mutually_exclusive_group(required=True)
+    src.add_argument('--interface', help='python-can interface of the bus the controller is on (socketcan, pcan, '
+                     'vector, kvaser, udp_multicast, ...)')
+    src.add_argument('--sim', action='store_true', help='test the simulated controller, started as a process of '
+                     'its own on a udp_multicast bus that stays on this host')
+    src.add_argument('--log', help='offline: check a raw CAN log (.blf, .asc, candump .log) recorded on a rig')
+    parser.add_argument('--channel', help='python-can channel (e.g. can0)')
+    parser.add_argument('--bitrate', type=int, default=1_000_000, help='CAN bit rate [bit/s] (default %(default)d)')
+    parser.add_argument('--data-bitrate', type=int, default=5_000_000, help='CAN FD data bit rate [bit/s]')
+    parser.add_argument('--classic', action='store_true', help='classic CAN (no FD): the classic frame profile')
+    parser.add_argument('--profile', choices=('packed', 'single', 'classic'), help='frame profile (default: packed '
+                        'on CAN FD, classic on classic CAN)')
+    parser.add_argument('--bus-options', default='{}', help='extra can.Bus keyword arguments as JSON')
+    parser.add_argument('--rate', default='1000Hz', help='the controller\'s sample rate (default %(default)s)')
+    parser.add_argument('--envelope', help='online: the displacement the run may use, +- this (e.g. 1mm); '
+                        'required: nothing moves without it')
+    parser.add_argument('--envelope-lower', help='lower end of the envelope where it is not symmetric (e.g. -0.5mm)')
+    parser.add_argument('--yes', action='store_true', help='the operator confirms the envelope without a prompt')
+    parser.add_argument('--defect', action='append', default=[], choices=sorted(DEFECTS),
+                        help='with --sim: a deliberate protocol defect of the simulated controller (repeatable)')
+    parser.add_argument('--markdown', help='write the report as Markdown to this file')
+    parser.add_argument('--junit', help='write the report as JUnit XML to this file')
+    parser.add_argument('--can-log', help='online: also write every frame of the run to this raw CAN log')
+
+
+def check_arguments(args):
+    """Combinations argparse cannot check; a message here is a usage error (exit 2)."""
+    try:
+        args.rate_hz = to_si(args.rate, 'frequency')
+        args.upper = to_si(args.envelope, 'length') if args.envelope else None
+        args.lower = to_si(args.envelope_lower, 'length') if args.envelope_lower else None
+    except ValueError as exc:
+        return f'{exc}'
+    if not 10 <= args.rate_hz <= 20000:
+        return f'argument --rate: {args.rate_hz:g} Hz outside 10..20000 Hz'
+    if args.log:
+        if args.envelope or args.defect or args.can_log:
+            return '--log checks a recording: --envelope, --defect and --can-log are for an online run'
+        return None
+    if args.upper is None:
+        return ('an online run moves the actuator: state the displacement envelope it may use with --envelope '
+                '(e.g. --envelope 1mm), inside what the specimen and fixture allow')
+    if args.lower is None:
+        args.lower = -args.upper
+    if args.defect and not args.sim:
+        return '--defect is for the simulated controller (--sim)'
+    try:
+        Envelope(args.lower, args.upper)
+    except ValueError as exc:
+        return f'argument --envelope: {exc}'
+    if args.can_log:
+        try:
+            check_log_path(args.can_log)
+        except CanLogError as exc:
+            return f'argument --can-log: {exc}'
+    return None
+
+
+def _write(args, results, title, facts, elapsed):
+    md = to_markdown(results, title, facts)
+    print(md)
+    if args.markdown:
+        with open(args.markdown, 'w', encoding='utf-8') as f:
+            f.write(md)
+    if args.junit:
+        with open(args.junit, 'w', encoding='utf-8') as f:
+            f.write(to_junit(results, title, elapsed))
+
+
+def _offline(args) -> int:
+    t0 = time.monotonic()
+    try:
+        trace = read_log(args.log, args.rate_hz)
+    except (CanLogError, OSError) as exc:
+        raise CommandError(str(exc)) from None
+    results = check_offline(trace).complete({r.id for r in REQUIREMENTS if r.offline},
+                                            'not shown by this log')
+    facts = [f'log {args.log}: {len(trace.frames)} frames over {trace.end - trace.start:.3f} s, judged at '
+             f'{args.rate_hz:g} Hz', f'rig protocol version {PROTOCOL_VERSION}; offline: only what a log can show']
+    facts += [f'warning: {w}' for w in trace.warnings]
+    _write(args, results, 'rubber_rig protocol conformance (offline)', facts, time.monotonic() - t0)
+    return EXIT_FAIL if not results.passed else 0
+
+
+def _config(args) -> RigConfig:
+    data = {'backend': args.interface or 'udp_multicast', 'channel': args.channel, 'bitrate': args.bitrate,
+            'data_bitrate': args.data_bitrate, 'fd': not args.classic, 'profile': args.profile or '',
+            'sample_rate': args.rate_hz, 'bus_options': json.loads(args.bus_options)}
+    if args.sim:
+        port = 43000 + os.getpid() % 5000     # a port of its own: another run on this host stays apart
+        data['channel'] = data['channel'] or '239.74.163.7'
+        data['bus_options'] = {'port': port, **data['bus_options']}
+        data['sim'] = {'defects': list(args.defect)}
+    return RigConfig.from_dict(data)
+
+
+def _confirm(args) -> bool:
+    if args.yes:
+        return True
+    print(f'The controller will move the actuator inside {args.lower * 1e3:g} .. {args.upper * 1e3:g} mm at a few '
+          'mm/s, with steps of up to 1.5 x its rated velocity for one sample. Is the specimen and fixture safe '
+          'there? Type yes to start: ', end='', flush=True)
+    return sys.stdin.readline().strip().lower() == 'yes'
+
+
+def run(args) -> int:
+    if args.log:
+        return _offline(args)
+    try:
+        cfg = _config(args)
+    except (ConfigError, ValueError) as exc:
+        raise CommandError(str(exc)) from None
+    if not args.sim and not _confirm(args):
+        print('rubber-rig conformance: not confirmed: nothing was sent', file=sys.stderr)
+        return 2
+    process = None
+    if args.sim:
+        process = subprocess.Popen([sys.executable, '-m', 'rubber_rig.rig.sim', '--config-json',
+                                    json.dumps(cfg.to_dict())], stdout=subprocess.DEVNULL)
+    try:
+        bus = open_bus(cfg)
+    except (can.CanError, OSError, ValueError, ImportError) as exc:
+        if process is not None:
+            process.terminate()
+        raise CommandError(f'cannot open the bus {cfg.backend} {cfg.channel or ""}: {exc}') from None
+    t0 = time.monotonic()
+    try:
+        conf = ConformanceRun(bus, cfg.sample_rate, Envelope(args.lower, args.upper), cfg.frame_profile,
+                              log=lambda text: print(text, file=sys.stderr, flush=True))
+        results = conf.run()
+        if args.can_log:
+            conf.trace_to_log(args.can_log)
+    except Aborted as exc:
+        print(f'rubber-rig conformance: aborted: {exc}', file=sys.stderr)
+        return EXIT_ABORTED
+    finally:
+        bus.shutdown()
+        if process is not None:
+            process.terminate()
+            process.wait(timeout=10)
+    ident = conf.identity[1] if conf.identity else None
+    facts = [f'bus {cfg.backend} {cfg.channel or ""}, {cfg.frame_profile} frames, {cfg.sample_rate:g} Hz',
+             f'envelope {args.lower * 1e3:g} .. {args.upper * 1e3:g} mm (stated by the operator)',
+             'controller: ' + (f"device 0x{int(ident['CI_Device']):04x}, firmware {int(ident['CI_Firmware'])}, "
+                               f"protocol {int(ident['CI_Protocol'])}" if ident else 'did not identify itself')
+             + (f" (simulated, defects: {', '.join(args.defect) or 'none'})" if args.sim else ''),
+             'host requirements (HOST-*) are checked offline on a log written by the driver']
+    if conf.deviation:
+        facts.append(f'ABORTED: {conf.deviation}')
+    _write(args, results, 'rubber_rig protocol conformance', facts, time.monotonic() - t0)
+    if conf.deviation:
+        return EXIT_ABORTED
+    return EXIT_FAIL if not results.passed else 0

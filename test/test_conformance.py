@@ -1,0 +1,186 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""`rubber-rig conformance` against the simulated controller in a process of its own, over udp_multicast in a
+private network namespace (real timing, nothing leaves the machine): the correct simulator passes every
+requirement, each deliberately broken one fails exactly the requirements its defect breaks, and the offline
+mode on the run's own log and on a log written by the driver agrees (docs/protocol.md).
+"""
+import math
+import os
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import can
+import pytest
+
+from rubber_rig.cli.main import main
+from rubber_rig.excitation import Program
+from rubber_rig.rig import open_rig, run_program
+from rubber_rig.rig.can.protocol import Protocol
+from rubber_rig.rig.can.stream import StreamRefused
+from rubber_rig.rig.conformance.defects import DEFECTS
+from rubber_rig.rig.conformance.report import Results, to_junit
+from rubber_rig.rig.conformance.requirements import REQUIREMENTS
+
+from support.netns import in_private_netns, rerun_in_private_netns
+
+pytest.importorskip('msgpack', reason='python-can udp_multicast needs msgpack')
+
+HERE = Path(__file__).resolve()
+CTRL = {r.id for r in REQUIREMENTS if r.id.startswith('CTRL')}
+OFFLINE_CTRL = {r.id for r in REQUIREMENTS if r.offline and r.id.startswith('CTRL')}
+inside = pytest.mark.skipif(not os.environ.get('RUBBER_RIG_TEST_PRIVATE_NETNS'),
+                            reason='runs inside the private network namespace of test_conformance_in_private_netns')
+
+
+def _junit(path) -> dict:
+    """requirement id -> 'pass' | 'fail' | 'not tested' from a JUnit report."""
+    out = {}
+    for case in ET.parse(path).getroot().iter('testcase'):
+        out[case.get('name')] = ('fail' if case.find('failure') is not None else
+                                 'not tested' if case.find('skipped') is not None else 'pass')
+    return out
+
+
+def _conformance(tmp_path, *args):
+    junit = tmp_path / 'report.xml'
+    proc = subprocess.run([sys.executable, '-m', 'rubber_rig.cli.main', 'conformance', *args, '--junit', str(junit)],
+                          capture_output=True, text=True, timeout=120)
+    return proc, (_junit(junit) if junit.exists() else {})
+
+
+def test_conformance_in_private_netns():
+    """Host side: the matrix below runs in a private network namespace (skipped where none can be made)."""
+    if in_private_netns():
+        pytest.skip('already inside the namespace')
+    rc, out = rerun_in_private_netns(f'{HERE}::', timeout=290)   # the module's inner tests
+    if rc is None:
+        pytest.skip(out)
+    assert rc == 0 and ' passed' in out and 'failed' not in out, out
+
+
+@inside
+def test_correct_simulator_passes_and_offline_agrees(tmp_path):
+    assert in_private_netns()
+    log = tmp_path / 'run.blf'
+    proc, online = _conformance(tmp_path, '--sim', '--envelope', '1mm', '--can-log', str(log))
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
+    assert set(online) == CTRL
+    assert {k for k, v in online.items() if v != 'pass'} == {'CTRL-PWR-1'}       # needs a power cycle
+    # offline on the run's own log: the same verdicts on every requirement a log can show
+    off = tmp_path / 'off'
+    off.mkdir()
+    proc, offline = _conformance(off, '--log', str(log), '--rate', '1kHz')
+    assert proc.returncode == 0, proc.stdout[-3000:]
+    assert {k: offline[k] for k in OFFLINE_CTRL} == {k: online[k] for k in OFFLINE_CTRL}
+
+
+@inside
+@pytest.mark.parametrize('defect', sorted(DEFECTS))
+def test_each_broken_simulator_fails_exactly_its_requirements(tmp_path, defect):
+    assert in_private_netns()
+    proc, online = _conformance(tmp_path, '--sim', '--envelope', '1mm', '--defect', defect)
+    assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-2000:]
+    failed = {k for k, v in online.items() if v == 'fail'}
+    assert failed == set(DEFECTS[defect][0]), proc.stdout[-3000:]
+
+
+@inside
+def test_offline_on_a_log_written_by_the_driver(tmp_path):
+    """The driver's own CAN log of a program on the separate-process simulator: every requirement a log shows
+    passes, the host's duties included.
+    """
+    assert in_private_netns()
+    log = tmp_path / 'driver.log'
+    cfg = {'backend': 'udp_multicast', 'channel': '239.74.163.9', 'bus_options': {'port': 44111},
+           'spawn_sim': True, 'paced': True, 'can_log': str(log)}
+    prog = Program.from_yaml_text('name: xproc\nblocks:\n  - {waveform: sine, frequency: 2 Hz, amplitude: 0.5 mm, '
+                                  'cycles: 4}\n')
+    with open_rig(cfg) as rig:
+        r = run_program(prog, cfg, rig=rig)
+    assert r.completed, r.message
+    proc, offline = _conformance(tmp_path, '--log', str(log), '--rate', '1000Hz')
+    assert proc.returncode == 0, proc.stdout[-3000:]
+    for rid in ('HOST-HB-1', 'HOST-LIM-1', 'HOST-STREAM-1', 'CTRL-FRAME-1', 'CTRL-HB-1', 'CTRL-ST-1', 'CTRL-SEQ-1',
+                'CTRL-FB-1', 'CTRL-FB-2', 'CTRL-ST-3'):
+        assert offline[rid] == 'pass', (rid, proc.stdout[-3000:])
+
+
+# ---- no bus needed ------------------------------------------------------------------------------------------
+
+def test_an_online_run_needs_a_stated_envelope(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(['conformance', '--interface', 'virtual', '--channel', 'x'])
+    assert exc.value.code == 2
+    assert 'state the displacement envelope' in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(['conformance', '--sim', '--envelope', '1mm', '--envelope-lower', '0.2mm'])
+    assert exc.value.code == 2 and 'must contain the rest position' in capsys.readouterr().err
+
+
+def test_an_unconfirmed_run_sends_nothing(monkeypatch, capsys):
+    """Without --yes the operator must type yes; anything else sends no frame."""
+    listener = can.Bus(interface='virtual', channel='conformance_confirm', receive_own_messages=False)
+    monkeypatch.setattr('sys.stdin', __import__('io').StringIO('no\n'))
+    assert main(['conformance', '--interface', 'virtual', '--channel', 'conformance_confirm',
+                 '--envelope', '1mm']) == 2
+    assert 'not confirmed' in capsys.readouterr().err
+    assert listener.recv(0.2) is None
+    listener.shutdown()
+
+
+def test_offline_reads_a_damaged_log_up_to_the_damage(tmp_path, capsys):
+    proto = Protocol()
+    path = tmp_path / 'a.log'
+    with can.Logger(str(path)) as log:
+        for k in range(40):
+            msg = proto.encode('ControllerHeartbeat', {'HB_Counter': k + 1, 'HB_State': 1})
+            msg.timestamp, msg.channel = 1000.0 + 0.05 * k, 'can0'
+            log.on_message_received(msg)
+    lines = path.read_text().splitlines()
+    path.write_text('\n'.join(lines[:20] + ['garbage line ###'] + lines[20:]) + '\n')
+    code = main(['conformance', '--log', str(path)])
+    out = capsys.readouterr().out
+    # the heartbeats before the damage are read and judged (20 at 50 ms), and the report says where it stopped
+    assert code == 0 and '20 frames' in out and 'unreadable after frame 20' in out
+    assert 'median 50.0 ms' in out and '| CTRL-HB-2 |' in out
+    assert main(['conformance', '--log', str(tmp_path / 'x.txt')]) != 0
+    assert 'unsupported suffix' in capsys.readouterr().err
+
+
+def test_junit_report_counts_each_verdict():
+    res = Results()
+    res.put('CTRL-HB-1', 'pass', 'median 50.0 ms')
+    res.put('CTRL-WD-1', 'fail', 'still holding', 'must ramp')
+    res.complete({'CTRL-PWR-1'}, 'needs a power cycle')
+    root = ET.fromstring(to_junit(res, 'suite', 1.5).split('\n', 1)[1])
+    suite = root.find('testsuite')
+    assert (suite.get('tests'), suite.get('failures'), suite.get('skipped')) == ('3', '1', '1')
+    assert root.find(".//testcase[@name='CTRL-WD-1']/failure").get('message') == 'must ramp'
+
+
+def test_the_driver_refuses_a_controller_of_another_protocol_version():
+    cfg = {'paced': False, 'sim': {'protocol_version': 3}}
+    with open_rig(cfg) as rig:
+        rig.wait_ready(2.0)
+        why = rig.driver.why_not_ready()
+        assert 'protocol version 3' in why and 'version 4' in why
+        with pytest.raises(StreamRefused, match='refusing to stream'):
+            rig.driver.open_stream('test')
+    with open_rig({**cfg, 'require_identity': False}) as rig:     # explicitly waived: streams
+        assert rig.wait_ready(2.0) and rig.driver.why_not_ready() == ''
+    assert math.isfinite(0.0)
