@@ -17,10 +17,10 @@ private network namespace (real timing, nothing leaves the machine): the correct
 requirement, each deliberately broken one fails exactly the requirements its defect breaks, and the offline
 mode on the run's own log and on a log written by the driver agrees (docs/protocol.md).
 """
-import math
 import os
 import subprocess
 import sys
+import time
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -32,9 +32,12 @@ from rubber_rig.excitation import Program
 from rubber_rig.rig import open_rig, run_program
 from rubber_rig.rig.can.protocol import Protocol
 from rubber_rig.rig.can.stream import StreamRefused
+from rubber_rig.rig.config import RigConfig
+from rubber_rig.rig.conformance.active import ConformanceRun, Envelope
 from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.report import Results, to_junit
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
+from rubber_rig.rig.sim.controller import SimController
 
 from support.netns import in_private_netns, rerun_in_private_netns
 
@@ -79,10 +82,10 @@ def test_conformance_in_private_netns():
 def test_correct_simulator_passes_and_offline_agrees(tmp_path):
     assert in_private_netns()
     log = tmp_path / 'run.blf'
-    proc, online = _conformance(tmp_path, '--sim', '--envelope', '1mm', '--can-log', str(log))
+    proc, online = _conformance(tmp_path, '--sim', '--power-up', '--envelope', '1mm', '--can-log', str(log))
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
     assert set(online) == CTRL
-    assert {k for k, v in online.items() if v != 'pass'} == {'CTRL-PWR-1'}       # needs a power cycle
+    assert {k for k, v in online.items() if v != 'pass'} == set(), proc.stdout[-3000:]
     # offline on the run's own log: the same verdicts on every requirement a log can show
     off = tmp_path / 'off'
     off.mkdir()
@@ -97,7 +100,7 @@ def test_correct_simulator_passes_and_offline_agrees(tmp_path):
 @pytest.mark.parametrize('defect', sorted(DEFECTS))
 def test_each_broken_simulator_fails_exactly_its_requirements(tmp_path, defect):
     assert in_private_netns()
-    proc, online = _conformance(tmp_path, '--sim', '--envelope', '1mm', '--defect', defect)
+    proc, online = _conformance(tmp_path, '--sim', '--power-up', '--envelope', '1mm', '--defect', defect)
     assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-2000:]
     failed = {k for k, v in online.items() if v == 'fail'}
     assert failed == set(DEFECTS[defect][0]), proc.stdout[-3000:]
@@ -166,6 +169,30 @@ def test_offline_reads_a_damaged_log_up_to_the_damage(tmp_path, capsys):
     assert 'unsupported suffix' in capsys.readouterr().err
 
 
+def test_a_sample_outside_the_envelope_aborts_the_run():
+    """The load frame reads 0.9 mm off (a displacement offset): the first streamed samples are far from the
+    command, so the run commands ABORT at once, judges nothing it did not see, and the controller ends at rest.
+    """
+    cfg = RigConfig.from_dict({'sim': {'displacement_offset': 0.9e-3}})
+    sim_bus = can.Bus(interface='virtual', channel='conformance_envelope', receive_own_messages=False)
+    bus = can.Bus(interface='virtual', channel='conformance_envelope', receive_own_messages=False)
+    sim = SimController(sim_bus, 1000.0, cfg.sim, True)
+    sim.start()
+    try:
+        run = ConformanceRun(bus, 1000.0, Envelope(-1e-3, 1e-3), log=lambda text: None)
+        results = run.run()
+        assert 'tracking error' in run.deviation or 'outside the envelope' in run.deviation
+        assert results['CTRL-RAMP-1'].status == 'not tested' and 'run aborted' in results['CTRL-RAMP-1'].detail
+        deadline = time.monotonic() + 5.0
+        while sim.state != 'idle' and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert sim.state == 'idle' and abs(sim.u) < 1e-9           # ramped back to rest at 0
+    finally:
+        sim.stop()
+        bus.shutdown()
+        sim_bus.shutdown()
+
+
 def test_junit_report_counts_each_verdict():
     res = Results()
     res.put('CTRL-HB-1', 'pass', 'median 50.0 ms')
@@ -187,4 +214,3 @@ def test_the_driver_refuses_a_controller_of_another_protocol_version():
             rig.driver.open_stream('test')
     with open_rig({**cfg, 'require_identity': False}) as rig:     # explicitly waived: streams
         assert rig.wait_ready(2.0) and rig.driver.why_not_ready() == ''
-    assert math.isfinite(0.0)

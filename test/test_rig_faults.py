@@ -111,7 +111,9 @@ def test_host_silence_makes_the_controller_ramp_on_its_own():
         drv, sim = rig.driver, rig.sim
         t = np.arange(1500) / 1000.0
         x = 1e-3 * np.sin(2 * np.pi * 5 * t) * np.minimum(t / 0.2, 1.0) ** 2
-        # stream setpoints without the driver's heartbeats: a dead host, as the controller sees it
+        # stream setpoints without the driver's heartbeats: a dead host, as the controller sees it (the stream
+        # announced as every stream must be: CTRL-PWR-1, no setpoint before a HostStreamStart)
+        drv.bus.send(drv.proto.encode('HostStreamStart', {'HS_FirstSequence': 0}))
         for msg in drv.frames.encode_setpoints(0, x.tolist()):
             drv.bus.send(msg)
         for _ in range(200000):

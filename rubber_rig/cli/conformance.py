@@ -67,6 +67,8 @@ def add_arguments(parser):
     parser.add_argument('--envelope', help='online: the displacement the run may use, +- this (e.g. 1mm); '
                         'required: nothing moves without it')
     parser.add_argument('--envelope-lower', help='lower end of the envelope where it is not symmetric (e.g. -0.5mm)')
+    parser.add_argument('--power-up', action='store_true', help='online: also check power-up (CTRL-PWR-1): the run '
+                        'listens first, then asks you to switch the controller on (--sim: starts it)')
     parser.add_argument('--yes', action='store_true', help='the operator confirms the envelope without a prompt')
     parser.add_argument('--defect', action='append', default=[], choices=sorted(DEFECTS),
                         help='with --sim: a deliberate protocol defect of the simulated controller (repeatable)')
@@ -165,20 +167,27 @@ def run(args) -> int:
     if not args.sim and not _confirm(args):
         print('rubber-rig conformance: not confirmed: nothing was sent', file=sys.stderr)
         return 2
-    process = None
-    if args.sim:
-        process = subprocess.Popen([sys.executable, '-m', 'rubber_rig.rig.sim', '--config-json',
-                                    json.dumps(cfg.to_dict())], stdout=subprocess.DEVNULL)
+    box = {}
+    sim_command = [sys.executable, '-m', 'rubber_rig.rig.sim', '--config-json', json.dumps(cfg.to_dict())]
+
+    def start_sim():
+        box['process'] = subprocess.Popen(sim_command, stdout=subprocess.DEVNULL)
+
+    def ask_operator():
+        print('rubber-rig conformance: switch the controller on now (waiting 60 s)', file=sys.stderr, flush=True)
+    power_up = (start_sim if args.sim else ask_operator) if args.power_up else None
+    if args.sim and not args.power_up:
+        start_sim()
     try:
         bus = open_bus(cfg)
     except (can.CanError, OSError, ValueError, ImportError) as exc:
-        if process is not None:
-            process.terminate()
+        if 'process' in box:
+            box['process'].terminate()
         raise CommandError(f'cannot open the bus {cfg.backend} {cfg.channel or ""}: {exc}') from None
     t0 = time.monotonic()
     try:
         conf = ConformanceRun(bus, cfg.sample_rate, Envelope(args.lower, args.upper), cfg.frame_profile,
-                              log=lambda text: print(text, file=sys.stderr, flush=True))
+                              log=lambda text: print(text, file=sys.stderr, flush=True), power_up=power_up)
         results = conf.run()
         if args.can_log:
             conf.trace_to_log(args.can_log)
@@ -187,9 +196,9 @@ def run(args) -> int:
         return EXIT_ABORTED
     finally:
         bus.shutdown()
-        if process is not None:
-            process.terminate()
-            process.wait(timeout=10)
+        if 'process' in box:
+            box['process'].terminate()
+            box['process'].wait(timeout=10)
     ident = conf.identity[1] if conf.identity else None
     facts = [f'bus {cfg.backend} {cfg.channel or ""}, {cfg.frame_profile} frames, {cfg.sample_rate:g} Hz',
              f'envelope {args.lower * 1e3:g} .. {args.upper * 1e3:g} mm (stated by the operator)',

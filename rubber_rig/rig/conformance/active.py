@@ -99,8 +99,11 @@ class ConformanceRun:
     """
 
     def __init__(self, bus: can.BusABC, sample_rate: float, envelope: Envelope, profile: str = 'packed',
-                 log=print):
+                 log=print, power_up=None):
         self.bus, self.fs, self.env, self.log = bus, float(sample_rate), envelope, log
+        # power_up: callable that switches the controller on (or asks the operator to) once the run listens;
+        # None: the controller is already on and CTRL-PWR-1 is not tested
+        self.power_up = power_up
         self.proto = Protocol()
         self.frames = SampleFrames(profile, self.proto.db, self.fs)
         self.trace = Trace(self.fs)
@@ -291,9 +294,10 @@ class ConformanceRun:
     def run(self) -> Results:
         """Every scenario in order; the offline-checkable requirements from the whole trace at the end."""
         self._rx.start()
-        scenarios = (self.s_listen, self.s_identify, self.s_stream, self.s_stale, self.s_hold, self.s_reset_moving,
-                     self.s_bad_frames, self.s_host_limits, self.s_out_of_limits, self.s_too_fast,
-                     self.s_host_silence, self.s_wrap)
+        scenarios = ((self.s_power_up,) if self.power_up else ()) + (
+            self.s_listen, self.s_identify, self.s_stream, self.s_stale, self.s_hold, self.s_reset_moving,
+            self.s_bad_frames, self.s_host_limits, self.s_out_of_limits, self.s_too_fast, self.s_host_silence,
+            self.s_wrap)
         try:
             for scenario in scenarios:
                 self.log(f'conformance: {scenario.__doc__.splitlines()[0].rstrip(".")}')
@@ -312,8 +316,31 @@ class ConformanceRun:
             for rid, r in passive.items():
                 if rid.startswith('CTRL'):
                     self.results.put(rid, r.status, r.measured, r.detail)
-        why = f'run aborted: {self.deviation}' if self.deviation else 'needs a power cycle of the controller'
+        why = (f'run aborted: {self.deviation}' if self.deviation else
+               'needs the controller switched on during the run (--power-up)')
         return self.results.complete({r.id for r in REQUIREMENTS if r.id.startswith('CTRL')}, why)
+
+    def s_power_up(self):
+        """Power-up (CTRL-PWR-1)."""
+        self.power_up()
+        if not self._wait(lambda: any(f.host is False for f in self.trace.frames), 60.0):
+            raise Aborted('the controller sent nothing within 60 s of power-up')
+        with self.lock:
+            t0 = next(f.t for f in self.trace.frames if f.host is False)
+        self._sleep(1.5)
+        with self.lock:
+            first = [f for f in self.trace.frames if f.host is False and f.t <= t0 + 1.0 and not f.malformed]
+        ident = [f for f in first if f.name == 'ControllerIdentity']
+        states = {STATES[int(f.signals['ST_State'])] if int(f.signals['ST_State']) < len(STATES) else '?'
+                  for f in first if f.name == 'ControllerStatus'}
+        faults = [f for f in first if f.name == 'ControllerStatus' and int(f.signals['ST_Faults'])]
+        ticking = [f for f in first if f.samples is not None]
+        ok = (bool(ident) and int(ident[0].signals['CI_Protocol']) == PROTOCOL_VERSION and bool(states)
+              and states <= {'idle', 'unconfigured'} and not faults and not ticking)
+        self.results.put('CTRL-PWR-1', PASS if ok else FAIL,
+                         f'first second after power-up: {len(ident)} ControllerIdentity, states {sorted(states)}, '
+                         f'{len(faults)} status frames with faults, {len(ticking)} feedback frames',
+                         '' if ok else 'at power-up the controller must identify itself, idle, at rest, unfaulted')
 
     def s_listen(self):
         """Listen 1.5 s to the idle controller."""

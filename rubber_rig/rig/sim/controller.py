@@ -78,7 +78,7 @@ class SimController:
         self._fb_first = 0                # sequence of the first of them
         # setpoints start a stream from idle only at or after this sample (HostStreamStart); after a ramp to rest
         # none until the host announces the next stream
-        self.accept_from = 0
+        self.accept_from = math.inf       # CTRL-PWR-1: from power-up, no setpoint before a HostStreamStart
         # bus_flood faults: another node on the same bus (paced only), owed frames carried between wake-ups
         self.flood_bus, self._flood_owed, self._flood_at = flood_bus, 0.0, None
         # one stream per noise source, so idle-time draws (temperature) never shift the sensor noise and paced
