@@ -38,6 +38,7 @@ from support.netns import NETNS_MARK, ROOT, multicast_routes, netns_id, unshare_
 
 pytest.importorskip('msgpack', reason='python-can udp_multicast needs msgpack')
 
+
 def test_run_program_against_a_separate_process_rig_over_udp_multicast():
     host_netns = os.environ.get(NETNS_MARK)
     if host_netns is None:          # on the host: re-run this test inside a private network namespace

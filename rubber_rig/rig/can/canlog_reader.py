@@ -211,6 +211,22 @@ def decode_log(path, dbc=DBC_PATH) -> CanLog:
     return out
 
 
+def frames_until_damage(reader, damaged: list):
+    """The frames of a python-can log reader up to the first it cannot read (corrupt data: what precedes it is
+    good); why it stopped is appended to `damaged`, which stays empty when the log was read to its end.
+    """
+    it = iter(reader)
+    while True:
+        try:
+            msg = next(it)
+        except StopIteration:
+            return
+        except Exception as exc:   # noqa: BLE001 - python-can's readers raise anything on corrupt data
+            damaged.append(f'{type(exc).__name__}: {exc}')
+            return
+        yield msg
+
+
 class _Damaged(Exception):
     def __init__(self, reason):
         super().__init__(reason)
@@ -243,15 +259,9 @@ def _decode(reader, proto: Protocol, out: CanLog, offset: float = 0.0):
     a = collections.defaultdict(list)   # the arrays of _ARRAYS, as lists; 'time' holds absolute timestamps
     expected = last_status_seq = sp_ref = state = None
     temperature, faults = math.nan, 0
-    it = iter(reader)
+    damaged = []
     try:
-        while True:
-            try:
-                msg = next(it)
-            except StopIteration:
-                break
-            except Exception as exc:   # noqa: BLE001 - corrupt data: decode what precedes it
-                raise _Damaged(f'{type(exc).__name__}: {exc}') from None
+        for msg in frames_until_damage(reader, damaged):
             t = float(msg.timestamp) + offset
             if not out.frames_total:
                 out.start = t
@@ -354,6 +364,8 @@ def _decode(reader, proto: Protocol, out: CanLog, offset: float = 0.0):
             elif name == 'HostCommand':
                 code = int(sig['CMD_Code'])
                 out.commands.append((rel, cmd_names.get(code, str(code)), float(sig['CMD_Argument'])))
+        if damaged:
+            raise _Damaged(damaged[0])
     finally:   # also after damage: what was decoded is the result
         out.frames = dict(frames)
         out.frames_by_id = dict(sorted(by_id_count.items()))

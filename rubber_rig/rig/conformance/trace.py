@@ -30,6 +30,7 @@ from pathlib import Path
 import can
 
 from ..can.canlog import CanLogError, log_format
+from ..can.canlog_reader import frames_until_damage
 from ..can.frames import PROFILES, SampleFrames
 from ..can.protocol import MalformedFrame, Protocol
 
@@ -123,17 +124,12 @@ def read_log(path, sample_rate: float) -> Trace:
         reader = can.LogReader(str(p))
     except Exception as exc:   # noqa: BLE001 - python-can raises anything from struct.error to its own errors
         raise CanLogError(f'{p}: not a readable CAN log: {exc or type(exc).__name__}') from None
-    it = iter(reader)
+    damaged = []
     try:
-        while True:
-            try:
-                msg = next(it)
-            except StopIteration:
-                break
-            except Exception as exc:   # noqa: BLE001 - damaged data: what precedes it is checked
-                trace.warnings.append(f'{p}: unreadable after frame {len(trace.frames)}: {exc}')
-                break
+        for msg in frames_until_damage(reader, damaged):
             trace.add(msg, float(msg.timestamp))
+        if damaged:
+            trace.warnings.append(f'{p}: unreadable after frame {len(trace.frames)}: {damaged[0]}')
     finally:
         try:
             reader.stop()

@@ -251,17 +251,17 @@ class SimController:
             return
         try:
             decoded = self.proto.decode(msg)
-        except MalformedFrame:
+        except MalformedFrame:   # CTRL-FRAME-2: counted, never applied
             self.counters['frames_bad'] += 1
             return
-        if decoded is None:
+        if decoded is None:      # CTRL-FRAME-3: unknown, extended, remote frames change nothing
             return
         name, sig = decoded
         if name == 'HostStreamStart':
             self.accept_from = int(sig['HS_FirstSequence'])
         elif name == 'HostHeartbeat':
             self.last_host_hb = self.ticks
-        elif name == 'HostLimits' and 'ignore_host_limits' not in self.defects:
+        elif name == 'HostLimits' and 'ignore_host_limits' not in self.defects:   # CTRL-LIM-1
             lo, hi = float(sig['HL_DisplacementMin']), float(sig['HL_DisplacementMax'])
             if lo < hi:
                 self.lower, self.upper = lo, hi
@@ -274,7 +274,7 @@ class SimController:
                 self.abort(None, 0, float(sig['CMD_RampVelocity']) or None)
             elif code == CMD_IDENTIFY:
                 self._send_identity()   # CTRL-ID-1
-            elif code == CMD_RESET and self.state in ('fault', 'idle'):
+            elif code == CMD_RESET and self.state in ('fault', 'idle'):   # CTRL-FAULT-2; CTRL-RESET-1: not moving
                 self.fault_bits = 0
                 self.state = 'idle'
                 self._housekeeping(force=True)
@@ -287,7 +287,7 @@ class SimController:
             return
         if self.state in ('ramping_down', 'fault'):
             return
-        if self.state == 'idle':
+        if self.state == 'idle':   # CTRL-STREAM-1, CTRL-STREAM-2: only from HS_FirstSequence on
             seq = unwrap(seq, self.accept_from if math.isfinite(self.accept_from) else self.next_seq,
                          self.frames.setpoint_modulus)
             if seq < self.accept_from:   # left over from an aborted stream, or no stream announced
@@ -334,7 +334,8 @@ class SimController:
     def abort(self, target: float = 0.0, fault_bits: int = 0, velocity_max: float = None):
         """Flush queued setpoints and ramp from the current command and velocity to target [m] (None: stop
         where the motion can stop, braking at the host's deceleration limit), at most velocity_max [m/s]
-        (default RAMP_VELOCITY_MAX; the host sends half its velocity limit), inside the host's limits.
+        (default RAMP_VELOCITY_MAX; the host sends half its velocity limit), inside the host's limits
+        (CTRL-RAMP-1, CTRL-RAMP-2, CTRL-LIM-1).
         """
         self.fault_bits |= fault_bits
         self.buffer.clear()
@@ -412,7 +413,7 @@ class SimController:
             u = self.ramp.step()
         else:
             u = self.buffer.pop(self.next_seq, None)
-            if u is None:
+            if u is None:   # CTRL-STREAM-3: an underrun holds the last command
                 u = self.u
                 self.counters['underruns'] += 1
                 self.state = 'holding'
