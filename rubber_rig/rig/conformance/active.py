@@ -59,7 +59,8 @@ IDENTIFY_TIMEOUT = 0.1      # [s] CTRL-ID-1
 RAMP_VELOCITY = 0.002       # [m/s] commanded velocity of the ramps the run asks for
 WAVE_FREQUENCY = 2.0        # [Hz] of the motion the run streams
 DEFAULT_HOST_TIMEOUT = 0.5  # [s] assumed when the controller states none
-BUFFER_IN_FLIGHT = 0.02     # [s] setpoints sent this recently may not be counted in ST_BufferLevel yet
+BUFFER_IN_FLIGHT = 0.05     # [s] setpoints sent this recently may not be counted in ST_BufferLevel yet
+BUFFER_OUTLIERS = 0.02      # share of status frames whose level may be off (a controller busy for a moment)
 REST_TIMEOUT = 15.0         # [s] longest wait for the controller to come to rest
 
 
@@ -445,9 +446,11 @@ class ConformanceRun:
             self.results.put('CTRL-ST-4', NOT_TESTED, '', 'no status frame while running')
             return
         bad = sum(1 for e in errors if e)
-        self.results.put('CTRL-ST-4', FAIL if bad else PASS, f'{len(errors)} status frames while running, {bad} with '
-                         f'a level off the queued setpoints by up to {max(errors)}',
-                         'ST_BufferLevel must count the setpoints queued' if bad else '')
+        ok = bad <= BUFFER_OUTLIERS * len(errors)
+        self.results.put('CTRL-ST-4', PASS if ok else FAIL, f'{len(errors)} status frames while running, {bad} with '
+                         f'a level off the queued setpoints (by up to {max(errors)})',
+                         '' if ok else f'ST_BufferLevel must count the setpoints queued (at most '
+                         f'{BUFFER_OUTLIERS * 100:g} % of the status frames off)')
 
     def _judge_ramp(self, target: float):
         """ABORT from rest to target at RAMP_VELOCITY (CTRL-RAMP-1)."""
