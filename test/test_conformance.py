@@ -26,6 +26,7 @@ from pathlib import Path
 
 import can
 import pytest
+import yaml
 
 from rubber_rig.cli.main import main
 from rubber_rig.excitation import Program
@@ -202,6 +203,13 @@ def test_junit_report_counts_each_verdict():
     suite = root.find('testsuite')
     assert (suite.get('tests'), suite.get('failures'), suite.get('skipped')) == ('3', '1', '1')
     assert root.find(".//testcase[@name='CTRL-WD-1']/failure").get('message') == 'must ramp'
+
+
+def test_the_hardware_configuration_streams_only_to_an_identified_controller():
+    """rig_can.launch.py reads config/rig_can.yaml: it must keep the identity check on."""
+    params = yaml.safe_load((HERE.parents[1] / 'config' / 'rig_can.yaml').read_text())
+    driver = params['/**/rig_driver']['ros__parameters']
+    assert driver['require_identity'] is True and driver['controller_device'] == 0
 
 
 def test_the_driver_refuses_a_controller_of_another_protocol_version():

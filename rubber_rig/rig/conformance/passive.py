@@ -37,6 +37,10 @@ RUN_BREAK = 0.05          # [s] feedback silent this long ends a run (the contro
 STATUS_LEAD = 0.01        # [s] how far ST_LastSequence may be ahead of the feedback received
 STATE_TICKING = {STATES.index(s) for s in ('running', 'holding', 'ramping_down')}
 NARROW = 1 << 16          # the width a 32-bit sequence must not wrap at
+# the controller's state machine (docs/protocol.md): every change of ST_State must be one of these
+TRANSITIONS = {('unconfigured', 'idle'), ('idle', 'running'), ('running', 'holding'), ('holding', 'running'),
+               ('running', 'ramping_down'), ('holding', 'ramping_down'), ('ramping_down', 'idle'),
+               ('ramping_down', 'fault'), ('idle', 'fault'), ('fault', 'idle'), ('unconfigured', 'fault')}
 
 
 @dataclass
@@ -137,10 +141,18 @@ def check_counters(trace: Trace, results: Results):
             undefined = sum(1 for f in frames if int(f.signals['ST_Faults']) & ~defined_faults)
             if undefined:
                 problems.append(f'{undefined} frames with undefined fault bits')
+            named = [STATES[x] for x in states if x < len(STATES)]
+            changes = {(a, b) for a, b in zip(named, named[1:], strict=False) if a != b}
+            illegal = sorted(changes - TRANSITIONS)
+            if illegal:
+                problems.append('state changes the state machine does not have: '
+                                + ', '.join(f'{a} -> {b}' for a, b in illegal))
         else:
             problems += _heartbeat_state(status, hb)
-        results.put(rid, FAIL if problems else PASS, f'{len(frames)} frames, {skips} counter steps other than +1',
-                    '; '.join(problems))
+        measured = f'{len(frames)} frames, {skips} counter steps other than +1'
+        if rid == 'CTRL-ST-2':
+            measured += f', {len(changes)} kinds of state change, all in the state machine' if not illegal else ''
+        results.put(rid, FAIL if problems else PASS, measured, '; '.join(problems))
 
 
 def _heartbeat_state(status: list, hb: list) -> list:
