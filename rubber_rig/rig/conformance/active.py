@@ -735,8 +735,9 @@ class ConformanceRun:
         first = self.next_sequence() + 1000
         self.stream(first, self.smooth(p0, -a if p0 > 0 else a), 0.6)
         self.heartbeat = False
-        with self.lock:
-            t_silent = max(f.t for f in self.trace.frames if f.host)
+        self._sleep(0.01)
+        with self.lock:   # the controller's host watchdog runs on HostHeartbeat
+            t_silent = max(f.t for f in self.trace.frames if f.name == 'HostHeartbeat')
         timeout = self.host_timeout
         ramped = self._wait(lambda: self.state in ('ramping_down', 'fault', 'idle'), timeout + 1.0)
         t_ramp = next((s[0] for s in self._states_since(t_silent) if s[1] in ('ramping_down', 'fault', 'idle')),
@@ -753,7 +754,7 @@ class ConformanceRun:
         rest = self.position
         ok = delay <= timeout + 0.1 and abs(rest) <= 1e-6 and self.state == 'fault' and bool(faults)
         self.results.put('CTRL-WD-1', PASS if ok else FAIL,
-                         f'ramp began {delay:.3f} s after the last host frame (stated host timeout {timeout:g} s), '
+                         f'ramp began {delay:.3f} s after the last HostHeartbeat (stated host timeout {timeout:g} s), '
                          f'rest at {rest * 1e3:.4f} mm, state {self.state}, faults {fault_names(faults)}',
                          '' if ok else 'host silence must ramp the rig to rest within the host timeout, faulted')
         self._judge_fault_bits('host silence', faults, FAULT_WATCHDOG)
