@@ -24,6 +24,8 @@ timing, continuity, sequence width, the host's duties):
 Exit status: 0 every requirement checked passed, 1 a requirement failed, 2 usage error or refusal, 3 the run
 left the envelope and was aborted.
 """
+import datetime
+import hashlib
 import json
 import os
 import subprocess
@@ -32,9 +34,10 @@ import time
 
 import can
 
+from rubber_rig import __version__
 from rubber_rig.rig.can.bus import open_bus
 from rubber_rig.rig.can.canlog import CanLogError, check_log_path
-from rubber_rig.rig.can.protocol import PROTOCOL_VERSION
+from rubber_rig.rig.can.protocol import DBC_PATH, PROTOCOL_VERSION
 from rubber_rig.rig.config import ConfigError, RigConfig
 from rubber_rig.rig.conformance.active import Aborted, ConformanceRun, Envelope
 from rubber_rig.rig.conformance.defects import DEFECTS
@@ -110,8 +113,16 @@ def check_arguments(args):
     return None
 
 
+def _provenance() -> list:
+    """When, with what tool and which protocol definition a report was made (a test record names them)."""
+    digest = hashlib.sha256(DBC_PATH.read_bytes()).hexdigest()[:16]
+    now = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec='seconds')
+    return [f'{now}, rubber_rig {__version__}, {DBC_PATH.name} protocol version {PROTOCOL_VERSION} (sha256 '
+            f'{digest}...)']
+
+
 def _write(args, results, title, facts, elapsed):
-    md = to_markdown(results, title, facts)
+    md = to_markdown(results, title, _provenance() + list(facts))
     print(md)
     if args.markdown:
         with open(args.markdown, 'w', encoding='utf-8') as f:
