@@ -67,6 +67,21 @@ def _conformance(tmp_path, *args):
     return proc, (_junit(junit) if junit.exists() else {})
 
 
+# requirements judged on the wall-clock timing of this host's processes: a shared CI host that stalls the
+# simulator's process for tens of ms can fail them; such a run is repeated once (a controller that really
+# breaks one fails it by a wide margin every time: 80 ms heartbeats, 0-8 ms jitter)
+TIMING = {'CTRL-HB-1', 'CTRL-ST-1', 'CTRL-TEMP-1', 'CTRL-ID-2', 'CTRL-FB-2', 'CTRL-ST-3', 'CTRL-ST-4'}
+
+
+def _conformance_expecting(tmp_path, failing: set, *args):
+    """Run conformance; once more if the failures differ from `failing` in timing requirements only."""
+    proc, verdicts = _conformance(tmp_path, *args)
+    failed = {k for k, v in verdicts.items() if v == 'fail'}
+    if failed != failing and verdicts and (failed ^ failing) <= TIMING:
+        proc, verdicts = _conformance(tmp_path, *args)
+    return proc, verdicts
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(600)
 def test_conformance_in_private_netns():
@@ -83,7 +98,8 @@ def test_conformance_in_private_netns():
 def test_correct_simulator_passes_and_offline_agrees(tmp_path):
     assert in_private_netns()
     log = tmp_path / 'run.blf'
-    proc, online = _conformance(tmp_path, '--sim', '--power-up', '--envelope', '1mm', '--can-log', str(log))
+    proc, online = _conformance_expecting(tmp_path, set(), '--sim', '--power-up', '--envelope', '1mm',
+                                          '--can-log', str(log))
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
     assert set(online) == CTRL
     assert {k for k, v in online.items() if v != 'pass'} == set(), proc.stdout[-3000:]
@@ -101,7 +117,8 @@ def test_correct_simulator_passes_and_offline_agrees(tmp_path):
 @pytest.mark.parametrize('defect', sorted(DEFECTS))
 def test_each_broken_simulator_fails_exactly_its_requirements(tmp_path, defect):
     assert in_private_netns()
-    proc, online = _conformance(tmp_path, '--sim', '--power-up', '--envelope', '1mm', '--defect', defect)
+    proc, online = _conformance_expecting(tmp_path, set(DEFECTS[defect][0]), '--sim', '--power-up', '--envelope',
+                                          '1mm', '--defect', defect)
     assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-2000:]
     failed = {k for k, v in online.items() if v == 'fail'}
     assert failed == set(DEFECTS[defect][0]), proc.stdout[-3000:]
@@ -113,15 +130,19 @@ def test_offline_on_a_log_written_by_the_driver(tmp_path):
     passes, the host's duties included.
     """
     assert in_private_netns()
-    log = tmp_path / 'driver.log'
-    cfg = {'backend': 'udp_multicast', 'channel': '239.74.163.9', 'bus_options': {'port': 44111},
-           'spawn_sim': True, 'paced': True, 'can_log': str(log)}
-    prog = Program.from_yaml_text('name: xproc\nblocks:\n  - {waveform: sine, frequency: 2 Hz, amplitude: 0.5 mm, '
-                                  'cycles: 4}\n')
-    with open_rig(cfg) as rig:
-        r = run_program(prog, cfg, rig=rig)
-    assert r.completed, r.message
-    proc, offline = _conformance(tmp_path, '--log', str(log), '--rate', '1000Hz')
+    for attempt in range(2):          # once more only if this host's timing failed a timing requirement
+        log = tmp_path / f'driver{attempt}.log'
+        cfg = {'backend': 'udp_multicast', 'channel': '239.74.163.9', 'bus_options': {'port': 44111 + attempt},
+               'spawn_sim': True, 'paced': True, 'can_log': str(log)}
+        prog = Program.from_yaml_text('name: xproc\nblocks:\n  - {waveform: sine, frequency: 2 Hz, amplitude: '
+                                      '0.5 mm, cycles: 4}\n')
+        with open_rig(cfg) as rig:
+            r = run_program(prog, cfg, rig=rig)
+        assert r.completed, r.message
+        proc, offline = _conformance(tmp_path, '--log', str(log), '--rate', '1000Hz')
+        failed = {k for k, v in offline.items() if v == 'fail'}
+        if not (failed and failed <= TIMING):
+            break
     assert proc.returncode == 0, proc.stdout[-3000:]
     for rid in ('HOST-HB-1', 'HOST-LIM-1', 'HOST-STREAM-1', 'CTRL-FRAME-1', 'CTRL-HB-1', 'CTRL-ST-1', 'CTRL-SEQ-1',
                 'CTRL-FB-1', 'CTRL-FB-2', 'CTRL-ST-3'):
