@@ -493,18 +493,24 @@ class SimController:
         """Status, heartbeat and temperature at their DBC cycle times of rig time (or now if force)."""
         code = STATE_CODE[self.state]
         if force or self.ticks % self._st_every == 0:
-            self._st = (self._st + 1) % 16
-            self._send('ControllerStatus', {'ST_State': code, 'ST_Counter': self._st, 'ST_Faults': self.fault_bits,
-                                            'ST_LastSequence': (self.next_seq - 1) % STATUS_SEQ_MOD,
-                                            'ST_BufferLevel': min(len(self.buffer), 65535)})
+            self._send_status(code)
         if force or self.ticks % self._hb_every == 0:
-            self._hb = (self._hb + 1) % 256
-            self._send('ControllerHeartbeat', {'HB_Counter': self._hb, 'HB_State': code})
+            self._send_heartbeat(code)
         if force or self.ticks % self._tc_every == 0:
             self._send_temperature()
         if self.ticks >= self._id_next_tick:
             self._send_identity()
             self._id_next_tick = self.ticks + self._id_every
+
+    def _send_status(self, code: int):
+        self._st = (self._st + 1) % 16
+        self._send('ControllerStatus', {'ST_State': code, 'ST_Counter': self._st, 'ST_Faults': self.fault_bits,
+                                        'ST_LastSequence': (self.next_seq - 1) % STATUS_SEQ_MOD,
+                                        'ST_BufferLevel': min(len(self.buffer), 65535)})
+
+    def _send_heartbeat(self, code: int):
+        self._hb = (self._hb + 1) % 256
+        self._send('ControllerHeartbeat', {'HB_Counter': self._hb, 'HB_State': code})
 
     def _send_temperature(self):
         self._tc = (self._tc + 1) % 256
@@ -524,16 +530,10 @@ class SimController:
                 self._id_next_tick = self.ticks + self._id_every
             elif name == 'Temperature':
                 self._send_temperature()
+            elif name == 'ControllerStatus':
+                self._send_status(STATE_CODE[self.state])
             else:
-                code = STATE_CODE[self.state]
-                if name == 'ControllerStatus':
-                    self._st = (self._st + 1) % 16
-                    self._send(name, {'ST_State': code, 'ST_Counter': self._st, 'ST_Faults': self.fault_bits,
-                                      'ST_LastSequence': (self.next_seq - 1) % STATUS_SEQ_MOD,
-                                      'ST_BufferLevel': min(len(self.buffer), 65535)})
-                else:
-                    self._hb = (self._hb + 1) % 256
-                    self._send(name, {'HB_Counter': self._hb, 'HB_State': code})
+                self._send_heartbeat(STATE_CODE[self.state])
 
     def _send_identity(self):
         """ControllerIdentity (CTRL-ID-1): protocol version, device, firmware, host timeout, rated velocity."""
