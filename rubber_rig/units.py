@@ -31,7 +31,7 @@ UNITS = {
     'velocity': {'m/s': 1.0, 'mm/s': 1e-3, 'um/s': 1e-6, 'µm/s': 1e-6},
     'force': {'N': 1.0, 'kN': 1e3, 'MN': 1e6, 'mN': 1e-3},
     'frequency': {'Hz': 1.0, 'kHz': 1e3, 'mHz': 1e-3},
-    'time': {'s': 1.0, 'ms': 1e-3, 'us': 1e-6, 'µs': 1e-6, 'min': 60.0},
+    'time': {'s': 1.0, 'ms': 1e-3, 'us': 1e-6, 'µs': 1e-6, 'min': 60.0, 'h': 3600.0},
     'stiffness': {'N/m': 1.0, 'N/mm': 1e3, 'kN/m': 1e3, 'kN/mm': 1e6, 'MN/m': 1e6},
     'damping': {'Ns/m': 1.0, 'kNs/m': 1e3, 'Ns/mm': 1e3},
     'stiffness2': {'N/m^2': 1.0, 'N/mm^2': 1e6, 'kN/mm^2': 1e9},

@@ -169,7 +169,8 @@ class CycleDetector:
     ``update(x, force, *more_forces)`` takes chunks of any length and returns a list of dicts, one
     per completed cycle: the :class:`HarmonicProperties` fields of ``force`` plus ``index`` (cycle
     count), ``start`` and ``end`` (absolute sample indices, end exclusive), ``period`` [s] and
-    ``channels`` (the properties of every force channel, ``force`` first). The cut depends on x
+    ``channels`` (the properties of every force channel, ``force`` first), and with two or more forces
+    ``rms_difference`` [N], the RMS of ``force`` minus the second force over the cycle. The cut depends on x
     alone, so several forces measured against one displacement (e.g. measured and model) share one
     detector and its cycles. Chunking does not change the result. ``hysteresis``, ``min_amplitude``
     [m] and the cycle lengths [samples] are the cutter's.
@@ -218,6 +219,8 @@ class CycleDetector:
             channels = [harmonic_properties(x_cycle, f, self.dt, frequency=1.0 / (period * self.dt),
                                             whole_cycles=1).as_dict() for f in forces]
             d = dict(channels[0], channels=channels)
+            if len(forces) > 1:   # e.g. measured - model: the residual a detector judges
+                d['rms_difference'] = float(np.sqrt(np.mean((forces[0] - forces[1]) ** 2)))
             d.update(index=self._index, start=cycle.start, end=cycle.end, period=period * self.dt)
             self._index += 1
             out.append(d)

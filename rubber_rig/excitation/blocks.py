@@ -21,6 +21,7 @@ import numpy as np
 from rubber_rig.units import to_si
 
 from . import waveforms as wf
+from .detectors import DetectorError, parse_detectors
 
 
 class ProgramError(ValueError):
@@ -81,6 +82,7 @@ class Block:
     target: float = 0.0
     start_level: float = 0.0
     square_slope: float = field(default=1.0, repr=False)
+    detectors: list = field(default_factory=list, repr=False)   # DetectorSpecs of this block only
 
     # ---- classification
     @property
@@ -95,6 +97,8 @@ class Block:
         same start level gives an equal block), for programs rewritten by tools such as ``rubber-rig bench``.
         """
         d = {'name': self.name, 'waveform': self.waveform}
+        if self.detectors:
+            d['detectors'] = [x.to_dict() for x in self.detectors]
         if self.oscillating:
             d.update(amplitude=self.amplitude, mean=self.mean, taper_cycles=self.taper_cycles)
         if self.waveform in wf.PERIODIC:
@@ -203,6 +207,8 @@ def parse_block(raw, index: int, start_level: float, defaults: dict) -> Block:
                                             f"(one of: {', '.join(wf.WAVEFORMS)})")
     name = str(name) if name is not None else f'{wave}_{index}'
     for key in raw:
+        if key == 'detectors':
+            continue
         if key not in _FIELDS:
             raise _err(index, name, key, f"unknown field (known: {', '.join(sorted(_FIELDS))})")
         if key not in ('name', 'waveform') and key not in _ALLOWED[wave]:
@@ -231,6 +237,10 @@ def parse_block(raw, index: int, start_level: float, defaults: dict) -> Block:
         return values[key]
 
     blk = Block(index=index, name=name, waveform=wave, start_level=start_level)
+    try:
+        blk.detectors = parse_detectors(raw.get('detectors'), f"block {index} '{name}'", index)
+    except DetectorError as exc:
+        raise ProgramError(str(exc)) from None
     if blk.oscillating:
         blk.amplitude = need('amplitude')
         blk.mean = values.get('mean', start_level)

@@ -38,12 +38,14 @@ from .blocks import (  # noqa: F401 - MIN_FREQUENCY, MAX_FREQUENCY_FRACTION are 
     ProgramError,
     parse_block,
 )
+from .detectors import DetectorError, parse_detectors
 
 PROGRAM_DIR = Path(__file__).with_name('programs')
 # The most blocks a program may have (after grid expansion): far above any real test plan (seed000_grid has
 # 22), low enough that parsing and checking a program stays well below half a second (bench_checks.py).
 MAX_BLOCKS = 2000
-_TOP_FIELDS = {'name', 'description', 'source', 'initial_position', 'rest_position', 'defaults', 'blocks'}
+_TOP_FIELDS = {'name', 'description', 'source', 'initial_position', 'rest_position', 'defaults', 'blocks',
+               'detectors'}
 
 
 @dataclass
@@ -56,6 +58,7 @@ class Program:
     initial_position: float = 0.0   # where the actuator is when the program starts [m]
     rest_position: float = 0.0      # where an abort ramps to [m]
     source: str = ''
+    detectors: list = field(default_factory=list)   # DetectorSpecs of the whole program (blocks add their own)
     _starts: dict = field(default_factory=dict, repr=False)
 
     @classmethod
@@ -99,8 +102,16 @@ class Program:
                     raise ProgramError(f"program '{name}': block {blk.index} '{blk.name}': the program would run "
                                        f"longer than {MAX_PROGRAM_DURATION:g} s ({MAX_PROGRAM_DURATION / 3600:g} h), "
                                        f"the longest accepted")
+        try:
+            detectors = parse_detectors(data.get('detectors'), f"program '{name}'")
+        except DetectorError as exc:
+            raise ProgramError(str(exc)) from None
         return cls(name=name, blocks=blocks, description=str(data.get('description', '')),
-                   source=str(data.get('source', '')), **positions)
+                   source=str(data.get('source', '')), detectors=detectors, **positions)
+
+    def all_detectors(self) -> list:
+        """The program's detectors followed by every block's own (each knows its block: -1 = all)."""
+        return list(self.detectors) + [d for b in self.blocks for d in b.detectors]
 
     def check_sample_rate(self, sample_rate: float) -> None:
         """Raise ProgramError unless the program can run at sample_rate [Hz]: a finite positive rate, every
@@ -209,6 +220,8 @@ def with_overrides(program: Program, cycles: int = None, duration_scale: float =
         out.append(d)
     data = {'name': program.name, 'description': f'{program.description} ({note})'.strip(),
             'initial_position': program.initial_position, 'rest_position': program.rest_position, 'blocks': out}
+    if program.detectors:
+        data['detectors'] = [d.to_dict() for d in program.detectors]
     text = yaml.safe_dump(data, sort_keys=False)
     return Program.from_yaml_text(text, name=program.name), text
 

@@ -226,17 +226,23 @@ def prediction_msg(batch: RigSampleBatch, predicted, branch_names: Iterable[str]
 
 def cycle_properties_msg(m: Any) -> CycleProperties:
     msg = CycleProperties()
-    for name in ('k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy_harmonic', 'energy_loop'):
+    for name in ('k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy_harmonic', 'energy_loop', 'force_mean'):
         value = _get(m, name)
         setattr(msg, name, float('nan') if value is None else float(value))
+    k_peak, x_peak = _get(m, 'k_peak'), _get(m, 'peak_amplitude')   # half the force range = k_peak x half the x range
+    msg.force_amplitude = float('nan') if k_peak is None or x_peak is None else float(k_peak * x_peak)
     return msg
 
 
-def cycle_metrics_msg(measured: Any, model: Any, block_index: int, cycle_index: int, t: float) -> CycleMetrics:
+def cycle_metrics_msg(measured: Any, model: Any, block_index: int, cycle_index: int, t: float,
+                      start_sequence: int = 0, end_sequence: int = 0,
+                      residual_rms: float = float('nan')) -> CycleMetrics:
     msg = CycleMetrics()
     msg.header.stamp = stamp(t)
     msg.block_index = int(block_index)
     msg.cycle_index = int(cycle_index)
+    msg.start_sequence, msg.end_sequence = int(start_sequence), int(end_sequence)
+    msg.residual_rms = float(residual_rms)
     msg.frequency = float(_get(measured, 'frequency', float('nan')))
     msg.amplitude = float(_get(measured, 'amplitude', float('nan')))
     msg.peak_amplitude = float(_get(measured, 'peak_amplitude', float('nan')))

@@ -216,7 +216,8 @@ class ElementModelNode(Node):
             return
         for c in cycles:
             t_end = t0 + (c.end_sequence - first) * dt
-            self.pub_metrics.publish(conv.cycle_metrics_msg(c.measured, c.model, block, c.index, t_end))
+            self.pub_metrics.publish(conv.cycle_metrics_msg(c.measured, c.model, block, c.index, t_end,
+                                                            c.start_sequence, c.end_sequence, c.residual_rms))
 
     def publish_parameters(self) -> None:
         p = self.predictor

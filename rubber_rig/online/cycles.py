@@ -39,6 +39,7 @@ class PairedCycle:
     end_sequence: int          # exclusive
     measured: dict             # HarmonicProperties fields (k_dyn, loss_angle, damping, c_eq, energy_*, ...)
     model: dict
+    residual_rms: float = float('nan')   # RMS of measured - model force over the cycle [N]
 
 
 class CyclePairer:
@@ -66,5 +67,6 @@ class CyclePairer:
             m, p = c['channels']
             if m['amplitude'] < self.min_amplitude:
                 continue
-            out.append(PairedCycle(c['index'], self._origin + c['start'], self._origin + c['end'], m, p))
+            out.append(PairedCycle(c['index'], self._origin + c['start'], self._origin + c['end'], m, p,
+                                   c.get('rms_difference', float('nan'))))
         return out

@@ -97,6 +97,49 @@ class FaultSpec:
         return self.start <= t < self.start + self.duration
 
 
+DAMAGE_TYPES = ('fatigue', 'crack', 'slip')
+
+
+@dataclass
+class DamageSpec:
+    """A way the simulated specimen fails, from load cycle `cycle` on (cycles counted by the specimen itself:
+    one per two displacement reversals of at least 10 um, from the simulator's start).
+
+    fatigue: gradual stiffness loss, D(n) = loss * ((n - cycle) / life) ** exponent (a Woehler-like power law:
+             exponent 1 loses stiffness at a constant rate per cycle, larger exponents accelerate towards the
+             end of life as elastomer specimens do); the force is (1 - D) x the intact specimen's, D <= 0.95.
+    crack:   a sudden partial crack: the force drops to (1 - loss) x the intact one and the crack faces add a
+             viscous damping `damping` [N s/m].
+    slip:    the specimen slips in its fixture by `offset` [m]: it sees the actuator displacement minus the
+             offset while the displacement transducer (on the actuator) does not see it.
+    """
+
+    type: str
+    cycle: float = 0.0
+    loss: float = 0.3
+    life: float = 1000.0
+    exponent: float = 1.0
+    damping: float = 0.0
+    offset: float = 0.0
+
+    def check(self, path):
+        if self.type not in DAMAGE_TYPES:
+            raise ConfigError(f'{path}.type', f"unknown damage {self.type!r} (one of: {', '.join(DAMAGE_TYPES)})")
+        for name in ('cycle', 'loss', 'life', 'exponent', 'damping', 'offset'):
+            if not math.isfinite(getattr(self, name)):
+                raise ConfigError(f'{path}.{name}', 'must be finite')
+        if self.cycle < 0:
+            raise ConfigError(f'{path}.cycle', 'must be >= 0')
+        if not 0 <= self.loss <= 0.95:
+            raise ConfigError(f'{path}.loss', f'{self.loss!r} outside 0..0.95 (a fraction of the stiffness)')
+        if self.life <= 0 or self.exponent <= 0:
+            raise ConfigError(f'{path}.life/exponent', 'must be > 0')
+        if self.damping < 0:
+            raise ConfigError(f'{path}.damping', 'must be >= 0 N s/m')
+        if abs(self.offset) > 0.01:
+            raise ConfigError(f'{path}.offset', f'{self.offset!r} m: a slip of at most 10 mm')
+
+
 @dataclass
 class SimOptions:
     """Simulated servo-hydraulic rig. SI units.
@@ -142,6 +185,9 @@ class SimOptions:
     faults: List[FaultSpec] = setting(
         doc='injected faults of the simulated rig (YAML list, e.g. [{type: silent_controller, start: 2.0}]; types: '
             + ', '.join(FAULT_TYPES) + ')', yaml_text=True, default_factory=list)
+    damage: List[DamageSpec] = setting(
+        doc='ways the simulated specimen fails (YAML list, e.g. [{type: crack, cycle: 200, loss: 0.3}]; types: '
+            + ', '.join(DAMAGE_TYPES) + '; see DamageSpec)', yaml_text=True, default_factory=list)
 
     def check(self, path='sim'):
         if not isinstance(self.specimen, dict):
@@ -161,6 +207,8 @@ class SimOptions:
             raise ConfigError(f'{path}.force_gain', f"must be > 0, got {self.force_gain!r}")
         for i, f in enumerate(self.faults):
             f.check(f'{path}.faults[{i}]')
+        for i, d in enumerate(self.damage):
+            d.check(f'{path}.damage[{i}]')
         why = check_defects(self.defects)
         if why:
             raise ConfigError(f'{path}.defects', why)
@@ -356,6 +404,10 @@ def _convert(typ, value, fpath):
         if not isinstance(value, list):
             raise bad
         return [_build(FaultSpec, v, f'{fpath}[{i}]') for i, v in enumerate(value)]
+    if typ == 'List[DamageSpec]':
+        if not isinstance(value, list):
+            raise bad
+        return [_build(DamageSpec, v, f'{fpath}[{i}]') for i, v in enumerate(value)]
     if typ == 'float':
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise bad

@@ -86,7 +86,7 @@ class SimController:
         rng_x, rng_f, rng_t = (np.random.default_rng([options.seed, k]) for k in range(3))
         self.actuator = Actuator(options.actuator_frequency, options.actuator_damping,
                                  options.actuator_velocity_max, self.fs)
-        self.specimen = build_specimen(options.specimen, 1.0 / self.fs)
+        self.specimen = build_specimen(options.specimen, 1.0 / self.fs, options.damage)
         self.disp_sensor = Sensor(options.displacement_noise, options.displacement_offset,
                                   options.displacement_resolution, rng_x)
         self.force_sensor = Sensor(options.force_noise, options.force_offset, options.force_resolution, rng_f,

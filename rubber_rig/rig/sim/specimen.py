@@ -18,6 +18,7 @@ or a plain linear spring + dashpot for quick checks.
 from rubber_rig.models import build_model
 
 from ..config import ConfigError
+from .damage import DamagedSpecimen
 
 
 class LinearSpecimen:
@@ -41,8 +42,8 @@ class LinearSpecimen:
         self._x = None
 
 
-def build_specimen(spec: dict, dt: float):
-    """Streaming specimen model for `spec` at time step dt [s].
+def build_specimen(spec: dict, dt: float, damage: list = ()):
+    """Streaming specimen model for `spec` at time step dt [s], failing as `damage` (DamageSpec list) says.
 
     {"model": "linear", "stiffness": N/m, "damping": N s/m} builds LinearSpecimen; anything else goes to
     rubber_rig.models.build_model (e.g. {"model": "fractional_zener_berg", "temperature": 20.0}).
@@ -53,8 +54,10 @@ def build_specimen(spec: dict, dt: float):
         if unknown:
             raise ConfigError(f'sim.specimen.{sorted(unknown)[0]}', "unknown for the linear "
                               "specimen (stiffness, damping)")
-        return LinearSpecimen(spec.get('stiffness', 1.3e7), spec.get('damping', 2.0e4), dt)
-    try:
-        return build_model(spec, dt)
-    except (KeyError, ValueError) as exc:
-        raise ConfigError('sim.specimen', str(exc)) from None
+        intact = LinearSpecimen(spec.get('stiffness', 1.3e7), spec.get('damping', 2.0e4), dt)
+    else:
+        try:
+            intact = build_model(spec, dt)
+        except (KeyError, ValueError) as exc:
+            raise ConfigError('sim.specimen', str(exc)) from None
+    return DamagedSpecimen(intact, damage, dt) if damage else intact

@@ -1,0 +1,350 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Detectors: the program's own judges of whether the specimen still is the specimen it was.
+
+A program declares them in its YAML (``detectors:`` for the whole program, or in a block for that block); the
+excitation node evaluates them on every cycle the element model measures (and the end-of-test triggers on every
+sample batch) and acts on a trip. Each detector has an ``action``:
+
+- ``record``: an event on the ``events`` topic (so in the recording and the report), nothing else;
+- ``warn``: the event, a warning in the log and the diagnostics;
+- ``hold``: the event, and the program holds at the block mean (resumable: ``excitation/hold`` false);
+- ``end``: the event, and the program ends with the ramp to rest.
+
+Types (``threshold`` is what trips it; all are judged only on *steady* cycles, inside a block's full-amplitude
+part, so tapers and approach ramps never trip them):
+
+- ``residual``: RMS of measured - model force over a cycle above ``threshold`` x the expected residual. The
+  expected residual is the block's own stabilised value (median over ``reference_cycles`` cycles after
+  ``settle_cycles``), at least the declared ``noise`` [N] and at least ``floor`` x the block's force amplitude
+  (a perfect model on a quiet load cell must not make a tiny residual the yardstick).
+- ``stiffness_change``: ``quantity`` (k_dyn, c_eq or loss_angle) of the cycle against a ``reference``: the
+  block's stabilised value (``stabilised``) or the element model's value for the same cycle (``model``);
+  trips when ``|value / reference - 1| > threshold`` (a fraction: 0.2 = +-20 %, the end of life of elastomer
+  durability tests is commonly a 10-30 % stiffness drop).
+- ``force_drift``: ``quantity`` mean or amplitude of the measured force against the block's stabilised value;
+  ``threshold`` is a force ('2 kN') or, as a plain number, a fraction of the stabilised force amplitude.
+- ``tracking``: the measured displacement amplitude and mean against the block's targets; trips when the larger
+  error exceeds ``threshold`` x the target amplitude.
+- ``cycle_count``: ``threshold`` full-amplitude cycles of the program (of the block, in a block) are done.
+- ``elapsed_time``: ``threshold`` of rig time since the program started ('2 h').
+
+``consecutive``: cycles in a row over the threshold before it trips (default 1: a crack is acted on one cycle
+after it happens). A detector trips once per block; after a hold and resume it is armed again.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from rubber_rig.units import to_si
+
+TYPES = ('residual', 'stiffness_change', 'force_drift', 'tracking', 'cycle_count', 'elapsed_time')
+ACTIONS = ('record', 'warn', 'hold', 'end')
+SEVERITY = {a: i for i, a in enumerate(ACTIONS)}     # when several trip together, the strongest action wins
+TRIGGERS = ('cycle_count', 'elapsed_time')           # end-of-test triggers: judged on samples, not on cycles
+UNITS = {'k_dyn': 'N/m', 'c_eq': 'N s/m', 'loss_angle': 'rad'}
+QUANTITIES = {'stiffness_change': ('k_dyn', 'c_eq', 'loss_angle'), 'force_drift': ('mean', 'amplitude')}
+DEFAULT_ACTION = {'residual': 'hold', 'stiffness_change': 'end', 'force_drift': 'hold', 'tracking': 'hold',
+                  'cycle_count': 'end', 'elapsed_time': 'end'}
+# the threshold's dimension (rubber_rig.units) and its default (None: required)
+THRESHOLD = {'residual': ('number', 4.0), 'stiffness_change': ('number', 0.2), 'force_drift': ('force', None),
+             'tracking': ('number', 0.1), 'cycle_count': ('number', None), 'elapsed_time': ('time', None)}
+_DIMENSIONS = {'noise': 'force', 'floor': 'number', 'settle_cycles': 'number', 'reference_cycles': 'number',
+               'consecutive': 'number'}
+# The default detectors every program runs with unless it declares its own (excitation parameter
+# `default_detectors`): thresholds from benchmarks/bench_detectors.py (README, "Detectors").
+DEFAULTS = ({'type': 'residual'}, {'type': 'stiffness_change'}, {'type': 'force_drift', 'threshold': 0.1},
+            {'type': 'tracking', 'action': 'warn'})
+
+
+class DetectorError(ValueError):
+    """A detector declaration is invalid; the message names where (program or block) and the field."""
+
+
+@dataclass
+class DetectorSpec:
+    """One declared detector (SI units; see the module docstring)."""
+
+    type: str
+    name: str = ''
+    action: str = ''
+    threshold: float = math.nan
+    threshold_units: str = ''        # 'N' for an absolute force_drift bound, '' for a fraction or count
+    quantity: str = ''
+    reference: str = 'stabilised'
+    consecutive: int = 1
+    settle_cycles: int = 3
+    reference_cycles: int = 3
+    noise: float = 0.0
+    floor: float = 0.01
+    block: int = -1                  # -1: the whole program
+
+    def to_dict(self) -> dict:
+        """As program YAML fields (SI), so a rewritten program keeps its detectors."""
+        d = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ('threshold_units', 'block')}
+        if self.threshold_units == 'N':
+            d['threshold'] = f'{self.threshold:g} N'
+        return d
+
+
+def parse_detectors(raw, where: str, block: int = -1) -> list[DetectorSpec]:
+    """DetectorSpecs of a ``detectors:`` list; ``where`` ('program' or "block 3 'name'") prefixes errors."""
+    if raw is None:
+        return []
+    if not isinstance(raw, list):
+        raise DetectorError(f"{where}: field 'detectors': expected a list of detectors like [{{type: residual}}]")
+    out = [parse_detector(d, f'{where}: detectors[{i}]', block) for i, d in enumerate(raw)]
+    names = [d.name for d in out]
+    for n in names:
+        if names.count(n) > 1:
+            raise DetectorError(f"{where}: detectors: two detectors named {n!r} (give each a 'name')")
+    return out
+
+
+def parse_detector(raw, where: str, block: int = -1) -> DetectorSpec:
+    if not isinstance(raw, dict):
+        raise DetectorError(f'{where}: expected a mapping like {{type: stiffness_change, threshold: 0.2}}')
+    kind = raw.get('type')
+    if kind not in TYPES:
+        raise DetectorError(f"{where}: field 'type': {kind!r} is not one of {', '.join(TYPES)}")
+    known = {f.name for f in fields(DetectorSpec)} - {'threshold_units', 'block'}
+    for key in raw:
+        if key not in known:
+            raise DetectorError(f"{where}: field '{key}': unknown (known: {', '.join(sorted(known))})")
+    spec = DetectorSpec(type=kind, name=str(raw.get('name') or kind), block=block)
+    spec.action = raw.get('action', DEFAULT_ACTION[kind])
+    if spec.action not in ACTIONS:
+        raise DetectorError(f"{where}: field 'action': {spec.action!r} is not one of {', '.join(ACTIONS)}")
+    dim, default = THRESHOLD[kind]
+    value = raw.get('threshold', default)
+    if value is None:
+        raise DetectorError(f"{where}: field 'threshold': required for a {kind} detector")
+    if kind == 'force_drift' and isinstance(value, (int, float)) and not isinstance(value, bool):
+        dim = 'number'                          # a plain number: a fraction of the force amplitude
+    spec.threshold_units = 'N' if dim == 'force' else ''
+    spec.threshold = _number(value, dim, where, 'threshold')
+    if not spec.threshold > 0:
+        raise DetectorError(f"{where}: field 'threshold': must be > 0, got {value!r}")
+    for key, dim in _DIMENSIONS.items():
+        if key in raw:
+            setattr(spec, key, _number(raw[key], dim, where, key))
+    for key in ('consecutive', 'settle_cycles', 'reference_cycles'):
+        v = getattr(spec, key)
+        if v != int(v) or v < (1 if key != 'settle_cycles' else 0) or v > 10000:
+            raise DetectorError(f"{where}: field '{key}': a whole number within "
+                                f"{1 if key != 'settle_cycles' else 0}..10000, got {raw[key]!r}")
+        setattr(spec, key, int(v))
+    if spec.noise < 0 or not 0 <= spec.floor < 1:
+        raise DetectorError(f"{where}: field 'noise'/'floor': noise >= 0 N and floor within 0..1")
+    quantities = QUANTITIES.get(kind)
+    spec.quantity = str(raw.get('quantity', quantities[0] if quantities else ''))
+    if quantities and spec.quantity not in quantities:
+        raise DetectorError(f"{where}: field 'quantity': {spec.quantity!r} is not one of {', '.join(quantities)}")
+    if not quantities and 'quantity' in raw:
+        raise DetectorError(f"{where}: field 'quantity': not used by a {kind} detector")
+    spec.reference = str(raw.get('reference', 'stabilised'))
+    if spec.reference not in ('stabilised', 'model') or (spec.reference == 'model' and kind != 'stiffness_change'):
+        raise DetectorError(f"{where}: field 'reference': 'stabilised'" +
+                            (" or 'model'" if kind == 'stiffness_change' else '') + f', got {spec.reference!r}')
+    return spec
+
+
+def _number(value, dim, where, key) -> float:
+    try:
+        v = to_si(value, dim)
+    except ValueError as exc:
+        raise DetectorError(f"{where}: field '{key}': {exc}") from None
+    if not math.isfinite(v):
+        raise DetectorError(f"{where}: field '{key}': must be finite, got {value!r}")
+    return v
+
+
+@dataclass
+class Cycle:
+    """One measured cycle as a detector sees it (from msg_defs/CycleMetrics, SI).
+
+    measured/model: {k_dyn, c_eq, loss_angle, force_mean, force_amplitude}. block: the program block; cycle:
+    its full-amplitude cycle number counted across holds (1 = the first); steady: the cycle lies inside the
+    block's full-amplitude part; target_amplitude/target_mean [m]; elapsed: program rig time at its end [s].
+    """
+
+    block: int
+    cycle: int
+    steady: bool
+    amplitude: float
+    mean: float
+    measured: dict
+    model: dict
+    residual_rms: float
+    target_amplitude: float = math.nan
+    target_mean: float = math.nan
+    elapsed: float = math.nan
+    program_cycle: int = 0
+
+
+@dataclass
+class Event:
+    """A detector tripped: what it saw, against what, and what it asks for."""
+
+    detector: str
+    kind: str
+    block: int
+    cycle: int
+    program_cycle: int
+    elapsed: float
+    value: float
+    reference: float
+    threshold: float
+    units: str
+    action: str
+    message: str
+
+
+@dataclass
+class _BlockState:
+    references: dict = field(default_factory=dict)   # detector name -> stabilised reference (float or tuple)
+    samples: dict = field(default_factory=dict)      # detector name -> values gathered for the reference
+    over: dict = field(default_factory=dict)         # detector name -> consecutive cycles over the threshold
+    tripped: set = field(default_factory=set)
+
+
+class Monitor:
+    """Evaluates a program's detectors cycle by cycle and trigger by trigger; returns the Events."""
+
+    def __init__(self, detectors: list[DetectorSpec]):
+        self.detectors = list(detectors)
+        self._blocks: dict[int, _BlockState] = {}
+        self.events: list[Event] = []
+
+    def rearm(self) -> None:
+        """After a hold: every detector may trip again (references are kept: the block is the same block)."""
+        for state in self._blocks.values():
+            state.tripped.clear()
+            state.over.clear()
+
+    def _applies(self, d: DetectorSpec, block: int) -> bool:
+        return d.block in (-1, block)
+
+    def on_cycle(self, c: Cycle) -> list[Event]:
+        """Judge one measured cycle with every cycle detector of its block."""
+        state = self._blocks.setdefault(c.block, _BlockState())
+        out = []
+        if not c.steady:
+            return out
+        for d in self.detectors:
+            if d.type in TRIGGERS or not self._applies(d, c.block) or d.name in state.tripped:
+                continue
+            judged = self._judge(d, c, state)
+            if judged is None:
+                continue
+            value, reference, threshold, units, over = judged
+            n = state.over[d.name] = state.over.get(d.name, 0) + 1 if over else 0
+            if n >= d.consecutive:
+                out.append(self._trip(d, state, c.block, c.cycle, c.program_cycle, c.elapsed, value, reference,
+                                      threshold, units))
+        return out
+
+    def on_progress(self, block: int, block_cycles: int, program_cycles: int, elapsed: float) -> list[Event]:
+        """Judge the end-of-test triggers: full-amplitude cycles done in the block and the program, rig time [s]."""
+        state = self._blocks.setdefault(block, _BlockState())
+        out = []
+        for d in self.detectors:
+            if d.type not in TRIGGERS or not self._applies(d, block) or d.name in state.tripped:
+                continue
+            if d.type == 'cycle_count':
+                count = block_cycles if d.block >= 0 else program_cycles
+                if count >= d.threshold:
+                    out.append(self._trip(d, state, block, block_cycles, program_cycles, elapsed, count, math.nan,
+                                          d.threshold, 'cycles'))
+            elif elapsed >= d.threshold:
+                out.append(self._trip(d, state, block, block_cycles, program_cycles, elapsed, elapsed, math.nan,
+                                      d.threshold, 's'))
+        return out
+
+    def _trip(self, d, state, block, cycle, program_cycle, elapsed, value, reference, threshold, units) -> Event:
+        state.tripped.add(d.name)
+        if d.type in TRIGGERS:
+            what = f'{value:.6g} {units} reached (threshold {threshold:.6g} {units})'
+        else:
+            change = f' ({value / reference - 1:+.1%})' if reference else ''
+            what = (f'{value:.6g} {units} against {reference:.6g} {units}{change}, allowed deviation '
+                    f'{threshold:.6g} {units}') if d.type != 'residual' else \
+                f'residual RMS {value:.6g} N, {threshold / reference:g} x the expected {reference:.6g} N exceeded'
+        msg = f"detector '{d.name}' ({d.type}) in block {block}, cycle {cycle}: {what}; action {d.action}"
+        event = Event(d.name, d.type, block, int(cycle), int(program_cycle), float(elapsed), float(value),
+                      float(reference), float(threshold), units, d.action, msg)
+        self.events.append(event)
+        return event
+
+    def _stabilised(self, d, state, value):
+        """The block's stabilised reference of detector d (None while it is still being gathered)."""
+        if d.name in state.references:
+            return state.references[d.name]
+        got = state.samples.setdefault(d.name, [])
+        got.append(value)
+        if len(got) <= d.settle_cycles + d.reference_cycles:
+            if len(got) == d.settle_cycles + d.reference_cycles:
+                ref = np.median(np.asarray(got[d.settle_cycles:], dtype=float), axis=0)
+                state.references[d.name] = tuple(ref) if np.ndim(ref) else float(ref)
+            return None
+        return state.references[d.name]
+
+    def _judge(self, d, c: Cycle, state):
+        """(value, reference, threshold, units, over) of detector d on cycle c, or None (not armed yet, or the
+        cycle lacks what it needs).
+        """
+        m = c.measured
+        if d.type == 'residual':
+            amp = m.get('force_amplitude', math.nan)
+            ref = self._stabilised(d, state, (c.residual_rms, amp))
+            if ref is None or not math.isfinite(c.residual_rms):
+                return None
+            expected = max(ref[0], d.noise, d.floor * ref[1])
+            threshold = d.threshold * expected
+            return c.residual_rms, expected, threshold, 'N', c.residual_rms > threshold
+        if d.type == 'stiffness_change':
+            value = m.get(d.quantity, math.nan)
+            if d.reference == 'model':
+                ref = c.model.get(d.quantity, math.nan)
+            else:
+                ref = self._stabilised(d, state, value)
+                if ref is None:
+                    return None
+            if not (math.isfinite(value) and math.isfinite(ref)) or ref == 0:
+                return None
+            bound = d.threshold * abs(ref)
+            return value, ref, bound, UNITS[d.quantity], abs(value - ref) > bound
+        if d.type == 'force_drift':
+            value = m.get('force_mean' if d.quantity == 'mean' else 'force_amplitude', math.nan)
+            ref = self._stabilised(d, state, (value, m.get('force_amplitude', math.nan)))
+            if ref is None or not math.isfinite(value):
+                return None
+            bound = d.threshold if d.threshold_units == 'N' else d.threshold * ref[1]
+            return value, ref[0], bound, 'N', abs(value - ref[0]) > bound
+        if d.type == 'tracking':
+            if not (math.isfinite(c.target_amplitude) and c.target_amplitude > 0):
+                return None
+            error = max(abs(c.amplitude - c.target_amplitude), abs(c.mean - c.target_mean))
+            bound = d.threshold * c.target_amplitude
+            return error, c.target_amplitude, bound, 'm', error > bound
+        return None
+
+
+def strongest(events: list[Event]) -> Event | None:
+    """The event whose action goes furthest (end > hold > warn > record), or None."""
+    return max(events, key=lambda e: SEVERITY[e.action], default=None)
