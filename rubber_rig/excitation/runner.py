@@ -16,6 +16,7 @@
 limit enforcement on every setpoint, hold/resume and the abort ramp.
 """
 import bisect
+import dataclasses
 import math
 from dataclasses import dataclass
 
@@ -25,6 +26,7 @@ from .amplitude import BlockLoop
 from .compensation import CompensationMemory
 from .limits import LimitError, Limits
 from .ramp import RAMP_VELOCITY, SafeRamp
+from .waveforms import PERIODIC
 
 
 @dataclass
@@ -111,6 +113,7 @@ class ProgramRunner:
         self._segments = []                           # [seq0, seq1, block, local0, loop]
         self._seg_starts = []
         self._completed = set()
+        self.cycles_before = {}                       # block index -> full cycles run before its latest resume
         self.last_block_index = np.empty(0, dtype=np.int32)
 
     # ---- state
@@ -154,19 +157,82 @@ class ProgramRunner:
         blk = self.program.blocks[self.block_index]
         return blk.mean if blk.oscillating else self._x
 
-    def resume_at(self, sequence: int, position: float):
-        """Continue after hold() on a new stream: the held block restarts from its beginning at `sequence`,
-        approached smoothly from `position` [m] (where the rig holds) if that is not where the block starts.
+    def resume_at(self, sequence: int, position: float, measured_sequence: int = None):
+        """Continue after hold() on a new stream at `sequence`, approached smoothly from `position` [m] (where the
+        rig holds) if that is not where the block starts. The held block restarts with its taper; given
+        `measured_sequence` (the sample after the last one measured before the hold), a periodic block runs only
+        the full cycles it had not finished then (a durability block resumes, not restarts), counted on in
+        cycles_before.
         """
         if self.state != 'holding':
             return
+        b = self._hold_block
+        located = self.locate(measured_sequence) if measured_sequence is not None else None
+        blk = self.program.blocks[b]
+        if located is not None and located[0] == b and blk.waveform in PERIODIC:
+            done = min(max(int(math.floor(located[1] - blk.taper_cycles)), 0), blk.cycles - 1)
+            if done:
+                self.program.blocks[b] = dataclasses.replace(blk, cycles=blk.cycles - done)
+                self.program._starts.clear()
+                self._starts = self.program.block_starts(self.fs)
+                self._total = int(self._starts[-1])
+                self.cycles_before[b] = self.cycles_before.get(b, 0) + done
         target = self.hold_target
-        self._restart(self._hold_block)
+        self._restart(b)
         self.sequence = int(sequence)
         self._x = self._x_prev = float(position)
         if abs(position - target) > 1e-7:
             self._start_ramp(target)
             self.state = 'approaching'
+
+    def locate(self, sequence: int):
+        """(block index, phase [cycles since the block's start, tapers included; seconds for hold/ramp blocks
+        times its frequency = 0]) of the setpoint with this sequence number, or None outside program blocks.
+        """
+        if sequence is None:
+            return None
+        j = bisect.bisect_right(self._seg_starts, sequence) - 1
+        if j < 0:
+            return None
+        seq0, seq1, b, local0, _ = self._segments[j]
+        if not seq0 <= sequence < seq1:
+            return None
+        blk = self.program.blocks[b]
+        t = (local0 + sequence - seq0) / self.fs
+        return b, float(blk.phase(np.array(t))) if blk.oscillating else 0.0
+
+    def cycle_position(self, start: int, end: int):
+        """Where the measured cycle of samples start..end-1 lies: (block, full-amplitude cycle number counted
+        across holds, steady), or None when it is not inside one periodic block. Steady: inside the block's
+        full-amplitude part (tapers excluded; a quarter cycle of slack for the actuator's lag).
+        """
+        a, z = self.locate(start), self.locate(end - 1)
+        if a is None or z is None or a[0] != z[0]:
+            return None
+        b = a[0]
+        blk = self.program.blocks[b]
+        if not blk.oscillating:
+            return None
+        full = blk.total_cycles - blk.taper_cycles
+        steady = a[1] >= blk.taper_cycles - 0.25 and z[1] <= full + 0.25
+        number = int(math.floor(z[1] - blk.taper_cycles + 0.25)) + self.cycles_before.get(b, 0)
+        return b, max(number, 0), steady
+
+    def cycles_done(self, sequence: int) -> tuple[int, int, int]:
+        """(block, its full-amplitude cycles done, the program's full-amplitude cycles done) at `sequence`
+        (counted across holds); block -1 before the first program sample.
+        """
+        located = self.locate(sequence)
+        if located is None:
+            return -1, 0, 0
+        b, phase = located
+        blk = self.program.blocks[b]
+        done = 0
+        if blk.waveform in PERIODIC:
+            done = min(max(int(math.floor(phase - blk.taper_cycles)), 0), blk.cycles) + self.cycles_before.get(b, 0)
+        before = sum(blocks.cycles + self.cycles_before.get(i, 0) for i, blocks in enumerate(self.program.blocks[:b])
+                     if blocks.waveform in PERIODIC)
+        return b, done, before + done
 
     def resume(self):
         """Continue after hold(): the held block restarts from its beginning (with its taper) once the hold

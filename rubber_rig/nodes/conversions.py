@@ -32,6 +32,7 @@ from msg_defs.msg import (
     BranchForce,
     CycleMetrics,
     CycleProperties,
+    DetectorEvent,
     ModelParameters,
     ModelPrediction,
     RigLimits,
@@ -234,6 +235,12 @@ def cycle_properties_msg(m: Any) -> CycleProperties:
     return msg
 
 
+def cycle_properties_dict(msg: CycleProperties) -> dict:
+    """msg_defs/CycleProperties -> {field: value} (SI), what rubber_rig.excitation.detectors judges."""
+    return {name: float(getattr(msg, name)) for name in ('k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy_harmonic',
+                                                         'energy_loop', 'force_mean', 'force_amplitude')}
+
+
 def cycle_metrics_msg(measured: Any, model: Any, block_index: int, cycle_index: int, t: float,
                       start_sequence: int = 0, end_sequence: int = 0,
                       residual_rms: float = float('nan')) -> CycleMetrics:
@@ -275,4 +282,17 @@ def block_summary_msg(s: Any, index: int | None = None) -> BlockSummary:
     msg.cycles = int(_get(s, 'cycles', 0) or 0)
     msg.completed = bool(_get(s, 'completed', False))
     msg.message = str(_get(s, 'message', '') or '')
+    return msg
+
+
+def detector_event_msg(event: Any, program: str, block_name: str, t: float) -> DetectorEvent:
+    """rubber_rig.excitation.detectors.Event -> msg_defs/DetectorEvent (stamped t [s])."""
+    msg = DetectorEvent()
+    msg.header.stamp = stamp(t)
+    msg.program, msg.block_name = str(program), str(block_name)
+    msg.detector, msg.kind, msg.action = event.detector, event.kind, event.action
+    msg.block_index, msg.cycle, msg.program_cycle = int(event.block), int(event.cycle), int(event.program_cycle)
+    msg.elapsed, msg.value = float(event.elapsed), float(event.value)
+    msg.reference, msg.threshold = float(event.reference), float(event.threshold)
+    msg.units, msg.message = event.units, event.message
     return msg

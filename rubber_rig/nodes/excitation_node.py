@@ -22,7 +22,9 @@ Services:    ~/abort (std_srvs/Trigger: ramp to rest now), ~/hold (std_srvs/SetB
 Subscribes:  samples (msg_defs/RigSampleBatch: amplitude control, progress), status (msg_defs/RigStatus,
              latched: sample rate, limits, faults, who owns the stream), recorder_status (msg_defs/RecorderStatus,
              with require_recording)
-Publishes:   setpoints (msg_defs/SetpointBatch), program (std_msgs/String, latched: YAML of the running program)
+Subscribes:  cycle_metrics (msg_defs/CycleMetrics from element_model: what the detectors judge)
+Publishes:   setpoints (msg_defs/SetpointBatch), program (std_msgs/String, latched: YAML of the running program),
+             events (msg_defs/DetectorEvent: every detector trip), /diagnostics (program state, detector events)
 Calls:       <rig_driver>/open_stream, <rig_driver>/stop_stream
 
 A program starts only on a stream the driver grants (one owner at a time), from wherever the rig holds (an
@@ -31,6 +33,12 @@ rubber_rig.excitation.ProgramRunner (never from wall-clock time) and published `
 latest measured sample. Abort, cancel and hold go to the driver directly (its controller ramps at once,
 instead of after the queued lead); a rig that stops the stream, faults or goes silent ends the goal with the
 reason. No callback lets an exception take the node down: it ends the running program and logs.
+
+Detectors (rubber_rig.excitation.detectors): the program's own, plus the ``default_detectors`` it does not
+override by name, judge every steady cycle the element model measures and the end-of-test triggers on every
+sample batch. A trip is a DetectorEvent on ``events``, in the goal's feedback and result and in the
+diagnostics; its action (record, warn, hold, end) goes through the same hold and abort paths an operator uses.
+A held program resumes (``~/hold`` false) with the full cycles its block had not yet run.
 """
 from __future__ import annotations
 
@@ -38,6 +46,8 @@ import math
 import time
 import traceback
 
+import yaml
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
 from rclpy.task import Future
@@ -45,9 +55,10 @@ from std_msgs.msg import String
 from std_srvs.srv import SetBool, Trigger
 
 from msg_defs.action import RunProgram
-from msg_defs.msg import RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
+from msg_defs.msg import CycleMetrics, DetectorEvent, RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import LoadProgram, OpenStream, StopStream
 from rubber_rig.excitation import Program, ProgramRunner, read_program
+from rubber_rig.excitation.detectors import DEFAULTS, Cycle, DetectorError, Monitor, parse_detectors, strongest
 from rubber_rig.excitation.limits import element_force_model
 from rubber_rig.excitation.streamer import SetpointStreamer
 from rubber_rig.nodes import conversions as conv
@@ -94,6 +105,18 @@ class ExcitationNode(Node):
         self.force_model_set = declare(self, 'force_model', 'swing_arm_joint_20C', 'element-model parameter set that '
                                        'predicts each block\'s peak force before start (refused above '
                                        "limits.force_max); '' = no force prediction")
+        self.hold_timeout = declare(self, 'hold_timeout', 600.0, 'a program held (operator or detector) this long '
+                                    'without a resume ends: the rig ramps to the rest position and the goal says why',
+                                    range=(1.0, 86400.0), units='s')
+        default_detectors = declare(self, 'default_detectors', 'default', "detectors every program runs with "
+                                    "besides its own (a program's detector of the same name replaces one): "
+                                    "'default' (residual, stiffness_change, force_drift, tracking; README "
+                                    "'Detectors'), '' for none, or a YAML list like [{type: residual, threshold: 5}]")
+        try:
+            raw = list(DEFAULTS) if default_detectors == 'default' else yaml.safe_load(default_detectors) or []
+            self.default_detectors = parse_detectors(raw, 'default_detectors')
+        except (DetectorError, yaml.YAMLError) as exc:
+            raise ParameterError(self.get_name(), 'default_detectors', str(exc)) from None
         if self.stream_period >= self.lead_time / 2:
             raise ParameterError(self.get_name(), 'stream_period', f'{self.stream_period} s must be below half '
                                  f'of lead_time ({self.lead_time} s) or the driver could starve')
@@ -127,9 +150,17 @@ class ExcitationNode(Node):
         self._done: Future | None = None
         self._last_feedback = 0.0
         self.result: RunProgram.Result | None = None   # result of the last run (also for program runs)
+        self.monitor: Monitor | None = None   # the running program's detectors
+        self.events: list[DetectorEvent] = []  # detector events of the running (or last) program
+        self._held_at = None             # sequence after the last sample measured before a hold
+        self._held_wall = 0.0            # time.monotonic() of the hold (hold_timeout)
+        self._elapsed_samples = 0        # program samples measured (rig time of the program, holds excluded)
 
         self.pub_setpoints = self.create_publisher(SetpointBatch, topics.SETPOINTS, topics.STREAM_QOS)
         self.pub_program = self.create_publisher(String, topics.PROGRAM, topics.LATCHED_QOS)
+        self.pub_events = self.create_publisher(DetectorEvent, topics.EVENTS, topics.EVENT_QOS)
+        self.pub_diagnostics = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        self.create_subscription(CycleMetrics, topics.CYCLE_METRICS, self.on_cycle_metrics, topics.EVENT_QOS)
         self.sub_samples = self.create_subscription(RigSampleBatch, topics.SAMPLES, self.on_samples,
                                                     topics.STREAM_QOS)
         self.create_subscription(RigStatus, topics.STATUS, self.on_status, topics.LATCHED_QOS)
@@ -144,6 +175,7 @@ class ExcitationNode(Node):
                                    goal_callback=lambda _: GoalResponse.ACCEPT,
                                    cancel_callback=lambda _: CancelResponse.ACCEPT)
         self.create_timer(self.stream_period, self.stream)
+        self.create_timer(1.0, self.publish_diagnostics)
 
     @property
     def samples_topic(self) -> str:
@@ -187,8 +219,57 @@ class ExcitationNode(Node):
         if self.runner is not None and n and not self.held:
             try:
                 self.runner.feed_measurement(msg.first_sequence, conv.as_array(msg.displacement))
+                self._elapsed_samples += n
+                block, block_cycles, program_cycles = self.runner.cycles_done(self.next_sample - 1)
+                if block >= 0:
+                    self.act(self.monitor.on_progress(block, block_cycles, program_cycles, self.elapsed))
             except Exception as exc:   # noqa: BLE001 - a bad batch must not take the node down
                 self.abort_program(f'internal error on a sample batch: {exc!r}')
+
+    @property
+    def elapsed(self) -> float:
+        """Rig time the running program has been measured for [s] (holds excluded)."""
+        return self._elapsed_samples / self.status.sample_rate if self.status else 0.0
+
+    def on_cycle_metrics(self, msg: CycleMetrics) -> None:
+        r = self.runner
+        if r is None or self.held or self.monitor is None:
+            return
+        try:
+            where = r.cycle_position(msg.start_sequence, msg.end_sequence)
+            if where is None:            # not a cycle of this program's blocks (an approach ramp, another stream)
+                return
+            block, number, steady = where
+            blk = r.program.blocks[block]
+            _, _, program_cycles = r.cycles_done(msg.end_sequence - 1)
+            amplitude = msg.peak_amplitude if blk.waveform in ('triangle', 'square') else msg.amplitude
+            cycle = Cycle(block, number, steady, amplitude, msg.mean, conv.cycle_properties_dict(msg.measured),
+                          conv.cycle_properties_dict(msg.model), msg.residual_rms, blk.amplitude, blk.mean,
+                          self.elapsed, program_cycles)
+            self.act(self.monitor.on_cycle(cycle))
+        except Exception as exc:   # noqa: BLE001 - a bad message must not take the node down
+            self.get_logger().error(f'detectors failed on a cycle: {exc!r}\n{traceback.format_exc()}')
+
+    def act(self, events) -> None:
+        """Publish detector events and take the strongest action among them."""
+        if not events or self.runner is None:
+            return
+        r = self.runner
+        t = self.get_clock().now().nanoseconds * 1e-9
+        for e in events:
+            msg = conv.detector_event_msg(e, r.program.name, r.program.blocks[e.block].name, t)
+            self.events.append(msg)
+            self.pub_events.publish(msg)
+            log = self.get_logger().info if e.action == 'record' else self.get_logger().warning
+            log(e.message)
+        top = strongest(events)
+        if top.action == 'end':
+            trigger = top.kind in ('cycle_count', 'elapsed_time')
+            self.abort_program(f'ended by detector: {top.message}', success=trigger)
+        elif top.action == 'hold' and not self.held:
+            why = self.hold_program(f'detector {top.detector}')
+            if why:
+                self.abort_program(f'detector {top.detector} asked for a hold, which failed ({why}): {top.message}')
 
     # -- starting programs ------------------------------------------------------------------------------------------
     def rig_ready(self) -> str:
@@ -308,6 +389,9 @@ class ExcitationNode(Node):
         self.next_sample = None          # samples of an earlier rig (a restarted driver counts from 0) do not count
         self.end_sequence = None
         self.result = None
+        own = {d.name for d in program.all_detectors()}
+        self.monitor = Monitor(program.all_detectors() + [d for d in self.default_detectors if d.name not in own])
+        self.events, self._elapsed_samples = [], 0
         self.pub_program.publish(String(data=text))
         self.get_logger().info(f"program '{program.name}': {len(program.blocks)} blocks, "
                                f'{program.duration(self.status.sample_rate):.1f} s, stream {grant.stream_id} from '
@@ -329,6 +413,9 @@ class ExcitationNode(Node):
                 program, text = self._pending
                 self._pending = None
                 self.executor.create_task(self._start_pending(program, text))
+            return
+        if self.held and time.monotonic() - self._held_wall > self.hold_timeout:
+            self.abort_program(f'held for {self.hold_timeout:g} s without a resume (hold_timeout): ramp to rest')
             return
         if self.held or not self.stream_id:
             return
@@ -370,32 +457,36 @@ class ExcitationNode(Node):
         p = self.runner.progress
         return RunProgram.Feedback(block_index=p.block_index, block_count=p.block_count, block_name=p.block_name,
                                    cycle=p.cycle, cycles_total=p.cycles_total, target_amplitude=p.target_amplitude,
-                                   achieved_amplitude=p.achieved_amplitude, progress=p.fraction)
+                                   achieved_amplitude=p.achieved_amplitude, progress=p.fraction,
+                                   events=len(self.events),
+                                   last_event=self.events[-1] if self.events else DetectorEvent())
 
     # -- ending programs --------------------------------------------------------------------------------------------
-    def abort_program(self, reason: str) -> bool:
+    def abort_program(self, reason: str, success: bool = False) -> bool:
         """Stop the running program now: the driver's controller ramps to the program's rest position at once
-        (not after the queued lead); the goal ends with `reason`. False if nothing runs.
+        (not after the queued lead); the goal ends with `reason` (a success only for an end-of-test trigger).
+        False if nothing runs.
         """
         if self.runner is None:
             return False
         self._stop_stream(StopStream.Request.ACTION_ABORT, reason, self.runner.program.rest_position)
-        self._end(reason)
+        self._end(reason, success)
         return True
 
-    def _end(self, reason: str) -> None:
+    def _end(self, reason: str, success: bool = False) -> None:
         if self.runner is not None:
             self.runner.abort(reason)
         self.get_logger().warning(f'program stopped: {reason}')
-        self._finish(success=False)
+        self._finish(success=success, ended=True)
 
-    def _finish(self, success: bool) -> None:
+    def _finish(self, success: bool, ended: bool = False) -> None:
         r = self.runner
         if r is None:
             return
-        result = RunProgram.Result(success=success and not r.aborted,
+        result = RunProgram.Result(success=success and (ended or not r.aborted),
                                    message=r.abort_reason if r.aborted else 'completed',
-                                   blocks=[conv.block_summary_msg(s) for s in r.block_summaries])
+                                   blocks=[conv.block_summary_msg(s) for s in r.block_summaries],
+                                   events=list(self.events))
         self.result = result
         self.runner, self.stream_id, self.held = None, 0, False
         self.get_logger().info(f'program ended: {result.message}')
@@ -495,21 +586,27 @@ class ExcitationNode(Node):
         if r is None:
             response.success, response.message = False, 'no program running'
         elif request.data:
-            if self.held or r.state != 'running':
-                response.success, response.message = False, f'cannot hold: the program is {r.state}'
-                return response
-            target = r.hold_target
-            self._stop_stream(StopStream.Request.ACTION_HOLD, 'operator hold (excitation/hold)', target)
-            r.hold()
-            self.held = True
-            response.success, response.message = True, f'holding at {target * 1e3:.4f} mm (the block mean)'
+            why = self.hold_program('operator hold (excitation/hold)')
+            response.success = not why
+            response.message = why or f'holding at {r.hold_target * 1e3:.4f} mm (the block mean)'
         else:
             if not self.held:
                 response.success, response.message = False, 'not holding'
                 return response
             self.executor.create_task(self._resume())
-            response.success, response.message = True, 'resuming the held block from its start'
+            response.success, response.message = True, 'resuming the held block with the cycles it has not run'
         return response
+
+    def hold_program(self, reason: str) -> str:
+        """Hold the running program at its block mean (the driver keeps the stream for us). '' or why not."""
+        r = self.runner
+        if self.held or r.state != 'running':
+            return f'cannot hold: the program is {"held" if self.held else r.state}'
+        self._stop_stream(StopStream.Request.ACTION_HOLD, reason, r.hold_target)
+        r.hold()
+        self.held, self._held_at, self._held_wall = True, self.next_sample, time.monotonic()
+        self.get_logger().warning(f'program held at {r.hold_target * 1e3:.4f} mm: {reason}')
+        return ''
 
     async def _resume(self):
         r = self.runner
@@ -524,7 +621,26 @@ class ExcitationNode(Node):
         self.stream_id, self.held = grant.stream_id, False
         self.start_sequence = grant.first_sequence
         self.next_sample = None          # samples of an earlier rig (a restarted driver counts from 0) do not count
-        r.resume_at(grant.first_sequence, grant.position)
+        r.resume_at(grant.first_sequence, grant.position, measured_sequence=self._held_at)
+        self.monitor.rearm()
+
+    def publish_diagnostics(self) -> None:
+        """/diagnostics: the program state and its detector events, named after this node."""
+        r = self.runner
+        state = 'idle' if r is None else ('held' if self.held else r.state)
+        last = self.events[-1] if self.events else None
+        level = DiagnosticStatus.OK
+        if last is not None and last.action != 'record':
+            level = DiagnosticStatus.WARN
+        values = {'state': state, 'program': r.program.name if r else '', 'detector_events': len(self.events),
+                  'last_event': last.message if last else ''}
+        msg = DiagnosticArray()
+        msg.header.stamp = self.get_clock().now().to_msg()
+        msg.status.append(DiagnosticStatus(
+            level=level, name=self.get_fully_qualified_name(), hardware_id='rubber_rig',
+            message=(last.message if level != DiagnosticStatus.OK else f'program {state}'),
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]))
+        self.pub_diagnostics.publish(msg)
 
     def on_load_program(self, request, response):
         try:

@@ -31,6 +31,7 @@ PREDICTION = 'prediction'            # msg_defs/msg/ModelPrediction, element_mod
 CYCLE_METRICS = 'cycle_metrics'      # msg_defs/msg/CycleMetrics, element_model
 MODEL_PARAMETERS = 'model_parameters'  # msg_defs/msg/ModelParameters, element_model (latched)
 PROGRAM = 'program'                  # std_msgs/msg/String (program YAML), excitation (latched)
+EVENTS = 'events'                    # msg_defs/msg/DetectorEvent, excitation (detector trips)
 RECORDER_STATUS = 'recorder_status'  # msg_defs/msg/RecorderStatus, recorder (latched)
 DIAGNOSTICS = '/diagnostics'         # diagnostic_msgs/msg/DiagnosticArray (absolute, as in every ROS 2 system)
 

@@ -653,7 +653,8 @@ class RigDriver:
         if self.faults & FAULT_WATCHDOG:
             return
         s = self._stream
-        streaming = s is not None and s.queued_end > s.grant.first_sequence and (
+        # a held stream has nothing queued: the controller flushed it and stands at rest until the owner resumes
+        streaming = s is not None and not s.held and s.queued_end > s.grant.first_sequence and (
             self._expected is None or self._expected < s.queued_end)
         if streaming and not self._aborting and now - self._last_fb_wall > self._wd_wall:
             self._fault(FAULT_WATCHDOG, f'no feedback for {now - self._last_fb_wall:.3f} s with setpoints queued')
