@@ -345,6 +345,23 @@ class Monitor:
         return None
 
 
+def cycle_of(runner, start: int, end: int, amplitude: float, peak_amplitude: float, mean: float, measured: dict,
+             model: dict, residual_rms: float, elapsed: float) -> Cycle | None:
+    """The Cycle a detector judges for the measured cycle of samples start..end-1 of `runner`'s program (an
+    excitation ProgramRunner), or None when it lies outside one periodic block (an approach or hold ramp, a
+    foreign stream). A triangle's or square's amplitude is its peak amplitude, a sine's its first harmonic.
+    """
+    where = runner.cycle_position(start, end)
+    if where is None:
+        return None
+    block, number, steady = where
+    blk = runner.program.blocks[block]
+    _, _, program_cycles = runner.cycles_done(end - 1)
+    amp = peak_amplitude if blk.waveform in ('triangle', 'square') else amplitude
+    return Cycle(block, number, steady, amp, mean, measured, model, residual_rms, blk.amplitude, blk.mean, elapsed,
+                 program_cycles)
+
+
 def strongest(events: list[Event]) -> Event | None:
     """The event whose action goes furthest (end > hold > warn > record), or None."""
     return max(events, key=lambda e: SEVERITY[e.action], default=None)

@@ -58,7 +58,7 @@ from msg_defs.action import RunProgram
 from msg_defs.msg import CycleMetrics, DetectorEvent, RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import LoadProgram, OpenStream, StopStream
 from rubber_rig.excitation import Program, ProgramRunner, read_program
-from rubber_rig.excitation.detectors import DEFAULTS, Cycle, DetectorError, Monitor, parse_detectors, strongest
+from rubber_rig.excitation.detectors import DEFAULTS, DetectorError, Monitor, cycle_of, parse_detectors, strongest
 from rubber_rig.excitation.limits import element_force_model
 from rubber_rig.excitation.streamer import SetpointStreamer
 from rubber_rig.nodes import conversions as conv
@@ -236,16 +236,11 @@ class ExcitationNode(Node):
         if r is None or self.held or self.monitor is None:
             return
         try:
-            where = r.cycle_position(msg.start_sequence, msg.end_sequence)
-            if where is None:            # not a cycle of this program's blocks (an approach ramp, another stream)
+            cycle = cycle_of(r, msg.start_sequence, msg.end_sequence, msg.amplitude, msg.peak_amplitude, msg.mean,
+                             conv.cycle_properties_dict(msg.measured), conv.cycle_properties_dict(msg.model),
+                             msg.residual_rms, self.elapsed)
+            if cycle is None:            # not a cycle of this program's blocks (an approach ramp, another stream)
                 return
-            block, number, steady = where
-            blk = r.program.blocks[block]
-            _, _, program_cycles = r.cycles_done(msg.end_sequence - 1)
-            amplitude = msg.peak_amplitude if blk.waveform in ('triangle', 'square') else msg.amplitude
-            cycle = Cycle(block, number, steady, amplitude, msg.mean, conv.cycle_properties_dict(msg.measured),
-                          conv.cycle_properties_dict(msg.model), msg.residual_rms, blk.amplitude, blk.mean,
-                          self.elapsed, program_cycles)
             self.act(self.monitor.on_cycle(cycle))
         except Exception as exc:   # noqa: BLE001 - a bad message must not take the node down
             self.get_logger().error(f'detectors failed on a cycle: {exc!r}\n{traceback.format_exc()}')

@@ -1,0 +1,202 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Detectors end to end: rig_driver (simulated rig with a failing specimen), element_model and excitation as
+separate processes, driven through the action and services from this process.
+
+Each damage option of the simulated specimen is detected by its detector and acted on within 2 cycles of the
+onset; the onset is located in the measured displacement with the specimen's own cycle counter (the same
+reversal rule, fed the measurement: its 20 N-class noise is far below the 10 um reversal). A clean program with
+every default detector on trips none at 200 N of load-cell noise, and a held durability block resumes with the
+cycles it had not run.
+"""
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from msg_defs.msg import RigStatus
+from rubber_rig.nodes.processes import Operator, SuiteProcesses
+from rubber_rig.rig.config import DamageSpec
+from rubber_rig.rig.sim.damage import DamagedSpecimen
+
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
+
+CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'rig_sim.yaml'
+NS = '/det'
+FS, F = 1000.0, 10.0
+ONSET = 30            # specimen load cycle at which crack and slip happen
+SINE = """name: damage_run
+blocks:
+  - {name: s10, waveform: sine, frequency: 10 Hz, amplitude: 1 mm, cycles: 60}
+"""
+
+
+def domain_id() -> int:
+    return 60 + os.getpid() % 30
+
+
+@pytest.fixture(scope='module')
+def suite(tmp_path_factory):
+    base = tmp_path_factory.mktemp('detectors')
+    overrides = {'rig_driver': {'sim': {'force_noise': 20.0}},
+                 'excitation': {'amplitude_control': True, 'hold_timeout': 3.0}}
+    procs = SuiteProcesses(CONFIG, NS, domain_id(), base / 'logs', overrides)
+    procs.start_all(('rig_driver', 'excitation', 'element_model'))
+    op = Operator(NS, domain_id())
+    try:
+        assert op.wait_ready(60.0), 'suite did not come up:\n' + procs.log('rig_driver')[-2000:]
+        yield procs, op
+    finally:
+        op.close()
+        procs.stop_all()
+
+
+def restart_rig(procs, op, sim: dict):
+    """A new simulated rig (a fresh specimen that counts its cycles from 0) with these sim options."""
+    t0 = time.monotonic()
+    procs.start('rig_driver', {'sim': dict({'force_noise': 20.0}, **sim)})
+    op.clear_history()
+    op.events.clear()
+    assert op.wait_for(lambda: any(t > t0 + 0.5 and s.state == RigStatus.STATE_IDLE for t, s in op.statuses), 60.0), \
+        'no status of the restarted rig_driver:\n' + procs.log('rig_driver')[-2000:]
+
+
+def onset_sequence(op, cycle: float) -> int:
+    """Sample at which the specimen's own counter reaches `cycle` load cycles (replayed on the measurement)."""
+    seq, _, x = op.applied(0)
+    counter = DamagedSpecimen(None, [], 1.0 / FS)
+    for s, v in zip(seq.tolist(), x.tolist(), strict=True):
+        counter._count(v)
+        if counter.cycles >= cycle:
+            return s
+    raise AssertionError(f'the specimen never reached {cycle} cycles')
+
+
+def damage_case(procs, op, damage: list, program: str):
+    restart_rig(procs, op, {'damage': yaml.safe_dump(damage, default_flow_style=True)})
+    handle = op.send_goal(program)
+    result = op.result(handle, 90.0)
+    assert result is not None, 'the goal did not end (hold_timeout should end a held program)'
+    assert op.wait_status(lambda s: s.state in (RigStatus.STATE_IDLE, RigStatus.STATE_HOLDING)
+                          and abs(s.position) < 2e-5, 10.0), 'the rig did not come to rest'
+    return result
+
+
+def delay_cycles(op, event_onset: int) -> float:
+    departure = op.first_departure(0)
+    assert departure is not None, 'the program was never held or stopped'
+    return (departure[0] - event_onset) * F / FS
+
+
+def test_crack_is_held_by_the_residual_detector_within_two_cycles(suite):
+    procs, op = suite
+    result = damage_case(procs, op, [{'type': 'crack', 'cycle': ONSET, 'loss': 0.3, 'damping': 2000.0}], SINE)
+    kinds = {e.kind: e for e in result.events}
+    assert 'residual' in kinds, [e.message for e in result.events]
+    e = kinds['residual']
+    assert e.action == 'hold' and e.value > 4 * e.reference
+    delay = delay_cycles(op, onset_sequence(op, ONSET))
+    print(f'crack: residual {e.value:.0f} N vs expected {e.reference:.0f} N; hold {delay:.2f} cycles after onset')
+    assert 0 < delay <= 2.0
+    assert 'hold_timeout' in result.message and not result.success
+    assert [m.kind for m in op.events] == [x.kind for x in result.events], 'the events topic carries the same events'
+
+
+def test_slip_is_held_by_the_force_drift_detector_within_two_cycles(suite):
+    procs, op = suite
+    program = SINE + "detectors: [{type: residual, action: record}]\n"     # residual trips too: only recorded
+    result = damage_case(procs, op, [{'type': 'slip', 'cycle': ONSET, 'offset': 0.2e-3}], program)
+    kinds = {e.kind: e for e in result.events}
+    assert {'residual', 'force_drift'} <= set(kinds), [e.message for e in result.events]
+    drift = kinds['force_drift']
+    assert drift.action == 'hold'
+    # 0.2 mm into a ~14 kN/mm joint: the mean force moves by about -2.8 kN
+    assert -3500 < drift.value - drift.reference < -2000, (drift.value, drift.reference)
+    delay = delay_cycles(op, onset_sequence(op, ONSET))
+    print(f'slip: mean force {drift.value - drift.reference:.0f} N off; hold {delay:.2f} cycles after onset')
+    assert 0 < delay <= 2.0
+
+
+def test_fatigue_ends_a_durability_block_at_the_stiffness_criterion(suite):
+    procs, op = suite
+    life, loss = 100.0, 0.4               # 0.4 % of the stiffness lost per cycle
+    program = """name: durability
+detectors:
+  - {type: stiffness_change, threshold: 0.2, action: end}
+  - {type: residual, action: record}
+  - {type: force_drift, threshold: 0.1, action: record}
+blocks:
+  - {name: life, waveform: sine, frequency: 10 Hz, amplitude: 1 mm, cycles: 150}
+"""
+    result = damage_case(procs, op, [{'type': 'fatigue', 'loss': loss, 'life': life}], program)
+    stiff = [e for e in result.events if e.kind == 'stiffness_change']
+    assert len(stiff) == 1 and stiff[0].action == 'end', [e.message for e in result.events]
+    assert not result.success and 'stiffness_change' in result.message
+    e = stiff[0]
+    assert e.value < 0.8 * e.reference
+    # the criterion is crossed where (1 - D(n)) / (1 - D(n_ref)) = 0.8, D(n) = loss n / life, with the
+    # reference the median of block cycles 4..6 (the taper adds one specimen cycle before block cycle 1)
+    spec = DamageSpec('fatigue', loss=loss, life=life)
+    d_ref = DamagedSpecimen(None, [spec], 1e-3).state(6.0)[0]
+    n_cross = life / loss * (1 - 0.8 * (1 - d_ref))
+    departure = op.first_departure(0)
+    crossing = onset_sequence(op, n_cross)
+    delay = (departure[0] - crossing) * F / FS
+    print(f'fatigue: {e.message}; criterion crossed at specimen cycle {n_cross:.1f}, end {delay:.2f} cycles later')
+    assert -0.5 < delay <= 2.0
+
+
+def test_clean_program_with_default_detectors_trips_none_at_200_newton_noise(suite):
+    procs, op = suite
+    restart_rig(procs, op, {'force_noise': 200.0, 'damage': '[]'})
+    program = """name: clean
+blocks:
+  - {name: a, waveform: sine, frequency: 10 Hz, amplitude: 1 mm, cycles: 40}
+  - {name: b, waveform: triangle, frequency: 2 Hz, amplitude: 0.5 mm, cycles: 8}
+  - {name: c, waveform: sine, frequency: 14 Hz, amplitude: 0.2 mm, cycles: 40}
+"""
+    result = op.run(program, timeout=90.0)
+    assert result is not None and result.success, result and result.message
+    assert list(result.events) == [] and op.events == [], [e.message for e in result.events]
+
+
+def test_held_durability_block_resumes_with_the_cycles_it_had_not_run(suite):
+    procs, op = suite
+    restart_rig(procs, op, {'damage': '[]'})
+    program = """name: resume
+blocks:
+  - {name: life, waveform: sine, frequency: 10 Hz, amplitude: 1 mm, cycles: 50}
+"""
+    handle = op.send_goal(program)
+    assert op.wait_for(lambda: op.last_sequence > 2500, 20.0)
+    assert op.hold(True).success
+    assert op.wait_status(lambda s: s.state == RigStatus.STATE_IDLE and abs(s.position) < 2e-5, 10.0), \
+        'a held rig stands at the block mean'
+    held_at = op.last_sequence
+    assert op.wait_for(lambda: False, 1.0) is False        # held for a second: no fault (the driver waits)
+    assert op.status.faults == 0, list(op.status.fault_messages)
+    assert op.hold(False).success
+    result = op.result(handle, 60.0)
+    assert result is not None and result.success, result and result.message
+    seq, u, _ = op.applied(held_at)
+    moving = np.abs(np.diff(u)) > 1e-7
+    # about 25 cycles were run before the hold: the resumed block runs the other ~25 (+ its two taper cycles)
+    resumed_cycles = moving.sum() / FS * F
+    assert 24 < resumed_cycles < 31, resumed_cycles
+    summary = result.blocks[0]
+    assert summary.completed
