@@ -57,6 +57,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--taper-cycles', type=float, help='taper cycles in and out of periodic blocks')
     parser.add_argument('--fast', action='store_true', help='run the simulated rig as fast as possible instead of '
                         'paced to the wall clock (same waveform and physics)')
+    parser.add_argument('--force-noise', help="simulated load-cell noise, e.g. '200N' (default: from the config)")
+    parser.add_argument('--damage', help="how the simulated specimen fails (YAML list), e.g. "
+                        "\"[{type: crack, cycle: 200, loss: 0.3}]\"; types fatigue, crack, slip (README 'Detectors')")
+    parser.add_argument('--hold-timeout', help="how long a held program waits for a resume before it ends, "
+                        "e.g. '30s' (default: the excitation config, 600 s)")
     parser.add_argument('--output-dir', default='recordings', help='directory for the MCAP file and summary')
     parser.add_argument('--namespace', default='', help='ROS namespace of the rig')
     parser.add_argument('--domain-id', type=int, help='ROS domain id (default: $ROS_DOMAIN_ID or 0)')

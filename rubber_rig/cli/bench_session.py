@@ -38,9 +38,10 @@ from rubber_rig.nodes.monitor import SuiteMonitor
 from rubber_rig.nodes.recorder_node import RecorderNode
 from rubber_rig.nodes.rig_driver_node import RigDriverNode
 from rubber_rig.recording.loss import recording_loss
+from rubber_rig.units import to_si
 
 # the streams the recorder must record (matched with their publishers) before the first setpoint is sent
-RECORDED_TOPICS = ('samples', 'prediction', 'setpoints', 'cycle_metrics', 'status')
+RECORDED_TOPICS = ('samples', 'prediction', 'setpoints', 'cycle_metrics', 'status', 'events')
 CONNECT_TIMEOUT = 30.0      # [s] nodes connected, goal accepted, recorder stopped
 ABORT_TIMEOUT = 15.0        # [s] the program ends after Ctrl-C cancelled it
 CATCH_UP_TIMEOUT = 5.0      # [s] the model predicts the last published samples
@@ -73,7 +74,11 @@ class BenchSession:
             raise CommandError('cannot record, nothing started: '
                                f'{self.recorder.core.error or "recorder not recording"}')
         self.model = launcher.start(ElementModelNode)
-        self.excitation = launcher.start(ExcitationNode, {'program': ''})
+        self.excitation = launcher.start(ExcitationNode, excitation_overrides(args))
+        self._hold_help = (f'the rig holds at rest; resume: ros2 service call '
+                           f'{self.excitation.get_fully_qualified_name()}/hold '
+                           f'std_srvs/srv/SetBool "{{data: false}}", Ctrl-C ends the program, and it ends by '
+                           f'itself after {self.excitation.hold_timeout:g} s (--hold-timeout)')
         self.driver = launcher.start(RigDriverNode, driver_overrides(args))
         if self.driver.lifecycle_state != 'active':
             raise CommandError(f'rig_driver did not come up (lifecycle state {self.driver.lifecycle_state}); '
@@ -84,7 +89,7 @@ class BenchSession:
             self.foxglove = f'Foxglove: connect to ws://127.0.0.1:{args.foxglove_port}, import layout {LAYOUT_FILE}'
         self.monitor = launcher.spin(SuiteMonitor(context=launcher.context, namespace=args.namespace))
         self.cfg = self.driver.config
-        self._n_feedback = self._n_cycles = 0
+        self._n_feedback = self._n_cycles = self._n_events = 0
         self._rest_since = None
 
     def describe(self, program) -> list[str]:
@@ -152,6 +157,7 @@ class BenchSession:
                     term.line(f'RECORDING FAILED: {run.recording_error}; stopping the program (smooth ramp to rest)')
                     goal_handle.cancel_goal_async()
                 self._show_progress(term, t_start)
+                self._show_events(term)
                 for c in self.new_cycle_metrics():
                     on_cycle(c)
                 self.launcher.wait_for(run.future.done, REFRESH_PERIOD)
@@ -166,6 +172,16 @@ class BenchSession:
         term.end_status()
         run.wall_time = time.monotonic() - t_start
         return run
+
+    def _show_events(self, term) -> None:
+        """Each detector event once, as it arrives (between the table's rows)."""
+        events = self.monitor.events[self._n_events:]
+        self._n_events += len(events)
+        for e in events:
+            term.end_status()
+            term.line(f'EVENT {e.action.upper()}: {e.message}')
+            if e.action == 'hold':
+                term.line(self._hold_help)
 
     def _show_progress(self, term, t_start: float) -> None:
         fb = self.monitor.feedback[self._n_feedback:]
@@ -188,6 +204,7 @@ class BenchSession:
         for c in self.new_cycle_metrics():
             on_cycle(c)
         run.result = run.future.result().result if run.future.done() else None
+        self._show_events(term)
 
     # -- the end of the recording -------------------------------------------------------------------------------------
     def _tail_recorded(self, run: ProgramRun) -> bool:
@@ -252,7 +269,23 @@ class BenchSession:
             # stamps are rig time (sample index / rate): only a paced rig keeps it in step with the wall clock
             'latency': self.monitor.latency_summary() if cfg.paced else {},
             'blocks': rows,
+            'events': [event_dict(e) for e in (result.events if result else self.monitor.events)],
         }
+
+
+def event_dict(e) -> dict:
+    """msg_defs/DetectorEvent -> the summary's record of it (SI, as on the message)."""
+    return {k: getattr(e, k) for k in ('detector', 'kind', 'action', 'block_index', 'block_name', 'cycle',
+                                       'program_cycle', 'elapsed', 'value', 'reference', 'threshold', 'units',
+                                       'message')}
+
+
+def excitation_overrides(args) -> dict:
+    """excitation parameters the command line sets (the program comes by the action, not the parameter)."""
+    overrides = {'program': ''}
+    if getattr(args, 'hold_timeout', None):
+        overrides['hold_timeout'] = to_si(args.hold_timeout, 'time')
+    return overrides
 
 
 def driver_overrides(args) -> dict:
@@ -264,4 +297,8 @@ def driver_overrides(args) -> dict:
         overrides['batch_size'] = int(args.batch_size)
     if args.fast:
         overrides['paced'] = False
+    if getattr(args, 'force_noise', None):
+        overrides['sim.force_noise'] = to_si(args.force_noise, 'force')
+    if getattr(args, 'damage', None):
+        overrides['sim.damage'] = args.damage
     return overrides

@@ -74,6 +74,8 @@ def print_result(summary: dict, rec_loss: dict, recording_error: str, paced: boo
           f"recording: {rec_loss.get('samples_lost', 'n/a')} samples lost"
           + (f" ({rec_loss['samples_not_recorded']} published samples not recorded)"
              if rec_loss.get('samples_not_recorded') else ''))
+    events = summary.get('events', [])
+    print(f'detector events: {len(events)}' + ''.join(f"\n  {e['action']}: {e['message']}" for e in events))
     if recording_error:
         print(f'RECORDING FAILED: {recording_error}')
     lat = summary['latency'].get('last_sample')

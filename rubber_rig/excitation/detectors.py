@@ -30,10 +30,12 @@ part, so tapers and approach ramps never trip them):
   expected residual is the block's own stabilised value (median over ``reference_cycles`` cycles after
   ``settle_cycles``), at least the declared ``noise`` [N] and at least ``floor`` x the block's force amplitude
   (a perfect model on a quiet load cell must not make a tiny residual the yardstick).
-- ``stiffness_change``: ``quantity`` (k_dyn, c_eq or loss_angle) of the cycle against a ``reference``: the
-  block's stabilised value (``stabilised``) or the element model's value for the same cycle (``model``);
-  trips when ``|value / reference - 1| > threshold`` (a fraction: 0.2 = +-20 %, the end of life of elastomer
-  durability tests is commonly a 10-30 % stiffness drop).
+- ``stiffness_change``: ``quantity`` (k_dyn, c_eq or loss_angle) of the cycle against a ``reference``:
+  ``program`` (default) the specimen's stabilised ratio to the element model over the program's first steady
+  cycles, so one reference serves every block and a change between blocks is seen; ``stabilised`` the block's
+  own stabilised value; ``model`` the element model's value for the same cycle. Trips when
+  ``|value / reference - 1| > threshold`` (a fraction: 0.2 = +-20 %, the end of life of elastomer durability
+  tests is commonly a 10-30 % stiffness drop).
 - ``force_drift``: ``quantity`` mean or amplitude of the measured force against the block's stabilised value;
   ``threshold`` is a force ('2 kN') or, as a plain number, a fraction of the stabilised force amplitude.
 - ``tracking``: the measured displacement amplitude and mean against the block's targets; trips when the larger
@@ -42,7 +44,9 @@ part, so tapers and approach ramps never trip them):
 - ``elapsed_time``: ``threshold`` of rig time since the program started ('2 h').
 
 ``consecutive``: cycles in a row over the threshold before it trips (default 1: a crack is acted on one cycle
-after it happens). A detector trips once per block; after a hold and resume it is armed again.
+after it happens). A detector trips once per block; after a hold and resume it is armed again. The cycles a
+reference is gathered from are judged against it once it is set (a residual's reference is their smallest
+value), so a change while the reference is gathered trips too, on the cycle the reference is complete.
 """
 from __future__ import annotations
 
@@ -58,6 +62,7 @@ ACTIONS = ('record', 'warn', 'hold', 'end')
 SEVERITY = {a: i for i, a in enumerate(ACTIONS)}     # when several trip together, the strongest action wins
 TRIGGERS = ('cycle_count', 'elapsed_time')           # end-of-test triggers: judged on samples, not on cycles
 UNITS = {'k_dyn': 'N/m', 'c_eq': 'N s/m', 'loss_angle': 'rad'}
+REFERENCES = ('program', 'stabilised', 'model')      # stiffness_change; the others use 'stabilised'
 QUANTITIES = {'stiffness_change': ('k_dyn', 'c_eq', 'loss_angle'), 'force_drift': ('mean', 'amplitude')}
 DEFAULT_ACTION = {'residual': 'hold', 'stiffness_change': 'end', 'force_drift': 'hold', 'tracking': 'hold',
                   'cycle_count': 'end', 'elapsed_time': 'end'}
@@ -86,7 +91,7 @@ class DetectorSpec:
     threshold: float = math.nan
     threshold_units: str = ''        # 'N' for an absolute force_drift bound, '' for a fraction or count
     quantity: str = ''
-    reference: str = 'stabilised'
+    reference: str = 'stabilised'   # stiffness_change: 'program' by default (parse_detector)
     consecutive: int = 1
     settle_cycles: int = 3
     reference_cycles: int = 3
@@ -96,7 +101,8 @@ class DetectorSpec:
 
     def to_dict(self) -> dict:
         """As program YAML fields (SI), so a rewritten program keeps its detectors."""
-        d = {f.name: getattr(self, f.name) for f in fields(self) if f.name not in ('threshold_units', 'block')}
+        d = {f.name: getattr(self, f.name) for f in fields(self)
+             if f.name not in ('threshold_units', 'block') and getattr(self, f.name) != ''}
         if self.threshold_units == 'N':
             d['threshold'] = f'{self.threshold:g} N'
         return d
@@ -157,10 +163,11 @@ def parse_detector(raw, where: str, block: int = -1) -> DetectorSpec:
         raise DetectorError(f"{where}: field 'quantity': {spec.quantity!r} is not one of {', '.join(quantities)}")
     if not quantities and 'quantity' in raw:
         raise DetectorError(f"{where}: field 'quantity': not used by a {kind} detector")
-    spec.reference = str(raw.get('reference', 'stabilised'))
-    if spec.reference not in ('stabilised', 'model') or (spec.reference == 'model' and kind != 'stiffness_change'):
-        raise DetectorError(f"{where}: field 'reference': 'stabilised'" +
-                            (" or 'model'" if kind == 'stiffness_change' else '') + f', got {spec.reference!r}')
+    stiffness = kind == 'stiffness_change'
+    spec.reference = str(raw.get('reference', 'program' if stiffness else 'stabilised'))
+    if spec.reference not in REFERENCES or (spec.reference != 'stabilised' and not stiffness):
+        raise DetectorError(f"{where}: field 'reference': " + (', '.join(repr(r) for r in REFERENCES) if stiffness
+                                                                else "'stabilised'") + f', got {spec.reference!r}')
     return spec
 
 
@@ -229,6 +236,7 @@ class Monitor:
     def __init__(self, detectors: list[DetectorSpec]):
         self.detectors = list(detectors)
         self._blocks: dict[int, _BlockState] = {}
+        self._program = _BlockState()      # references that serve every block (stiffness_change 'program')
         self.events: list[Event] = []
 
     def rearm(self) -> None:
@@ -280,62 +288,76 @@ class Monitor:
         state.tripped.add(d.name)
         if d.type in TRIGGERS:
             what = f'{value:.6g} {units} reached (threshold {threshold:.6g} {units})'
+        elif d.type == 'residual':
+            what = f'residual RMS {value:.6g} N, {threshold / reference:g} x the expected {reference:.6g} N exceeded'
         else:
             change = f' ({value / reference - 1:+.1%})' if reference else ''
             what = (f'{value:.6g} {units} against {reference:.6g} {units}{change}, allowed deviation '
-                    f'{threshold:.6g} {units}') if d.type != 'residual' else \
-                f'residual RMS {value:.6g} N, {threshold / reference:g} x the expected {reference:.6g} N exceeded'
+                    f'{threshold:.6g} {units}')
+            if d.reference == 'program':
+                what += " (reference: the specimen's stabilised ratio to the model, at this cycle's model value)"
         msg = f"detector '{d.name}' ({d.type}) in block {block}, cycle {cycle}: {what}; action {d.action}"
         event = Event(d.name, d.type, block, int(cycle), int(program_cycle), float(elapsed), float(value),
                       float(reference), float(threshold), units, d.action, msg)
         self.events.append(event)
         return event
 
-    def _stabilised(self, d, state, value):
-        """The block's stabilised reference of detector d (None while it is still being gathered)."""
+    def _stabilised(self, d, state, value, reduce=np.median):
+        """(reference, the cycles it was gathered from) of detector d: the reduced values of its
+        ``reference_cycles`` after ``settle_cycles``. The cycles are returned once, on the cycle that completes
+        the reference (so the caller judges them too), () after that; (None, ()) while gathering.
+        """
         if d.name in state.references:
-            return state.references[d.name]
+            return state.references[d.name], ()
         got = state.samples.setdefault(d.name, [])
+        if not np.all(np.isfinite(value)):           # a cycle the model or the analysis could not judge
+            return None, ()
         got.append(value)
-        if len(got) <= d.settle_cycles + d.reference_cycles:
-            if len(got) == d.settle_cycles + d.reference_cycles:
-                ref = np.median(np.asarray(got[d.settle_cycles:], dtype=float), axis=0)
-                state.references[d.name] = tuple(ref) if np.ndim(ref) else float(ref)
-            return None
-        return state.references[d.name]
+        if len(got) < d.settle_cycles + d.reference_cycles:
+            return None, ()
+        window = got[d.settle_cycles:]
+        ref = reduce(np.asarray(window, dtype=float), axis=0)
+        state.references[d.name] = tuple(float(r) for r in ref) if np.ndim(ref) else float(ref)
+        return state.references[d.name], window
 
     def _judge(self, d, c: Cycle, state):
         """(value, reference, threshold, units, over) of detector d on cycle c, or None (not armed yet, or the
-        cycle lacks what it needs).
+        cycle lacks what it needs). On the cycle that completes a reference, the worst of its cycles is judged.
         """
         m = c.measured
         if d.type == 'residual':
-            amp = m.get('force_amplitude', math.nan)
-            ref = self._stabilised(d, state, (c.residual_rms, amp))
+            ref, window = self._stabilised(d, state, (c.residual_rms, m.get('force_amplitude', math.nan)), np.min)
             if ref is None or not math.isfinite(c.residual_rms):
                 return None
             expected = max(ref[0], d.noise, d.floor * ref[1])
-            threshold = d.threshold * expected
-            return c.residual_rms, expected, threshold, 'N', c.residual_rms > threshold
+            worst = max([c.residual_rms] + [w[0] for w in window])
+            return worst, expected, d.threshold * expected, 'N', worst > d.threshold * expected
         if d.type == 'stiffness_change':
-            value = m.get(d.quantity, math.nan)
+            value, model = m.get(d.quantity, math.nan), c.model.get(d.quantity, math.nan)
             if d.reference == 'model':
-                ref = c.model.get(d.quantity, math.nan)
+                ref, window = model, ()
+            elif d.reference == 'program':
+                ratio, window = self._stabilised(d, self._program, value / model if model else math.nan)
+                if ratio is None:
+                    return None
+                ref, window = ratio * model, [w * model for w in window]
             else:
-                ref = self._stabilised(d, state, value)
+                ref, window = self._stabilised(d, state, value)
                 if ref is None:
                     return None
             if not (math.isfinite(value) and math.isfinite(ref)) or ref == 0:
                 return None
+            worst = max([value, *window], key=lambda v: abs(v - ref))
             bound = d.threshold * abs(ref)
-            return value, ref, bound, UNITS[d.quantity], abs(value - ref) > bound
+            return worst, ref, bound, UNITS[d.quantity], abs(worst - ref) > bound
         if d.type == 'force_drift':
             value = m.get('force_mean' if d.quantity == 'mean' else 'force_amplitude', math.nan)
-            ref = self._stabilised(d, state, (value, m.get('force_amplitude', math.nan)))
+            ref, window = self._stabilised(d, state, (value, m.get('force_amplitude', math.nan)))
             if ref is None or not math.isfinite(value):
                 return None
             bound = d.threshold if d.threshold_units == 'N' else d.threshold * ref[1]
-            return value, ref[0], bound, 'N', abs(value - ref[0]) > bound
+            worst = max([value] + [w[0] for w in window], key=lambda v: abs(v - ref[0]))
+            return worst, ref[0], bound, 'N', abs(worst - ref[0]) > bound
         if d.type == 'tracking':
             if not (math.isfinite(c.target_amplitude) and c.target_amplitude > 0):
                 return None

@@ -33,6 +33,7 @@ from std_srvs.srv import SetBool, Trigger
 from msg_defs.action import RunProgram
 from msg_defs.msg import (
     CycleMetrics,
+    DetectorEvent,
     ModelParameters,
     ModelPrediction,
     RecorderStatus,
@@ -79,6 +80,7 @@ class SuiteMonitor(Node):
         self.latency_first: list[float] = []    # [s] first sample of a batch taken -> its prediction here
         self.cycle_metrics: list[CycleMetrics] = []
         self.feedback: list = []
+        self.events: list[DetectorEvent] = []
         self.status: RigStatus | None = None
         self.recorder_status: RecorderStatus | None = None
         self.model_parameters: ModelParameters | None = None
@@ -89,6 +91,7 @@ class SuiteMonitor(Node):
         sub(ModelPrediction, topics.PREDICTION, self._on_prediction, topics.STREAM_QOS)
         sub(SetpointBatch, topics.SETPOINTS, self._on_setpoints, topics.STREAM_QOS)
         sub(CycleMetrics, topics.CYCLE_METRICS, self._on_cycle, topics.EVENT_QOS)
+        sub(DetectorEvent, topics.EVENTS, self.events.append, topics.EVENT_QOS)
         sub(RigStatus, topics.STATUS, self._on_status, topics.LATCHED_QOS)
         sub(ModelParameters, topics.MODEL_PARAMETERS, self._on_parameters, topics.LATCHED_QOS)
         sub(String, topics.PROGRAM, self._on_program, topics.LATCHED_QOS)

@@ -132,5 +132,15 @@ def write_summary(mcap: Path, summary: dict) -> tuple[Path, Path]:
                      f"{r['measured']['c_eq'] * 1e-3:.2f} | {r['model']['c_eq'] * 1e-3:.2f} | "
                      f"{r['deviation_c_eq_pct']:+.2f} | {math.degrees(r['measured']['loss_angle']):.2f} / "
                      f"{math.degrees(r['model']['loss_angle']):.2f} |")
+    events = summary.get('events', [])
+    lines += ['', f'## Detector events ({len(events)})', '']
+    if events:
+        lines += ['| block | cycle | program cycle | detector | action | value | reference | threshold | units |',
+                  '|---|---|---|---|---|---|---|---|---|']
+        lines += [f"| {e['block_index']} {e['block_name']} | {e['cycle']} | {e['program_cycle']} | {e['detector']} "
+                  f"({e['kind']}) | {e['action']} | {e['value']:.6g} | {e['reference']:.6g} | {e['threshold']:.6g} | "
+                  f"{e['units']} |" for e in events]
+    else:
+        lines.append('No detector tripped.')
     mpath.write_text('\n'.join(lines) + '\n')
     return jpath, mpath
