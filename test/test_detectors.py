@@ -23,12 +23,14 @@ import pytest
 
 from rubber_rig.excitation.blocks import ProgramError
 from rubber_rig.excitation.detectors import (
+    DEFAULTS,
     Cycle,
     DetectorError,
     Monitor,
     parse_detector,
     parse_detectors,
     strongest,
+    with_defaults,
 )
 from rubber_rig.excitation.program import read_program, with_overrides
 from rubber_rig.excitation.runner import ProgramRunner
@@ -330,3 +332,10 @@ blocks:
     assert n_b == (1 + 15 + 1) * per_b
     assert r.cycles_done(first_b + 3 * per_b) == (1, 5 + 2, 4 + 5 + 2)
     assert np.max(np.abs(x)) <= 0.5e-3 + 1e-12
+
+
+def test_a_program_criterion_replaces_the_default_of_its_type():
+    program, _ = read_program(yaml_text=PROGRAM)
+    got = with_defaults(program.all_detectors(), parse_detectors(list(DEFAULTS), 'default_detectors'))
+    assert [(d.name, d.block) for d in got] == [('elapsed_time', -1), ('stiffness_change', 1), ('residual', 1),
+                                                 ('force_drift', -1), ('tracking', -1)]

@@ -21,6 +21,7 @@ reversal rule, fed the measurement: its 20 N-class noise is far below the 10 um 
 every default detector on trips none at 200 N of load-cell noise, and a held durability block resumes with the
 cycles it had not run.
 """
+import html
 import os
 import time
 from pathlib import Path
@@ -30,6 +31,10 @@ import pytest
 import yaml
 
 from msg_defs.msg import RigStatus
+from msg_defs.srv import RecorderControl
+from rubber_rig.fitting.blocks import split_blocks
+from rubber_rig.fitting.data import load_run
+from rubber_rig.fitting.report import make_report
 from rubber_rig.nodes.processes import Operator, SuiteProcesses
 from rubber_rig.rig.config import DamageSpec
 from rubber_rig.rig.sim.damage import DamagedSpecimen
@@ -54,9 +59,10 @@ def domain_id() -> int:
 def suite(tmp_path_factory):
     base = tmp_path_factory.mktemp('detectors')
     overrides = {'rig_driver': {'sim': {'force_noise': 20.0}},
-                 'excitation': {'amplitude_control': True, 'hold_timeout': 3.0}}
+                 'excitation': {'amplitude_control': True, 'hold_timeout': 3.0},
+                 'recorder': {'output_dir': str(base / 'recordings')}}
     procs = SuiteProcesses(CONFIG, NS, domain_id(), base / 'logs', overrides)
-    procs.start_all(('rig_driver', 'excitation', 'element_model'))
+    procs.start_all(('recorder', 'rig_driver', 'excitation', 'element_model'))
     op = Operator(NS, domain_id())
     try:
         assert op.wait_ready(60.0), 'suite did not come up:\n' + procs.log('rig_driver')[-2000:]
@@ -115,6 +121,19 @@ def test_crack_is_held_by_the_residual_detector_within_two_cycles(suite):
     assert 0 < delay <= 2.0
     assert 'hold_timeout' in result.message and not result.success
     assert [m.kind for m in op.events] == [x.kind for x in result.events], 'the events topic carries the same events'
+    # the recording has the events and the cycle metrics; the report marks them
+    stop = op.call(f'{NS}/recorder/control', RecorderControl, RecorderControl.Request(command=RecorderControl.Request.STOP),
+                   timeout=30.0)
+    assert stop is not None and stop.success, stop
+    run = load_run(stop.file)
+    assert [(e['detector'], e['action'], e['cycle']) for e in run.events] == \
+        [(x.detector, x.action, x.cycle) for x in result.events]
+    assert result.events[0].sequence in run.cycles['end_sequence']
+    rep = split_blocks(run.displacement, run.force, run.dt, block_index=run.block_index,
+                       program_blocks=run.program_blocks)
+    files = make_report(run, rep.blocks, None, procs.log_dir.parent / 'report')
+    page = files['html'].read_text()
+    assert 'cycles' in files and 'Detector events (1)' in page and html.escape(result.events[0].message) in page
 
 
 def test_slip_is_held_by_the_force_drift_detector_within_two_cycles(suite):

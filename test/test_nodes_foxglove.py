@@ -27,7 +27,8 @@ import numpy as np
 import pytest
 from rclpy.node import Node
 
-from msg_defs.msg import ModelPrediction
+from msg_defs.msg import DetectorEvent, ModelPrediction
+from rubber_rig.excitation.detectors import Event
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.foxglove_view_node import LAYOUT_FILE, FoxgloveViewNode, build_layout
@@ -35,7 +36,7 @@ from rubber_rig.nodes.launcher import InProcessLauncher
 
 from support.suite import domain_id
 
-CHANNELS = {'/live/force', '/live/loop', '/live/cycle', '/live/status'}
+CHANNELS = {'/live/force', '/live/loop', '/live/cycle', '/live/status', '/live/events'}
 
 
 def layout_paths(obj):
@@ -143,3 +144,23 @@ def test_live_view_serves_force_samples_over_websocket():
         assert sample['displacement_mm'] == pytest.approx(x[i] * 1e3)
         assert sample['measured_kN'] == pytest.approx(1.5e7 * x[i] * 1e-3)
         assert sample['residual_kN'] == pytest.approx(3.0e-3)
+
+        # a detector event reaches the events table (and the K_dyn plot's markers)
+        client.send_text(json.dumps({'op': 'subscribe', 'subscriptions': [
+            {'id': 8, 'channelId': channels['/live/events']['id']}]}))
+        events = feeder.create_publisher(DetectorEvent, topics.EVENTS, topics.EVENT_QOS)
+        event = Event('crack', 'residual', 2, 17, 41, 12.5, 2400.0, 150.0, 600.0, 'N', 'hold', 'a crack', 12500)
+        got = []
+        deadline = time.monotonic() + 20
+        while not got and time.monotonic() < deadline:
+            events.publish(conv.detector_event_msg(event, 'durability_10hz', 'durability', time.time()))
+            try:
+                while not got:
+                    op, data = client.frame()
+                    if op == 2 and data[0] == 0x01 and struct.unpack('<I', data[1:5])[0] == 8:
+                        got.append(json.loads(data[13:]))
+            except socket.timeout:
+                pass
+        assert got, 'no /live/events message over the WebSocket'
+        assert (got[0]['detector'], got[0]['action'], got[0]['cycle'], got[0]['block_name']) == \
+            ('crack', 'hold', 17, 'durability')

@@ -276,8 +276,8 @@ class BenchSession:
 def event_dict(e) -> dict:
     """msg_defs/DetectorEvent -> the summary's record of it (SI, as on the message)."""
     return {k: getattr(e, k) for k in ('detector', 'kind', 'action', 'block_index', 'block_name', 'cycle',
-                                       'program_cycle', 'elapsed', 'value', 'reference', 'threshold', 'units',
-                                       'message')}
+                                       'program_cycle', 'elapsed', 'sequence', 'value', 'reference', 'threshold',
+                                       'units', 'message')}
 
 
 def excitation_overrides(args) -> dict:

@@ -202,6 +202,7 @@ class Cycle:
     target_mean: float = math.nan
     elapsed: float = math.nan
     program_cycle: int = 0
+    end_sequence: int = 0          # rig sample sequence after the cycle's last sample
 
 
 @dataclass
@@ -220,6 +221,7 @@ class Event:
     units: str
     action: str
     message: str
+    sequence: int = 0              # rig sample sequence the event belongs to (after the cycle or batch judged)
 
 
 @dataclass
@@ -264,11 +266,14 @@ class Monitor:
             n = state.over[d.name] = state.over.get(d.name, 0) + 1 if over else 0
             if n >= d.consecutive:
                 out.append(self._trip(d, state, c.block, c.cycle, c.program_cycle, c.elapsed, value, reference,
-                                      threshold, units))
+                                      threshold, units, c.end_sequence))
         return out
 
-    def on_progress(self, block: int, block_cycles: int, program_cycles: int, elapsed: float) -> list[Event]:
-        """Judge the end-of-test triggers: full-amplitude cycles done in the block and the program, rig time [s]."""
+    def on_progress(self, block: int, block_cycles: int, program_cycles: int, elapsed: float,
+                    sequence: int = 0) -> list[Event]:
+        """Judge the end-of-test triggers: full-amplitude cycles done in the block and the program, rig time [s],
+        at rig sample `sequence`.
+        """
         state = self._blocks.setdefault(block, _BlockState())
         out = []
         for d in self.detectors:
@@ -278,13 +283,14 @@ class Monitor:
                 count = block_cycles if d.block >= 0 else program_cycles
                 if count >= d.threshold:
                     out.append(self._trip(d, state, block, block_cycles, program_cycles, elapsed, count, math.nan,
-                                          d.threshold, 'cycles'))
+                                          d.threshold, 'cycles', sequence))
             elif elapsed >= d.threshold:
                 out.append(self._trip(d, state, block, block_cycles, program_cycles, elapsed, elapsed, math.nan,
-                                      d.threshold, 's'))
+                                      d.threshold, 's', sequence))
         return out
 
-    def _trip(self, d, state, block, cycle, program_cycle, elapsed, value, reference, threshold, units) -> Event:
+    def _trip(self, d, state, block, cycle, program_cycle, elapsed, value, reference, threshold, units,
+              sequence) -> Event:
         state.tripped.add(d.name)
         if d.type in TRIGGERS:
             what = f'{value:.6g} {units} reached (threshold {threshold:.6g} {units})'
@@ -298,7 +304,7 @@ class Monitor:
                 what += " (reference: the specimen's stabilised ratio to the model, at this cycle's model value)"
         msg = f"detector '{d.name}' ({d.type}) in block {block}, cycle {cycle}: {what}; action {d.action}"
         event = Event(d.name, d.type, block, int(cycle), int(program_cycle), float(elapsed), float(value),
-                      float(reference), float(threshold), units, d.action, msg)
+                      float(reference), float(threshold), units, d.action, msg, int(sequence))
         self.events.append(event)
         return event
 
@@ -381,7 +387,15 @@ def cycle_of(runner, start: int, end: int, amplitude: float, peak_amplitude: flo
     _, _, program_cycles = runner.cycles_done(end - 1)
     amp = peak_amplitude if blk.waveform in ('triangle', 'square') else amplitude
     return Cycle(block, number, steady, amp, mean, measured, model, residual_rms, blk.amplitude, blk.mean, elapsed,
-                 program_cycles)
+                 program_cycles, int(end))
+
+
+def with_defaults(own: list[DetectorSpec], defaults: list[DetectorSpec]) -> list[DetectorSpec]:
+    """A program's own detectors plus the defaults of the types (and names) it does not declare: a program with
+    its own stiffness_change criterion does not also run the default one.
+    """
+    taken = {d.type for d in own} | {d.name for d in own}
+    return list(own) + [d for d in defaults if d.type not in taken and d.name not in taken]
 
 
 def strongest(events: list[Event]) -> Event | None:

@@ -32,6 +32,8 @@ from rubber_rig.excitation.program import Program
 from rubber_rig.models import load_parameter_set
 from rubber_rig.recording import RecordingError, load_recording
 
+from .events import recorded_cycles, recorded_events
+
 
 @dataclass
 class RunData:
@@ -46,6 +48,8 @@ class RunData:
     metadata: dict = field(default_factory=dict)
     messages: list = field(default_factory=list)
     true_params: dict | None = None            # specimen parameters when the run is simulated
+    cycles: dict | None = None                 # the element model's per-cycle metrics (fitting.events)
+    events: list = field(default_factory=list)  # detector events (fitting.events)
 
     def usable(self) -> bool:
         return self.force is not None and self.displacement is not None
@@ -191,7 +195,8 @@ def load_run(path) -> RunData:
                   setpoint=sig('setpoint'), temperature=temperature,
                   block_index=None if bi is None else bi.astype(int),
                   program_blocks=_program_blocks(_meta_program(meta)), metadata=meta,
-                  messages=messages, true_params=_meta_true_params(meta))
+                  messages=messages, true_params=_meta_true_params(meta), cycles=recorded_cycles(rec),
+                  events=recorded_events(rec))
     return _finish(run)
 
 

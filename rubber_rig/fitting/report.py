@@ -41,6 +41,7 @@ import base64
 import html
 import io
 import math
+from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -57,9 +58,11 @@ from .identification import calibrate, corrected_force
 from .metrics import window_properties
 from .modelfit import DELAY, Z95, paper_unit
 from .paramfile import PARAM_NAMES
+from .report_events import events_html, fig_cycles, mark_events
 from .timefit import run_input
 
-FIGURES = ('loops', 'kdyn_ceq', 'ratios', 'traces', 'errors')
+_NO_MODEL = defaultdict(lambda: math.nan)
+FIGURES = ('loops', 'kdyn_ceq', 'ratios', 'traces', 'cycles', 'errors')
 BAND_SAMPLES = 50          # parameter sets drawn for the model band of kdyn_ceq.png
 _RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma')
 
@@ -455,7 +458,8 @@ def fig_traces(run, force, blocks, sigma_f, plt):
         for b in blocks:
             ax.axvspan(b.start * run.dt, b.stop * run.dt, color='C0', alpha=0.06, lw=0)
         ax.grid(alpha=0.3)
-    axes[0].set_title('Time traces (shaded: analysed steady cycles of each block)')
+    mark_events(axes, getattr(run, 'events', []), run.dt)
+    axes[0].set_title('Time traces (shaded: analysed steady cycles of each block; dashed: detector events)')
     fig.tight_layout()
     return fig
 
@@ -508,6 +512,9 @@ def make_report(run, blocks, model: ReportModel | None, outdir, title=None, mess
         skipped['ratios'] = ('R_K and R_E (seed 000 Eq. 30, Fig. 7) split the fractional Zener from the Berg '
                              'friction; this model is not fractional Zener + Berg, so the figure is left out.')
     figs['traces'] = fig_traces(run, force, blocks, sigma_f, plt)
+    cycles = fig_cycles(run, plt)
+    if cycles is not None:
+        figs['cycles'] = cycles
     if model is not None:
         figs['errors'] = fig_errors(quality, plt)
     files, images = {}, {}
@@ -635,8 +642,8 @@ def _html(run, blocks, model, quality, images, title, messages, sigma_f, stats, 
                          f'{n} analysed samples (offset per block removed; no parameter fitted here, so near 1 '
                          'means the model reproduces this recording to its noise).</p>')
     if quality:
-        has_a = 'analytic' in quality[0]
-        has_s = 'simulated' in quality[0]
+        has_a = quality[0].get('analytic') is not None        # a report without a model has neither
+        has_s = quality[0].get('simulated') is not None
         head = ['f [Hz]', 'x0 [mm]', 'cycles', 'K_dyn [kN/mm]', '&plusmn;1 sigma']
         head += ['model run'] * has_s + ['model 1st harm.'] * has_a + ['e_K run [%]'] * has_s
         head += ['e_K 1st harm. [%]'] * has_a + ['C_eq [kN s/m]', '&plusmn;1 sigma'] + ['model run'] * has_s
@@ -644,7 +651,8 @@ def _html(run, blocks, model, quality, images, title, messages, sigma_f, stats, 
         head += ['loss angle [deg]', 'E [J]']
         parts.append('<h2>Blocks</h2><table class="blocks"><tr>' + ''.join(f'<th>{h}</th>' for h in head) + '</tr>')
         for q in quality:
-            m, s, a = q['measured'], q.get('simulated'), q.get('analytic')
+            # without a model the columns are absent; the NaN rows only keep the expressions below evaluable
+            m, s, a = q['measured'], q.get('simulated') or _NO_MODEL, q.get('analytic') or _NO_MODEL
             cells = [f'{q["frequency"]:.3g}', f'{q["amplitude"] * 1e3:.3g}', str(q['cycles']),
                      f'{m["k_dyn"] * 1e-6:.4g}', f'{m["sigma_k"] * 1e-6:.2g}']
             cells += [f'{s["k_dyn"] * 1e-6:.4g}'] * has_s + [f'{a["k_dyn"] * 1e-6:.4g}'] * has_a
@@ -656,10 +664,11 @@ def _html(run, blocks, model, quality, images, title, messages, sigma_f, stats, 
             parts.append('<tr>' + ''.join(f'<td>{c}</td>' for c in cells) + '</tr>')
         parts.append('</table>')
         for kind, what in (('simulated', 'run over the measured displacement'), ('analytic', 'first harmonic')):
-            if kind in quality[0]:
+            if quality[0].get(kind) is not None:
                 ek = max(abs(q[kind]['e_k']) for q in quality)
                 ec = max(abs(q[kind]['e_c']) for q in quality)
                 parts.append(f'<p>Max |error|, model {what}: K_dyn {100 * ek:.2f} %, C_eq {100 * ec:.2f} %.</p>')
+    parts += events_html(getattr(run, 'events', []))
     if messages:
         parts.append('<h2>Notes</h2><ul>' + ''.join(f'<li>{esc(m)}</li>' for m in messages) + '</ul>')
     band = (f'The shaded bands are the model\'s +-1 sigma from its parameter uncertainty: {band_used} parameter '
@@ -680,6 +689,10 @@ def _html(run, blocks, model, quality, images, title, messages, sigma_f, stats, 
         'ratios': ('R_K and R_E (seed 000 Eq. 30, Fig. 7)', ''),
         'traces': ('Time traces and residual', 'Residual F_model - F_measured over the whole recording; grey: '
                                                '+-2 sigma_F.'),
+        'cycles': ('K_dyn and C_eq cycle by cycle (online)',
+                   'Every cycle the element model measured while the test ran (recorded CycleMetrics): measured '
+                   'points and the model\'s value for the same cycle. A durability test\'s stiffness curve; dashed '
+                   'lines: detector events (grey record, orange warn, red hold, black end).'),
         'errors': ('Relative errors per block (Eq. 28)', 'Error bars: 1 sigma of the measured K_dyn and C_eq.'),
     }
     for name in FIGURES:

@@ -41,6 +41,7 @@ from msg_defs.msg import (
     SetpointBatch,
 )
 from rubber_rig.excitation import Limits
+from rubber_rig.online import PROPERTY_FIELDS, cycle_properties
 from rubber_rig.rig.can.protocol import STATE_CODE, STATES, fault_names
 
 # RigStatus.STATE_* and FAULT_* equal the DBC's codes (test_rig_protocol checks it): one table serves both
@@ -227,18 +228,14 @@ def prediction_msg(batch: RigSampleBatch, predicted, branch_names: Iterable[str]
 
 def cycle_properties_msg(m: Any) -> CycleProperties:
     msg = CycleProperties()
-    for name in ('k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy_harmonic', 'energy_loop', 'force_mean'):
-        value = _get(m, name)
-        setattr(msg, name, float('nan') if value is None else float(value))
-    k_peak, x_peak = _get(m, 'k_peak'), _get(m, 'peak_amplitude')   # half the force range = k_peak x half the x range
-    msg.force_amplitude = float('nan') if k_peak is None or x_peak is None else float(k_peak * x_peak)
+    for name, value in cycle_properties(m).items():
+        setattr(msg, name, value)
     return msg
 
 
 def cycle_properties_dict(msg: CycleProperties) -> dict:
     """msg_defs/CycleProperties -> {field: value} (SI), what rubber_rig.excitation.detectors judges."""
-    return {name: float(getattr(msg, name)) for name in ('k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy_harmonic',
-                                                         'energy_loop', 'force_mean', 'force_amplitude')}
+    return {name: float(getattr(msg, name)) for name in PROPERTY_FIELDS}
 
 
 def cycle_metrics_msg(measured: Any, model: Any, block_index: int, cycle_index: int, t: float,
@@ -292,7 +289,7 @@ def detector_event_msg(event: Any, program: str, block_name: str, t: float) -> D
     msg.program, msg.block_name = str(program), str(block_name)
     msg.detector, msg.kind, msg.action = event.detector, event.kind, event.action
     msg.block_index, msg.cycle, msg.program_cycle = int(event.block), int(event.cycle), int(event.program_cycle)
-    msg.elapsed, msg.value = float(event.elapsed), float(event.value)
+    msg.elapsed, msg.value, msg.sequence = float(event.elapsed), float(event.value), int(event.sequence)
     msg.reference, msg.threshold = float(event.reference), float(event.threshold)
     msg.units, msg.message = event.units, event.message
     return msg

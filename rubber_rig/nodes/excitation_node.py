@@ -34,8 +34,8 @@ latest measured sample. Abort, cancel and hold go to the driver directly (its co
 instead of after the queued lead); a rig that stops the stream, faults or goes silent ends the goal with the
 reason. No callback lets an exception take the node down: it ends the running program and logs.
 
-Detectors (rubber_rig.excitation.detectors): the program's own, plus the ``default_detectors`` it does not
-override by name, judge every steady cycle the element model measures and the end-of-test triggers on every
+Detectors (rubber_rig.excitation.detectors): the program's own, plus the ``default_detectors`` of the types it
+does not declare, judge every steady cycle the element model measures and the end-of-test triggers on every
 sample batch. A trip is a DetectorEvent on ``events``, in the goal's feedback and result and in the
 diagnostics; its action (record, warn, hold, end) goes through the same hold and abort paths an operator uses.
 A held program resumes (``~/hold`` false) with the full cycles its block had not yet run.
@@ -58,7 +58,15 @@ from msg_defs.action import RunProgram
 from msg_defs.msg import CycleMetrics, DetectorEvent, RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import LoadProgram, OpenStream, StopStream
 from rubber_rig.excitation import Program, ProgramRunner, read_program
-from rubber_rig.excitation.detectors import DEFAULTS, DetectorError, Monitor, cycle_of, parse_detectors, strongest
+from rubber_rig.excitation.detectors import (
+    DEFAULTS,
+    DetectorError,
+    Monitor,
+    cycle_of,
+    parse_detectors,
+    strongest,
+    with_defaults,
+)
 from rubber_rig.excitation.limits import element_force_model
 from rubber_rig.excitation.streamer import SetpointStreamer
 from rubber_rig.nodes import conversions as conv
@@ -222,7 +230,8 @@ class ExcitationNode(Node):
                 self._elapsed_samples += n
                 block, block_cycles, program_cycles = self.runner.cycles_done(self.next_sample - 1)
                 if block >= 0:
-                    self.act(self.monitor.on_progress(block, block_cycles, program_cycles, self.elapsed))
+                    self.act(self.monitor.on_progress(block, block_cycles, program_cycles, self.elapsed,
+                                                      self.next_sample))
             except Exception as exc:   # noqa: BLE001 - a bad batch must not take the node down
                 self.abort_program(f'internal error on a sample batch: {exc!r}')
 
@@ -384,8 +393,7 @@ class ExcitationNode(Node):
         self.next_sample = None          # samples of an earlier rig (a restarted driver counts from 0) do not count
         self.end_sequence = None
         self.result = None
-        own = {d.name for d in program.all_detectors()}
-        self.monitor = Monitor(program.all_detectors() + [d for d in self.default_detectors if d.name not in own])
+        self.monitor = Monitor(with_defaults(program.all_detectors(), self.default_detectors))
         self.events, self._elapsed_samples = [], 0
         self.pub_program.publish(String(data=text))
         self.get_logger().info(f"program '{program.name}': {len(program.blocks)} blocks, "

@@ -24,7 +24,9 @@ Channels (JSON, display units mm and kN like the papers' figures; the ROS topics
 - ``/live/loop``: the last ``loop_seconds`` of displacement and measured/model force as arrays, a few times a
   second -> force vs displacement (hysteresis loop) measured and model;
 - ``/live/cycle``: per-cycle K_dyn [kN/mm] and C_eq [kN s/m], measured and model;
-- ``/live/status``: rig state and faults.
+- ``/live/status``: rig state and faults;
+- ``/live/events``: detector events (what tripped, where, the action), with the K_dyn of the latest cycle so the
+  layout marks them on the K_dyn plot.
 """
 from __future__ import annotations
 
@@ -35,7 +37,7 @@ from collections import deque
 import numpy as np
 from rclpy.node import Node
 
-from msg_defs.msg import CycleMetrics, ModelPrediction, RigStatus
+from msg_defs.msg import CycleMetrics, DetectorEvent, ModelPrediction, RigStatus
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.params import declare
@@ -90,12 +92,19 @@ class FoxgloveViewNode(Node):
         self.ch_status = foxglove.Channel('/live/status', schema=_schema(
             state='string', faults='array', messages='array', samples_received='integer', frames_lost='integer',
             temperature_degC='number'))
+        self.ch_events = foxglove.Channel('/live/events', schema=_schema(
+            timestamp='time', program='string', detector='string', kind='string', action='string',
+            block_index='integer', block_name='string', cycle='integer', program_cycle='integer',
+            value='number', reference='number', threshold='number', units='string', message='string',
+            k_dyn_kN_per_mm='number'))
+        self._k_dyn = float('nan')                # [kN/mm] of the latest cycle: where an event marker sits
         self._loop: deque = deque()
         self._loop_len = 0
         self._next_live = None
         self.create_subscription(ModelPrediction, topics.PREDICTION, self.on_prediction, topics.STREAM_QOS)
         self.create_subscription(CycleMetrics, topics.CYCLE_METRICS, self.on_cycle, topics.EVENT_QOS)
         self.create_subscription(RigStatus, topics.STATUS, self.on_status, topics.LATCHED_QOS)
+        self.create_subscription(DetectorEvent, topics.EVENTS, self.on_event, topics.EVENT_QOS)
         self.create_timer(self.loop_period, self.publish_loop)
         self.get_logger().info(f'Foxglove live view on ws://{self.host}:{self.port} '
                                f'(layout: {LAYOUT_FILE.name})')
@@ -134,6 +143,7 @@ class FoxgloveViewNode(Node):
                           'model_kN': (fp[::step] * 1e-3).tolist()})
 
     def on_cycle(self, msg: CycleMetrics) -> None:
+        self._k_dyn = msg.measured.k_dyn * 1e-6
         self.ch_cycle.log({'timestamp': _time(conv.to_seconds(msg.header.stamp)), 'block_index': msg.block_index,
                            'cycle_index': msg.cycle_index, 'frequency_Hz': msg.frequency,
                            'amplitude_mm': msg.amplitude * 1e3,
@@ -143,6 +153,12 @@ class FoxgloveViewNode(Node):
                            'c_eq_model_kNs_per_m': msg.model.c_eq * 1e-3,
                            'loss_angle_measured_deg': float(np.degrees(msg.measured.loss_angle)),
                            'loss_angle_model_deg': float(np.degrees(msg.model.loss_angle))})
+
+    def on_event(self, msg: DetectorEvent) -> None:
+        fields = ('program', 'detector', 'kind', 'action', 'block_index', 'block_name', 'cycle', 'program_cycle',
+                  'value', 'reference', 'threshold', 'units', 'message')
+        self.ch_events.log({'timestamp': _time(conv.to_seconds(msg.header.stamp)), 'k_dyn_kN_per_mm': self._k_dyn,
+                            **{k: getattr(msg, k) for k in fields}})
 
     def on_status(self, msg: RigStatus) -> None:
         self.ch_status.log({'state': msg.state_name, 'faults': conv.fault_names(msg.faults),
@@ -177,7 +193,10 @@ def build_layout() -> str:
     kdyn = fl.PlotPanel(title='K_dyn per cycle [kN/mm]', config=fl.PlotConfig(
         x_axis_val='timestamp', show_legend=True,
         paths=[series('/live/cycle.k_dyn_measured_kN_per_mm', 'measured', '#1f77b4'),
-               series('/live/cycle.k_dyn_model_kN_per_mm', 'model', '#d62728')]))
+               series('/live/cycle.k_dyn_model_kN_per_mm', 'model', '#d62728'),
+               fl.PlotSeries(value='/live/events.k_dyn_kN_per_mm', label='detector event', color='#000000',
+                             enabled=True, show_line=False, line_size=4.0, timestamp_method='receiveTime')]))
+    events = fl.TablePanel(title='Detector events', config=fl.TableConfig(topic_path='/live/events'))
     status = fl.RawMessagesPanel(title='Rig status', config=fl.RawMessagesConfig(topic_path='/live/status'))
     layout = fl.Layout(content=fl.SplitContainer(direction='row', items=[
         fl.SplitItem(proportion=1, content=loop),
@@ -185,6 +204,7 @@ def build_layout() -> str:
             fl.SplitItem(proportion=2, content=force_time),
             fl.SplitItem(proportion=1, content=residual),
             fl.SplitItem(proportion=1, content=kdyn),
+            fl.SplitItem(proportion=1, content=events),
             fl.SplitItem(proportion=1, content=status)]))]))
     return json.dumps(json.loads(layout.to_json()), indent=2) + '\n'
 

@@ -17,7 +17,7 @@ prediction of each sample batch (:class:`OnlinePredictor`), the program block of
 (:class:`BlockIndex`) and the per-cycle comparison of measurement and model (:class:`CyclePairer`).
 The element_model node wires these to topics and parameters.
 """
-from .cycles import CyclePairer, PairedCycle
+from .cycles import PROPERTY_FIELDS, CyclePairer, PairedCycle, cycle_properties
 from .predictor import (
                         DEFAULT_REVERSAL_THRESHOLD,
                         SOURCES,
@@ -29,4 +29,5 @@ from .predictor import (
 )
 
 __all__ = ['BlockIndex', 'ChoiceError', 'CyclePairer', 'DEFAULT_REVERSAL_THRESHOLD', 'ModelChoice',
-           'OnlinePredictor', 'PairedCycle', 'SOURCES', 'batch_problem']
+           'OnlinePredictor', 'PROPERTY_FIELDS', 'PairedCycle', 'SOURCES', 'batch_problem',
+           'cycle_properties']

@@ -25,11 +25,29 @@ block, the detector starts each block from its own data.
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
 
 from rubber_rig.analysis import CycleDetector
+
+
+# what a detector judges of each side of a cycle (msg_defs/CycleProperties carries the same fields)
+PROPERTY_FIELDS = ('k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy_harmonic', 'energy_loop', 'force_mean',
+                   'force_amplitude')
+
+
+def cycle_properties(m) -> dict:
+    """{PROPERTY_FIELDS: value} (SI, NaN where missing) of one side of a cycle, from the harmonic analysis' fields
+    (a mapping or an object). force_amplitude is half the force range: k_peak x half the displacement range.
+    """
+    def get(name):
+        v = m.get(name) if isinstance(m, Mapping) else getattr(m, name, None)
+        return float('nan') if v is None else float(v)
+    out = {name: get(name) for name in PROPERTY_FIELDS[:-1]}
+    out['force_amplitude'] = get('k_peak') * get('peak_amplitude')
+    return out
 
 
 @dataclass
