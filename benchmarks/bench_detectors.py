@@ -96,7 +96,7 @@ def judge(program, noise: float, damage: dict | None, seed: int = 0):
         predicted, _ = predictor.process(int(r.sequence[i]), 1 / fs, r.displacement[sl])
         blocks = r.block_index[sl]
         cuts = np.flatnonzero(np.diff(blocks)) + 1
-        for a, b in zip(np.r_[0, cuts], np.r_[cuts, blocks.size]):
+        for a, b in zip(np.r_[0, cuts], np.r_[cuts, blocks.size], strict=True):
             first = int(r.sequence[i + a])
             for c in pairer.feed(first, 1 / fs, r.displacement[sl][a:b], r.force[sl][a:b], predicted[a:b],
                                  int(blocks[a])):
@@ -165,7 +165,7 @@ def false_trips(noises, programs, out: dict) -> None:
             monitor, r = judge(program, noise, None)
             counts = {d.name: sum(e.detector == d.name for e in monitor.events) for d in monitor.detectors}
             out.setdefault('false_trips', []).append({'noise': noise, 'program': name, 'blocks':
-                                                      len(program.blocks), 'trips': counts,
+                                                      len(program.blocks), 'trips': counts, 'peak': monitor.peak,
                                                       'events': [e.message for e in monitor.events
                                                                  if e.detector.startswith('default')]})
             tripped = {k: v for k, v in counts.items() if v}
@@ -186,6 +186,12 @@ def markdown(out: dict) -> str:
     for row in out.get('false_trips', []):
         lines.append(f"| {row['noise']:.0f} N | {row['program']} | {row['blocks']} | "
                      + ' | '.join(str(row['trips'].get(n, 0)) for n in names) + ' |')
+    lines += ['', '### Margin: the largest fraction of its threshold a clean cycle reached (1.00 trips)', '',
+              '| noise | ' + ' | '.join(names) + ' |', '|' + '---|' * (len(names) + 1)]
+    for noise in sorted({row['noise'] for row in out.get('false_trips', [])}):
+        rows = [row for row in out['false_trips'] if row['noise'] == noise]
+        lines.append(f'| {noise:.0f} N | ' + ' | '.join(
+            f"{max(row['peak'].get(n, 0.0) for row in rows):.2f}" for n in names) + ' |')
     return '\n'.join(lines)
 
 

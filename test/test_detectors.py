@@ -151,6 +151,7 @@ def test_residual_trips_on_the_first_cycle_over_k_times_the_stabilised_level():
     # just below the threshold: nothing
     m = Monitor(parse_detectors([{'type': 'residual'}], 'program'))
     assert run(m, [cycle(n, residual=50.0 if n < 20 else 550.0) for n in range(1, 30)]) == {}
+    assert m.peak['residual'] == pytest.approx(550.0 / 560.0)          # the margin left: 2 %
 
 
 def test_residual_uses_the_larger_of_the_stabilised_level_and_the_declared_noise():
@@ -220,6 +221,10 @@ def test_force_drift_absolute_and_fractional():
     m = Monitor(parse_detectors([{'type': 'force_drift', 'threshold': 0.1}], 'x'))      # 10 % of 14 kN
     assert run(m, [cycle(n, force_mean=0.0 if n < 9 else 1500.0) for n in range(1, 10)]) == {9: ['force_drift']}
     assert m.events[0].threshold == pytest.approx(0.1 * K * 1e-3)
+    # preloaded to 30 kN (amplitude 14 kN): 10 % of the preload; a relaxation of 2.5 kN is not a departure
+    m = Monitor(parse_detectors([{'type': 'force_drift', 'threshold': 0.1}], 'x'))
+    relaxing = [cycle(n, force_mean=30e3 - (0.0 if n < 7 else 2500.0)) for n in range(1, 10)]
+    assert run(m, relaxing) == {} and run(m, [cycle(10, force_mean=26.9e3)]) == {10: ['force_drift']}
 
 
 def test_tracking_judges_the_measured_against_the_target_amplitude():

@@ -122,8 +122,8 @@ def test_crack_is_held_by_the_residual_detector_within_two_cycles(suite):
     assert 'hold_timeout' in result.message and not result.success
     assert [m.kind for m in op.events] == [x.kind for x in result.events], 'the events topic carries the same events'
     # the recording has the events and the cycle metrics; the report marks them
-    stop = op.call(f'{NS}/recorder/control', RecorderControl, RecorderControl.Request(command=RecorderControl.Request.STOP),
-                   timeout=30.0)
+    stop = op.call(f'{NS}/recorder/control', RecorderControl,
+                   RecorderControl.Request(command=RecorderControl.Request.STOP), timeout=30.0)
     assert stop is not None and stop.success, stop
     run = load_run(stop.file)
     assert [(e['detector'], e['action'], e['cycle']) for e in run.events] == \

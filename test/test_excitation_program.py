@@ -34,12 +34,18 @@ FS = 1000.0
 
 def test_shipped_programs_load_and_fit_default_limits():
     names = shipped_programs()
-    for n in ('seed000_grid', 'seed001_bushing', 'seed003_sweeps', 'seed004_preload'):
+    for n in ('seed000_grid', 'seed001_bushing', 'seed003_sweeps', 'seed004_preload', 'durability_10hz'):
         assert n in names
     for n in names:
         p = load_program(n)
         Limits().check_program(p, FS)          # +-5 mm, 0.2 m/s
-        assert p.description and 0 < p.duration(FS) < 600
+        # characterisation programs take minutes; a durability program runs until its detector ends it
+        longest = 3 * 3600 if n.startswith('durability') else 600
+        assert p.description and 0 < p.duration(FS) < longest
+    durability = load_program('durability_10hz')
+    assert durability.blocks[0].cycles == 100000 and durability.blocks[0].frequency == 10.0
+    assert {(d.type, d.action) for d in durability.all_detectors()} >= {('stiffness_change', 'end'),
+                                                                          ('residual', 'hold')}
 
 
 def test_seed000_grid_is_the_paper_protocol():

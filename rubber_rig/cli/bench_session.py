@@ -281,7 +281,7 @@ def event_dict(e) -> dict:
 
 
 def excitation_overrides(args) -> dict:
-    """excitation parameters the command line sets (the program comes by the action, not the parameter)."""
+    """Excitation parameters the command line sets (the program comes by the action, not the parameter)."""
     overrides = {'program': ''}
     if getattr(args, 'hold_timeout', None):
         overrides['hold_timeout'] = to_si(args.hold_timeout, 'time')

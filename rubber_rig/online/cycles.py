@@ -32,7 +32,6 @@ import numpy as np
 
 from rubber_rig.analysis import CycleDetector
 
-
 # what a detector judges of each side of a cycle (msg_defs/CycleProperties carries the same fields)
 PROPERTY_FIELDS = ('k_dyn', 'loss_angle', 'damping', 'c_eq', 'energy_harmonic', 'energy_loop', 'force_mean',
                    'force_amplitude')
