@@ -150,6 +150,8 @@ def damage_table(noises, out: dict) -> None:
         for case, damage in DAMAGE.items():
             t0 = time.perf_counter()
             monitor, r = judge(program, noise, damage)
+            if not r.completed:
+                raise RuntimeError(f'{case} at {noise:g} N: the rig ended the run early: {r.message}')
             d = delays(monitor, r, damage, period)
             out.setdefault('damage', []).append({'noise': noise, 'case': case, 'delays': d})
             cells = ', '.join(f'{k}: ' + ('missed' if v is None else v if isinstance(v, str) else f'{v:.2f}')
@@ -166,11 +168,14 @@ def false_trips(noises, programs, out: dict) -> None:
             counts = {d.name: sum(e.detector == d.name for e in monitor.events) for d in monitor.detectors}
             out.setdefault('false_trips', []).append({'noise': noise, 'program': name, 'blocks':
                                                       len(program.blocks), 'trips': counts, 'peak': monitor.peak,
+                                                      'completed': r.completed, 'message': r.message,
                                                       'events': [e.message for e in monitor.events
                                                                  if e.detector.startswith('default')]})
             tripped = {k: v for k, v in counts.items() if v}
+            # a run the rig ended early judged fewer cycles: its trip count is not a false-trip rate
+            ran = 'completed' if r.completed else f'INCOMPLETE ({r.message})'
             print(f'  {noise:5.0f} N  {name:16s} {len(program.blocks):3d} blocks {r.sequence.size / 1000:6.0f} s  '
-                  f'trips: {tripped or "none"}  ({time.perf_counter() - t0:.0f} s)', flush=True)
+                  f'{ran}  trips: {tripped or "none"}  ({time.perf_counter() - t0:.0f} s)', flush=True)
 
 
 def markdown(out: dict) -> str:
@@ -182,9 +187,10 @@ def markdown(out: dict) -> str:
                   if isinstance(row['delays'][n], str) else f"{row['delays'][n]:.2f}") for n in names]
         lines.append(f"| {row['noise']:.0f} N | {row['case']} | " + ' | '.join(cells) + ' |')
     lines += ['', '### False trips over the clean shipped programs (blocks with a trip)', '',
-              '| noise | program | blocks | ' + ' | '.join(names) + ' |', '|' + '---|' * (len(names) + 3)]
+              '| noise | program | blocks | run | ' + ' | '.join(names) + ' |', '|' + '---|' * (len(names) + 4)]
     for row in out.get('false_trips', []):
         lines.append(f"| {row['noise']:.0f} N | {row['program']} | {row['blocks']} | "
+                     f"{'completed' if row['completed'] else 'ENDED EARLY'} | "
                      + ' | '.join(str(row['trips'].get(n, 0)) for n in names) + ' |')
     lines += ['', '### Margin: the largest fraction of its threshold a clean cycle reached (1.00 trips)', '',
               '| noise | ' + ' | '.join(names) + ' |', '|' + '---|' * (len(names) + 1)]

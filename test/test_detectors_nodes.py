@@ -32,6 +32,7 @@ import yaml
 
 from msg_defs.msg import RigStatus
 from msg_defs.srv import RecorderControl
+from rubber_rig.excitation.program import load_program
 from rubber_rig.fitting.blocks import split_blocks
 from rubber_rig.fitting.data import load_run
 from rubber_rig.fitting.report import make_report
@@ -42,6 +43,7 @@ from rubber_rig.rig.sim.damage import DamagedSpecimen
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'rig_sim.yaml'
+PROGRAMS = Path(__file__).resolve().parents[1] / 'rubber_rig' / 'excitation' / 'programs'
 NS = '/det'
 FS, F = 1000.0, 10.0
 ONSET = 30            # specimen load cycle at which crack and slip happen
@@ -72,10 +74,12 @@ def suite(tmp_path_factory):
         procs.stop_all()
 
 
-def restart_rig(procs, op, sim: dict):
-    """A new simulated rig (a fresh specimen that counts its cycles from 0) with these sim options."""
+def restart_rig(procs, op, sim: dict, **driver):
+    """A new simulated rig (a fresh specimen that counts its cycles from 0) with these sim options (and other
+    rig_driver parameters).
+    """
     t0 = time.monotonic()
-    procs.start('rig_driver', {'sim': dict({'force_noise': 20.0}, **sim)})
+    procs.start('rig_driver', dict(driver, sim=dict({'force_noise': 20.0}, **sim)))
     op.clear_history()
     op.events.clear()
     assert op.wait_for(lambda: any(t > t0 + 0.5 and s.state == RigStatus.STATE_IDLE for t, s in op.statuses), 60.0), \
@@ -192,6 +196,20 @@ blocks:
     result = op.run(program, timeout=90.0)
     assert result is not None and result.success, result and result.message
     assert list(result.events) == [] and op.events == [], [e.message for e in result.events]
+
+
+@pytest.mark.parametrize('name', ('seed000_grid', 'seed001_bushing', 'seed003_sweeps', 'seed004_preload'))
+def test_shipped_program_trips_no_default_detector_at_200_newton_noise(suite, name):
+    """The whole shipped program, with amplitude control as the bench runs it, on a rig as fast as the nodes
+    go (same waveform and physics as paced; 674 s of programs in minutes).
+    """
+    procs, op = suite
+    restart_rig(procs, op, {'force_noise': 200.0, 'damage': '[]'}, paced=False)
+    handle = op.send_goal(program_path=str(PROGRAMS / f'{name}.yaml'), amplitude_control=True)
+    result = op.result(handle, 400.0)
+    assert result is not None and result.success, result and result.message
+    assert list(result.events) == [] and op.events == [], [e.message for e in result.events]
+    assert len(result.blocks) == len(load_program(name).blocks)
 
 
 def test_held_durability_block_resumes_with_the_cycles_it_had_not_run(suite):

@@ -32,6 +32,7 @@ from rubber_rig.rig import (
 )
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.can.protocol import FAULT_STREAM, SEQ_MOD
+from rubber_rig.rig.can.sensor_check import SensorCheck
 
 from support.rig import FAST, contiguous_diffs
 
@@ -366,3 +367,26 @@ def test_tighter_limits_at_run_time_apply_at_once():
         assert v.max() <= V_MAX / 2 + QUANTUM * FS        # the ramp travels at half velocity_max at most
         assert u.max() <= x[199] + 0.2e-3                 # it braked the outward motion, then came back
         assert np.all(u[np.argmax(u):] <= u.max()) and u[-1] == 0.0
+
+
+def _first_trip(check, u, x, f):
+    for i, (ui, xi, fi) in enumerate(zip(u.tolist(), x.tolist(), f.tolist(), strict=True)):
+        if check.add(ui, xi, fi):
+            return i
+    return None
+
+
+def test_sensor_check_follows_a_lagging_actuator_and_still_sees_a_disconnected_transducer():
+    fs = 1000.0
+    t = np.arange(int(3 * fs)) / fs
+    rng = np.random.default_rng(3)
+    # seed003's sweep end: 0.5 mm at 50 Hz, 20 samples a cycle; an 80 Hz actuator lags ~60 deg and is 15 % low.
+    # Two samples of command move 0.12 mm while the actuator turns at its peak: not a stuck sensor.
+    u = 0.5e-3 * np.sin(2 * np.pi * 50 * t)
+    x = 0.85 * 0.5e-3 * np.sin(2 * np.pi * 50 * t - np.radians(60)) + 0.2e-6 * rng.standard_normal(t.size)
+    f = 1.4e7 * x + 2.0 * rng.standard_normal(t.size)
+    assert _first_trip(SensorCheck(fs), u, x, f) is None
+    # a disconnected transducer reads noise around where it was: tripped within 0.1 s of the command moving
+    dead = 0.3e-3 + 0.5e-6 * rng.standard_normal(t.size)
+    i = _first_trip(SensorCheck(fs), u, dead, 1.4e7 * dead)
+    assert i is not None and i <= 0.1 * fs + 1
