@@ -342,5 +342,5 @@ blocks:
 def test_a_program_criterion_replaces_the_default_of_its_type():
     program, _ = read_program(yaml_text=PROGRAM)
     got = with_defaults(program.all_detectors(), parse_detectors(list(DEFAULTS), 'default_detectors'))
-    assert [(d.name, d.block) for d in got] == [('elapsed_time', -1), ('stiffness_change', 1), ('residual', 1),
-                                                 ('force_drift', -1), ('tracking', -1)]
+    expected = [('elapsed_time', -1), ('stiffness_change', 1), ('residual', 1), ('force_drift', -1), ('tracking', -1)]
+    assert [(d.name, d.block) for d in got] == expected

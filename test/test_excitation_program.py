@@ -44,8 +44,8 @@ def test_shipped_programs_load_and_fit_default_limits():
         assert p.description and 0 < p.duration(FS) < longest
     durability = load_program('durability_10hz')
     assert durability.blocks[0].cycles == 100000 and durability.blocks[0].frequency == 10.0
-    assert {(d.type, d.action) for d in durability.all_detectors()} >= {('stiffness_change', 'end'),
-                                                                          ('residual', 'hold')}
+    actions = {(d.type, d.action) for d in durability.all_detectors()}
+    assert actions >= {('stiffness_change', 'end'), ('residual', 'hold')}
 
 
 def test_seed000_grid_is_the_paper_protocol():

@@ -167,8 +167,8 @@ def parse_detector(raw, where: str, block: int = -1) -> DetectorSpec:
     stiffness = kind == 'stiffness_change'
     spec.reference = str(raw.get('reference', 'program' if stiffness else 'stabilised'))
     if spec.reference not in REFERENCES or (spec.reference != 'stabilised' and not stiffness):
-        raise DetectorError(f"{where}: field 'reference': " + (', '.join(repr(r) for r in REFERENCES) if stiffness
-                                                                else "'stabilised'") + f', got {spec.reference!r}')
+        allowed = ', '.join(repr(r) for r in REFERENCES) if stiffness else "'stabilised'"
+        raise DetectorError(f"{where}: field 'reference': {allowed}, got {spec.reference!r}")
     return spec
 
 

@@ -39,8 +39,8 @@ def fig_cycles(run, plt):
         return None
     n = np.arange(1, c['k_dyn'].size + 1)
     fig, axes = plt.subplots(2, 1, figsize=(11, 6), sharex=True)
-    for ax, key, scale, label in ((axes[0], 'k_dyn', 1e-6, 'K_dyn [kN/mm]'), (axes[1], 'c_eq', 1e-3,
-                                                                                 'C_eq [kN s/m]')):
+    panels = ((axes[0], 'k_dyn', 1e-6, 'K_dyn [kN/mm]'), (axes[1], 'c_eq', 1e-3, 'C_eq [kN s/m]'))
+    for ax, key, scale, label in panels:
         ax.plot(n, c[key + '_model'] * scale, lw=1.0, color='C3', label='model (online)')
         ax.plot(n, c[key] * scale, '.', ms=2.5, color='C0', label='measured')
         ax.set_ylabel(label)
