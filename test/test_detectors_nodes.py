@@ -31,7 +31,7 @@ import pytest
 import yaml
 
 from msg_defs.msg import RigStatus
-from msg_defs.srv import RecorderControl
+from msg_defs.srv import LoadProgram, RecorderControl
 from rubber_rig.excitation.program import load_program
 from rubber_rig.fitting.blocks import split_blocks
 from rubber_rig.fitting.data import load_run
@@ -221,12 +221,17 @@ blocks:
 """
     handle = op.send_goal(program)
     assert op.wait_for(lambda: op.last_sequence > 2500, 20.0)
+    # reset never takes the rig from its owner: refused while it moves and while the program holds it
+    reset = op.trigger(f'{NS}/rig_driver/reset')
+    assert reset is not None and not reset.success and 'moving' in reset.message, reset
     assert op.hold(True).success
     assert op.wait_status(lambda s: s.state == RigStatus.STATE_IDLE and abs(s.position) < 2e-5, 10.0), \
         'a held rig stands at the block mean'
     held_at = op.last_sequence
     assert op.wait_for(lambda: False, 1.0) is False        # held for a second: no fault (the driver waits)
     assert op.status.faults == 0, list(op.status.fault_messages)
+    reset = op.trigger(f'{NS}/rig_driver/reset')
+    assert reset is not None and not reset.success and 'held' in reset.message, reset
     assert op.hold(False).success
     result = op.result(handle, 60.0)
     assert result is not None and result.success, result and result.message
@@ -237,3 +242,30 @@ blocks:
     assert 24 < resumed_cycles < 31, resumed_cycles
     summary = result.blocks[0]
     assert summary.completed
+    reset = op.trigger(f'{NS}/rig_driver/reset')            # at rest, nobody's: accepted
+    assert reset is not None and reset.success, reset
+
+
+def test_costly_program_requests_are_refused_at_once_while_a_program_runs(suite):
+    """A YAML bomb, 5000-deep nesting and a 2 MB program sent to excitation/load_program from a second process
+    while a program runs: each refused within a second, naming the limit; the running program completes.
+    """
+    procs, op = suite
+    restart_rig(procs, op, {'damage': '[]'})
+    handle = op.send_goal(SINE)
+    assert op.wait_for(lambda: op.last_sequence > 1000, 20.0)
+    bomb = ('a: &a [x, x, x, x, x, x, x, x, x]\n' + ''.join(
+        f'{b}: &{b} [' + ', '.join([f'*{a}'] * 9) + ']\n' for a, b in zip('abcdefgh', 'bcdefghi', strict=True))
+            + 'blocks: *i\n')
+    cases = {'bomb': (bomb, 'aliases expanded'), 'deep': ('blocks: ' + '[' * 5000 + ']' * 5000, 'nested'),
+             'huge': ('blocks:\n' + '  - {waveform: sine, frequency: 1 Hz, amplitude: 1 mm, cycles: 1}\n' * 30000,
+                      'bytes, more than')}
+    for name, (text, limit) in cases.items():
+        t0 = time.monotonic()
+        answer = op.call(f'{NS}/excitation/load_program', LoadProgram, LoadProgram.Request(program_yaml=text),
+                         timeout=10.0)
+        took = time.monotonic() - t0
+        assert answer is not None and not answer.success and limit in answer.message, (name, answer)
+        assert took < 2.0, (name, took)
+    result = op.result(handle, 60.0)
+    assert result is not None and result.success, result and result.message

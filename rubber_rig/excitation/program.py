@@ -14,10 +14,12 @@
 
 """Test programs: an ordered list of blocks loaded from YAML and validated on load.
 
-Bounded by construction, so no request can occupy the excitation for long: at most MAX_BLOCKS blocks (grids
-included) and MAX_PROGRAM_DURATION (24 h) of rig time, every number finite, every block frequency at least
-MIN_FREQUENCY; the sample-rate rule (f <= MAX_FREQUENCY_FRACTION * fs, i.e. fs/10) is checked by
-Program.check_sample_rate where the rate is known (Limits.check_program, ProgramRunner).
+Bounded by construction, so no request can occupy the excitation for long: the YAML text is at most
+MAX_BYTES long, nests at most 32 deep and expands its aliases to at most 100 000 nodes (checked by
+yamltext.load_bounded before the document is built); at most MAX_BLOCKS blocks (grids included) and
+MAX_PROGRAM_DURATION (24 h) of rig time, every number finite, every block frequency at least MIN_FREQUENCY;
+the sample-rate rule (f <= MAX_FREQUENCY_FRACTION * fs, i.e. fs/10) is checked by Program.check_sample_rate
+where the rate is known (Limits.check_program, ProgramRunner).
 """
 import itertools
 import math
@@ -39,6 +41,7 @@ from .blocks import (  # noqa: F401 - MIN_FREQUENCY, MAX_FREQUENCY_FRACTION are 
     parse_block,
 )
 from .detectors import DetectorError, parse_detectors
+from .yamltext import MAX_BYTES, YAMLLimitError, load_bounded
 
 PROGRAM_DIR = Path(__file__).with_name('programs')
 # The most blocks a program may have (after grid expansion): far above any real test plan (seed000_grid has
@@ -65,7 +68,9 @@ class Program:
     def from_yaml_text(cls, text: str, name: str = '') -> 'Program':
         """Parse and validate a program from YAML text. Raises ProgramError naming block and field."""
         try:
-            data = yaml.safe_load(text)
+            data = load_bounded(text, f'program {name or "<text>"}')
+        except YAMLLimitError as exc:
+            raise ProgramError(str(exc)) from None
         except yaml.YAMLError as exc:
             raise ProgramError(f'program {name or "<text>"}: not valid YAML: {exc}') from None
         return cls.from_dict(data, name=name)
@@ -280,7 +285,13 @@ def program_source(path_or_name) -> tuple[str, str]:
     if not path.exists():
         raise FileNotFoundError(f'no program {str(path_or_name)!r} (shipped programs: '
                                 f'{", ".join(shipped_programs())})')
-    return path.read_text(), path.stem
+    if path.is_file() and path.stat().st_size > MAX_BYTES:        # before reading it: a request stays cheap
+        raise ProgramError(f'program {str(path)!r}: {path.stat().st_size} bytes, more than the {MAX_BYTES} '
+                           'accepted')
+    try:
+        return path.read_text(encoding='utf-8'), path.stem
+    except UnicodeDecodeError as exc:
+        raise ProgramError(f'program {str(path)!r}: not a text file ({exc.reason} at byte {exc.start})') from None
 
 
 def read_program(path: str = '', yaml_text: str = '') -> tuple[Program, str]:

@@ -375,10 +375,20 @@ class RigDriver:
 
     def reset(self) -> str:
         """Acknowledge and clear faults (driver and controller) so a new stream can open. '' on success, else
-        why not (the rig is still ramping).
+        why not: the rig still moves, or a stream has an owner. Reset never takes the rig from its owner: a
+        reset that dropped a running stream left the controller playing its queue out and then standing loaded,
+        held by nobody.
         """
         if self.controller_state == 'ramping_down':
             return 'the rig is still ramping to rest: reset when it is at rest'
+        if self.controller_state in ('running', 'holding'):
+            return (f'the rig is moving ({self.controller_state}): stop the program first (excitation/abort or '
+                    'rig_driver/abort); reset clears the faults of a rig at rest')
+        s = self._stream
+        if s is not None and not s.ended and not self.faults:    # a fault has already taken the rig from it
+            owner = s.grant.owner or 'a local program'
+            return (f'stream {s.grant.stream_id} of {owner} is {"held" if s.held else "open"}: end that program '
+                    'first (excitation/abort); reset clears the faults of a rig nobody drives')
         self._send_command(CMD_RESET)
         if self.faults or self.fault_messages:
             self._event('info', 'reset: cleared ' + ('; '.join(self.fault_messages[-3:]) or 'faults'))
