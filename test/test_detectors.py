@@ -27,6 +27,7 @@ from rubber_rig.excitation.detectors import (
     Cycle,
     DetectorError,
     Monitor,
+    blind_for,
     parse_detector,
     parse_detectors,
     strongest,
@@ -344,3 +345,21 @@ def test_a_program_criterion_replaces_the_default_of_its_type():
     got = with_defaults(program.all_detectors(), parse_detectors(list(DEFAULTS), 'default_detectors'))
     expected = [('elapsed_time', -1), ('stiffness_change', 1), ('residual', 1), ('force_drift', -1), ('tracking', -1)]
     assert [(d.name, d.block) for d in got] == expected
+
+
+def test_blind_detectors_are_reported_after_two_seconds_and_five_cycles_of_a_periodic_block():
+    program, _ = read_program(yaml_text="""
+name: blind
+blocks:
+  - {name: slow, waveform: sine, amplitude: 0.5 mm, frequency: 1 Hz, cycles: 20}
+  - {name: rest, waveform: hold, duration: 10 s}
+""")
+    fs = 1000.0
+    r = ProgramRunner(program, fs)
+    r.next_setpoints(program.n_samples(fs))
+    assert blind_for(r, 4000, 0, fs) == 0.0                # 4 s, 4 cycles: not yet
+    assert blind_for(r, 6000, 0, fs) == pytest.approx(6.0)  # 6 s and 6 cycles without a judged cycle
+    assert blind_for(r, 6000, 5000, fs) == 0.0             # a cycle judged 1 s ago
+    assert blind_for(r, 24000 + 6000, 0, fs) == 0.0        # a hold block has no cycles to judge
+    assert Monitor(parse_detectors([{'type': 'residual'}], 'x')).needs_cycles
+    assert not Monitor(parse_detectors([{'type': 'cycle_count', 'threshold': 9}], 'x')).needs_cycles

@@ -245,6 +245,11 @@ class Monitor:
         # margin a clean run leaves, what a threshold is chosen from (benchmarks/bench_detectors.py)
         self.peak: dict[str, float] = {}
 
+    @property
+    def needs_cycles(self) -> bool:
+        """Some detector judges measured cycles (not only the end-of-test triggers)."""
+        return any(d.type not in TRIGGERS for d in self.detectors)
+
     def rearm(self) -> None:
         """After a hold: every detector may trip again (references are kept: the block is the same block)."""
         for state in self._blocks.values():
@@ -397,6 +402,30 @@ def cycle_of(runner, start: int, end: int, amplitude: float, peak_amplitude: flo
     amp = peak_amplitude if blk.waveform in ('triangle', 'square') else amplitude
     return Cycle(block, number, steady, amp, mean, measured, model, residual_rms, blk.amplitude, blk.mean, elapsed,
                  program_cycles, int(end))
+
+
+BLIND_SECONDS, BLIND_CYCLES = 2.0, 5     # no cycle judged for this long (and this many cycles): detectors blind
+
+
+def blind_for(runner, sequence: int, last_cycle_end: int, sample_rate: float) -> float:
+    """Rig time [s] a periodic block has run at `sequence` with no measured cycle judged since `last_cycle_end`
+    (the end sequence of the latest cycle metrics, or the program's first sample), when that is more than
+    BLIND_SECONDS and BLIND_CYCLES cycles: the element model's cycle metrics are not arriving, so no cycle
+    detector can trip. 0.0 otherwise (judging keeps up, or the rig is not in a periodic block).
+    """
+    located = runner.locate(sequence)
+    if located is None:
+        return 0.0
+    block, phase = located
+    blk = runner.program.blocks[block]
+    if not blk.oscillating:
+        return 0.0
+    f = max(blk.frequency, blk.frequency_end or 0.0, 1e-6)
+    since = (sequence - last_cycle_end) / sample_rate
+    in_block = phase / f
+    if min(since, in_block) > max(BLIND_SECONDS, BLIND_CYCLES / f):
+        return since
+    return 0.0
 
 
 def with_defaults(own: list[DetectorSpec], defaults: list[DetectorSpec]) -> list[DetectorSpec]:

@@ -62,6 +62,7 @@ from rubber_rig.excitation.detectors import (
     DEFAULTS,
     DetectorError,
     Monitor,
+    blind_for,
     cycle_of,
     parse_detectors,
     strongest,
@@ -159,6 +160,7 @@ class ExcitationNode(Node):
         self._last_feedback = 0.0
         self.result: RunProgram.Result | None = None   # result of the last run (also for program runs)
         self.monitor: Monitor | None = None   # the running program's detectors
+        self._last_cycle_end, self._blind = 0, ''   # end of the latest judged cycle; why detectors were blind
         self.events: list[DetectorEvent] = []  # detector events of the running (or last) program
         self._held_at = None             # sequence after the last sample measured before a hold
         self._held_wall = 0.0            # time.monotonic() of the hold (hold_timeout)
@@ -250,6 +252,7 @@ class ExcitationNode(Node):
                              msg.residual_rms, self.elapsed)
             if cycle is None:            # not a cycle of this program's blocks (an approach ramp, another stream)
                 return
+            self._last_cycle_end = max(self._last_cycle_end, msg.end_sequence)
             self.act(self.monitor.on_cycle(cycle))
         except Exception as exc:   # noqa: BLE001 - a bad message must not take the node down
             self.get_logger().error(f'detectors failed on a cycle: {exc!r}\n{traceback.format_exc()}')
@@ -264,8 +267,12 @@ class ExcitationNode(Node):
             msg = conv.detector_event_msg(e, r.program.name, r.program.blocks[e.block].name, t)
             self.events.append(msg)
             self.pub_events.publish(msg)
-            log = self.get_logger().info if e.action == 'record' else self.get_logger().warning
-            log(e.message)
+            # one call site per severity: rclpy refuses a call site whose severity changes between calls (an
+            # event recorded and then one that holds, from one line, raised and lost the hold)
+            if e.action == 'record':
+                self.get_logger().info(e.message)
+            else:
+                self.get_logger().warning(e.message)
         top = strongest(events)
         if top.action == 'end':
             trigger = top.kind in ('cycle_count', 'elapsed_time')
@@ -394,6 +401,7 @@ class ExcitationNode(Node):
         self.end_sequence = None
         self.result = None
         self.monitor = Monitor(with_defaults(program.all_detectors(), self.default_detectors))
+        self._last_cycle_end, self._blind = grant.first_sequence, ''
         self.events, self._elapsed_samples = [], 0
         self.pub_program.publish(String(data=text))
         self.get_logger().info(f"program '{program.name}': {len(program.blocks)} blocks, "
@@ -490,6 +498,8 @@ class ExcitationNode(Node):
                                    message=r.abort_reason if r.aborted else 'completed',
                                    blocks=[conv.block_summary_msg(s) for s in r.block_summaries],
                                    events=list(self.events))
+        if self._blind:
+            result.message += f' (detectors were blind: {self._blind})'
         self.result = result
         self.runner, self.stream_id, self.held = None, 0, False
         self.get_logger().info(f'program ended: {result.message}')
@@ -625,6 +635,7 @@ class ExcitationNode(Node):
         self.start_sequence = grant.first_sequence
         self.next_sample = None          # samples of an earlier rig (a restarted driver counts from 0) do not count
         r.resume_at(grant.first_sequence, grant.position, measured_sequence=self._held_at)
+        self._last_cycle_end = grant.first_sequence     # the hold is not blindness
         self.monitor.rearm()
 
     def publish_diagnostics(self) -> None:
@@ -635,15 +646,32 @@ class ExcitationNode(Node):
         level = DiagnosticStatus.OK
         if last is not None and last.action != 'record':
             level = DiagnosticStatus.WARN
+        blind = self.detectors_blind()
+        if blind:
+            level = DiagnosticStatus.WARN
+            if not self._blind:
+                self.get_logger().warning(f'detectors blind: {blind}')
+            self._blind = blind
         values = {'state': state, 'program': r.program.name if r else '', 'detector_events': len(self.events),
-                  'last_event': last.message if last else ''}
+                  'last_event': last.message if last else '', 'detectors_blind': blind}
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.status.append(DiagnosticStatus(
             level=level, name=self.get_fully_qualified_name(), hardware_id='rubber_rig',
-            message=(last.message if level != DiagnosticStatus.OK else f'program {state}'),
+            message=(f'detectors blind: {blind}' if blind else last.message if level != DiagnosticStatus.OK
+                     else f'program {state}'),
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]))
         self.pub_diagnostics.publish(msg)
+
+    def detectors_blind(self) -> str:
+        """Why the running program's cycle detectors cannot trip ('' when they judge cycles as they come)."""
+        r = self.runner
+        if r is None or self.held or self.monitor is None or not self.monitor.needs_cycles \
+                or self.next_sample is None or self.status is None:
+            return ''
+        since = blind_for(r, self.next_sample - 1, self._last_cycle_end, self.status.sample_rate)
+        return (f'no cycle_metrics from element_model for {since:.1f} s of a periodic block (is it running?)'
+                if since else '')
 
     def on_load_program(self, request, response):
         try:

@@ -42,7 +42,7 @@ from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import SetBool, Trigger
 
 from msg_defs.action import RunProgram
-from msg_defs.msg import DetectorEvent, RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
+from msg_defs.msg import CycleMetrics, DetectorEvent, RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
 
 from . import conversions as conv
 from . import topics
@@ -188,7 +188,9 @@ class Operator:
         self.recorder: RecorderStatus | None = None
         self.setpoints_seen: list[SetpointBatch] = []
         self.events: list[DetectorEvent] = []
+        self.cycle_metrics: list[CycleMetrics] = []
         n = self.node
+        n.create_subscription(CycleMetrics, topics.CYCLE_METRICS, self.cycle_metrics.append, topics.EVENT_QOS)
         n.create_subscription(DetectorEvent, topics.EVENTS, self.events.append, topics.EVENT_QOS)
         n.create_subscription(RigSampleBatch, topics.SAMPLES, self._on_samples, topics.STREAM_QOS)
         n.create_subscription(RigStatus, topics.STATUS, self._on_status, topics.LATCHED_QOS)

@@ -381,9 +381,9 @@ class RigDriver:
         """
         if self.controller_state == 'ramping_down':
             return 'the rig is still ramping to rest: reset when it is at rest'
-        if self.controller_state in ('running', 'holding'):
-            return (f'the rig is moving ({self.controller_state}): stop the program first (excitation/abort or '
-                    'rig_driver/abort); reset clears the faults of a rig at rest')
+        if self.controller_state == 'running':      # ('holding' is a controller at rest on its last command)
+            return ('the rig is moving (running its queued setpoints): stop the program first (excitation/abort '
+                    'or rig_driver/abort); reset clears the faults of a rig at rest')
         s = self._stream
         if s is not None and not s.ended and not self.faults:    # a fault has already taken the rig from it
             owner = s.grant.owner or 'a local program'
