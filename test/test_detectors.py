@@ -230,8 +230,9 @@ def test_force_drift_absolute_and_fractional():
 
 def test_tracking_judges_the_measured_against_the_target_amplitude():
     m = Monitor(parse_detectors([{'type': 'tracking'}], 'x'))
-    near, far = cycle(1, amp=0.95e-3), cycle(2, amp=0.85e-3)
-    assert run(m, [near]) == {} and run(m, [far]) == {2: ['tracking']}
+    assert run(m, [cycle(n, amp=0.5e-3) for n in range(1, 4)]) == {}      # settling: not judged
+    near, far = cycle(4, amp=0.95e-3), cycle(5, amp=0.85e-3)
+    assert run(m, [near]) == {} and run(m, [far]) == {5: ['tracking']}
     assert m.events[0].value == pytest.approx(0.15e-3) and m.events[0].units == 'm'
 
 
@@ -251,6 +252,8 @@ def test_triggers_count_program_or_block_cycles_and_rig_time():
 def test_strongest_action_wins():
     m = Monitor(parse_detectors([{'type': 'residual', 'action': 'record'}, {'type': 'tracking', 'action': 'warn'},
                                  {'type': 'stiffness_change', 'reference': 'model', 'action': 'end'}], 'x'))
+    for n in range(1, 4):
+        m.on_cycle(cycle(n))
     events = m.on_cycle(cycle(7, k=0.5 * K, residual=1e5, amp=0.5e-3))
     assert [e.action for e in events] == ['warn', 'end'] and strongest(events).action == 'end'
 
@@ -322,6 +325,8 @@ blocks:
     r.next_setpoints(b0 + 8 * per_b)                    # ... into block b's 8th cycle (its taper first)
     assert r.cycle_position(0, per_a) == (0, 0, False)                      # taper
     assert r.cycle_position(2 * per_a, 3 * per_a) == (0, 2, True)
+    assert r.cycle_position(per_a - 50, 2 * per_a - 50)[2] is False              # starts in the taper
+    assert r.cycle_position(4 * per_a + 50, 5 * per_a + 50)[2] is True          # ends a lag after the full part
     assert r.cycle_position(b0 + 3 * per_b, b0 + 4 * per_b) == (1, 3, True)
     assert r.cycle_position(b0 - 50, b0 + 50) is None                        # across two blocks
     assert r.cycles_done(b0 + 6 * per_b) == (1, 5, 9)

@@ -39,8 +39,9 @@ part, so tapers and approach ramps never trip them):
 - ``force_drift``: ``quantity`` mean or amplitude of the measured force against the block's stabilised value;
   ``threshold`` is a force ('2 kN') or, as a plain number, a fraction of the larger of the stabilised force
   amplitude and mean (a preload's mean force relaxes by a few per cent of it during a block).
-- ``tracking``: the measured displacement amplitude and mean against the block's targets; trips when the larger
-  error exceeds ``threshold`` x the target amplitude.
+- ``tracking``: the measured displacement amplitude and mean against the block's targets, after
+  ``settle_cycles`` (the amplitude loop converges over the first cycles); trips when the larger error exceeds
+  ``threshold`` x the target amplitude.
 - ``cycle_count``: ``threshold`` full-amplitude cycles of the program (of the block, in a block) are done.
 - ``elapsed_time``: ``threshold`` of rig time since the program started ('2 h').
 
@@ -231,6 +232,7 @@ class _BlockState:
     samples: dict = field(default_factory=dict)      # detector name -> values gathered for the reference
     over: dict = field(default_factory=dict)         # detector name -> consecutive cycles over the threshold
     tripped: set = field(default_factory=set)
+    seen: dict = field(default_factory=dict)         # detector name -> steady cycles judged (tracking's settle)
 
 
 class Monitor:
@@ -380,6 +382,9 @@ class Monitor:
             return worst, ref[0], bound, 'N', abs(worst - ref[0]) > bound
         if d.type == 'tracking':
             if not (math.isfinite(c.target_amplitude) and c.target_amplitude > 0):
+                return None
+            state.seen[d.name] = state.seen.get(d.name, 0) + 1
+            if state.seen[d.name] <= d.settle_cycles:     # the amplitude loop converges over the first cycles
                 return None
             error = max(abs(c.amplitude - c.target_amplitude), abs(c.mean - c.target_mean))
             bound = d.threshold * c.target_amplitude

@@ -204,7 +204,7 @@ class ProgramRunner:
     def cycle_position(self, start: int, end: int):
         """Where the measured cycle of samples start..end-1 lies: (block, full-amplitude cycle number counted
         across holds, steady), or None when it is not inside one periodic block. Steady: inside the block's
-        full-amplitude part (tapers excluded; a quarter cycle of slack for the actuator's lag).
+        full-amplitude part (tapers excluded; a quarter cycle of slack at its end for the actuator's lag).
         """
         a, z = self.locate(start), self.locate(end - 1)
         if a is None or z is None or a[0] != z[0]:
@@ -214,7 +214,9 @@ class ProgramRunner:
         if not blk.oscillating:
             return None
         full = blk.total_cycles - blk.taper_cycles
-        steady = a[1] >= blk.taper_cycles - 0.25 and z[1] <= full + 0.25
+        # the actuator lags: a measured cycle ends up to a quarter cycle after the full part, but never starts
+        # before the taper has ended (one that does carries taper, at a lower amplitude)
+        steady = a[1] >= blk.taper_cycles and z[1] <= full + 0.25
         number = int(math.floor(z[1] - blk.taper_cycles + 0.25)) + self.cycles_before.get(b, 0)
         return b, max(number, 0), steady
 

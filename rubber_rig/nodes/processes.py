@@ -42,7 +42,15 @@ from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import SetBool, Trigger
 
 from msg_defs.action import RunProgram
-from msg_defs.msg import CycleMetrics, DetectorEvent, RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
+from msg_defs.msg import (
+    CycleMetrics,
+    DetectorEvent,
+    ModelPrediction,
+    RecorderStatus,
+    RigSampleBatch,
+    RigStatus,
+    SetpointBatch,
+)
 
 from . import conversions as conv
 from . import topics
@@ -189,7 +197,9 @@ class Operator:
         self.setpoints_seen: list[SetpointBatch] = []
         self.events: list[DetectorEvent] = []
         self.cycle_metrics: list[CycleMetrics] = []
+        self.predicted_until = -1          # sequence after the latest sample element_model predicted
         n = self.node
+        n.create_subscription(ModelPrediction, topics.PREDICTION, self._on_prediction, topics.STREAM_QOS)
         n.create_subscription(CycleMetrics, topics.CYCLE_METRICS, self.cycle_metrics.append, topics.EVENT_QOS)
         n.create_subscription(DetectorEvent, topics.EVENTS, self.events.append, topics.EVENT_QOS)
         n.create_subscription(RigSampleBatch, topics.SAMPLES, self._on_samples, topics.STREAM_QOS)
@@ -234,6 +244,9 @@ class Operator:
         with self.lock:
             self.status = msg
             self.statuses.append((time.monotonic(), msg))
+
+    def _on_prediction(self, msg):
+        self.predicted_until = msg.first_sequence + len(msg.predicted_force)
 
     def _on_recorder(self, msg):
         self.recorder = msg
