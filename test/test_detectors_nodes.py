@@ -103,7 +103,6 @@ def restart_rig(procs, op, sim: dict, connect: bool = True, **driver):
         assert not connect, 'element_model predicts none of the restarted rig\'s samples'
 
 
-
 def onset_sequence(op, cycle: float) -> int:
     """Sample at which the specimen's own counter reaches `cycle` load cycles (replayed on the measurement)."""
     seq, _, x = op.applied(0)
