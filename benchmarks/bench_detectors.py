@@ -50,8 +50,7 @@ from rubber_rig.excitation.program import load_program, shipped_programs, with_o
 from rubber_rig.online import CyclePairer, ModelChoice, OnlinePredictor, cycle_properties  # noqa: E402
 from rubber_rig.rig import run_program  # noqa: E402
 from rubber_rig.rig.config import DamageSpec  # noqa: E402
-from rubber_rig.rig.sim.damage import DamagedSpecimen  # noqa: E402
-from rubber_rig.rig.sim.specimen import LinearSpecimen  # noqa: E402
+from rubber_rig.rig.sim.damage import sample_at_cycle  # noqa: E402
 
 REVERSAL_THRESHOLD = 2e-6    # [m] as config/rig_sim.yaml (specimen and element_model)
 BATCH = 10                   # samples per prediction batch (rig_driver: 10 ms at 1 kHz)
@@ -115,12 +114,7 @@ def onset_sample(r, damage: dict, threshold: float = None) -> int:
     n = spec.cycle
     if spec.type == 'fatigue' and threshold is not None:
         n = spec.cycle + spec.life * (threshold / spec.loss) ** (1 / spec.exponent)
-    counter = DamagedSpecimen(LinearSpecimen(1.0, 0.0, 1 / r.sample_rate), [], 1 / r.sample_rate)
-    for i, x in enumerate(r.displacement.tolist()):     # the measured displacement: noise 0.2 um << 10 um
-        counter._count(x)
-        if counter.cycles >= n:
-            return i
-    return -1
+    return sample_at_cycle(r.displacement, n)     # the measured displacement: noise 0.2 um << 10 um
 
 
 def delays(monitor, r, damage: dict, period: int) -> dict:

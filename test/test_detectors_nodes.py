@@ -38,7 +38,7 @@ from rubber_rig.fitting.data import load_run
 from rubber_rig.fitting.report import make_report
 from rubber_rig.nodes.processes import Operator, SuiteProcesses
 from rubber_rig.rig.config import DamageSpec
-from rubber_rig.rig.sim.damage import DamagedSpecimen
+from rubber_rig.rig.sim.damage import DamagedSpecimen, sample_at_cycle
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
 
@@ -106,12 +106,9 @@ def restart_rig(procs, op, sim: dict, connect: bool = True, **driver):
 def onset_sequence(op, cycle: float) -> int:
     """Sample at which the specimen's own counter reaches `cycle` load cycles (replayed on the measurement)."""
     seq, _, x = op.applied(0)
-    counter = DamagedSpecimen(None, [], 1.0 / FS)
-    for s, v in zip(seq.tolist(), x.tolist(), strict=True):
-        counter._count(v)
-        if counter.cycles >= cycle:
-            return s
-    raise AssertionError(f'the specimen never reached {cycle} cycles')
+    i = sample_at_cycle(x, cycle)
+    assert i >= 0, f'the specimen never reached {cycle} cycles'
+    return int(seq[i])
 
 
 def damage_case(procs, op, damage: list, program: str):

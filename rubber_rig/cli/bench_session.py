@@ -31,6 +31,7 @@ from msg_defs.msg import RigStatus
 from msg_defs.srv import RecorderControl
 from rubber_rig.cli.bench_view import progress_text
 from rubber_rig.cli.main import CommandError
+from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes.element_model_node import ElementModelNode
 from rubber_rig.nodes.excitation_node import ExcitationNode
 from rubber_rig.nodes.foxglove_view_node import LAYOUT_FILE, FoxgloveViewNode
@@ -269,15 +270,8 @@ class BenchSession:
             # stamps are rig time (sample index / rate): only a paced rig keeps it in step with the wall clock
             'latency': self.monitor.latency_summary() if cfg.paced else {},
             'blocks': rows,
-            'events': [event_dict(e) for e in (result.events if result else self.monitor.events)],
+            'events': [conv.detector_event_dict(e) for e in (result.events if result else self.monitor.events)],
         }
-
-
-def event_dict(e) -> dict:
-    """msg_defs/DetectorEvent -> the summary's record of it (SI, as on the message)."""
-    return {k: getattr(e, k) for k in ('detector', 'kind', 'action', 'block_index', 'block_name', 'cycle',
-                                       'program_cycle', 'elapsed', 'sequence', 'value', 'reference', 'threshold',
-                                       'units', 'message')}
 
 
 def excitation_overrides(args) -> dict:

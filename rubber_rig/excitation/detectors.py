@@ -273,10 +273,9 @@ class Monitor:
             judged = self._judge(d, c, state)
             if judged is None:
                 continue
-            value, reference, threshold, units, over = judged
-            deviation = value if d.type in ('residual', 'tracking') else abs(value - reference)
+            value, reference, threshold, units, deviation = judged
             self.peak[d.name] = max(self.peak.get(d.name, 0.0), deviation / threshold if threshold else math.inf)
-            n = state.over[d.name] = state.over.get(d.name, 0) + 1 if over else 0
+            n = state.over[d.name] = state.over.get(d.name, 0) + 1 if deviation > threshold else 0
             if n >= d.consecutive:
                 out.append(self._trip(d, state, c.block, c.cycle, c.program_cycle, c.elapsed, value, reference,
                                       threshold, units, c.end_sequence))
@@ -340,8 +339,9 @@ class Monitor:
         return state.references[d.name], window
 
     def _judge(self, d, c: Cycle, state):
-        """(value, reference, threshold, units, over) of detector d on cycle c, or None (not armed yet, or the
-        cycle lacks what it needs). On the cycle that completes a reference, the worst of its cycles is judged.
+        """(value, reference, threshold, units, deviation) of detector d on cycle c, or None (not armed yet, or
+        the cycle lacks what it needs); it trips when deviation > threshold. On the cycle that completes a
+        reference, the worst of its cycles is judged.
         """
         m = c.measured
         if d.type == 'residual':
@@ -350,7 +350,7 @@ class Monitor:
                 return None
             expected = max(ref[0], d.noise, d.floor * ref[1])
             worst = max([c.residual_rms] + [w[0] for w in window])
-            return worst, expected, d.threshold * expected, 'N', worst > d.threshold * expected
+            return worst, expected, d.threshold * expected, 'N', worst
         if d.type == 'stiffness_change':
             value, model = m.get(d.quantity, math.nan), c.model.get(d.quantity, math.nan)
             if d.reference == 'model':
@@ -368,7 +368,7 @@ class Monitor:
                 return None
             worst = max([value, *window], key=lambda v: abs(v - ref))
             bound = d.threshold * abs(ref)
-            return worst, ref, bound, UNITS[d.quantity], abs(worst - ref) > bound
+            return worst, ref, bound, UNITS[d.quantity], abs(worst - ref)
         if d.type == 'force_drift':
             value = m.get('force_mean' if d.quantity == 'mean' else 'force_amplitude', math.nan)
             ref, window = self._stabilised(d, state, (value, m.get('force_amplitude', math.nan),
@@ -379,7 +379,7 @@ class Monitor:
             # force relaxes by a few per cent of the preload during a block, which is not a departure
             bound = d.threshold if d.threshold_units == 'N' else d.threshold * max(ref[1], ref[2])
             worst = max([value] + [w[0] for w in window], key=lambda v: abs(v - ref[0]))
-            return worst, ref[0], bound, 'N', abs(worst - ref[0]) > bound
+            return worst, ref[0], bound, 'N', abs(worst - ref[0])
         if d.type == 'tracking':
             if not (math.isfinite(c.target_amplitude) and c.target_amplitude > 0):
                 return None
@@ -388,7 +388,7 @@ class Monitor:
                 return None
             error = max(abs(c.amplitude - c.target_amplitude), abs(c.mean - c.target_mean))
             bound = d.threshold * c.target_amplitude
-            return error, c.target_amplitude, bound, 'm', error > bound
+            return error, c.target_amplitude, bound, 'm', error
         return None
 
 

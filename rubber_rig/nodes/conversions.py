@@ -238,6 +238,11 @@ def cycle_properties_dict(msg: CycleProperties) -> dict:
     return {name: float(getattr(msg, name)) for name in PROPERTY_FIELDS}
 
 
+def detector_event_dict(msg: DetectorEvent) -> dict:
+    """msg_defs/DetectorEvent -> {field: value} of every field but the header (SI, as on the message)."""
+    return {k: getattr(msg, k) for k in msg.get_fields_and_field_types() if k != 'header'}
+
+
 def cycle_metrics_msg(measured: Any, model: Any, block_index: int, cycle_index: int, t: float,
                       start_sequence: int = 0, end_sequence: int = 0,
                       residual_rms: float = float('nan')) -> CycleMetrics:

@@ -95,8 +95,8 @@ class FoxgloveViewNode(Node):
         self.ch_events = foxglove.Channel('/live/events', schema=_schema(
             timestamp='time', program='string', detector='string', kind='string', action='string',
             block_index='integer', block_name='string', cycle='integer', program_cycle='integer',
-            value='number', reference='number', threshold='number', units='string', message='string',
-            k_dyn_kN_per_mm='number'))
+            elapsed='number', sequence='integer', value='number', reference='number', threshold='number',
+            units='string', message='string', k_dyn_kN_per_mm='number'))
         self._k_dyn = float('nan')                # [kN/mm] of the latest cycle: where an event marker sits
         self._loop: deque = deque()
         self._loop_len = 0
@@ -155,10 +155,8 @@ class FoxgloveViewNode(Node):
                            'loss_angle_model_deg': float(np.degrees(msg.model.loss_angle))})
 
     def on_event(self, msg: DetectorEvent) -> None:
-        fields = ('program', 'detector', 'kind', 'action', 'block_index', 'block_name', 'cycle', 'program_cycle',
-                  'value', 'reference', 'threshold', 'units', 'message')
         self.ch_events.log({'timestamp': _time(conv.to_seconds(msg.header.stamp)), 'k_dyn_kN_per_mm': self._k_dyn,
-                            **{k: getattr(msg, k) for k in fields}})
+                            **conv.detector_event_dict(msg)})
 
     def on_status(self, msg: RigStatus) -> None:
         self.ch_status.log({'state': msg.state_name, 'faults': conv.fault_names(msg.faults),

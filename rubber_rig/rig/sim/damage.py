@@ -31,6 +31,19 @@ REVERSAL = 10e-6     # [m] a displacement reversal this large counts half a load
 MAX_DAMAGE = 0.95    # a specimen keeps 5 % of its stiffness: a torn one still has its fixtures' friction
 
 
+def sample_at_cycle(x, cycles: float) -> int:
+    """Index of the first sample of displacement x [m] at which a specimen counting its reversals as
+    DamagedSpecimen does has gone through `cycles` load cycles; -1 if it never does. Replayed on a measured
+    displacement it locates a damage onset (transducer noise is far below REVERSAL).
+    """
+    counter = DamagedSpecimen(None, [], 1.0)
+    for i, xi in enumerate(np.asarray(x, dtype=float).tolist()):
+        counter._count(xi)
+        if counter.cycles >= cycles:
+            return i
+    return -1
+
+
 class DamagedSpecimen:
     """Streaming specimen (step(x) -> F, run(x) -> forces, reset()) = `intact` with the `damage` list applied.
 
