@@ -507,9 +507,15 @@ class ExcitationNode(Node):
             self._done.set_result(result)
 
     def _stop_stream(self, action: int, reason: str, target: float = 0.0) -> None:
-        if self.stream_id and self.stop_client.service_is_ready():
-            self.stop_client.call_async(StopStream.Request(stream_id=self.stream_id, action=action,
-                                                           target=float(target), reason=reason))
+        if not self.stream_id:
+            return
+        if not self.stop_client.service_is_ready():
+            # the stream still ends (no more setpoints): the driver faults it after stream_timeout and ramps
+            self.get_logger().error(f'{self.rig_driver}/stop_stream is not available: the rig ramps to rest on '
+                                    f'the driver\'s stream_timeout instead of at once ({reason})')
+            return
+        self.stop_client.call_async(StopStream.Request(stream_id=self.stream_id, action=action,
+                                                       target=float(target), reason=reason))
 
     async def _call(self, client, request, timeout: float):
         """Await a service response, or None after `timeout` seconds (or if the service is not there)."""
