@@ -148,6 +148,7 @@ class ExcitationNode(Node):
         self.recorder: RecorderStatus | None = None
         self._recorder_wall = 0.0
         self.next_sample = None          # sequence after the latest measured sample
+        self._time_base: tuple[int, float] | None = None   # (sequence, rig time [s]) of the latest sample batch
         self.runner: ProgramRunner | None = None
         self.streamer: SetpointStreamer | None = None   # keeps the runner lead_time ahead of the measurement
         self.stream_id = 0               # the stream the driver granted us (0: none)
@@ -226,6 +227,7 @@ class ExcitationNode(Node):
         if self.runner is not None and msg.first_sequence + n <= self.start_sequence:
             return                       # from before this program's stream
         self.next_sample = msg.first_sequence + n
+        self._time_base = (msg.first_sequence, conv.to_seconds(msg.header.stamp))
         if self.runner is not None and n and not self.held:
             try:
                 self.runner.feed_measurement(msg.first_sequence, conv.as_array(msg.displacement))
@@ -460,9 +462,21 @@ class ExcitationNode(Node):
             self._finish(success=not r.aborted)   # measured to the end: the summaries are complete
 
     def _publish(self, first, x, block, end=False):
+        dt = 1.0 / self.status.sample_rate
         self.pub_setpoints.publish(conv.setpoint_batch_msg(
-            first, 1.0 / self.status.sample_rate, x, block, stream_id=self.stream_id,
+            first, dt, x, block, t=self.rig_time(first, dt), stream_id=self.stream_id,
             source=self.get_fully_qualified_name(), end_of_stream=end))
+
+    def rig_time(self, sequence: int, dt: float) -> float:
+        """When the rig will apply sample `sequence` [s, the rig's clock]: the stamp of the latest measured
+        batch plus the samples between (a setpoint batch is stamped with the time it is for, as a sample batch
+        is with the time it was measured). Before any sample arrived, the first setpoint is taken to apply now
+        (this node's clock): a new stream starts with its first batch.
+        """
+        if self._time_base is None:
+            self._time_base = (sequence, self.get_clock().now().nanoseconds * 1e-9)
+        first, t0 = self._time_base
+        return t0 + (sequence - first) * dt
 
     def feedback(self) -> RunProgram.Feedback:
         p = self.runner.progress
