@@ -34,6 +34,7 @@ ALLOWED = {
     'units': set(),
     'versions': set(),
     'paths': set(),
+    'dds': {'paths'},
     'analysis': set(),
     'models': {'analysis', 'units'},
     'excitation': {'models', 'settings', 'units'},
@@ -41,7 +42,8 @@ ALLOWED = {
     'rig': {'excitation', 'models', 'settings'},
     'online': {'analysis', 'excitation', 'models'},
     'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig', 'units'},
-    'nodes': {'analysis', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'settings', 'versions'},
+    'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'settings',
+              'versions'},
     'cli': {'__init__', 'analysis', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording', 'rig',
             'units'},
 }

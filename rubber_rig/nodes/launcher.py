@@ -36,6 +36,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
+from ..dds import configure_dds
 from .params import undeclared_overrides
 
 
@@ -53,6 +54,7 @@ class InProcessLauncher:
         # No rclpy signal handlers: Ctrl-C must reach the caller as KeyboardInterrupt (the main job then aborts
         # the program with the smooth ramp and closes the recording) instead of silently stopping every executor.
         init_kwargs = {'context': self.context, 'signal_handler_options': SignalHandlerOptions.NO}
+        configure_dds()
         if domain_id is not None:
             init_kwargs['domain_id'] = domain_id
         rclpy.init(args=[], **init_kwargs)

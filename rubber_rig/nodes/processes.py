@@ -52,6 +52,7 @@ from msg_defs.msg import (
     SetpointBatch,
 )
 
+from ..dds import configure_dds
 from . import conversions as conv
 from . import topics
 
@@ -184,6 +185,7 @@ class Operator:
     def __init__(self, namespace: str, domain_id: int, name: str = 'operator'):
         self.ns = namespace.rstrip('/')
         self.context = Context()
+        configure_dds()
         rclpy.init(args=[], context=self.context, domain_id=int(domain_id),
                    signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node(name, namespace=namespace, context=self.context)

@@ -17,11 +17,8 @@
 SingleThreadedExecutor, not MultiThreadedExecutor: with a timer publishing to a subscription in the same
 process, rclpy's MultiThreadedExecutor collapses to tens of callbacks per second (rclpy #1223, measured here).
 
-Fast DDS transport: UDP only (FASTDDS_BUILTIN_TRANSPORTS=UDPv4) unless the environment chooses. With Fast DDS's
-default shared-memory transport, a subscriber process that dies (a recorder killed with SIGKILL) leaves its
-port full, and every publisher to it blocks on its next writes until the port is judged dead (up to a second):
-the excitation's setpoint stream then stalls past the driver's stream_timeout and a crash of the recorder
-faults the rig. Over UDP a dead reader costs nothing.
+The DDS configuration (rubber_rig.dds.configure_dds: transport, discovery) is chosen before rclpy.init and
+logged with the ready line.
 """
 from __future__ import annotations
 
@@ -32,10 +29,9 @@ import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 
+from ..dds import configure_dds
 from .params import undeclared_overrides
 from .rclpy_compat import RCLError
-
-DDS_TRANSPORTS_VARIABLE = 'FASTDDS_BUILTIN_TRANSPORTS'
 
 
 def spin_node(node_factory: Callable[[], Node], args=None) -> None:
@@ -43,12 +39,13 @@ def spin_node(node_factory: Callable[[], Node], args=None) -> None:
 
     A node with a ``close()`` method (open bus, open file) has it called before ``destroy_node()``.
     """
-    os.environ.setdefault(DDS_TRANSPORTS_VARIABLE, 'UDPv4')   # before the first participant exists
+    dds = configure_dds()   # before the first participant exists
     rclpy.init(args=args)
     node = None
     try:
         node = node_factory()
         undeclared_overrides(node)   # a misspelt key in a parameter file must not pass silently
+        node.get_logger().info(f'DDS: {dds}')
         node.get_logger().info(f'ready (pid {os.getpid()})')   # launchers and the fault-matrix tests wait for it
         executor = SingleThreadedExecutor()
         executor.add_node(node)
