@@ -23,6 +23,7 @@ cycles it had not run.
 """
 import html
 import os
+import signal
 import time
 from pathlib import Path
 
@@ -30,7 +31,7 @@ import numpy as np
 import pytest
 import yaml
 
-from msg_defs.msg import RigStatus
+from msg_defs.msg import RecorderStatus, RigStatus
 from msg_defs.srv import LoadProgram, RecorderControl
 from rubber_rig.excitation.program import load_program
 from rubber_rig.fitting.blocks import split_blocks
@@ -329,3 +330,33 @@ def test_detectors_without_cycle_metrics_say_they_are_blind(suite):
     finally:
         procs.start('element_model')
         assert procs.wait_started('element_model'), procs.log('element_model')[-2000:]
+
+
+def test_a_program_whose_recorder_is_killed_says_its_recording_was_lost(suite):
+    """Without require_recording the program runs on when its recorder dies, but its result, the log and the
+    excitation's diagnostics say from where on the samples are not recorded.
+    """
+    procs, op = suite
+    restart_rig(procs, op, {'damage': '[]'})
+    start = op.call(f'{NS}/recorder/control', RecorderControl,
+                    RecorderControl.Request(command=RecorderControl.Request.START), timeout=30.0)
+    assert start is not None, 'recorder/control did not answer'
+    assert op.wait_for(lambda: op.recorder is not None and op.recorder.state == RecorderStatus.STATE_RECORDING
+                       and f'{NS}/samples' in op.recorder.topics, 20.0), op.recorder
+    path = op.recorder.path
+    try:
+        handle = op.send_goal(SINE)                   # 6 s
+        assert op.wait_for(lambda: op.status.stream_owner and op.last_sequence > 0, 10.0)
+        killed_at = op.last_sequence
+        procs.kill('recorder', signal.SIGKILL)
+        result = op.result(handle, 60.0)
+        assert result is not None and result.success, result and result.message
+        assert 'recording lost from about sample' in result.message and path in result.message, result.message
+        lost_from = int(result.message.split('recording lost from about sample ')[1].split(':')[0])
+        # the recorder's status stops; recorder_timeout (2 s) later the excitation calls it lost
+        assert killed_at <= lost_from <= killed_at + 3.0 * FS, (killed_at, lost_from)
+        assert 'no recorder status for' in result.message
+        assert 'recording lost' in procs.log('excitation')
+    finally:
+        procs.start('recorder')
+        assert procs.wait_started('recorder'), procs.log('recorder')[-2000:]

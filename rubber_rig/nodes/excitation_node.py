@@ -162,6 +162,7 @@ class ExcitationNode(Node):
         self.result: RunProgram.Result | None = None   # result of the last run (also for program runs)
         self.monitor: Monitor | None = None   # the running program's detectors
         self._last_cycle_end, self._blind = 0, ''   # end of the latest judged cycle; why detectors were blind
+        self._recorded_by, self._recording_lost = '', ''   # the recording a program started in; why it was lost
         self.events: list[DetectorEvent] = []  # detector events of the running (or last) program
         self._held_at = None             # sequence after the last sample measured before a hold
         self._held_wall = 0.0            # time.monotonic() of the hold (hold_timeout)
@@ -218,6 +219,34 @@ class ExcitationNode(Node):
         self.recorder, self._recorder_wall = msg, time.monotonic()
         if self.require_recording and self.runner is not None and msg.state == RecorderStatus.STATE_ERROR:
             self.abort_program(f'recording failed: {msg.error or "recorder error"}')
+        elif self.runner is not None:
+            self.check_recording()
+
+    def recording_path(self) -> str:
+        """The file the recorder reports recording this namespace's samples into ('' if none, or stale)."""
+        r = self.recorder
+        if r is None or time.monotonic() - self._recorder_wall > self.recorder_timeout \
+                or r.state != RecorderStatus.STATE_RECORDING or self.samples_topic not in r.topics:
+            return ''
+        return r.path or '(unnamed file)'
+
+    def check_recording(self) -> None:
+        """A program that started while being recorded and whose recording stopped says so, once: in the log,
+        the diagnostics and the goal's result (without require_recording the program runs on; with it, the
+        program is stopped elsewhere).
+        """
+        if not self._recorded_by or self._recording_lost:
+            return
+        now = self.recording_path()
+        if now == self._recorded_by:
+            return
+        r, age = self.recorder, time.monotonic() - self._recorder_wall
+        why = (f'no recorder status for {age:.1f} s (the recorder is gone)' if age > self.recorder_timeout
+               else f'the recorder is {r.state_name}' + (f': {r.error}' if r.error else '') if not now
+               else f'the recorder switched to {now}')
+        self._recording_lost = (f'recording lost from about sample {self.next_sample}: {why}; the samples after '
+                                f'it are not in {self._recorded_by}')
+        self.get_logger().error(self._recording_lost)
 
     def on_samples(self, msg: RigSampleBatch) -> None:
         # samples prove the driver alive as well as its status does: one late status message (DDS can hold a
@@ -405,6 +434,8 @@ class ExcitationNode(Node):
         self.monitor = Monitor(with_defaults(program.all_detectors(), self.default_detectors))
         self._last_cycle_end, self._blind = grant.first_sequence, ''
         self.events, self._elapsed_samples = [], 0
+        self._recorded_by = self.recording_path()     # the recording this program starts in ('' if none)
+        self._recording_lost = ''
         self.pub_program.publish(String(data=text))
         self.get_logger().info(f"program '{program.name}': {len(program.blocks)} blocks, "
                                f'{program.duration(self.status.sample_rate):.1f} s, stream {grant.stream_id} from '
@@ -432,6 +463,7 @@ class ExcitationNode(Node):
             return
         if self.held or not self.stream_id:
             return
+        self.check_recording()
         if self.require_recording and time.monotonic() - self._recorder_wall > self.recorder_timeout:
             self.abort_program(f'recording lost: no recorder status for {time.monotonic() - self._recorder_wall:.1f}'
                                ' s (the recorder is gone)')
@@ -514,6 +546,8 @@ class ExcitationNode(Node):
                                    events=list(self.events))
         if self._blind:
             result.message += f' (detectors were blind: {self._blind})'
+        if self._recording_lost:
+            result.message += f' ({self._recording_lost})'
         self.result = result
         self.runner, self.stream_id, self.held = None, 0, False
         self.get_logger().info(f'program ended: {result.message}')
@@ -667,18 +701,22 @@ class ExcitationNode(Node):
         if last is not None and last.action != 'record':
             level = DiagnosticStatus.WARN
         blind = self.detectors_blind()
+        if self._recording_lost and r is not None:
+            level = DiagnosticStatus.WARN
         if blind:
             level = DiagnosticStatus.WARN
             if not self._blind:
                 self.get_logger().warning(f'detectors blind: {blind}')
             self._blind = blind
         values = {'state': state, 'program': r.program.name if r else '', 'detector_events': len(self.events),
-                  'last_event': last.message if last else '', 'detectors_blind': blind}
+                  'last_event': last.message if last else '', 'detectors_blind': blind,
+                  'recording_lost': self._recording_lost if r is not None else ''}
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.status.append(DiagnosticStatus(
             level=level, name=self.get_fully_qualified_name(), hardware_id='rubber_rig',
-            message=(f'detectors blind: {blind}' if blind else last.message if level != DiagnosticStatus.OK
+            message=(f'detectors blind: {blind}' if blind else self._recording_lost if self._recording_lost and r
+                     else last.message if level != DiagnosticStatus.OK
                      else f'program {state}'),
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]))
         self.pub_diagnostics.publish(msg)
