@@ -14,11 +14,13 @@
 
 """Raw CAN logs (RigConfig.can_log, rubber_rig.rig.can.canlog, `rubber-rig canlog`): a program on the simulated
 rig is logged as BLF, ASC and candump .log; the decoded log gives the same samples, sequences and counts as the
-driver, plain python-can reads the files, and bad names, bad places and damaged logs are refused or reported."""
+driver, plain python-can reads the files, and bad names, bad places and damaged logs are refused or reported; a
+damaged line of a text log (.asc, .log) is skipped and counted, and every frame before and after it is kept."""
 import datetime
 import importlib
 import json
 import os
+import re
 import subprocess
 import sys
 import time
@@ -33,8 +35,8 @@ from rubber_rig.cli.main import main as cli_main
 from rubber_rig.excitation import Program
 from rubber_rig.rig import ConfigError, RigConfig, open_rig, run_program
 from rubber_rig.rig import interface as rig_interface
-from rubber_rig.rig.can.canlog import CanLogWarning
-from rubber_rig.rig.can.canlog_reader import decode_log
+from rubber_rig.rig.can.canlog import CanLogError, CanLogWarning
+from rubber_rig.rig.can.canlog_reader import MAX_SKIPPED_REPORTED, TextLogReader, decode_log
 from rubber_rig.settings import settings_of
 
 FAST = {'paced': False, 'profile': 'single'}   # one frame per sample: frame counts are sample counts
@@ -364,28 +366,216 @@ def test_truncated_log_decodes_what_is_there_with_a_warning(logged_runs, tmp_pat
     np.testing.assert_allclose(log.displacement, r.displacement[:k], rtol=0, atol=0.5e-7)
 
 
-@pytest.mark.parametrize('suffix', FORMATS)
-def test_corrupt_log_decodes_up_to_the_damage_with_a_warning(logged_runs, tmp_path, suffix):
-    r, path, _, _ = logged_runs[suffix]
+def test_corrupt_blf_decodes_up_to_the_damage_with_a_warning(logged_runs, tmp_path):
+    """BLF is binary: it is read up to the first object python-can cannot read."""
+    r, path, _, _ = logged_runs['.blf']
     data = bytearray(path.read_bytes())
     mid = len(data) // 2
-    if suffix == '.blf':
-        data[mid:mid + 32] = b'\xa5' * 32                  # inside the compressed container
-    elif suffix == '.asc':
-        start = data.index(b'Rx', mid)
-        begin, end = data.rindex(b'\n', 0, start) + 1, data.index(b'\n', start)
-        data[begin:end] = data[begin:end].split()[0] + b' 1 QQQ Rx d 8 00'   # a frame whose identifier is no hex
-    else:
-        mid = data.index(b'\n', mid) + 1
-        data[mid:mid] = b'(17.5) garbage that is no frame\n'
-    bad = tmp_path / f'bad{suffix}'
+    data[mid:mid + 32] = b'\xa5' * 32                  # inside the compressed container
+    bad = tmp_path / 'bad.blf'
     bad.write_bytes(bytes(data))
     with pytest.warns(CanLogWarning, match='unreadable after frame|not closed'):
         log = decode_log(bad)
-    assert not log.complete
+    assert not log.complete and log.lines_skipped == 0
     k = len(log)
     assert k < r.sequence.size
     np.testing.assert_array_equal(log.sequence, r.sequence[:k])
+
+
+# ---- damaged text logs: the bad line is skipped, the frames before and after it are kept ---------------------
+
+TEXT_FORMATS = ('.asc', '.log')
+TEXT_WRITERS = {'.asc': can.ASCWriter, '.log': can.CanutilsLogWriter}
+N_FRAMES, BAD = 3085, 28     # issue 24: 0 of 3085 frames decoded although the first 28 lines were intact
+MARK = b'\xa5'               # data byte 0 of every frame: 'A5' in both formats, nowhere else on a frame line
+GARBAGE = bytes((i * 73 + 29) % 256 for i in range(64)).replace(b'\n', b'')
+
+
+def frame_key(m):
+    return (m.timestamp, m.arbitration_id, m.is_extended_id, m.is_fd, m.bitrate_switch, m.is_rx, m.dlc,
+            bytes(m.data), m.channel, m.is_remote_frame, m.is_error_frame)
+
+
+def write_frames(path, n=N_FRAMES):
+    """n frames through python-can's own writer: classic 0x123 (sent) and CAN FD 0x180 (received) in turn, the
+    frame's index in data bytes 1-3. Returns python-can's reading of the good file and the file's lines."""
+    with TEXT_WRITERS[path.suffix](str(path)) as w:
+        for k in range(n):
+            fd = k % 2 == 0
+            data = MARK + k.to_bytes(3, 'big') + bytes(8 if fd else 4)
+            w.on_message_received(can.Message(timestamp=1_767_000_000.0 + 1e-3 * k, arbitration_id=0x180 if fd
+                                              else 0x123, is_extended_id=False, is_fd=fd, bitrate_switch=fd,
+                                              is_rx=fd, data=data, channel='can0' if path.suffix == '.log' else 0))
+    frames = read_plain(path)
+    assert len(frames) == n
+    return frames, path.read_bytes().split(b'\n')
+
+
+def frame_lines(lines):
+    """Indices of the frame lines (those with the MARK) among `lines`."""
+    return [i for i, line in enumerate(lines) if b' A5' in line or b'#A5' in line or b'#1A5' in line]
+
+
+def _flip_bit(line):        # bit 6 of the '5' of 'A5': 'u', no hex digit
+    i = line.index(b'A5') + 1
+    return line[:i] + bytes([line[i] ^ 0x40]) + line[i + 1:]
+
+
+def _non_utf8(line):        # the 'A' of 'A5' becomes 0xff, which no UTF-8 text holds
+    i = line.index(b'A5')
+    return line[:i] + b'\xff' + line[i + 1:]
+
+
+def _cut(line):             # the line ends one digit into the data, its newline kept
+    return line[:line.index(b'A5') + 3]
+
+
+def _time(line):            # the timestamp's decimal point becomes 'Q'
+    return line.replace(b'.', b'Q', 1)
+
+
+# name: (what is done at frame line BAD, frames lost, why the line is skipped (per format))
+CORRUPTIONS = {
+    'flipped bit': (lambda lines, i: lines[:i] + [_flip_bit(lines[i])] + lines[i + 1:], 1,
+                    {'.asc': r'python-can cannot parse it \(ValueError', '.log': 'not a candump -L frame line'}),
+    'non-UTF-8 byte': (lambda lines, i: lines[:i] + [_non_utf8(lines[i])] + lines[i + 1:], 1,
+                       {'.asc': r'not UTF-8 text \(byte 0xff at column', '.log': r'not UTF-8 text \(byte 0xff'}),
+    'truncated line': (lambda lines, i: lines[:i] + [_cut(lines[i])] + lines[i + 1:], 1,
+                       {'.asc': r'data bytes where its length field says .* \(the line is cut short\)',
+                        '.log': 'not a candump -L frame line'}),
+    'damaged time': (lambda lines, i: lines[:i] + [_time(lines[i])] + lines[i + 1:], 1,
+                     {'.asc': 'a damaged ASC frame line', '.log': 'not a candump -L frame line'}),
+    'garbage line inserted': (lambda lines, i: lines[:i] + [GARBAGE] + lines[i:], 0,
+                              {'.asc': 'not UTF-8 text', '.log': 'not UTF-8 text'}),
+    'garbage over 3 lines': (lambda lines, i: lines[:i] + [lines[i][:20] + GARBAGE + lines[i + 2][20:]]
+                             + lines[i + 3:], 3, {'.asc': 'not UTF-8 text', '.log': 'not UTF-8 text'}),
+}
+
+
+@pytest.mark.parametrize('suffix', TEXT_FORMATS)
+@pytest.mark.parametrize('corruption', list(CORRUPTIONS))
+def test_a_bad_line_costs_only_its_frames(tmp_path, suffix, corruption):
+    """Issue 24: one bad byte dropped every frame after it (and with a non-UTF-8 byte every frame before it as
+    well). Now exactly the frames on the damaged line are missing; every frame before and after it is read,
+    the skipped line is counted and named by number with the reason."""
+    path = tmp_path / f'frames{suffix}'
+    good, lines = write_frames(path)
+    damage, lost, why = CORRUPTIONS[corruption]
+    at = frame_lines(lines)[BAD]
+    bad = tmp_path / f'bad{suffix}'
+    bad.write_bytes(b'\n'.join(damage(lines, at)))
+    reader = TextLogReader(bad)
+    frames = [frame_key(m) for m in reader]
+    expected = [frame_key(m) for m in good[:BAD] + good[BAD + lost:]]
+    assert len(frames) == N_FRAMES - lost and frames[:BAD] == expected[:BAD]    # the 28 frames before it
+    assert frames[BAD:] == expected[BAD:]                                     # and all 3057 (3055) after it
+    assert reader.lines_skipped == 1 and reader.frames == N_FRAMES - lost
+    (line_number, reason), = reader.skipped
+    assert line_number == at + 1 and re.search(why[suffix], reason), reason
+    # decode_log: the same frames, the skipped line counted and named in a warning with the file
+    with pytest.warns(CanLogWarning) as caught:
+        log = decode_log(bad)
+    assert log.frames_total == N_FRAMES - lost and log.lines_skipped == 1 and not log.complete
+    kept = good[:BAD] + good[BAD + lost:]
+    assert log.frames_by_id == {0x123: sum(not m.is_fd for m in kept), 0x180: sum(m.is_fd for m in kept)}
+    assert log.skipped_lines == [(at + 1, reason)]
+    text = [str(w.message) for w in caught if 'skipped 1 unreadable line' in str(w.message)]
+    assert len(text) == 1 and str(bad) in text[0] and f'line {at + 1}: ' in text[0], text
+    assert f'the {N_FRAMES - lost} frames before and after them are decoded' in text[0]
+
+
+@pytest.mark.parametrize('suffix', TEXT_FORMATS)
+def test_a_good_text_log_reads_as_python_can_reads_it(logged_runs, suffix):
+    """The line-by-line reader gives exactly can.LogReader's frames for a good log, and skips nothing."""
+    _, path, _, _ = logged_runs[suffix]
+    reader = TextLogReader(path)
+    assert [frame_key(m) for m in reader] == [frame_key(m) for m in read_plain(path)]
+    assert reader.lines_skipped == 0 and reader.skipped == [] and reader.frames > 1000
+    log = decode_clean(path)
+    assert log.lines_skipped == 0 and log.skipped_lines == [] and log.complete
+
+
+@pytest.mark.parametrize('suffix', TEXT_FORMATS)
+def test_a_bad_feedback_line_in_a_rig_log_costs_one_sample(logged_runs, tmp_path, suffix):
+    """A rig log with a non-UTF-8 byte in one Feedback line decodes every other sample; the missing one shows as
+    a sequence gap of one, and the warning names the line."""
+    r, path, _, _ = logged_runs[suffix]
+    lines = path.read_bytes().split(b'\n')
+    feedback = re.compile(rb'\s180##' if suffix == '.log' else rb'CANFD\s+\d+\s+Rx\s+180\s')
+    fb_lines = [i for i, line in enumerate(lines) if feedback.search(line)]
+    assert len(fb_lines) == r.sequence.size
+    j = len(fb_lines) // 2
+    i = fb_lines[j]
+    lines[i] = lines[i][:8] + b'\xfe' + lines[i][9:]
+    bad = tmp_path / f'fb{suffix}'
+    bad.write_bytes(b'\n'.join(lines))
+    with pytest.warns(CanLogWarning, match=rf'skipped 1 unreadable line .*line {i + 1}: not UTF-8 text'):
+        log = decode_log(bad)
+    np.testing.assert_array_equal(log.sequence, np.delete(r.sequence, j))
+    np.testing.assert_allclose(log.force, np.delete(r.force, j), rtol=0, atol=0.005)
+    assert log.frames['Feedback'] == r.sequence.size - 1 and log.lines_skipped == 1
+    assert [(g['expected'], g['lost']) for g in log.gaps] == [(r.sequence[j], 1)] and log.samples_lost == 1
+
+
+@pytest.mark.parametrize('suffix', TEXT_FORMATS)
+def test_many_bad_lines_are_all_counted_and_the_first_named(tmp_path, suffix):
+    """Every 100th frame line damaged: all counted, the first MAX_SKIPPED_REPORTED kept with line numbers."""
+    path = tmp_path / f'frames{suffix}'
+    good, lines = write_frames(path)
+    at = frame_lines(lines)[::100]
+    for i in at:
+        lines[i] = _flip_bit(lines[i])
+    bad = tmp_path / f'bad{suffix}'
+    bad.write_bytes(b'\n'.join(lines))
+    with pytest.warns(CanLogWarning, match=rf'skipped {len(at)} unreadable lines .*\(and {len(at) - 3} more\)'):
+        log = decode_log(bad)
+    assert log.lines_skipped == len(at) == 31 and log.frames_total == N_FRAMES - len(at)
+    assert [n for n, _ in log.skipped_lines] == [i + 1 for i in at[:MAX_SKIPPED_REPORTED]]
+    assert [frame_key(m) for m in TextLogReader(bad)] == [frame_key(m) for k, m in enumerate(good) if k % 100]
+
+
+@pytest.mark.parametrize('suffix', TEXT_FORMATS)
+def test_a_text_log_with_nothing_readable_is_refused(tmp_path, suffix):
+    """Every frame line damaged, or binary data in place of the log: refused, naming the file and the lines."""
+    path = tmp_path / f'frames{suffix}'
+    _, lines = write_frames(path, 40)
+    for i in frame_lines(lines):
+        lines[i] = _flip_bit(lines[i])
+    bad = tmp_path / f'bad{suffix}'
+    bad.write_bytes(b'\n'.join(lines))
+    with pytest.raises(CanLogError, match=rf'{re.escape(str(bad))}: not a readable .* no frame could be read, '
+                                          rf'40 of its \d+ lines are unreadable: line \d+: .*\(and 37 more\)'):
+        decode_log(bad)
+    binary = tmp_path / f'binary{suffix}'
+    binary.write_bytes(GARBAGE * 50)
+    with pytest.raises(CanLogError, match=rf'{re.escape(str(binary))}: .*line 1: not UTF-8 text'):
+        decode_log(binary)
+    prose = tmp_path / f'prose{suffix}'
+    prose.write_text('this is no CAN log\nnor is this line\n')
+    with pytest.raises(CanLogError, match=re.escape(str(prose))):
+        decode_log(prose)
+    assert cli_main(['canlog', str(bad)]) == 2
+
+
+def test_cli_prints_the_skipped_line_count(logged_runs, tmp_path, capsys):
+    _, path, _, _ = logged_runs['.log']
+    assert cli_main(['canlog', str(path)]) == 0
+    assert 'bad lines:  0 unreadable lines skipped' in capsys.readouterr().out
+    lines = path.read_bytes().split(b'\n')
+    lines[40] = b'(17.5) garbage that is no frame'
+    lines[41] = lines[41][:10] + b'\x00' + lines[41][11:]
+    bad = tmp_path / 'bad.log'
+    bad.write_bytes(b'\n'.join(lines))
+    assert cli_main(['canlog', str(bad)]) == 0
+    captured = capsys.readouterr()
+    assert 'bad lines:  2 unreadable lines skipped' in captured.out
+    assert "  line 41: not a candump -L frame line: '(17.5) garbage that is no frame'" in captured.out
+    assert '  line 42: binary data (byte 0x00 at column 11)' in captured.out
+    assert 'INCOMPLETE' in captured.out and f'{bad} is incomplete: skipped 2 unreadable lines' in captured.err
+    assert cli_main(['canlog', str(bad), '--json']) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info['lines_skipped'] == 2 and [s['line'] for s in info['skipped_lines']] == [41, 42]
+    assert info['frames_total'] == len(read_plain(path)) - 2 and not info['complete']
 
 
 def test_a_file_that_is_no_log_is_refused_with_its_name(tmp_path):

@@ -20,6 +20,9 @@ Examples:
   rubber-rig canlog /tmp/rig.asc -o samples.csv
 The log is what rig_driver writes with the parameter can_log (or any capture of the rig's bus, e.g.
 `candump -L can0`). The CSV has one row per measured sample (Feedback frame), in SI units.
+In a damaged .asc or .log an unreadable line (not text, not a frame line, a frame cut short) is skipped and
+the frames before and after it are decoded: the summary gives the count of skipped lines ('bad lines:', JSON
+lines_skipped) and the first ones by number with the reason. A log with no readable frame is refused (exit 2).
 """
 import csv
 import datetime
@@ -76,6 +79,8 @@ def summary(log, bitrate: float, data_bitrate: float) -> dict:
         'frames_by_id': {f'0x{k:03x}': v for k, v in log.frames_by_id.items()},
         'frames_malformed': log.frames_malformed, 'frames_unknown': log.frames_unknown,
         'error_frames': log.error_frames, 'frames_late': log.frames_late,
+        'lines_skipped': log.lines_skipped,
+        'skipped_lines': [{'line': n, 'why': why} for n, why in log.skipped_lines],
         'samples': len(log), 'sequence': _range(log.sequence),
         'setpoints': int(log.setpoint_sequence.size), 'setpoint_sequence': _range(log.setpoint_sequence),
         'sequence_gaps': len(log.gaps), 'samples_lost': log.samples_lost, 'gaps': log.gaps[:20],
@@ -122,6 +127,12 @@ def _print(info, log):
         print(f'  at {gap["time"]:.3f} s: expected {gap["expected"]}, got {gap["received"]} ({gap["lost"]} lost)')
     print(f'bad frames: {log.frames_malformed} malformed (length/CRC), {log.frames_unknown} unknown identifier, '
           f'{log.error_frames} error frames, {log.frames_late} late or duplicated')
+    if log.format != '.blf':   # text logs are read line by line; an unreadable line is skipped
+        print(f'bad lines:  {log.lines_skipped} unreadable lines skipped (the frames around them are decoded)')
+        for n, why in log.skipped_lines:
+            print(f'  line {n}: {why}')
+        if log.lines_skipped > len(log.skipped_lines):
+            print(f'  ... and {log.lines_skipped - len(log.skipped_lines)} more')
     states = ', '.join(f'{s} {t:.3f} s' for t, s in log.states[:12]) + (' ...' if len(log.states) > 12 else '')
     print(f'states:     {states or "-"}')
     print(f'faults:     {", ".join(log.faults_seen) or "none"}')
@@ -150,6 +161,8 @@ def run(args) -> int:
         if args.output:
             print(f'csv:        {args.output} ({len(log)} samples)')
     if not log.complete:
-        print(f'rubber-rig canlog: warning: {args.log} is incomplete: decoded what precedes the damage',
-              file=sys.stderr)
+        n = log.lines_skipped
+        what = (f'skipped {n} unreadable line{"" if n == 1 else "s"}, decoded the frames before and after them'
+                if n else 'decoded what precedes the damage')
+        print(f'rubber-rig canlog: warning: {args.log} is incomplete: {what} (see the warnings)', file=sys.stderr)
     return 0

@@ -69,7 +69,10 @@ class CanLogError(ValueError):
 
 
 class CanLogWarning(UserWarning):
-    """A CAN log was read only in part (truncated, not closed, corrupt): the data before the damage is decoded."""
+    """A CAN log was read only in part: a truncated, unclosed or corrupt BLF is decoded up to the damage; in a
+    text log (.asc, .log) the unreadable lines are skipped (named by number, with the reason) and the frames
+    before and after them are decoded.
+    """
 
 
 def _supported_text() -> str:

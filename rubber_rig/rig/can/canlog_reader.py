@@ -13,8 +13,14 @@
 # limitations under the License.
 
 """Reading raw CAN logs back: decode_log reads a log written by python-can (BLF, ASC, candump -L; see
-:mod:`.canlog`) with can.LogReader and decodes it with the project's DBC (cantools) into the numpy arrays a
-recording gives, with frame counts, sequence gaps, faults and the bus load.
+:mod:`.canlog`) and decodes it with the project's DBC (cantools) into the numpy arrays a recording gives, with
+frame counts, sequence gaps, faults and the bus load.
+
+BLF is read with can.LogReader, up to the first object it cannot read. The text formats (.asc, .log) are read
+line by line by TextLogReader, which hands each line to python-can's own parser and skips (and counts) a line
+that is unreadable - not UTF-8, binary bytes, not a frame line of the format, a frame python-can cannot parse
+or one with fewer data bytes than its length field says - so one bad line costs that line only: every good
+frame before and after it is decoded.
 """
 from __future__ import annotations
 
@@ -28,6 +34,7 @@ from pathlib import Path
 
 import can
 import numpy as np
+from can.io.asc import ASC_MESSAGE_REGEX
 
 from .canlog import SUPPORTED_FORMATS, CanLogError, CanLogWarning, log_format
 from .frames import PROFILES, SampleFrames
@@ -49,7 +56,11 @@ class CanLog:
     commands: (time, command name, argument) of the host. gaps: sequence gaps while the controller was streaming
     ({'expected', 'received', 'lost', 'time'}); jumps: sequence jumps of an idle controller starting a new stream
     (not loss). frames: count per message name (unknown identifiers as '0x...'); frames_by_id: per identifier.
-    complete is False when the log was damaged or not closed (warnings say how; what precedes it is decoded).
+    complete is False when the log was damaged or not closed (warnings say how). A BLF log is decoded up to its
+    damage; in a text log (.asc, .log) an unreadable line is skipped and the frames before and after it are
+    decoded: lines_skipped counts the skipped lines, skipped_lines holds (line number, why) of the first
+    MAX_SKIPPED_REPORTED. A skipped Feedback line shows as a sequence gap (its samples are missing from the data
+    as if lost on the bus; the warning names the line).
     """
 
     path: str
@@ -68,6 +79,8 @@ class CanLog:
     frames_unknown: int = 0
     error_frames: int = 0
     frames_late: int = 0
+    lines_skipped: int = 0
+    skipped_lines: list = field(default_factory=list)   # (line number, why) of the first MAX_SKIPPED_REPORTED
     sequence: np.ndarray = None
     time: np.ndarray = None
     time_ns: np.ndarray = None
@@ -166,11 +179,188 @@ def _integrity(path: Path, fmt: str, reader, frames: int) -> list:
     return out
 
 
+# ---------------------------------------------------------------------------------------- text logs, line by line
+MAX_SKIPPED_REPORTED = 10   # skipped lines whose number and reason are kept (all of them are counted)
+_WARNED_SKIPPED = 3         # of those, named in the warning
+_FD_LENGTHS = frozenset((*range(9), 12, 16, 20, 24, 32, 48, 64))
+_CONTROL = re.compile(r'[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]')   # never in a text log (tab and CR are)
+# candump -L (can-utils, python-can's CanutilsLogWriter): '(time) channel id#data', id of 3 (standard) or 8
+# (extended) hex digits, '##<flags>' before the data of a CAN FD frame, 'R[dlc]' for a remote frame, and
+# python-can's optional direction ' R' (received) / ' T' (sent)
+_CANDUMP_FRAME = re.compile(r'\(\d+(?:\.\d*)?\)\s+\S+\s+(?:[0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})#(?:#[0-9A-Fa-f])?'
+                            r'(?:(?:[0-9A-Fa-f]{2})*|[Rr]\d*)(?:\s+[RrTt])?')
+# an ASC line laid out as a frame whatever its fields hold: 'CANFD' as its second or third word, or a 5-letter
+# word in its place before '<channel> Rx|Tx' (a damaged 'CANFD'), or a lower-case data type 'd' / 'r' with a 1-2
+# digit length after 3 to 5 words ('<time> <channel> <id> <dir> d <dlc> ...', one word more or less when a
+# damaged byte split or joined two). When python-can's pattern (ASC_MESSAGE_REGEX) does not match such a line,
+# python-can passes over it in silence: a frame whose time, channel, direction or CANFD mark is damaged would
+# vanish uncounted. CANoe's other lines are not laid out so ('Statistic: D 0 R 0 ...' has upper-case letters,
+# J1939TP lines have 'd' after 9 words, LIN lines 'Li <id> Rx').
+_ASC_FRAME_SHAPE = re.compile(r'(?:\S+\s+){1,2}CANFD\s|\S+\s+\S{5}\s+\d+\s+[RT]x\s'
+                              r'|(?:\S+\s+){3,5}[dr]\s+[0-9A-Fa-f]{1,2}(?:\s|$)')
+_ASC_HEADER = re.compile(r'(?:date|base|begin\s+triggerblock|end\s+triggerblock|(?:no\s+)?internal\s+events)\b',
+                         re.IGNORECASE)
+
+
+def _shown(line, limit: int = 60) -> str:
+    """A line (str, or bytes that are no text) as a warning shows it: repr, cut to `limit` characters."""
+    line = line.strip()
+    return repr(line[:limit]) + ('...' if len(line) > limit else '')
+
+
+def _frame_problem(msg: can.Message):
+    """Why a frame python-can read from a text line cannot be one (None if it can): fewer data bytes than its
+    length field says (a line cut short), more than 8 in a classic frame, no CAN FD length.
+    """
+    if msg.is_error_frame or msg.is_remote_frame:
+        return None
+    n = len(msg.data)
+    expected = msg.dlc if msg.is_fd else min(msg.dlc, 8)
+    if n < expected:
+        return f'{n} data bytes where its length field says {expected} (the line is cut short)'
+    if not msg.is_fd and n > 8:
+        return f'{n} data bytes in a classic CAN frame (at most 8)'
+    if msg.is_fd and n not in _FD_LENGTHS:
+        return f'{n} data bytes is no CAN FD frame length'
+    return None
+
+
+class _ASCLineParser(can.ASCReader):
+    """python-can's ASCReader reading its header once: iterated again after a line it could not parse, it goes on
+    with the next line instead of taking that line for the header (overrides its _extract_header).
+    """
+
+    _header_read = False
+
+    def _extract_header(self) -> None:
+        if not self._header_read:
+            self._header_read = True
+            super()._extract_header()
+
+
+class _Lines:
+    """The lines of a text log for a python-can reader (which iterates its `file`): each line is checked first
+    and an unreadable one is skipped and counted in the TextLogReader instead of reaching the parser.
+    """
+
+    def __init__(self, raw, owner: TextLogReader):
+        self.raw, self.owner = iter(raw), owner
+        self.text = ''   # the last line handed to the parser
+
+    def __iter__(self):
+        return self
+
+    def __next__(self) -> str:
+        owner = self.owner
+        for raw in self.raw:
+            owner.lines += 1
+            try:
+                text = raw.decode('utf-8')
+            except UnicodeDecodeError as exc:
+                owner.skip(f'not UTF-8 text (byte 0x{raw[exc.start]:02x} at column {exc.start + 1}): {_shown(raw)}')
+                continue
+            bad = _CONTROL.search(text)
+            if bad:
+                owner.skip(f'binary data (byte 0x{ord(bad.group()):02x} at column {bad.start() + 1}): '
+                           f'{_shown(text)}')
+                continue
+            line = text.strip()
+            if not line:
+                continue
+            why = owner.check(line)
+            if why:
+                owner.skip(f'{why}: {_shown(line)}')
+                continue
+            self.text = line
+            return text
+        raise StopIteration
+
+    def close(self):
+        """python-can closes its file at the end; the TextLogReader closes the real one."""
+
+
+class TextLogReader:
+    """The frames (can.Message) of a text CAN log - .asc (Vector ASC) or .log (candump -L) - resynchronised
+    after damage: the file is read line by line as bytes and python-can's own parser (can.ASCReader,
+    can.CanutilsLogReader) reads each good line, so a good log gives exactly what can.LogReader gives.
+
+    A line is skipped and counted, and the frames before and after it are kept, when it is:
+
+    - not UTF-8 text, or holds binary bytes (control characters other than tab and CR);
+    - .log: not a candump -L frame line '(time) channel id#data [R|T]' (a flipped byte, a cut line, garbage);
+    - .asc: laid out as a frame line ('<time> <channel> <id> <dir> d|r <dlc> <data>', '<time> CANFD ...') but
+      not one python-can recognises (damaged time, channel or direction: python-can would drop it silently);
+      other ASC lines (header, comments, statistics, events) are python-can's to read or pass over;
+    - a frame line python-can's parser raises on (a damaged identifier, length or data byte);
+    - a frame with fewer data bytes than its length field says, more than 8 in a classic frame, or a length no
+      CAN FD frame has (a line cut short).
+
+    Iterate once. Counts: lines (read), lines_skipped, frames; skipped: (line number, why) of the first
+    MAX_SKIPPED_REPORTED skipped lines; header_lines: ASC header/trigger block lines seen.
+    """
+
+    def __init__(self, path, fmt: str = None):
+        self.path = Path(str(path)).expanduser()
+        self.format = fmt or log_format(self.path)
+        if self.format not in ('.asc', '.log'):
+            raise CanLogError(f'{self.path}: {SUPPORTED_FORMATS.get(self.format, self.format)} is no text log')
+        self.lines = self.lines_skipped = self.frames = self.header_lines = 0
+        self.skipped = []
+
+    def skip(self, why: str):
+        """Count the line being read as skipped for the reason `why`."""
+        self.lines_skipped += 1
+        if len(self.skipped) < MAX_SKIPPED_REPORTED:
+            self.skipped.append((self.lines, why))
+
+    def check(self, line: str):
+        """Why the stripped, non-empty text line `line` is no line of the format (None if it may be one)."""
+        if self.format == '.log':
+            return None if _CANDUMP_FRAME.fullmatch(line) else 'not a candump -L frame line'
+        if _ASC_HEADER.match(line):
+            self.header_lines += 1
+        elif (not line.startswith('//') and _ASC_FRAME_SHAPE.match(line)
+              and not ASC_MESSAGE_REGEX.match(line)):
+            return 'a damaged ASC frame line (time, channel or direction unreadable)'
+        return None
+
+    def skipped_text(self, limit: int = _WARNED_SKIPPED) -> str:
+        """'line 29: why; line 40: why (and 3 more)' of the first `limit` skipped lines."""
+        text = '; '.join(f'line {n}: {why}' for n, why in self.skipped[:limit])
+        more = self.lines_skipped - min(limit, len(self.skipped))
+        return text + (f' (and {more} more)' if more else '')
+
+    def __iter__(self):
+        with open(self.path, 'rb') as f:
+            lines = _Lines(f, self)
+            parser = _ASCLineParser(lines) if self.format == '.asc' else can.CanutilsLogReader(lines)
+            while True:
+                try:
+                    for msg in parser:   # a fresh iteration after a line python-can raised on goes on after it
+                        problem = _frame_problem(msg)
+                        if problem:
+                            self.skip(f'{problem}: {_shown(lines.text)}')
+                            continue
+                        self.frames += 1
+                        yield msg
+                    return
+                except OSError:
+                    raise
+                except Exception as exc:   # noqa: BLE001 - python-can's parsers raise anything on a bad line
+                    self.skip(f'python-can cannot parse it ({type(exc).__name__}: {exc}): {_shown(lines.text)}')
+
+    def stop(self):
+        """As python-can's readers (the file is closed when the iteration ends)."""
+
+
 def decode_log(path, dbc=DBC_PATH) -> CanLog:
-    """Read the raw CAN log `path` (.blf, .asc or candump .log) with can.LogReader and decode it with the DBC
-    `dbc` (a path, or a Protocol) into a CanLog. A damaged or unclosed log decodes up to the damage, with a
-    CanLogWarning (also in CanLog.warnings, complete=False). FileNotFoundError for a missing file, CanLogError for
-    a file that is no log of its suffix's format.
+    """Read the raw CAN log `path` (.blf, .asc or candump .log) and decode it with the DBC `dbc` (a path, or a
+    Protocol) into a CanLog. BLF is read with can.LogReader: a damaged or unclosed BLF decodes up to the damage.
+    .asc and .log are read with TextLogReader: an unreadable line is skipped and counted (CanLog.lines_skipped,
+    skipped_lines) and the frames before and after it are decoded. Either way a CanLogWarning says what is
+    missing and where (also in CanLog.warnings, complete=False). FileNotFoundError for a missing file,
+    CanLogError for a file that is no log of its suffix's format, or a text log that holds no readable frame
+    (every line with a frame in it unreadable, or no line of the format at all), naming the first bad lines.
     """
     p = Path(str(path)).expanduser()
     fmt = log_format(p)
@@ -187,10 +377,14 @@ def decode_log(path, dbc=DBC_PATH) -> CanLog:
             offset = 0.0
             out.warnings.append(f'{p}: no readable "Begin Triggerblock" date: times are relative to the start of '
                                 'the measurement, not absolute')
-    try:
-        reader = can.LogReader(str(p))
-    except Exception as exc:   # noqa: BLE001 - python-can raises anything from struct.error to its own errors
-        raise CanLogError(f'{p}: not a readable {SUPPORTED_FORMATS[fmt]} log: {exc or type(exc).__name__}') from None
+    if fmt == '.blf':
+        try:
+            reader = can.LogReader(str(p))
+        except Exception as exc:   # noqa: BLE001 - python-can raises anything from struct.error to its own errors
+            raise CanLogError(f'{p}: not a readable {SUPPORTED_FORMATS[fmt]} log: {exc or type(exc).__name__}') \
+                from None
+    else:
+        reader = TextLogReader(p, fmt)
     try:
         _decode(reader, proto, out, offset)
     except _Damaged as exc:
@@ -202,6 +396,8 @@ def decode_log(path, dbc=DBC_PATH) -> CanLog:
             reader.stop()
         except Exception:   # noqa: BLE001
             pass
+    if isinstance(reader, TextLogReader):
+        _text_damage(p, reader, out)
     more = _integrity(p, fmt, reader, out.frames_total)
     if more:
         out.complete = False
@@ -209,6 +405,25 @@ def decode_log(path, dbc=DBC_PATH) -> CanLog:
     for text in out.warnings:
         warnings.warn(text, CanLogWarning, stacklevel=2)
     return out
+
+
+def _text_damage(p: Path, reader: TextLogReader, out: CanLog):
+    """The skipped lines of a text log into `out`; CanLogError if nothing in the file could be read."""
+    out.lines_skipped, out.skipped_lines = reader.lines_skipped, list(reader.skipped)
+    name = SUPPORTED_FORMATS[out.format]
+    if not out.frames_total:
+        if reader.lines_skipped:
+            raise CanLogError(f'{p}: not a readable {name} log: no frame could be read, {reader.lines_skipped} of '
+                              f'its {reader.lines} lines are unreadable: {reader.skipped_text()}')
+        if out.format == '.asc' and not reader.header_lines and p.stat().st_size:
+            raise CanLogError(f'{p}: not a readable {name} log: none of its {reader.lines} lines is an ASC header '
+                              'or frame line')
+    if reader.lines_skipped:
+        out.complete = False
+        s = '' if reader.lines_skipped == 1 else 's'
+        out.warnings.append(f'{p}: skipped {reader.lines_skipped} unreadable line{s} of {reader.lines} '
+                            f'(the {out.frames_total} frames before and after them are decoded): '
+                            f'{reader.skipped_text()}')
 
 
 def frames_until_damage(reader, damaged: list):
