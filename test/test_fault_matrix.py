@@ -312,6 +312,60 @@ def test_hold_and_resume(suite):
     assert_applied_safe(op, since)
 
 
+
+def test_a_stopped_excitation_that_holds_the_rig_loses_its_stream_to_the_owner_watch(suite):
+    """The excitation holds the rig (no setpoints flow) and then stops (SIGSTOP: alive, silent, as a node stuck
+    in DDS would be): rig_driver sees its owner's heartbeat stop and treats it as stream loss within
+    owner_timeout (1 s): fault, ramp to rest, owner released. The excitation, continued, ends the goal.
+    """
+    procs, op, base = suite
+    since = op.last_sequence + 1
+    handle = op.send_goal(SHORT.replace('cycles: 5', 'cycles: 15'))
+    wait_for(lambda: op.last_sequence > since + 800, 10.0, 'samples of the program before holding it')
+    assert op.hold(True).success
+    assert op.wait_status(lambda s: s.state in (RigStatus.STATE_IDLE, RigStatus.STATE_HOLDING), 2.0)
+    pid = procs.procs['excitation'].pid
+    os.kill(pid, signal.SIGSTOP)
+    t0 = time.monotonic()
+    try:
+        assert op.wait_status(lambda s: s.faults & RigStatus.FAULT_STREAM, 3.0), op.status.fault_messages
+        took = time.monotonic() - t0
+        print(f'stopped owner: stream lost {took:.2f} s after SIGSTOP')
+        assert took < 1.0 + 0.25 + 0.3, took          # owner_timeout + one beat + a status period and delivery
+        assert any('silent for' in m and 'excitation' in m for m in op.status.fault_messages), \
+            op.status.fault_messages
+        st = wait_at_rest(op)
+        assert not st.stream_owner
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    result = op.result(handle, 10.0)
+    assert result is not None and not result.success and 'silent' in result.message, result
+    assert_applied_safe(op, since)
+    next_program_completes(op, procs)
+
+
+def test_a_stopped_element_model_is_named_within_a_second_and_in_the_result(suite):
+    procs, op, base = suite
+    handle = op.send_goal(SHORT.replace('cycles: 5', 'cycles: 15'))
+    assert op.wait_status(lambda s: s.stream_owner == f'{NS}/excitation', 10.0)
+    pid = procs.procs['element_model'].pid
+    mark = len(procs.log('excitation'))
+    os.kill(pid, signal.SIGSTOP)
+    t0 = time.monotonic()
+    try:
+        assert op.wait_for(lambda: f'{NS}/element_model is silent' in procs.log('excitation')[mark:], 3.0)
+        took = time.monotonic() - t0
+        print(f'stopped element_model named by the excitation {took:.2f} s after SIGSTOP')
+        assert took < 1.0, took
+        time.sleep(0.5)
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    result = op.result(handle, 30.0)
+    assert result is not None and result.success, result    # the model is no safety peer: the program runs on
+    assert f'silent during the program: {NS}/element_model up to' in result.message, result.message
+    assert op.wait_for(lambda: f'{NS}/element_model beats again' in procs.log('excitation')[mark:], 3.0)
+
+
 def test_excitation_killed_mid_program_stream_loss_ramps_to_rest(suite):
     procs, op, base = suite
     since, t_wall = op.last_sequence + 1, time.time()

@@ -61,6 +61,7 @@ from msg_defs.msg import CycleMetrics, ModelParameters, ModelPrediction, RigSamp
 from rubber_rig.models import load_parameter_set
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.heartbeat import start_heartbeat
 from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.online import (
@@ -137,6 +138,7 @@ class ElementModelNode(Node):
         self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints, topics.STREAM_QOS)
         self._published_params = None
         self.publish_parameters()
+        start_heartbeat(self, lambda: self.predictor.model_name)
         choice = self.predictor.choice
         self.get_logger().info(f'model {self.predictor.model_name} from {choice.source}: {self.predictor.params}, '
                                f'friction reversal threshold {choice.friction_reversal_threshold:g} m')

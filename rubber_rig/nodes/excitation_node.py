@@ -72,6 +72,7 @@ from rubber_rig.excitation.limits import element_force_model
 from rubber_rig.excitation.streamer import SetpointStreamer
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.heartbeat import Peers, start_heartbeat
 from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.nodes.spin import spin_node
 
@@ -188,6 +189,11 @@ class ExcitationNode(Node):
                                    cancel_callback=lambda _: CancelResponse.ACCEPT)
         self.create_timer(self.stream_period, self.stream)
         self.create_timer(1.0, self.publish_diagnostics)
+        start_heartbeat(self, lambda: 'idle' if self.runner is None else 'held' if self.held else self.runner.state)
+        self.peers = Peers(self)           # the suite's other nodes: silent ones are named in diagnostics
+        self._silent_seen = {}             # node -> longest silence seen during the running program [s]
+        self._silent_now: dict[str, float] = {}
+        self.create_timer(0.1, self.watch_peers)
 
     @property
     def samples_topic(self) -> str:
@@ -435,6 +441,7 @@ class ExcitationNode(Node):
         self._last_cycle_end, self._blind = grant.first_sequence, ''
         self.events, self._elapsed_samples = [], 0
         self._recorded_by = self.recording_path()     # the recording this program starts in ('' if none)
+        self._silent_seen = {}
         self._recording_lost = ''
         self.pub_program.publish(String(data=text))
         self.get_logger().info(f"program '{program.name}': {len(program.blocks)} blocks, "
@@ -548,6 +555,9 @@ class ExcitationNode(Node):
             result.message += f' (detectors were blind: {self._blind})'
         if self._recording_lost:
             result.message += f' ({self._recording_lost})'
+        if self._silent_seen:
+            result.message += ' (silent during the program: ' + ', '.join(
+                f'{n} up to {a:.1f} s' for n, a in sorted(self._silent_seen.items())) + ')'
         self.result = result
         self.runner, self.stream_id, self.held = None, 0, False
         self.get_logger().info(f'program ended: {result.message}')
@@ -703,6 +713,9 @@ class ExcitationNode(Node):
         blind = self.detectors_blind()
         if self._recording_lost and r is not None:
             level = DiagnosticStatus.WARN
+        silent = self.peers.describe()
+        if silent:
+            level = DiagnosticStatus.WARN
         if blind:
             level = DiagnosticStatus.WARN
             if not self._blind:
@@ -710,16 +723,34 @@ class ExcitationNode(Node):
             self._blind = blind
         values = {'state': state, 'program': r.program.name if r else '', 'detector_events': len(self.events),
                   'last_event': last.message if last else '', 'detectors_blind': blind,
-                  'recording_lost': self._recording_lost if r is not None else ''}
+                  'recording_lost': self._recording_lost if r is not None else '', 'nodes_silent': silent}
+        reasons = [f'nodes {silent}' if silent else '', f'detectors blind: {blind}' if blind else '',
+                   self._recording_lost if r is not None else '',
+                   last.message if last is not None and last.action != 'record' else '']
         msg = DiagnosticArray()
         msg.header.stamp = self.get_clock().now().to_msg()
         msg.status.append(DiagnosticStatus(
             level=level, name=self.get_fully_qualified_name(), hardware_id='rubber_rig',
-            message=(f'detectors blind: {blind}' if blind else self._recording_lost if self._recording_lost and r
-                     else last.message if level != DiagnosticStatus.OK
-                     else f'program {state}'),
+            message=next((x for x in reasons if x), f'program {state}'),
             values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]))
         self.pub_diagnostics.publish(msg)
+
+    def watch_peers(self) -> None:
+        """Name a node that went silent (no heartbeat for 1 s) once per silence in the log; while a program runs,
+        remember it for the goal's result. The rig driver's silence ends the program elsewhere (status_timeout).
+        """
+        quiet = self.peers.silent()
+        for name, age in quiet.items():
+            if name not in self._silent_now:
+                self.get_logger().error(f'{name} is silent: no heartbeat for {age:.1f} s (stuck or gone)')
+            if self.runner is not None:
+                self._silent_seen[name] = max(age, self._silent_seen.get(name, 0.0))
+        for name in set(self._silent_now) - set(quiet):
+            self.get_logger().info(f'{name} beats again')
+        changed = set(quiet) != set(self._silent_now)
+        self._silent_now = quiet
+        if changed:
+            self.publish_diagnostics()    # at once, not at the next 1 s tick
 
     def detectors_blind(self) -> str:
         """Why the running program's cycle detectors cannot trip ('' when they judge cycles as they come)."""

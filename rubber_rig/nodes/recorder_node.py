@@ -50,6 +50,7 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from msg_defs.msg import RecorderStatus
 from msg_defs.srv import RecorderControl
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.heartbeat import start_heartbeat
 from rubber_rig.nodes.params import declare
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.recording import Recorder, RecordingError, full_definition
@@ -139,6 +140,7 @@ class RecorderNode(Node):
         self.create_timer(flush_period, self._guarded(self.flush))
         self.create_timer(diagnostics_period, self._guarded(self.publish_diagnostics))
         self.create_timer(min(0.1, self.status_period), self._guarded(self.update_status))
+        start_heartbeat(self, lambda: 'recording' if self.core.recording else 'error' if self.core.error else 'idle')
         self._reported_error = None
         if autostart:
             self.start_recording()

@@ -50,6 +50,7 @@ from rubber_rig.excitation import Limits
 from rubber_rig.excitation.limits import LimitError
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.heartbeat import Peers, start_heartbeat
 from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles, declare
 from rubber_rig.nodes.rclpy_compat import lifecycle_state
 from rubber_rig.nodes.spin import spin_node
@@ -63,7 +64,7 @@ RIG_SETTINGS = settings_of(RigConfig)   # the core's configuration, described on
 # parameters the running driver applies at once; every other one needs configure (refused while configured)
 LIVE_PARAMETERS = {s.name for s in RIG_SETTINGS if s.name.startswith('limits.')} | {
     'stream_timeout', 'stream_loss_action', 'rest_position', 'batch_size', 'max_batch_delay', 'status_period',
-    'diagnostics_period', 'autostart'}
+    'diagnostics_period', 'autostart', 'owner_timeout'}
 # the simulated specimen: node parameters built into SimOptions.specimen (a model spec mapping)
 SPECIMEN_PARAMETERS = ('sim.specimen.parameter_set', 'sim.specimen.temperature',
                        'sim.specimen.friction_reversal_threshold')
@@ -96,6 +97,10 @@ class RigDriverNode(LifecycleNode):
                                      units='s')
         self.diagnostics_period = declare(self, 'diagnostics_period', 1.0, 'diagnostics period',
                                           range=(0.1, 60.0), units='s')
+        self.owner_timeout = declare(self, 'owner_timeout', 1.0, "the stream owner's heartbeat silent this long "
+                                     'is stream loss, also while it holds the rig (an owner that never beat, '
+                                     'e.g. a script without one, is watched by stream_timeout alone)',
+                                     range=(0.3, 30.0), units='s')
         self.config = self.rig_config()   # validated now: a bad value fails at start, naming the parameter
 
         self.rig = None
@@ -116,6 +121,8 @@ class RigDriverNode(LifecycleNode):
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints, topics.STREAM_QOS)
         self._poll_timer = None
+        start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig is not None else 'unconfigured')
+        self.peers = Peers(self, silent=self.owner_timeout)
         self.create_timer(self.status_period, self.publish_status)
         self.create_timer(self.diagnostics_period, self.publish_diagnostics)
         self.publish_status()
@@ -252,6 +259,8 @@ class RigDriverNode(LifecycleNode):
             self.batch_size = int(changed['batch_size'])
         if 'max_batch_delay' in changed:
             self.max_batch_delay = float(changed['max_batch_delay'])
+        if 'owner_timeout' in changed:
+            self.owner_timeout = self.peers.silent_after = float(changed['owner_timeout'])
         if limits is not None:
             self.config.limits = limits
             if self.rig is not None:
@@ -334,8 +343,19 @@ class RigDriverNode(LifecycleNode):
         return conv.status_msg(snapshot, self.config.limits, self.config.sample_rate, now)
 
     def publish_status(self) -> None:
+        self.watch_owner()
         self._last_status = self.status_message()
         self.pub_status.publish(self._last_status)
+
+    def watch_owner(self) -> None:
+        """A stream owner that beat and then went silent for owner_timeout loses its stream (fault, ramp)."""
+        grant = self.rig.driver.stream if self.rig is not None and self._poll_timer is not None else None
+        if grant is None or not grant.owner:
+            return
+        age = self.peers.age(grant.owner)
+        if age is not None and age > self.owner_timeout and self.rig.driver.owner_lost(
+                f'{grant.owner} silent for {age:.2f} s (no heartbeat; alive but stuck, or gone)'):
+            self._log_events()
 
     def publish_diagnostics(self) -> None:
         status = self._last_status or self.status_message()

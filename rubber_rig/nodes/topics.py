@@ -33,6 +33,7 @@ MODEL_PARAMETERS = 'model_parameters'  # msg_defs/msg/ModelParameters, element_m
 PROGRAM = 'program'                  # std_msgs/msg/String (program YAML), excitation (latched)
 EVENTS = 'events'                    # msg_defs/msg/DetectorEvent, excitation (detector trips)
 RECORDER_STATUS = 'recorder_status'  # msg_defs/msg/RecorderStatus, recorder (latched)
+HEARTBEAT = 'heartbeat'              # msg_defs/msg/Heartbeat, every node, every 0.25 s
 DIAGNOSTICS = '/diagnostics'         # diagnostic_msgs/msg/DiagnosticArray (absolute, as in every ROS 2 system)
 
 STREAM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
@@ -41,3 +42,5 @@ EVENT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=100,
                        reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
+HEARTBEAT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
+                           reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)

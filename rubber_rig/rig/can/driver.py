@@ -713,13 +713,27 @@ class RigDriver:
                 and self.controller_state == 'holding':
             why = f'the rig ran out of setpoints at sample {s.queued_end} before the end of the stream'
         if why:
-            self.faults |= FAULT_STREAM
-            self.fault_messages.append(f'setpoint stream lost: {why}')
-            self._event('error', f'fault stream: setpoint stream lost: {why}')
-            if self.cfg.stream_loss_action == 'hold':
-                self.hold_here('setpoint stream lost')
-            else:
-                self.abort('setpoint stream lost')
+            self._stream_lost(why)
+
+    def owner_lost(self, why: str) -> bool:
+        """The stream's owner is gone or alive but silent (the node's liveness watch says so): the same as a
+        lost stream (fault, then ramp or hold per stream_loss_action), also while the owner holds the rig - a
+        held stream sends no setpoints, so nothing else would notice. False if no stream of an owner is open.
+        """
+        s = self._stream
+        if s is None or s.ended or self.faults or self._aborting:
+            return False
+        self._stream_lost(why)
+        return True
+
+    def _stream_lost(self, why: str) -> None:
+        self.faults |= FAULT_STREAM
+        self.fault_messages.append(f'setpoint stream lost: {why}')
+        self._event('error', f'fault stream: setpoint stream lost: {why}')
+        if self.cfg.stream_loss_action == 'hold':
+            self.hold_here('setpoint stream lost')
+        else:
+            self.abort('setpoint stream lost')
 
     def _fault(self, bit: int, message: str):
         """Record a fault and command the safe ramp."""
