@@ -32,6 +32,12 @@ from launch_ros.parameter_descriptions import ParameterValue
 
 from launch import LaunchDescription
 
+# element_model and the recorder restart safely: a respawned model starts afresh on the next samples, a
+# respawned recorder opens a new file (the killed one keeps what it wrote; `rubber-rig recover` closes it).
+# rig_driver (the safety authority: an operator looks at why it died) and the excitation (with `program` set it
+# would start the program again) are not respawned.
+RESPAWN_DELAY = 2.0   # [s]
+
 
 def generate_launch_description():
     config = os.path.join(get_package_share_directory('rubber_rig'), 'config', 'rig_can.yaml')
@@ -53,7 +59,7 @@ def generate_launch_description():
         Node(package='rubber_rig', executable='excitation', name='excitation', namespace=namespace,
              parameters=[config, {'program': LaunchConfiguration('program')}], output='screen'),
         Node(package='rubber_rig', executable='element_model', name='element_model', namespace=namespace,
-             parameters=[config], output='screen'),
+             parameters=[config], output='screen', respawn=True, respawn_delay=RESPAWN_DELAY),
         Node(package='rubber_rig', executable='recorder', name='recorder', namespace=namespace,
-             parameters=[config], output='screen'),
+             parameters=[config], output='screen', respawn=True, respawn_delay=RESPAWN_DELAY),
     ])

@@ -312,7 +312,6 @@ def test_hold_and_resume(suite):
     assert_applied_safe(op, since)
 
 
-
 def test_a_stopped_excitation_that_holds_the_rig_loses_its_stream_to_the_owner_watch(suite):
     """The excitation holds the rig (no setpoints flow) and then stops (SIGSTOP: alive, silent, as a node stuck
     in DDS would be): rig_driver sees its owner's heartbeat stop and treats it as stream loss within

@@ -200,6 +200,18 @@ def test_rig_driver_is_a_lifecycle_node_brought_up_by_autostart_or_by_the_operat
             f'{path.name}: {cfg} must set autostart, and without it the docstring must say how to bring it up'
 
 
+@pytest.mark.parametrize('path', LAUNCH_FILES, ids=lambda p: p.name)
+def test_only_the_nodes_that_restart_safely_are_respawned(path):
+    """element_model and the recorder come back on their own after a crash; rig_driver (the safety authority)
+    and the excitation (which would start its `program` again) do not."""
+    lf = LaunchFile(path)
+    respawned = {}
+    for c in lf.nodes:
+        kw = _kw(c, 'respawn')
+        respawned[_kw(c, 'executable').value] = kw is not None and lf.resolve(kw).value is True
+    assert respawned == {'rig_driver': False, 'excitation': False, 'element_model': True, 'recorder': True}
+
+
 @pytest.mark.ros
 def test_every_node_parameter_has_a_description(declared):
     for exe, params in declared.items():

@@ -91,6 +91,7 @@ class BenchSession:
         self.monitor = launcher.spin(SuiteMonitor(context=launcher.context, namespace=args.namespace))
         self.cfg = self.driver.config
         self._n_feedback = self._n_cycles = self._n_events = 0
+        self._silent: set[str] = set()     # nodes named silent on the terminal
         self._rest_since = None
 
     def describe(self, program) -> list[str]:
@@ -159,6 +160,7 @@ class BenchSession:
                     goal_handle.cancel_goal_async()
                 self._show_progress(term, t_start)
                 self._show_events(term)
+                self._show_silent(term)
                 for c in self.new_cycle_metrics():
                     on_cycle(c)
                 self.launcher.wait_for(run.future.done, REFRESH_PERIOD)
@@ -183,6 +185,17 @@ class BenchSession:
             term.line(f'EVENT {e.action.upper()}: {e.message}')
             if e.action == 'hold':
                 term.line(self._hold_help)
+
+    def _show_silent(self, term) -> None:
+        """A node of the suite that stops beating (stuck or gone) is named once, and again when it is back."""
+        quiet = self.monitor.peers.silent()
+        for name in sorted(set(quiet) - self._silent):
+            term.end_status()
+            term.line(f'NODE SILENT: {name} sent no heartbeat for {quiet[name]:.1f} s (stuck or gone)')
+        for name in sorted(self._silent - set(quiet)):
+            term.end_status()
+            term.line(f'node back: {name} beats again')
+        self._silent = set(quiet)
 
     def _show_progress(self, term, t_start: float) -> None:
         fb = self.monitor.feedback[self._n_feedback:]

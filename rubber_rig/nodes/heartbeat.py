@@ -32,8 +32,9 @@ from msg_defs.msg import Heartbeat
 from . import topics
 
 PERIOD = 0.25        # [s] between beats
-SILENT = 0.75        # [s] without a beat: the node is called silent (three beats missed; watchers that check
-                     # every 0.1 s name it within 0.85 s of its last beat)
+# [s] without a beat: the node is called silent (three beats missed; a watcher that checks every 0.1 s names
+# it within 0.85 s of its last beat)
+SILENT = 0.75
 
 
 def start_heartbeat(node: Node, state: Callable[[], str] = lambda: '') -> None:

@@ -44,6 +44,7 @@ from msg_defs.msg import (
 from msg_defs.srv import RecorderControl
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.heartbeat import Peers
 
 
 class StreamStats:
@@ -96,6 +97,7 @@ class SuiteMonitor(Node):
         sub(ModelParameters, topics.MODEL_PARAMETERS, self._on_parameters, topics.LATCHED_QOS)
         sub(String, topics.PROGRAM, self._on_program, topics.LATCHED_QOS)
         sub(RecorderStatus, topics.RECORDER_STATUS, self._on_recorder_status, topics.LATCHED_QOS)
+        self.peers = Peers(self)          # the suite's heartbeats: peers.silent() names a node stuck or gone
         self.action = ActionClient(self, RunProgram, 'run_program')
         self.recorder_control = self.create_client(RecorderControl, f'{recorder}/control')
         self.excitation_abort = self.create_client(Trigger, f'{excitation}/abort')

@@ -1,0 +1,66 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Heartbeats (rubber_rig.nodes.heartbeat): a node whose executor stops is named silent by a watcher within a
+second of its last beat, a restarted one (new pid) is counted, and a node never heard from is not silent."""
+import os
+import time
+
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+
+from rubber_rig.nodes.heartbeat import PERIOD, SILENT, start_heartbeat
+from rubber_rig.nodes.monitor import SuiteMonitor
+
+from support.ros import ros_context
+
+DOMAIN = 90 + os.getpid() % 10
+
+
+def test_a_node_whose_executor_stops_is_named_silent_within_a_second():
+    with ros_context(DOMAIN) as ctx:
+        beating = Node('beating', namespace='/hb', context=ctx)
+        start_heartbeat(beating, lambda: 'busy')
+        watcher = SuiteMonitor(node_name='watcher', namespace='/hb', context=ctx)
+        peers = watcher.peers
+        both, alone = SingleThreadedExecutor(context=ctx), SingleThreadedExecutor(context=ctx)
+        both.add_node(beating)
+        both.add_node(watcher)
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 5.0 and '/hb/beating' not in peers.last:
+            both.spin_once(timeout_sec=0.05)
+        assert '/hb/beating' in peers.last, 'no beat received'
+        while time.monotonic() - t0 < 6.0:
+            both.spin_once(timeout_sec=0.05)
+        beat = peers.last['/hb/beating'][1]
+        assert beat.state == 'busy' and beat.pid == os.getpid() and beat.count >= 4 / PERIOD - 4
+        assert peers.silent() == {} and peers.describe() == ''
+        assert peers.silent(['/hb/never_started']) == {}          # never heard: not silent
+        # the beating node's executor stops (as a node stuck in a callback or in DDS): only the watcher spins
+        both.remove_node(watcher)
+        alone.add_node(watcher)
+        stopped = time.monotonic()
+        while not peers.silent() and time.monotonic() - stopped < 3.0:
+            alone.spin_once(timeout_sec=0.02)
+        named = time.monotonic() - stopped
+        assert '/hb/beating' in peers.silent(), 'never named silent'
+        assert SILENT - 0.05 <= named <= SILENT + PERIOD + 0.1, named
+        assert peers.describe().startswith('silent: /hb/beating (')
+        # it beats again with a new pid: a restart, counted, no longer silent
+        peers.on_beat(type(beat)(node='/hb/beating', pid=beat.pid + 1, count=0, state='idle'))
+        assert peers.restarts == {'/hb/beating': 1} and peers.silent() == {}
+        for ex in (both, alone):
+            ex.shutdown()
+        beating.destroy_node()
+        watcher.destroy_node()
