@@ -158,7 +158,7 @@ def assert_recorded(op, base, since, t_wall):
         keep = (rec.sequence >= since) & (rec.sequence < end) & (rec.time_ns >= (t_wall - 0.5) * 1e9)
         recorded = set(rec.sequence[keep].tolist())
         lost = sum(g['lost'] for g in rec.gaps if since < g['received'] <= end
-                   and (not g['log_time_ns'] or g['log_time_ns'] >= (t_wall - 0.5) * 1e9))
+                   and (not g['stamp_ns'] or g['stamp_ns'] >= (t_wall - 0.5) * 1e9))
         state.update(recorded=recorded, lost=lost, missing=set(range(since, end)) - recorded,
                      gaps=[g for g in rec.gaps if since < g['received'] <= end])
         return len(state['missing']) == state['lost']

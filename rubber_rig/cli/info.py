@@ -44,7 +44,8 @@ def run(args) -> int:
                                for q in parse_offered_qos(v['qos'])]}
                    for t, v in sorted(rec.topics.items())},
         'samples': len(rec.sequence), 'sample_period_s': rec.sample_period,
-        'sequence_gaps': len(rec.gaps), 'samples_lost': rec.samples_lost, 'gaps': rec.gaps[:20],
+        # the loss ledger (the recorder's close record and `recover` count the same way: gaps.LossLedger)
+        'sequence_gaps': rec.sequence_gaps, 'samples_lost': rec.samples_lost, 'loss': rec.loss, 'gaps': rec.gaps[:20],
         'tail_unaccounted': bool(getattr(rec, 'unclosed', None)), 'unclosed': getattr(rec, 'unclosed', []),
         'metadata': rec.metadata, 'closing': rec.closing, 'other_metadata': rec.other_metadata,
     }
@@ -66,7 +67,10 @@ def run(args) -> int:
     if len(rec.sequence):
         print(f'samples:    {len(rec.sequence)} at {1 / rec.sample_period:.1f} Hz, '
               f'sequence {int(rec.sequence[0])}..{int(rec.sequence[-1])}')
-    print(f'gaps:       {len(rec.gaps)} sequence gaps, {rec.samples_lost} samples lost')
+    jumps = rec.loss.get('sequence_jumps', 0)
+    print(f'gaps:       {rec.sequence_gaps} sequence gaps, {rec.samples_lost} samples lost'
+          + (f' ({jumps} sequence jumps between programs, not loss)' if jumps else '')
+          + (f' [{rec.loss["sample_topic"]}]' if rec.loss.get('sample_topic') else ''))
     if getattr(rec, 'unclosed', None):    # never a bare '0 lost' for a file whose tail is unaccounted
         for line in rec.loss_text().splitlines():
             print(f'loss:       {line.strip()}')

@@ -39,12 +39,16 @@ def run(args) -> int:
         result = recover(args.file, args.output, in_place=args.in_place, backup=not args.no_backup)
     except RecordingWriteError as exc:     # the output cannot be written: the input is fine, the job failed
         raise CommandError(str(exc)) from None
-    state = 'was already complete' if result.was_complete else 'was truncated'
+    # a damaged input raises RecordingError (bad input, exit 2) naming the record and its offset: nothing written
+    if result.summary_error:
+        state = f'had a damaged summary section ({result.summary_error}); its data section is intact'
+    elif result.was_complete:
+        state = 'was already complete'
+    else:
+        state = f'was truncated (intact data ends at byte {result.intact_end} of {result.size})'
     print(f'{result.source} {state}; wrote {result.output}: {result.messages} messages on '
           f'{result.channels} topics, {result.metadata_records} metadata records')
-    if not result.was_complete and hasattr(result, 'loss_text'):   # the tail's loss is unknown: say so
-        print(result.loss_text())
-    elif result.sequence_gaps:
-        print(f'sequence gaps in the recovered data: {result.sequence_gaps} '
-              f'({result.samples_lost} samples lost)')
+    # the loss as the ledger counts it (the recorder and `rubber-rig info` count the same way); the tail of a
+    # truncated file is unknown: said so, never a bare '0 lost'
+    print(result.loss_text())
     return 0

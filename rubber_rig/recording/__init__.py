@@ -30,7 +30,7 @@ Reading::
     r.sequence, r.block_index, r.metadata, r.gaps, r.samples_lost, r.messages[topic]
 
 Crashes: :func:`recover` (``rubber-rig recover FILE``) rebuilds a file whose writer was killed.
-Modules: msgdefs (ros2msg schema texts), qos (rosbag2 QoS YAML), gaps (sequence-gap accounting),
+Modules: msgdefs (ros2msg schema texts), qos (rosbag2 QoS YAML), gaps (the loss ledger: sequence-gap accounting),
 writer (the file), channels (schemas, channels, CDR encoding), gapcheck (gap check while writing),
 metadata (record names, value codec), plain (messages as plain values), rawfile (unbuffered file),
 session (Recorder), reader, mcapio (checked file access), cdr (numpy CDR decoder), recover,
@@ -38,7 +38,7 @@ bagmeta (rosbag2 metadata.yaml), mcap_compat (the private mcap_ros2 parts, with 
 """
 from .bagmeta import write_bag_metadata
 from .errors import RecordingError, RecordingWriteError
-from .gaps import GapTracker
+from .gaps import GapTracker, LossLedger
 from .msgdefs import full_definition, normalize_type, register_definition, type_hash
 from .qos import offered_qos_yaml, qos_entry
 from .reader import SIGNALS, Recording, load_recording
@@ -46,7 +46,7 @@ from .recover import RecoverResult, recover
 from .session import Recorder
 from .writer import CLOSE_METADATA_NAME, METADATA_NAME, RecordingWriter
 
-__all__ = ['RecordingError', 'RecordingWriteError', 'GapTracker', 'full_definition', 'normalize_type',
+__all__ = ['RecordingError', 'RecordingWriteError', 'GapTracker', 'LossLedger', 'full_definition', 'normalize_type',
            'register_definition', 'type_hash', 'offered_qos_yaml', 'qos_entry', 'CLOSE_METADATA_NAME',
            'METADATA_NAME', 'RecordingWriter', 'SIGNALS', 'Recording', 'load_recording', 'Recorder',
            'RecoverResult', 'recover', 'write_bag_metadata']

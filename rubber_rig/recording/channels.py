@@ -42,6 +42,7 @@ class ChannelTable:
         self._schemas = {}                 # msg_type -> its Schema record (for decoders)
         self._channels = {}                # topic -> (channel id, msg_type)
         self._sequences = {}               # channel id -> last sequence written
+        self._publication = set()          # channel ids whose stored sequence is the DDS publication sequence
         self._qos, self._hash = {}, {}     # topic -> offered QoS YAML, type hash (for the bag info)
         self._encoders = {}                # msg_type -> CDR encoder
 
@@ -67,7 +68,13 @@ class ChannelTable:
         channel_id = self._guard(self._mcap.register_channel, topic, 'cdr', schema.id, metadata)
         self._channels[topic] = (channel_id, msg_type)
         self._sequences[channel_id] = 0
+        if sequence_source == 'publication':
+            self._publication.add(channel_id)
         return channel_id
+
+    def publication_sequenced(self, channel_id: int) -> bool:
+        """True if the channel's metadata says its stored sequence is the publication sequence (readers trust it)."""
+        return channel_id in self._publication
 
     def schema(self, msg_type: str) -> Schema:
         return self._schemas[msg_type]

@@ -13,43 +13,42 @@
 # limitations under the License.
 
 """The gap check of a file being written: sample-stream messages are decoded as they are written and fed to
-the GapTracker, and their samples counted, so that the file's close record says what was lost.
+the loss ledger (gaps.LossLedger, the one that load_recording and recover use too), and their samples counted,
+so that the file's close record says what was lost, in the numbers ``rubber-rig info`` shows for the file.
 
-This is accounting, not I/O, so it lives apart from the writer. The tracker may carry on from the earlier
+This is accounting, not I/O, so it lives apart from the writer. The ledger may carry on from the earlier
 files of a split recording: :meth:`GapCheck.report` covers what this file added, plus the totals so far.
 """
-from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
+from .gaps import SAMPLE_TYPES, LossLedger, sequence_span
 from .mcapio import Decoders
-
-GAP_COUNTS = ('sequence_gaps', 'samples_lost', 'sequence_restarts', 'sequence_jumps', 'samples_skipped')
 
 
 class GapCheck:
     """Sequence gaps and sample counts of the messages written to one file."""
 
-    def __init__(self, path, gaps: GapTracker = None):
+    def __init__(self, path, gaps: LossLedger = None):
         # numpy decoder for the gap check (10 kHz), mcap_ros2's only if it fails (e.g. big-endian CDR)
         self._decoders = Decoders(path, lazy_fallback=True)
-        self.gaps = gaps if gaps is not None else GapTracker()
-        self._gaps_at_open = self.gaps.summary()
-        self._events_at_open = len(self.gaps.events)
-        self.samples_written = 0           # samples of sequenced messages (RigSampleBatch, ...) written
+        self.gaps = gaps if gaps is not None else LossLedger()
+        self._counts_at_open = self.gaps.counts()
+        self._events_at_open = {topic: len(t.events) for topic, t in self.gaps.trackers.items()}
+        self.samples_written = 0           # samples of sample-stream messages (RigSampleBatch, ...) written
         self.samples_flushed = 0           # ... of them in complete chunks handed to the OS
         self.samples_lost_unwritten = 0    # samples of the chunk a write error lost
 
     def observe(self, topic, msg_type, schema, data, decoded, log_time_ns, publication_sequence=None) -> bool:
         """Check one written message (``decoded``, or its CDR ``data`` under ``schema``); False if its bytes
-        could not be decoded (they are recorded anyway: the writer counts them).
+        could not be decoded (they are recorded anyway: the writer counts them). ``publication_sequence``: the
+        sequence stored for it if its channel stores publication sequence numbers, else None (as readers see it).
         """
-        if msg_type not in SEQUENCED_TYPES:
+        if msg_type not in SAMPLE_TYPES:
             return True
         if decoded is None:
             try:
                 decoded = self._decoders.decode(schema, data, topic)
             except Exception:  # the decoders raise many types on bad bytes; the caller counts them
                 return False
-        self.gaps.observe_message(topic, msg_type, decoded, log_time_ns,
-                                  publication_sequence & 0xFFFFFFFF if publication_sequence is not None else None)
+        self.gaps.observe(topic, msg_type, decoded, log_time_ns, publication_sequence)
         span = sequence_span(msg_type, decoded)
         if span is not None:
             self.samples_written += span[1]
@@ -65,9 +64,10 @@ class GapCheck:
 
     def report(self) -> dict:
         """The gap part of the writer's loss report (sequence jumps, between programs, are not loss)."""
-        now, at_open = self.gaps.summary(), self._gaps_at_open
-        return {**{key: now[key] - at_open[key] for key in GAP_COUNTS},
+        ledger = self.gaps
+        total = ledger.summary()
+        return {**ledger.summary(since=self._counts_at_open),
                 'samples_lost_unwritten': self.samples_lost_unwritten,
-                'gap_events': self.gaps.events[self._events_at_open:],
-                'total_sequence_gaps': now['sequence_gaps'],
-                'total_samples_lost': now['samples_lost']}
+                'gap_events': ledger.events[self._events_at_open.get(ledger.topic, 0):],
+                'total_sequence_gaps': total['sequence_gaps'],
+                'total_samples_lost': total['samples_lost']}

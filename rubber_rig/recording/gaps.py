@@ -12,8 +12,17 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Sequence-gap accounting for the rig's sample streams: lost samples are counted, never silent, and
-nothing that was not lost is counted as lost.
+"""The loss ledger of a recording: one rule, used by the recorder while it writes (gapcheck, session), by
+``load_recording`` (``rubber-rig info``, the bench summary) and by ``recover``, so that they agree to the sample.
+
+What is counted: the samples of the rig's sample stream, the one topic of RigSampleBatch (or RigSample) messages
+chosen by :func:`sample_topic` (the reader's arrays hold the same topic). Setpoints and model predictions also
+carry sample sequence numbers, but they are not samples: their numbers index the rig's samples they are for, so
+a setpoint stream that starts again below its last number (a held program resumed, a restarted rig driver) or a
+prediction stream that skips a batch says nothing about samples lost. They are not in the ledger.
+
+The messages are taken in file order (the order the recorder wrote them; a reader must not re-sort them by log
+time for this), per topic, and each is accounted by :class:`GapTracker`:
 
 A batch message carries ``first_sequence`` and N samples; the next batch of an unbroken stream starts
 at ``first_sequence + N``. A larger start is a *gap*; what the skipped samples were decides the count:
@@ -28,23 +37,29 @@ at ``first_sequence + N``. A larger start is a *gap*; what the skipped samples w
 - when no publication sequence number is known (data written without one, foreign recordings): lost
   (the conservative reading).
 
+The publication sequence number is the one the file stores (32 bits) on a channel whose ``rubber_rig.sequence``
+is ``publication``; the recorder uses the same stored value, so writing and reading see the same numbers.
+
 A smaller start means the stream restarted (counted separately). When the restarted publisher's first message
 is not its first publication, the samples it numbered before that message were published before the recorder
-matched it: lost.
+matched it: lost. (This rule holds for the sample stream only: a restarted rig driver numbers its samples from 0.)
 """
 from dataclasses import dataclass, field
 
-# message type -> (sequence field, array field whose length is the number of samples, or None for 1)
-SEQUENCED_TYPES = {
-    'msg_defs/msg/RigSampleBatch': ('first_sequence', 'displacement'),
-    'msg_defs/msg/SetpointBatch': ('first_sequence', 'displacement'),
-    'msg_defs/msg/ModelPrediction': ('first_sequence', 'displacement'),
-    'msg_defs/msg/RigSample': ('sequence', None),
+BATCH = 'msg_defs/msg/RigSampleBatch'
+SAMPLE = 'msg_defs/msg/RigSample'
+# the sample streams: message type -> (sequence field, array field whose length is the number of samples, or None
+# for 1). SetpointBatch and ModelPrediction are not here on purpose (module docstring).
+SAMPLE_TYPES = {
+    BATCH: ('first_sequence', 'displacement'),
+    SAMPLE: ('sequence', None),
 }
 # message types whose ``frames_lost`` field counts samples the driver lost on the bus before the message
-FRAMES_LOST_TYPES = ('msg_defs/msg/RigSampleBatch',)
+FRAMES_LOST_TYPES = (BATCH,)
 MAX_EVENTS = 1000     # keep the first events in detail; the totals always count all of them
 PUBSEQ_MOD = 1 << 32  # MCAP stores the publication sequence number in 32 bits
+COUNTS = ('sequence_gaps', 'samples_lost', 'sequence_restarts', 'sequence_jumps', 'samples_skipped', 'frames_lost',
+          'samples_seen')
 
 
 def _get(msg, name):
@@ -53,9 +68,24 @@ def _get(msg, name):
     return getattr(msg, name, None)
 
 
+def sample_topic(topic_types: dict):
+    """The recording's sample stream among ``topic_types`` (topic -> message type): of the RigSampleBatch topics
+    the one whose last name part is ``samples``, else the first by name; without any, the same among RigSample
+    topics; None if there is no sample topic. The reader's arrays and the loss ledger use this one choice.
+    """
+    for msg_type in (BATCH, SAMPLE):
+        candidates = sorted(t for t, ty in topic_types.items() if ty == msg_type)
+        for topic in candidates:
+            if topic.rstrip('/').split('/')[-1] == 'samples':
+                return topic
+        if candidates:
+            return candidates[0]
+    return None
+
+
 def sequence_span(msg_type: str, msg):
-    """(first sequence, sample count) of a sequenced message, or None for other types."""
-    spec = SEQUENCED_TYPES.get(msg_type)
+    """(first sequence, sample count) of a sample message (SAMPLE_TYPES), or None for other types."""
+    spec = SAMPLE_TYPES.get(msg_type)
     if spec is None:
         return None
     seq_field, array_field = spec
@@ -73,6 +103,14 @@ def frames_lost_of(msg_type: str, msg) -> int:
     if msg_type not in FRAMES_LOST_TYPES:
         return 0
     return int(_get(msg, 'frames_lost') or 0)
+
+
+def stamp_ns_of(msg) -> int:
+    """The header stamp of a message [ns] (0 without one): for a sample batch, the time of its first sample."""
+    stamp = _get(_get(msg, 'header'), 'stamp')
+    if stamp is None:
+        return 0
+    return int(_get(stamp, 'sec') or 0) * 1_000_000_000 + int(_get(stamp, 'nanosec') or 0)
 
 
 @dataclass
@@ -96,11 +134,12 @@ class GapTracker:
         self.lost_by_topic[topic] = self.lost_by_topic.get(topic, 0) + n
 
     def observe(self, topic: str, first: int, count: int, log_time_ns: int = 0, *, frames_lost: int = 0,
-                publication_sequence: int = None):
+                publication_sequence: int = None, stamp_ns: int = 0):
         """Account one message; returns the event dict if it revealed a gap, a jump or a restart.
 
         ``frames_lost``: samples the publisher reports lost before this message (always counted);
-        ``publication_sequence``: the DDS publication sequence number (None or 0: unknown).
+        ``publication_sequence``: the DDS publication sequence number (None or 0: unknown); ``log_time_ns``: when
+        it was recorded; ``stamp_ns``: its header stamp (the rig time of its first sample). Events carry both.
         """
         self.samples_seen += count
         expected = self.next_expected.get(topic)
@@ -116,7 +155,7 @@ class GapTracker:
             if not frames_lost:
                 return None
             event = {'topic': topic, 'kind': 'gap', 'expected': first - frames_lost, 'received': first,
-                     'lost': frames_lost, 'frames_lost': frames_lost, 'log_time_ns': int(log_time_ns)}
+                     'lost': frames_lost, 'frames_lost': frames_lost}
             self.gaps += 1
         elif first > expected:
             rest_lost = rest = max(0, first - expected - frames_lost)
@@ -132,35 +171,110 @@ class GapTracker:
             if lost:
                 self.gaps += 1
             event = {'topic': topic, 'kind': 'gap' if lost else 'jump', 'expected': expected,
-                     'received': first, 'lost': lost, 'frames_lost': frames_lost,
-                     'log_time_ns': int(log_time_ns)}
+                     'received': first, 'lost': lost, 'frames_lost': frames_lost}
         else:
             self.restarts += 1
             # a new publisher (a restarted rig numbers its samples from 0 again) whose first message reached us
             # after others it had published (its DDS publication sequence starts at 1): the samples before this
-            # one, 0..first-1, were published before we matched it, so they are lost, not merely unseen
-            missed = first if pub is not None and pub > 1 and first > 0 else 0
+            # one, 0..first-1, were published before we matched it, so they are lost, not merely unseen. The same
+            # publisher going on without a skip (publication sequence +1) published nothing in between: none lost.
+            same_publisher = pub is not None and prev_pub is not None and (pub - prev_pub) % PUBSEQ_MOD == 1
+            missed = first if pub is not None and pub > 1 and first > 0 and not same_publisher else 0
             if missed:
                 self._lose(topic, missed)
+            lost = frames_lost + missed
+            if lost:
                 self.gaps += 1
-            event = {'topic': topic, 'kind': 'gap' if missed else 'restart', 'restart': True, 'expected': expected,
-                     'received': first, 'lost': frames_lost + missed, 'frames_lost': frames_lost,
-                     'log_time_ns': int(log_time_ns)}
+            event = {'topic': topic, 'kind': 'gap' if lost else 'restart', 'restart': True, 'expected': expected,
+                     'received': first, 'lost': lost, 'frames_lost': frames_lost}
+        event['log_time_ns'], event['stamp_ns'] = int(log_time_ns), int(stamp_ns)
         if len(self.events) < MAX_EVENTS:
             self.events.append(event)
         return event
 
     def observe_message(self, topic: str, msg_type: str, msg, log_time_ns: int = 0,
                         publication_sequence: int = None):
-        """Account one decoded message (one of another type than SEQUENCED_TYPES is ignored: None)."""
+        """Account one decoded message (one of another type than SAMPLE_TYPES is ignored: None)."""
         span = sequence_span(msg_type, msg)
         if span is None:
             return None
         return self.observe(topic, span[0], span[1], log_time_ns, frames_lost=frames_lost_of(msg_type, msg),
-                            publication_sequence=publication_sequence)
+                            publication_sequence=publication_sequence, stamp_ns=stamp_ns_of(msg))
 
     def summary(self) -> dict:
         return {'sequence_gaps': self.gaps, 'samples_lost': self.samples_lost,
                 'sequence_restarts': self.restarts, 'sequence_jumps': self.jumps,
                 'samples_skipped': self.samples_skipped, 'frames_lost': self.frames_lost,
                 'samples_seen': self.samples_seen, 'samples_lost_by_topic': dict(self.lost_by_topic)}
+
+
+class LossLedger:
+    """The loss of a recording, as the recorder, ``load_recording`` (info, bench) and ``recover`` all count it.
+
+    Feed it every message of the recording in file order (:meth:`observe`; types other than SAMPLE_TYPES are
+    ignored, so the caller need not filter); each sample topic has its own :class:`GapTracker`, and the counts are
+    those of the sample stream (:func:`sample_topic`). ``publication_sequence``: the sequence the file stores for
+    the message if its channel stores publication sequence numbers (``rubber_rig.sequence: publication``), else
+    None.
+    """
+
+    def __init__(self):
+        self.trackers = {}                 # sample topic -> its GapTracker
+        self.types = {}                    # sample topic -> message type
+
+    def observe(self, topic: str, msg_type: str, msg, log_time_ns: int = 0, publication_sequence: int = None):
+        """Account one decoded message; the gap, jump or restart event it revealed, or None."""
+        if msg_type not in SAMPLE_TYPES:
+            return None
+        tracker = self.trackers.get(topic)
+        if tracker is None:
+            tracker = self.trackers[topic] = GapTracker()
+            self.types[topic] = msg_type
+        return tracker.observe_message(topic, msg_type, msg, log_time_ns, publication_sequence)
+
+    @property
+    def topic(self):
+        """The sample stream whose samples are counted (None before any sample message)."""
+        return sample_topic(self.types)
+
+    @property
+    def tracker(self) -> GapTracker:
+        return self.trackers.get(self.topic) or GapTracker()
+
+    @property
+    def samples_lost(self) -> int:
+        return self.tracker.samples_lost
+
+    @property
+    def sequence_gaps(self) -> int:
+        return self.tracker.gaps
+
+    @property
+    def events(self) -> list:
+        """The first MAX_EVENTS gap, jump and restart events of the sample stream."""
+        return self.tracker.events
+
+    @property
+    def next_expected(self) -> dict:
+        """Sample topic -> the sequence its next message continues at."""
+        return {topic: t.next_expected[topic] for topic, t in self.trackers.items() if topic in t.next_expected}
+
+    def counts(self) -> dict:
+        """Per sample topic: its counts (COUNTS), for the difference between two points of a recording."""
+        return {topic: _counts(t) for topic, t in self.trackers.items()}
+
+    def summary(self, since: dict = None) -> dict:
+        """The ledger: COUNTS of the sample stream and ``sample_topic``; ``since`` (an earlier :meth:`counts`): only
+        what was added after it (a file of a split recording).
+        """
+        topic = self.topic
+        now = _counts(self.tracker)
+        before = (since or {}).get(topic, dict.fromkeys(COUNTS, 0))
+        return {'sample_topic': topic or '', **{key: now[key] - before[key] for key in COUNTS}}
+
+
+def _counts(tracker: GapTracker) -> dict:
+    return {'sequence_gaps': tracker.gaps, 'samples_lost': tracker.samples_lost,
+            'sequence_restarts': tracker.restarts, 'sequence_jumps': tracker.jumps,
+            'samples_skipped': tracker.samples_skipped, 'frames_lost': tracker.frames_lost,
+            'samples_seen': tracker.samples_seen}

@@ -24,8 +24,9 @@ Topics are found by message type, not by name, so namespaces do not matter:
 - msg_defs/msg/SetpointBatch -> ``block_index`` joined on the sequence (-1 where unknown).
 - every other topic -> ``messages[topic]``: list of (log_time_ns, decoded message).
 - metadata: the ``rubber_rig`` record (specimen, temperature, model, ...) of the first file;
-  ``closing``: the loss reports (``rubber_rig.close``) of the files; ``gaps``: sequence gaps computed
-  from the data itself (so they are known for foreign recordings too): bus loss the driver reported
+  ``closing``: the loss reports (``rubber_rig.close``) of the files; ``loss``, ``samples_lost``, ``gaps``:
+  the loss ledger (gaps.LossLedger: the same one the recorder and ``recover`` keep) of the sample stream, computed
+  from the data itself in file order (so it is known for foreign recordings too): bus loss the driver reported
   (``frames_lost``) and messages missed in transport (the stored DDS publication sequence skipped); a
   sequence jump with nothing published in between (between two programs) is not a loss (``jumps``).
 - a file that was not closed (recorder killed, write error) is read up to its last complete chunk when
@@ -38,12 +39,10 @@ from pathlib import Path
 import numpy as np
 
 from .errors import RecordingError
-from .gaps import GapTracker
+from .gaps import BATCH, SAMPLE, SAMPLE_TYPES, LossLedger, sample_topic
 from .mcapio import Decoders, read_file, recording_files
 from .metadata import CLOSE_METADATA_NAME, METADATA_NAME, SEQUENCE_SOURCE_KEY, decode_metadata
 
-BATCH = 'msg_defs/msg/RigSampleBatch'
-SAMPLE = 'msg_defs/msg/RigSample'
 PREDICTION = 'msg_defs/msg/ModelPrediction'
 SETPOINTS = 'msg_defs/msg/SetpointBatch'
 SIGNALS = ('time', 'displacement', 'force', 'setpoint', 'prediction', 'residual', 'temperature',
@@ -58,7 +57,8 @@ class Recording:
     topics: dict = field(default_factory=dict)      # topic -> {'type', 'count', 'qos'}
     messages: dict = field(default_factory=dict)    # other topics: topic -> [(log_time_ns, msg)]
     other_metadata: dict = field(default_factory=dict)
-    gaps: list = field(default_factory=list)
+    loss: dict = field(default_factory=dict)        # the loss ledger's counts (gaps.LossLedger.summary)
+    gaps: list = field(default_factory=list)        # the first gap events (gaps.MAX_EVENTS); the count is in loss
     samples_lost: int = 0
     jumps: list = field(default_factory=list)       # sequence jumps that are not loss (between programs)
     complete: bool = True
@@ -90,6 +90,11 @@ class Recording:
         return len(self.sequence)
 
     @property
+    def sequence_gaps(self) -> int:
+        """Sequence gaps that are loss, all of them (``gaps`` lists the first gaps.MAX_EVENTS)."""
+        return int(self.loss.get('sequence_gaps', len(self.gaps)))
+
+    @property
     def tail_unaccounted(self) -> bool:
         """True if a file was not closed: samples after its last intact chunk are missing, how many is
         unknown (the recorder that knew was killed or could not write).
@@ -99,9 +104,10 @@ class Recording:
     def loss_text(self) -> str:
         """The loss of this recording in words (one line per finding), never '0 lost' when unknown."""
         lines = []
-        known = f'{self.samples_lost} samples lost in {len(self.gaps)} sequence gaps'
-        if self.jumps:
-            known += f' ({len(self.jumps)} sequence jumps between programs, not loss)'
+        known = f'{self.samples_lost} samples lost in {self.sequence_gaps} sequence gaps'
+        jumps = self.loss.get('sequence_jumps', len(self.jumps))
+        if jumps:
+            known += f' ({jumps} sequence jumps between programs, not loss)'
         if self.unclosed:
             lines.append(known + ' within the intact data, plus an unknown number after its end:')
             for u in self.unclosed:
@@ -114,25 +120,17 @@ class Recording:
         return '\n'.join(lines)
 
 
-def _pick(topics_of_type, preferred):
-    if not topics_of_type:
-        return None
-    for topic in topics_of_type:
-        if topic.rstrip('/').split('/')[-1] == preferred:
-            return topic
-    return sorted(topics_of_type)[0]
-
-
 def load_recording(path, *, allow_truncated: bool = False) -> Recording:
     """Load a recording (file, directory of split files, or list of files) into arrays.
 
     A truncated file (writer killed) raises RecordingError suggesting ``rubber-rig recover``, unless
-    ``allow_truncated`` (then everything up to the last complete chunk is read).
+    ``allow_truncated`` (then everything up to the last complete chunk is read). A corrupt file raises
+    RecordingError naming the damaged record and its offset.
     """
     files = recording_files(path)
     rec = Recording(files=[str(f) for f in files])
-    raw = []                                   # (log_time, topic, type, schema, data, file, pub. sequence)
-    for f in files:
+    raw = []                    # in file order: (file index, log_time, topic, type, schema, data, file, pub. sequence)
+    for i, f in enumerate(files):
         schemas, channels, messages, metadata, complete = read_file(Path(f), allow_truncated)
         rec.complete &= complete
         if not complete:
@@ -161,32 +159,51 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
                 'qos': channel.metadata.get('offered_qos_profiles', '')})
             info['count'] += 1
             pubseq = sequence if channel.metadata.get(SEQUENCE_SOURCE_KEY) == 'publication' else None
-            raw.append((log_time, channel.topic, schema.name, schema, data, f, pubseq))
+            raw.append((i, log_time, channel.topic, schema.name, schema, data, f, pubseq))
     if raw:
-        rec.start_ns = min(r[0] for r in raw)
-        rec.end_ns = max(r[0] for r in raw)
-    by_type = {}
-    for topic, info in rec.topics.items():
-        by_type.setdefault(info['type'], []).append(topic)
-    sample_topic = _pick(by_type.get(BATCH), 'samples') or _pick(by_type.get(SAMPLE), 'samples')
-    pred_topic = _pick(by_type.get(PREDICTION), 'prediction')
-    setp_topic = _pick(by_type.get(SETPOINTS), 'setpoints')
+        rec.start_ns = min(r[1] for r in raw)
+        rec.end_ns = max(r[1] for r in raw)
+    types = {topic: info['type'] for topic, info in rec.topics.items()}
+    samples_from = sample_topic(types)
+    pred_topic = _pick(types, PREDICTION, 'prediction')
+    setp_topic = _pick(types, SETPOINTS, 'setpoints')
     decoders = {f: Decoders(f) for f in files}
+    # the loss ledger sees the sample messages in the order they were written, as the recorder did
+    ledger, decoded = LossLedger(), {}
+    for k, (_, log_time, topic, type_name, schema, data, f, pubseq) in enumerate(raw):
+        if type_name in SAMPLE_TYPES:
+            msg = decoded[k] = decoders[f].decode(schema, data, topic)
+            ledger.observe(topic, type_name, msg, log_time, pubseq)
     samples, predictions, setpoints = [], [], []
-    for log_time, topic, type_name, schema, data, f, pubseq in raw:
+    # the arrays and message lists are in log-time order within each file (stable: file order among equal times)
+    for k in sorted(range(len(raw)), key=lambda k: (raw[k][0], raw[k][1])):
+        _, log_time, topic, type_name, schema, data, f, pubseq = raw[k]
         dec = decoders[f]
-        if topic == sample_topic:
-            samples.append((dec.decode(schema, data, topic), pubseq, str(f)))
+        if topic == samples_from:
+            samples.append((decoded[k], str(f)))
         elif topic == pred_topic:
             predictions.append(dec.decode(schema, data, topic))
         elif topic == setp_topic:
             setpoints.append(dec.decode(schema, data, topic))
         elif type_name not in (BATCH, SAMPLE, PREDICTION, SETPOINTS):
             rec.messages.setdefault(topic, []).append((log_time, dec.decode(schema, data, topic)))
-    _fill_samples(rec, samples, sample_topic)
+    _fill_samples(rec, samples, samples_from)
+    rec.loss = ledger.summary()
+    rec.samples_lost = ledger.samples_lost
+    rec.gaps = [e for e in ledger.events if e['kind'] == 'gap']
+    rec.jumps = [e for e in ledger.events if e['kind'] == 'jump']
     _join(rec, predictions, setpoints)
     _metadata_from_topics(rec)
     return rec
+
+
+def _pick(types: dict, msg_type: str, preferred: str):
+    """The topic of ``msg_type`` named ``preferred`` (last name part), else the first of that type by name."""
+    topics = sorted(t for t, ty in types.items() if ty == msg_type)
+    for topic in topics:
+        if topic.rstrip('/').split('/')[-1] == preferred:
+            return topic
+    return topics[0] if topics else None
 
 
 def _metadata_from_topics(rec: Recording):
@@ -216,11 +233,10 @@ def _cat(parts, dtype):
 
 
 def _fill_samples(rec: Recording, samples, topic):
-    tracker = GapTracker()
     t, d, fo, sp, te, st, seq = [], [], [], [], [], [], []
     periods = []
     last_in_file = {}
-    for m, pubseq, f in samples:
+    for m, f in samples:
         if hasattr(m, 'first_sequence'):                       # RigSampleBatch
             n = len(m.displacement)
             first = int(m.first_sequence)
@@ -245,19 +261,14 @@ def _fill_samples(rec: Recording, samples, topic):
         if len(fo[-1]) != n or len(sp[-1]) != n:
             raise RecordingError(f'{topic}: batch at sequence {first} has arrays of different '
                                  f'lengths ({n}, {len(fo[-1])}, {len(sp[-1])})')
-        tracker.observe(topic, first, n, int(t[-1][0]) if n else 0,
-                        frames_lost=int(getattr(m, 'frames_lost', 0) or 0), publication_sequence=pubseq)
         if n:
             last_in_file[f] = first + n - 1
     rec.time_ns = _cat(t, np.int64)
     rec.time = (rec.time_ns - rec.time_ns[0]) * 1e-9 if len(rec.time_ns) else np.zeros(0)
     rec.displacement, rec.force, rec.setpoint = _cat(d, float), _cat(fo, float), _cat(sp, float)
     rec.temperature, rec.status, rec.sequence = _cat(te, float), _cat(st, np.uint32), _cat(seq, np.uint64)
-    rec.gaps = [e for e in tracker.events if e['kind'] == 'gap']
-    rec.jumps = [e for e in tracker.events if e['kind'] == 'jump']
     for u in rec.unclosed:
         u['last_sequence'] = last_in_file.get(u['file'])
-    rec.samples_lost = tracker.samples_lost
     if periods:
         rec.sample_period = float(np.median(periods))
 

@@ -17,11 +17,16 @@
 Such a file has a header and complete chunks, maybe a partial last record, but no summary or footer.
 Everything readable is copied into a new, complete file (schemas, channels with their metadata, every
 message with its times and sequence, metadata records, attachments); the loss accounting that the
-writer could not write is recomputed from the data (sequence gaps) and stored in a
+writer could not write is recomputed from the data by the loss ledger (gaps.LossLedger, the one the recorder
+and ``rubber-rig info`` keep, so ``info`` on the recovered file shows the same numbers) and stored in a
 ``rubber_rig.recovered`` metadata record. Like ``mcap recover`` of the Go CLI, but in Python.
+
+A damaged file is refused, not copied in part: a chunk that fails its checksum, a record that does not parse,
+or in a file that has its footer a record running past its end raise RecordingError naming the file, the record
+and its byte offset (mcapio.RecordScan); nothing is written. Only a file that *ends* early is truncated.
 """
 import os
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from mcap.records import Attachment, Channel, Header, Message, Metadata, Schema
@@ -30,8 +35,8 @@ from mcap.writer import Writer as McapWriter
 
 from .bagmeta import METADATA_FILE, write_bag_metadata
 from .errors import RecordingError, RecordingWriteError
-from .gaps import SEQUENCED_TYPES, GapTracker, sequence_span
-from .mcapio import Decoders, check_file, iter_records
+from .gaps import SAMPLE_TYPES, LossLedger, sequence_span
+from .mcapio import Decoders, RecordScan
 from .metadata import SEQUENCE_SOURCE_KEY, encode_metadata
 
 RECOVERED_METADATA_NAME = 'rubber_rig.recovered'
@@ -49,6 +54,11 @@ class RecoverResult:
     sequence_gaps: int
     last_log_time_ns: int = 0          # log time of the last message recovered (where intact data ends)
     last_sequence: int = None          # sequence of the last sample recovered (None: no samples)
+    loss: dict = field(default_factory=dict)   # the loss ledger's counts (gaps.LossLedger.summary)
+    intact_end: int = None             # byte offset where the readable data of the source ends
+    size: int = 0                      # bytes in the source
+    summary_error: str = None          # a complete source whose summary section was damaged: where
+    undecodable: int = 0               # sample messages copied whose bytes do not decode (not in the ledger)
 
     @property
     def tail_unaccounted(self) -> bool:
@@ -57,12 +67,16 @@ class RecoverResult:
 
     def loss_text(self) -> str:
         known = f'{self.samples_lost} samples lost in {self.sequence_gaps} sequence gaps'
+        if self.loss.get('sequence_jumps'):
+            known += f' ({self.loss["sequence_jumps"]} sequence jumps between programs, not loss)'
+        if self.undecodable:
+            known += f'; {self.undecodable} sample messages do not decode and are not counted'
         if self.was_complete:
             return known
         seq = '' if self.last_sequence is None else f', last sample sequence {self.last_sequence}'
-        return (f'{self.source} was NOT CLOSED (recorder killed or its writes failed): intact data ends at log '
-                f'time {self.last_log_time_ns / 1e9:.3f} s{seq}; samples after that are unaccounted for '
-                f'(unknown number); {known} within the intact data')
+        return (f'{self.source} was NOT CLOSED (recorder killed or its writes failed): intact data ends at byte '
+                f'{self.intact_end} of {self.size}, log time {self.last_log_time_ns / 1e9:.3f} s{seq}; samples '
+                f'after that are unaccounted for (unknown number); {known} within the intact data')
 
 
 def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
@@ -70,18 +84,19 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
     """Copy every readable record of ``path`` into a complete MCAP file.
 
     ``output`` defaults to ``<name>.recovered.mcap``; with ``in_place`` the original is replaced
-    (kept as ``<name>.mcap.bak`` if ``backup``).
+    (kept as ``<name>.mcap.bak`` if ``backup``). A corrupt file raises RecordingError (nothing is written).
     """
     path = Path(path)
-    was_complete = check_file(path)           # raises RecordingError if not an MCAP file at all
+    scan = RecordScan(path)                   # raises RecordingError if not an MCAP file at all
+    was_complete = scan.footer
     if in_place:
         target = path.with_name(path.name + '.recovering')
     else:
         target = Path(output) if output else path.with_name(path.stem + '.recovered.mcap')
     if target.resolve() == path.resolve():
         raise RecordingError(f'{path}: output must differ from the input (use --in-place)')
-    counts = {'messages': 0, 'metadata': 0}
-    gaps = GapTracker()
+    counts = {'messages': 0, 'metadata': 0, 'undecodable': 0}
+    ledger = LossLedger()
     decoders = Decoders(path)
     header_seen = False
     last = {'log_time': 0, 'sequence': None}
@@ -90,7 +105,7 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
             writer = McapWriter(out, chunk_size=chunk_size, compression=CompressionType.ZSTD)
             schemas, channels = {}, {}        # ids in the source -> ids in the output
             schema_records, channel_types = {}, {}
-            for record in iter_records(path, allow_truncated=True):
+            for _, record in scan:            # file order: the order the recorder wrote (and counted) them
                 if isinstance(record, Header):
                     writer.start(record.profile, record.library)
                     header_seen = True
@@ -110,16 +125,17 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
                     counts['messages'] += 1
                     last['log_time'] = max(last['log_time'], record.log_time)
                     topic, schema, pubseq = channel_types[record.channel_id]
-                    if schema is not None and schema.name in SEQUENCED_TYPES:
+                    if schema is not None and schema.name in SAMPLE_TYPES:
                         try:
                             msg = decoders.decode(schema, record.data, topic)
-                            gaps.observe_message(topic, schema.name, msg, record.log_time,
-                                                 record.sequence if pubseq else None)
-                            span = sequence_span(schema.name, msg)
-                            if span and span[1] and schema.name.endswith(('RigSampleBatch', 'RigSample')):
-                                last['sequence'] = span[0] + span[1] - 1
-                        except RecordingError:
-                            pass
+                        except RecordingError:   # copied as it is; the recorder did not count it either
+                            counts['undecodable'] += 1
+                            continue
+                        ledger.observe(topic, schema.name, msg, record.log_time,
+                                       record.sequence if pubseq else None)
+                        span = sequence_span(schema.name, msg)
+                        if span and span[1]:
+                            last['sequence'] = span[0] + span[1] - 1
                 elif isinstance(record, Metadata):
                     writer.add_metadata(record.name, dict(record.metadata))
                     counts['metadata'] += 1
@@ -127,11 +143,13 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
                     writer.add_attachment(record.create_time, record.log_time, record.name,
                                           record.media_type, record.data)
             if not header_seen:
-                raise RecordingError(f'{path}: no MCAP header record: nothing to recover')
-            report = dict(gaps.summary(), source=str(path), was_complete=was_complete,
-                          messages_recovered=counts['messages'],
-                          gap_events=gaps.events, last_log_time_ns=last['log_time'],
-                          last_sample_sequence=last['sequence'],
+                raise RecordingError(f'{path}: no complete MCAP header record: nothing to recover')
+            loss = ledger.summary()
+            report = dict(loss, source=str(path), was_complete=was_complete,
+                          messages_recovered=counts['messages'], undecodable_sample_messages=counts['undecodable'],
+                          gap_events=ledger.events, last_log_time_ns=last['log_time'],
+                          last_sample_sequence=last['sequence'], intact_end=scan.intact_end,
+                          source_size=scan.size, summary_error=scan.summary_error or '',
                           tail_unaccounted=not was_complete)
             writer.add_metadata(RECOVERED_METADATA_NAME, encode_metadata(report))
             writer.finish()
@@ -157,7 +175,9 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
         if (path.parent / METADATA_FILE).exists():   # part of a bag: index the recovered file too
             write_bag_metadata(path.parent)
     return RecoverResult(str(path), str(target), was_complete, counts['messages'], len(channels),
-                         counts['metadata'], gaps.samples_lost, gaps.gaps, last['log_time'], last['sequence'])
+                         counts['metadata'], loss['samples_lost'], loss['sequence_gaps'], last['log_time'],
+                         last['sequence'], loss, scan.intact_end, scan.size, scan.summary_error,
+                         counts['undecodable'])
 
 
 def _write_error(target: Path, exc: OSError) -> RecordingWriteError:

@@ -16,7 +16,8 @@
 
 - start / stop / split, automatic splits by size and by duration. A split happens between two
   messages, so every message lands in exactly one file (none lost, none duplicated).
-- Sequence gaps are tracked across the files of one recording (a gap across a split is still seen).
+- Sequence gaps are tracked across the files of one recording (a gap across a split is still seen), by the loss
+  ledger that ``rubber-rig info`` and ``recover`` use too (gaps.LossLedger).
 - A write error (disk full, file too large) stops the recording cleanly: the file keeps everything up
   to its last complete chunk, the error is kept in ``error`` and messages that arrive afterwards are
   counted as not recorded (never silently lost): the samples of the chunk that could not be written and
@@ -36,7 +37,7 @@ from mcap.records import Schema
 
 from .bagmeta import write_bag_metadata
 from .errors import RecordingError, RecordingWriteError
-from .gaps import GapTracker, sequence_span
+from .gaps import LossLedger, sequence_span
 from .mcapio import Decoders
 from .msgdefs import full_definition, normalize_type
 from .writer import RecordingWriter
@@ -72,7 +73,7 @@ class Recorder:
         self._buffer = deque()
         self._qos = {}                       # topic -> offered QoS (list of dicts or YAML)
         self.writer = None
-        self.gaps = GapTracker()
+        self.gaps = LossLedger()             # the loss ledger of the recording, across its files
         self.files = []                      # files of the current/last recording, in order
         self._summaries = {}                 # closed file -> bagmeta.file_summary, for metadata.yaml
         self.reports = []                    # loss report of each closed file
@@ -98,8 +99,9 @@ class Recorder:
 
     @property
     def samples_lost_total(self) -> int:
-        """Every sample known lost: sequence gaps that are real loss, and samples received but not
-        written (a write error's lost chunk, batches after the error).
+        """Every sample known lost: the ledger's (sequence gaps of the sample stream that are real loss: what
+        ``rubber-rig info`` counts in the files), and samples received but not written (a write error's lost
+        chunk, batches after the error).
         """
         return self.gaps.samples_lost + self.samples_not_recorded + self.samples_unwritten
 
@@ -143,7 +145,7 @@ class Recorder:
                                              f'{exc.strerror}', exc.errno)
             raise self.error from None
         self._base, self._index = base, 0
-        self.gaps = GapTracker()
+        self.gaps = LossLedger()
         self.files, self.reports, self._summaries = [], [], {}
         self.error, self.not_recorded_after_error = None, 0
         self.samples_not_recorded = self.samples_unwritten = 0
@@ -230,7 +232,7 @@ class Recorder:
             return False                     # counted by the writer (unknown type / encode error)
 
     def _samples_in(self, topic, msg_type, msg) -> int:
-        """Samples carried by a message that could not be written (0 for other types)."""
+        """Samples carried by a message that could not be written (0 for other than sample-stream types)."""
         try:
             msg_type = normalize_type(msg_type)
             if isinstance(msg, (bytes, bytearray, memoryview)):

@@ -39,7 +39,7 @@ from . import bagmeta
 from .channels import ChannelTable
 from .errors import RecordingError, RecordingWriteError
 from .gapcheck import GapCheck
-from .gaps import GapTracker
+from .gaps import LossLedger
 from .metadata import CLOSE_METADATA_NAME, METADATA_NAME, SEQUENCE_SOURCE_KEY, encode_metadata
 from .msgdefs import MessageDefinitionError, normalize_type, type_of
 from .rawfile import UnbufferedFile
@@ -56,7 +56,7 @@ class RecordingWriter:
     """
 
     def __init__(self, path, metadata: dict = None, *, compression: str = 'zstd',
-                 chunk_size: int = 1 << 20, flush_interval_s: float = 1.0, gaps: GapTracker = None,
+                 chunk_size: int = 1 << 20, flush_interval_s: float = 1.0, gaps: LossLedger = None,
                  overwrite: bool = False):
         self.path = Path(path)
         if compression not in COMPRESSION:
@@ -102,18 +102,18 @@ class RecordingWriter:
         return self._file.tell() + self._pending
 
     @property
-    def gaps(self) -> GapTracker:
-        """The sequence-gap tracker (shared by the files of a split recording)."""
+    def gaps(self) -> LossLedger:
+        """The loss ledger (shared by the files of a split recording)."""
         return self._gap_check.gaps
 
     @property
     def samples_written(self) -> int:
-        """Samples of sequenced messages (RigSampleBatch, ...) written."""
+        """Samples of sample-stream messages (RigSampleBatch, RigSample) written."""
         return self._gap_check.samples_written
 
     @property
     def samples_flushed(self) -> int:
-        """Samples of sequenced messages in complete chunks handed to the OS."""
+        """Samples of sample-stream messages in complete chunks handed to the OS."""
         return self._gap_check.samples_flushed
 
     @property
@@ -185,12 +185,11 @@ class RecordingWriter:
             log_time_ns = time.time_ns()
         if publish_time_ns is None:
             publish_time_ns = log_time_ns
-        publication_sequence = sequence
-        sequence = self._channels.sequence(channel_id, sequence)
+        sequence = int(self._channels.sequence(channel_id, sequence)) & 0xFFFFFFFF
         before = self._file.tell()
         try:
             self._guard(self._mcap.add_message, channel_id, int(log_time_ns), data,
-                        int(publish_time_ns), int(sequence) & 0xFFFFFFFF)
+                        int(publish_time_ns), sequence)
         except RecordingWriteError:
             self.count_dropped('write_error')
             raise
@@ -200,6 +199,9 @@ class RecordingWriter:
         if self.first_log_time_ns is None:
             self.first_log_time_ns = self._last_flush_ns = log_time_ns
         self.last_log_time_ns = log_time_ns
+        # the ledger sees the publication sequence as every reader of the file will: the stored one, if the channel
+        # stores publication sequence numbers
+        publication_sequence = sequence if self._channels.publication_sequenced(channel_id) else None
         if not self._gap_check.observe(topic, msg_type, self._channels.schema(msg_type), data, decoded,
                                        log_time_ns, publication_sequence):
             self.count_dropped('undecodable_for_gap_check')
