@@ -22,6 +22,7 @@ every default detector on trips none at 200 N of load-cell noise, and a held dur
 cycles it had not run.
 """
 import html
+import json
 import os
 import signal
 import time
@@ -38,6 +39,7 @@ from rubber_rig.fitting.blocks import split_blocks
 from rubber_rig.fitting.data import load_run
 from rubber_rig.fitting.report import make_report
 from rubber_rig.nodes.processes import Operator, SuiteProcesses
+from rubber_rig.recording import load_recording
 from rubber_rig.rig.config import DamageSpec
 from rubber_rig.rig.sim.damage import DamagedSpecimen, sample_at_cycle
 
@@ -153,6 +155,9 @@ def test_crack_is_held_by_the_residual_detector_within_two_cycles(suite):
                    RecorderControl.Request(command=RecorderControl.Request.STOP), timeout=30.0)
     assert stop is not None and stop.success, stop
     run = load_run(stop.file)
+    # the file's bookkeeping also as a message (survives rosbags conversions) and latched on recording_info
+    carried = json.loads(load_recording(stop.file).messages[f'{NS}/recording_info'][-1][1].data)
+    assert carried['rubber_rig']['namespace'] == NS and carried['rubber_rig.close']['messages_written'] > 100
     assert [(e['detector'], e['action'], e['cycle']) for e in run.events] == \
         [(x.detector, x.action, x.cycle) for x in result.events]
     assert result.events[0].sequence in run.cycles['end_sequence']

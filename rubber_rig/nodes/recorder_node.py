@@ -37,6 +37,7 @@ splitting, snapshots and loss accounting are rubber_rig.recording.Recorder's.
   programs), ERROR when the recording stopped on an error.
 """
 import importlib
+import json
 import time
 from pathlib import Path
 
@@ -46,6 +47,7 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from std_msgs.msg import String
 
 from msg_defs.msg import RecorderStatus
 from msg_defs.srv import RecorderControl
@@ -53,7 +55,9 @@ from rubber_rig.nodes import topics
 from rubber_rig.nodes.heartbeat import start_heartbeat
 from rubber_rig.nodes.params import declare
 from rubber_rig.nodes.spin import spin_node
-from rubber_rig.recording import Recorder, RecordingError, full_definition
+from rubber_rig.recording import CLOSE_METADATA_NAME, METADATA_NAME, Recorder, RecordingError, full_definition
+from rubber_rig.recording.metadata import BOOKKEEPING_TOPIC, bookkeeping_topic
+from rubber_rig.recording.plain import plain
 from rubber_rig.recording.qos import qos_entry
 
 UNSUPPORTED_SEQUENCE = 2**63   # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED is UINT64_MAX
@@ -127,7 +131,10 @@ class RecorderNode(Node):
         self.core = Recorder(self.output_dir, metadata=metadata, compression=compression,
                              split_size_bytes=int(split_size * 1e6), split_duration_s=split_duration,
                              chunk_size=chunk_size * 1024, flush_interval_s=flush_period,
-                             snapshot_duration_s=snapshot_duration)
+                             snapshot_duration_s=snapshot_duration,
+                             bookkeeping_topic=bookkeeping_topic(self.get_namespace()))
+        # each closed file's bookkeeping, latched (and written into the file as the same message by the core)
+        self._bookkeeping_pub = self.create_publisher(String, BOOKKEEPING_TOPIC, topics.LATCHED_QOS)
         self._subs = {}                       # topic -> (subscription, type)
         self._unrecordable = {}               # topic -> reason
         self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
@@ -251,10 +258,12 @@ class RecorderNode(Node):
                 response.message = 'recording'
             elif cmd == RecorderControl.Request.STOP:
                 files = self.core.stop()
+                self.publish_bookkeeping()
                 response.file = str(files[-1]) if files else ''
                 response.message = f'stopped; {len(files)} file(s)'
             elif cmd == RecorderControl.Request.SPLIT:
                 response.file = str(self.core.split())
+                self.publish_bookkeeping()
                 response.message = 'split'
             elif cmd == RecorderControl.Request.SNAPSHOT:
                 response.file = str(self.core.snapshot(request.path or None))
@@ -338,6 +347,15 @@ class RecorderNode(Node):
         arr = DiagnosticArray(status=[d])
         arr.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(arr)
+
+    def publish_bookkeeping(self) -> None:
+        """The last closed file's records (the ``rubber_rig`` and ``rubber_rig.close`` metadata) on the latched
+        ``recording_info`` topic, as JSON: what a tool that drops MCAP metadata still shows.
+        """
+        if self.core.reports:
+            text = json.dumps(plain({METADATA_NAME: self.core.metadata, CLOSE_METADATA_NAME: self.core.reports[-1]}),
+                              sort_keys=True)
+            self._bookkeeping_pub.publish(String(data=text))
 
     def destroy_node(self):
         was_recording = self.core.recording

@@ -27,6 +27,23 @@ CLOSE_METADATA_NAME = 'rubber_rig.close'  # loss accounting written when a file 
 # channel metadata key: 'publication' when the MCAP message sequence is the DDS publication sequence number
 # (gaps in it are messages lost in transport), 'writer' when the writer numbered the messages itself
 SEQUENCE_SOURCE_KEY = 'rubber_rig.sequence'
+BOOKKEEPING_TOPIC = 'recording_info'    # the records again, as a std_msgs/String message (JSON) of this name
+
+
+def bookkeeping_topic(namespace: str = "") -> str:
+    """Absolute topic of the bookkeeping message of a recorder in `namespace`."""
+    return f'{namespace.rstrip("/")}/{BOOKKEEPING_TOPIC}'
+
+
+def bookkeeping_records(text: str) -> dict:
+    """{record name: values} from a bookkeeping message's JSON ({} if it is not one)."""
+    try:
+        records = json.loads(text)
+    except ValueError:
+        return {}
+    if not isinstance(records, dict):
+        return {}
+    return {k: v for k, v in records.items() if k in (METADATA_NAME, CLOSE_METADATA_NAME) and isinstance(v, dict)}
 
 
 def encode_metadata(values: dict) -> dict:

@@ -41,7 +41,14 @@ import numpy as np
 from .errors import RecordingError
 from .gaps import BATCH, SAMPLE, SAMPLE_TYPES, LossLedger, sample_topic
 from .mcapio import Decoders, read_file, recording_files
-from .metadata import CLOSE_METADATA_NAME, METADATA_NAME, SEQUENCE_SOURCE_KEY, decode_metadata
+from .metadata import (
+    BOOKKEEPING_TOPIC,
+    CLOSE_METADATA_NAME,
+    METADATA_NAME,
+    SEQUENCE_SOURCE_KEY,
+    bookkeeping_records,
+    decode_metadata,
+)
 
 PREDICTION = 'msg_defs/msg/ModelPrediction'
 SETPOINTS = 'msg_defs/msg/SetpointBatch'
@@ -208,8 +215,18 @@ def _pick(types: dict, msg_type: str, preferred: str):
 
 def _metadata_from_topics(rec: Recording):
     """Fill what the metadata record lacks (e.g. `ros2 bag record` files) from latched topics: the
-    program YAML (std_msgs/String on ``program``) and the model parameters (ModelParameters).
+    program YAML (std_msgs/String on ``program``) and the model parameters (ModelParameters); and, for a file
+    whose MCAP metadata records were lost in a conversion (rosbags: MCAP -> sqlite3 -> MCAP), the records from
+    the bookkeeping messages the writer adds (``<namespace>/recording_info``, one per closed file).
     """
+    for topic, msgs in rec.messages.items():
+        if rec.topics[topic]['type'] != 'std_msgs/msg/String' or not topic.endswith('/' + BOOKKEEPING_TOPIC):
+            continue
+        records = [r for r in (bookkeeping_records(m.data) for _, m in msgs) if r]
+        if records and not rec.metadata and METADATA_NAME in records[0]:
+            rec.metadata = dict(records[0][METADATA_NAME])
+        if records and not rec.closing:
+            rec.closing = [dict(r[CLOSE_METADATA_NAME]) for r in records if CLOSE_METADATA_NAME in r]
     for topic, msgs in rec.messages.items():
         info = rec.topics[topic]
         last = msgs[-1][1] if msgs else None

@@ -59,8 +59,9 @@ def _unique(base: Path, suffix: str = '') -> Path:
 class Recorder:
     def __init__(self, output_dir, *, metadata: dict = None, compression: str = 'zstd',
                  split_size_bytes: int = 0, split_duration_s: float = 0.0, chunk_size: int = 1 << 20,
-                 flush_interval_s: float = 1.0, snapshot_duration_s: float = 0.0):
+                 flush_interval_s: float = 1.0, snapshot_duration_s: float = 0.0, bookkeeping_topic: str = None):
         self.output_dir = Path(output_dir)
+        self.bookkeeping_topic = bookkeeping_topic   # each file's records also as a message there (writer)
         self.metadata = dict(metadata or {})
         self.compression = compression
         self.split_size_bytes = int(split_size_bytes)
@@ -163,7 +164,7 @@ class Recorder:
         metadata = dict(self.metadata, recording=self._base.name, file_index=str(self._index - 1))
         self.writer = RecordingWriter(path, metadata, compression=self.compression,
                                       chunk_size=self.chunk_size, flush_interval_s=self.flush_interval_s,
-                                      gaps=self.gaps)
+                                      gaps=self.gaps, bookkeeping_topic=self.bookkeeping_topic)
         self.files.append(path)
 
     def _close_writer(self):
@@ -274,7 +275,8 @@ class Recorder:
         metadata = dict(self.metadata, snapshot='true',
                         snapshot_duration_s=str(self.snapshot_duration_ns / 1e9))
         writer = RecordingWriter(path, metadata, compression=self.compression,
-                                 chunk_size=self.chunk_size, flush_interval_s=0)
+                                 chunk_size=self.chunk_size, flush_interval_s=0,
+                                 bookkeeping_topic=self.bookkeeping_topic)
         try:
             for topic, msg_type, msg, log_ns, pub_ns, seq in items:
                 try:

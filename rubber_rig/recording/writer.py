@@ -26,6 +26,7 @@ sample streams (gapcheck, gaps), metadata names and values (metadata), rosbag2's
   sample streams are counted, and both go into a ``rubber_rig.close`` metadata record when the file is closed.
 """
 import errno as errno_mod
+import json
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -42,6 +43,7 @@ from .gapcheck import GapCheck
 from .gaps import LossLedger
 from .metadata import CLOSE_METADATA_NAME, METADATA_NAME, SEQUENCE_SOURCE_KEY, encode_metadata
 from .msgdefs import MessageDefinitionError, normalize_type, type_of
+from .plain import plain
 from .rawfile import UnbufferedFile
 
 COMPRESSION = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE,
@@ -57,8 +59,9 @@ class RecordingWriter:
 
     def __init__(self, path, metadata: dict = None, *, compression: str = 'zstd',
                  chunk_size: int = 1 << 20, flush_interval_s: float = 1.0, gaps: LossLedger = None,
-                 overwrite: bool = False):
+                 overwrite: bool = False, bookkeeping_topic: str | None = None):
         self.path = Path(path)
+        self.bookkeeping_topic = bookkeeping_topic   # where close() also writes the records as a message
         if compression not in COMPRESSION:
             raise RecordingError(f'unknown compression {compression!r}; use zstd, lz4 or none')
         try:
@@ -255,6 +258,8 @@ class RecordingWriter:
         try:
             if self.failure is None:
                 values = dict(report, end_time_ns=time.time_ns(), clean_close=True, **(extra or {}))
+                if self.bookkeeping_topic:
+                    self._write_bookkeeping(values)
                 self._guard(self._mcap.add_metadata, CLOSE_METADATA_NAME, encode_metadata(values))
                 self._guard(self._mcap.add_metadata, 'rosbag2',
                             {'serialized_metadata': bagmeta.dump(self.bag_info())})
@@ -263,6 +268,15 @@ class RecordingWriter:
         finally:
             self._file.close()
         return report
+
+    def _write_bookkeeping(self, close_values: dict) -> None:
+        """The two metadata records, also as one message (std_msgs/String, JSON, on `bookkeeping_topic`: the recorder
+        node's ``<namespace>/recording_info``, where it latches them too): MCAP metadata records do not survive a
+        conversion by rosbag2-compatible tools (rosbags: MCAP -> sqlite3 -> MCAP), messages do. Its counts are
+        those of the other messages (the close record's).
+        """
+        text = json.dumps(plain({METADATA_NAME: self.metadata, CLOSE_METADATA_NAME: close_values}), sort_keys=True)
+        self.write_message(self.bookkeeping_topic, 'std_msgs/msg/String', {'data': text})
 
     def __enter__(self):
         return self
