@@ -216,3 +216,20 @@ def test_malformed_batches_are_dropped_and_a_restarted_driver_restarts_the_model
     assert node.predictor.restarts == 1
     fresh = OnlinePredictor(ModelChoice()).process(0, DT, x[:BATCH])[0]
     np.testing.assert_array_equal(np.asarray(node.published[-2].predicted_force), fresh)
+
+
+@pytest.mark.ros
+def test_a_stale_or_foreign_batch_that_goes_back_does_not_restart_the_model(node):
+    """One batch with an old sequence (a stale copy, another publisher) amid the driver's stream: ignored and
+    counted, the model goes on as if it never came; a stream that goes on from the new point is a restart."""
+    x = sine(1000)
+    f = np.zeros(1000)
+    stream(node, x[:500], f[:500])
+    node.on_samples(conv.sample_batch_msg(100, 0.1, DT, x[:BATCH], f[:BATCH], x[:BATCH], 20.0, 0, 0))
+    stream(node, x[500:], f[500:], first=500)
+    assert node.predictor.restarts == 0 and node.stray_batches == 1
+    pred = np.concatenate([np.asarray(m.predicted_force) for m in node.published])
+    ref = OnlinePredictor(ModelChoice())
+    clean = np.concatenate([ref.process(lo, DT, x[lo:lo + BATCH])[0] for lo in range(0, 1000, BATCH)])
+    np.testing.assert_array_equal(pred, clean)
+    assert [m.first_sequence for m in node.published] == list(range(0, 1000, BATCH))

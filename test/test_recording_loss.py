@@ -322,3 +322,24 @@ def test_info_counts_every_gap_beyond_the_events_it_lists(tmp_path, capsys):
     info = info_json(path, capsys)
     assert (info['sequence_gaps'], info['samples_lost']) == (gaps, gaps)
     assert np.array_equal(r.sequence, 2 * np.arange(gaps + 1))
+
+
+def test_a_stale_or_foreign_batch_is_a_stray_not_a_restart_and_not_loss():
+    """One batch with old sample numbers from another publisher amid the driver's stream (a spoofed or late copy):
+    with the restart rule alone it counted every sample before it lost (its publisher had published before) and
+    the stream's return a second gap. The stream going on where it was makes it a stray: no restart, no loss."""
+    g = LossLedger()
+    for k in range(10):
+        g.observe('/a/samples', BATCH, {'first_sequence': 20 * k, 'displacement': [0.0] * 20}, k, k + 1)
+    g.observe('/a/samples', BATCH, {'first_sequence': 40, 'displacement': [0.0] * 20, 'frames_lost': 5}, 10, 77)
+    for k in range(10, 15):
+        g.observe('/a/samples', BATCH, {'first_sequence': 20 * k, 'displacement': [0.0] * 20}, k + 1, k + 1)
+    s = g.summary()
+    assert (g.samples_lost, s['sequence_gaps'], s['sequence_restarts'], s['sequence_strays']) == (0, 0, 0, 1)
+    assert [e['kind'] for e in g.tracker.events] == ['stray']
+    # a restarted driver: its stream goes on from the new numbers - a restart (with what it published before we
+    # matched it counted lost)
+    g.observe('/a/samples', BATCH, {'first_sequence': 100, 'displacement': [0.0] * 20}, 20, 3)
+    g.observe('/a/samples', BATCH, {'first_sequence': 120, 'displacement': [0.0] * 20}, 21, 4)
+    s = g.summary()
+    assert (s['sequence_restarts'], s['sequence_strays'], g.samples_lost) == (1, 1, 100)

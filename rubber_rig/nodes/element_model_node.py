@@ -131,6 +131,8 @@ class ElementModelNode(Node):
         self._validated = None           # (choice, resolved) of the parameter change being set
         self.batches_dropped = 0         # sample batches refused (batch_problem)
         self.cycle_errors = 0            # cycles the metrics could not evaluate
+        self.stray_batches = 0           # batches that went back and were not followed: stale or foreign
+        self._went_back = None           # a batch that went back, until the next one says restart or stray
         self.pub_prediction = self.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
         self.pub_metrics = self.create_publisher(CycleMetrics, topics.CYCLE_METRICS, topics.EVENT_QOS)
         self.pub_params = self.create_publisher(ModelParameters, topics.MODEL_PARAMETERS, topics.LATCHED_QOS)
@@ -161,12 +163,25 @@ class ElementModelNode(Node):
             return
         if len(x) == 0:
             return
+        held, self._went_back = self._went_back, None
         if self.predictor.goes_back(msg.first_sequence):
+            if held is None or msg.first_sequence != held.first_sequence + len(held.displacement):
+                # one batch going back is not yet a restart: a stale or foreign batch (another publisher, a copy
+                # replayed late) is followed by the stream it interrupted; a restarted driver's by its own next
+                self._went_back = msg
+                return
             self.get_logger().info(f'sample sequence went back from {self.predictor.next_sequence} to '
-                                   f'{msg.first_sequence} (driver restarted?): model and cycle detection start afresh')
+                                   f'{held.first_sequence} (driver restarted?): model and cycle detection start '
+                                   'afresh')
             self.predictor.restart()
             self._cycle_queue.clear()
             self.cycles = CyclePairer(self.cycles.hysteresis, self.cycles.min_amplitude)
+            self.on_samples(held)
+        elif held is not None:
+            self.stray_batches += 1
+            self.get_logger().warning(f'sample batch at sequence {held.first_sequence} ignored: it went back from '
+                                      f'{self.predictor.next_sequence} and the stream went on where it was (stale '
+                                      f'or foreign; {self.stray_batches} so far)', throttle_duration_sec=WARN_EVERY)
         bad = self.predictor.nonfinite_samples
         predicted, branches = self.predictor.process(msg.first_sequence, msg.sample_period, x, msg.temperature)
         bad_force = len(f) - int(np.count_nonzero(np.isfinite(f)))

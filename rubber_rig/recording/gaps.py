@@ -59,7 +59,7 @@ FRAMES_LOST_TYPES = (BATCH,)
 MAX_EVENTS = 1000     # keep the first events in detail; the totals always count all of them
 PUBSEQ_MOD = 1 << 32  # MCAP stores the publication sequence number in 32 bits
 COUNTS = ('sequence_gaps', 'samples_lost', 'sequence_restarts', 'sequence_jumps', 'samples_skipped', 'frames_lost',
-          'samples_seen')
+          'samples_seen', 'sequence_strays')
 
 
 def _get(msg, name):
@@ -128,6 +128,25 @@ class GapTracker:
     frames_lost: int = 0              # of samples_lost: reported by the driver (bus)
     samples_seen: int = 0
     lost_by_topic: dict = field(default_factory=dict)
+    strays: int = 0                   # messages that went back and were not followed (stale or foreign)
+    _went_back: dict = field(default_factory=dict)   # topic -> what a message that went back changed
+
+    def _undo_stray(self, topic: str) -> None:
+        """The message that went back was not followed by its own stream but by the one it interrupted: it was
+        stale or foreign (another publisher, a late copy), not a restart. Its restart and any loss it implied
+        are taken back, and the stream is judged as if it had not come.
+        """
+        expected, prev_pub, event, lost, frames = self._went_back.pop(topic)
+        self.restarts -= 1
+        self.strays += 1
+        if lost:
+            self.gaps -= 1
+            self.samples_lost -= lost
+            self.lost_by_topic[topic] -= lost
+            self.frames_lost -= frames
+        event.update(kind='stray', lost=0, frames_lost=0)
+        event.pop('restart', None)
+        self.next_expected[topic], self.last_pubseq[topic] = expected, prev_pub
 
     def _lose(self, topic, n):
         self.samples_lost += n
@@ -142,6 +161,12 @@ class GapTracker:
         it was recorded; ``stamp_ns``: its header stamp (the rig time of its first sample). Events carry both.
         """
         self.samples_seen += count
+        pending = self._went_back.get(topic)
+        if pending is not None:
+            if first == pending[0]:
+                self._undo_stray(topic)
+            else:
+                del self._went_back[topic]
         expected = self.next_expected.get(topic)
         self.next_expected[topic] = first + count
         prev_pub = self.last_pubseq.get(topic)
@@ -187,6 +212,7 @@ class GapTracker:
                 self.gaps += 1
             event = {'topic': topic, 'kind': 'gap' if lost else 'restart', 'restart': True, 'expected': expected,
                      'received': first, 'lost': lost, 'frames_lost': frames_lost}
+            self._went_back[topic] = (expected, prev_pub, event, lost, frames_lost)
         event['log_time_ns'], event['stamp_ns'] = int(log_time_ns), int(stamp_ns)
         if len(self.events) < MAX_EVENTS:
             self.events.append(event)
@@ -203,7 +229,7 @@ class GapTracker:
 
     def summary(self) -> dict:
         return {'sequence_gaps': self.gaps, 'samples_lost': self.samples_lost,
-                'sequence_restarts': self.restarts, 'sequence_jumps': self.jumps,
+                'sequence_restarts': self.restarts, 'sequence_jumps': self.jumps, 'sequence_strays': self.strays,
                 'samples_skipped': self.samples_skipped, 'frames_lost': self.frames_lost,
                 'samples_seen': self.samples_seen, 'samples_lost_by_topic': dict(self.lost_by_topic)}
 
@@ -277,4 +303,4 @@ def _counts(tracker: GapTracker) -> dict:
     return {'sequence_gaps': tracker.gaps, 'samples_lost': tracker.samples_lost,
             'sequence_restarts': tracker.restarts, 'sequence_jumps': tracker.jumps,
             'samples_skipped': tracker.samples_skipped, 'frames_lost': tracker.frames_lost,
-            'samples_seen': tracker.samples_seen}
+            'samples_seen': tracker.samples_seen, 'sequence_strays': tracker.strays}
