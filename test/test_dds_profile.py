@@ -35,6 +35,7 @@ PROGRAM = """name: dds
 blocks:
   - {name: a, waveform: sine, frequency: 5 Hz, amplitude: 0.1 mm, cycles: 3}
 """
+pytestmark = [pytest.mark.ros, pytest.mark.slow]
 DOMAIN = 230 + os.getpid() % 2      # a domain of our own (the profile reaches 64 participant ports up to 231)
 
 

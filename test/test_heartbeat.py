@@ -17,6 +17,7 @@ second of its last beat, a restarted one (new pid) is counted, and a node never 
 import os
 import time
 
+import pytest
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
@@ -25,6 +26,7 @@ from rubber_rig.nodes.monitor import SuiteMonitor
 
 from support.ros import ros_context
 
+pytestmark = pytest.mark.ros
 DOMAIN = 90 + os.getpid() % 10
 
 

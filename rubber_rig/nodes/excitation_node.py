@@ -193,6 +193,7 @@ class ExcitationNode(Node):
         self.peers = Peers(self)           # the suite's other nodes: silent ones are named in diagnostics
         self._silent_seen = {}             # node -> longest silence seen during the running program [s]
         self._silent_now: dict[str, float] = {}
+        self._silent_before: set[str] = set()
         self.create_timer(0.1, self.watch_peers)
 
     @property
@@ -441,7 +442,8 @@ class ExcitationNode(Node):
         self._last_cycle_end, self._blind = grant.first_sequence, ''
         self.events, self._elapsed_samples = [], 0
         self._recorded_by = self.recording_path()     # the recording this program starts in ('' if none)
-        self._silent_seen = {}
+        # silences that began before the program (a node restarted just before it) are not the program's
+        self._silent_seen, self._silent_before = {}, set(self._silent_now)
         self._recording_lost = ''
         self.pub_program.publish(String(data=text))
         self.get_logger().info(f"program '{program.name}': {len(program.blocks)} blocks, "
@@ -743,10 +745,11 @@ class ExcitationNode(Node):
         for name, age in quiet.items():
             if name not in self._silent_now:
                 self.get_logger().error(f'{name} is silent: no heartbeat for {age:.1f} s (stuck or gone)')
-            if self.runner is not None:
+            if self.runner is not None and name not in self._silent_before:
                 self._silent_seen[name] = max(age, self._silent_seen.get(name, 0.0))
         for name in set(self._silent_now) - set(quiet):
             self.get_logger().info(f'{name} beats again')
+            self._silent_before.discard(name)
         changed = set(quiet) != set(self._silent_now)
         self._silent_now = quiet
         if changed:
