@@ -204,9 +204,9 @@ class Soak:
                     time.sleep(1.0)
                     op.wait_ready(20.0)
                     continue
-                result = op.result(handle, 60.0)
+                result = op.result(handle, 40.0)
                 self.programs.append({'t': start, 'end': self.now(), 'outcome': 'ok' if result and result.success
-                                      else 'failed', 'message': result.message if result else 'no result in 60 s'})
+                                      else 'failed', 'message': result.message if result else 'no result in 40 s'})
                 if not (result and result.success):
                     print(f'[{self.now():7.1f} s] program ended: {self.programs[-1]["message"]}', flush=True)
                     for _ in range(5):      # acknowledge a fault as an operator would
