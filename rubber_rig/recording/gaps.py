@@ -228,10 +228,7 @@ class GapTracker:
                             publication_sequence=publication_sequence, stamp_ns=stamp_ns_of(msg))
 
     def summary(self) -> dict:
-        return {'sequence_gaps': self.gaps, 'samples_lost': self.samples_lost,
-                'sequence_restarts': self.restarts, 'sequence_jumps': self.jumps, 'sequence_strays': self.strays,
-                'samples_skipped': self.samples_skipped, 'frames_lost': self.frames_lost,
-                'samples_seen': self.samples_seen, 'samples_lost_by_topic': dict(self.lost_by_topic)}
+        return dict(_counts(self), samples_lost_by_topic=dict(self.lost_by_topic))
 
 
 class LossLedger:
