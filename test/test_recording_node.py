@@ -251,3 +251,18 @@ def test_unwritable_output_dir_is_reported_not_fatal(context, tmp_path):
                                                             path=str(tmp_path / 'elsewhere')))
         assert spin_until(executor, future.done) and future.result().success
         assert rec.core.recording and rec.core.current_file.parent == tmp_path / 'elsewhere'
+
+
+def test_a_recorder_records_its_own_suite_not_another_on_the_domain(context, tmp_path):
+    """A recorder in the root namespace (as `rubber-rig bench` runs it) records the topics its suite's nodes
+    publish, not those of a second suite (/rig1) on the same domain."""
+    ours, theirs = Node('fake_rig', context=context), Node('fake_rig', namespace='/rig1', context=context)
+    rec = RecorderNode(context=context, parameter_overrides=[
+        Parameter('output_dir', value=str(tmp_path)), Parameter('discovery_period', value=0.1)])
+    with spinning(context, ours, theirs, rec) as executor:
+        ours.create_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
+        theirs.create_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
+        theirs.create_publisher(RigStatus, topics.STATUS, topics.LATCHED_QOS)
+        assert spin_until(executor, lambda: '/samples' in rec._subs, 10.0)
+        spin_until(executor, lambda: False, 1.0)          # a second of discovery: /rig1's topics stay out
+        assert set(rec._subs) == {'/samples'}, set(rec._subs)

@@ -99,7 +99,8 @@ class RecorderNode(Node):
         self.output_dir = declare(self, 'output_dir', 'recordings', 'directory for recordings')
         self.declare_parameter('topics', Parameter.Type.STRING_ARRAY, ParameterDescriptor(
             description='topics to record (relative names resolve in the namespace); '
-                        'not set or empty: every topic under the node namespace'))
+                        'not set or empty: every topic under the node namespace that nodes of this namespace '
+                        'publish'))
         autostart = declare(self, 'autostart', True, 'start recording at once')
         split_size = declare(self, 'split_size', 0.0, 'start a new file at this size (0: never)',
                              range=(0.0, 1e6), units='MB')
@@ -187,11 +188,14 @@ class RecorderNode(Node):
             self.update_status()
 
     # -- topics ------------------------------------------------------------------------------
-    def wanted_topics(self, graph):
+    def configured_topics(self) -> list[str]:
         try:
-            configured = self.get_parameter('topics').value or []
+            return [t for t in (self.get_parameter('topics').value or []) if t]
         except ParameterUninitializedException:   # declared without a value: record everything
-            configured = []
+            return []
+
+    def wanted_topics(self, graph):
+        configured = self.configured_topics()
         if configured:
             names = {self.resolve_topic_name(t) for t in configured if t}
             return [(n, t) for n, t in graph if n in names]
@@ -205,6 +209,10 @@ class RecorderNode(Node):
                 continue
             publishers = [p for p in self.get_publishers_info_by_topic(name)
                           if p.node_name != self.get_name() or p.node_namespace != self.get_namespace()]
+            if not self.configured_topics():
+                # by default a suite's recorder records its suite: topics published by nodes of its namespace
+                # (a recorder in the root namespace would otherwise record every other suite on the domain)
+                publishers = [p for p in publishers if p.node_namespace == self.get_namespace()]
             if not publishers:
                 continue                      # QoS is matched to publishers: wait for one
             type_name = types[0]
