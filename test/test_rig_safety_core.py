@@ -15,6 +15,7 @@
 """The rig driver as the one safety authority, ROS-free (issue 11 items 1, 2, 5, 6, 8, 11): the safe ramp at
 any phase, stream ownership and the true continuation of the command, stream loss, reset and the 16-bit
 sequence wrap, slow and small stuck sensors, limits changed at run time."""
+import math
 import time
 
 import numpy as np
@@ -141,8 +142,14 @@ def test_only_the_stream_owner_commands_and_checks_continue_from_the_queue_end()
         assert not drv.queue_setpoints(end + int(FS) + 1, np.full(10, 3e-3), grant.stream_id)
         assert 'discontinuous streams are refused' in drv.refusal
         assert not drv.queue_setpoints(end - 5, np.zeros(10), grant.stream_id)
+        # a contiguous batch with a NaN (forged with the owner's id, or corrupted) is refused without a fault
+        assert not drv.queue_setpoints(end, np.array([0.25e-3, math.nan, 0.25e-3]), grant.stream_id)
+        assert f'non-finite setpoint nan at sample {end + 1}' in drv.refusal
         st = drv.status
-        assert st.faults == 0 and st.setpoints_sent == sent and st.extra['setpoints_refused'] == 30
+        assert st.faults == 0 and st.setpoints_sent == sent and st.extra['setpoints_refused'] == 33
+        assert drv.queue_setpoints(end, np.full(3, 0.25e-3), grant.stream_id)      # the owner's stream goes on
+        sent += 3
+        end += 3
         assert st.extra['stream_owner'] == '/rig1/excitation'
         # the velocity check continues from where the queue ends (0.25 mm), not from the last applied sample
         # (still ~0: nothing polled yet): a step back to 0 is 0.25 m/s

@@ -248,12 +248,21 @@ class RigDriver:
             self.refusal = why
             self.counters['setpoints_refused'] += int(x.size)
             return False
+        if not np.all(np.isfinite(x)):
+            # never a setpoint of a program (the excitation cannot make one): a corrupted or forged batch. It is
+            # refused without a fault, so a forged one that copied the owner's stream id and name cannot end its
+            # program; the owner's own next batch then continues the queue as if it never came (were it the
+            # owner's, its next batch would not continue and the stream would be lost after stream_timeout)
+            k = int(np.argmin(np.isfinite(x)))
+            self.refusal = f'non-finite setpoint {float(x[k])} at sample {first_sequence + k}: batch refused'
+            self.counters['setpoints_refused'] += int(x.size)
+            return False
         s.last_rx_wall = self._clock()
         s.batches += 1
         if x.size == 0:
             return True
         lim = self.limits
-        lo, hi = (float(np.min(x)), float(np.max(x))) if np.all(np.isfinite(x)) else (math.nan, math.nan)
+        lo, hi = float(np.min(x)), float(np.max(x))
         if not (lim.displacement_min <= lo and hi <= lim.displacement_max):
             self._fault(FAULT_DISPLACEMENT_LIMIT, f'setpoints {lo:.6g}..{hi:.6g} m outside the displacement '
                                                   f'limits {lim.displacement_min:g}..{lim.displacement_max:g} m')
