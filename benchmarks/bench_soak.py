@@ -232,12 +232,17 @@ class Soak:
             return 'expected fault'
         return 'false fault'
 
-    def expected_silence(self, s: dict) -> str:
-        for e in self.log:
+    def cause(self, s: dict) -> dict | None:
+        """The latest kill or freeze that explains a silence (the silence was first seen within 40 s after it)."""
+        for e in reversed(self.log):
             if e['kind'] in ('kill', 'freeze') and f'{NS}/{e["node"]}' == s['node'] \
                     and e['t'] - 0.5 <= s['seen'] <= e['t'] + 40.0:
-                return e['kind']
-        return ''
+                return e
+        return None
+
+    def expected_silence(self, s: dict) -> str:
+        e = self.cause(s)
+        return e['kind'] if e else ''
 
     def ledger(self) -> dict:
         info = recorder = recovered = 0
@@ -275,8 +280,7 @@ class Soak:
         caused = [s for s in self.silences if self.expected_silence(s)]
         freezes = [s for s in self.silences if self.expected_silence(s) == 'freeze']
         spontaneous = [s for s in self.silences if not self.expected_silence(s)]
-        detect = [s['seen'] - next(e['t'] for e in self.log if e['kind'] == 'freeze' and e['t'] <= s['seen'] + 0.5
-                                   and s['seen'] - e['t'] < 10) for s in freezes]
+        detect = [s['seen'] - self.cause(s)['t'] for s in freezes]
         growth = {}
         for (node, _pid), pts in self.rss.items():
             if len(pts) >= 3 and pts[-1][0] - pts[0][0] >= 60:
@@ -339,7 +343,13 @@ def main(argv=None) -> int:
     parser.add_argument('--json', help='also write the figures to this JSON file')
     args = parser.parse_args(argv)
     with tempfile.TemporaryDirectory(prefix='soak_') as tmp:
-        r = Soak(args, Path(tmp)).run()
+        soak = Soak(args, Path(tmp))
+        try:
+            r = soak.run()
+        finally:                          # the raw record, whatever the report makes of it
+            raw = {'log': soak.log, 'programs': soak.programs, 'silences': soak.silences,
+                   'rss': {f'{n}:{pid}': pts for (n, pid), pts in soak.rss.items()}}
+            Path(args.json or 'soak.json').with_suffix('.raw.json').write_text(json.dumps(raw, default=str))
     print(markdown(r))
     if args.json:
         Path(args.json).write_text(json.dumps(r, indent=1, default=str))
