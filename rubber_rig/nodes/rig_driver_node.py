@@ -136,7 +136,7 @@ class RigDriverNode(LifecycleNode):
             try:
                 values[setting.path] = setting.value(self.get_parameter(setting.name).value)
             except ValueError as exc:
-                raise ParameterError(self.get_name(), setting.name, str(exc)) from None
+                raise ParameterError(self, setting.name, str(exc)) from None
         p = {name: self.get_parameter(name).value for name in SPECIMEN_PARAMETERS}
         specimen = ({'model': 'fractional_zener_berg', 'parameter_set': p['sim.specimen.parameter_set']}
                     if p['sim.specimen.parameter_set'] else
@@ -149,7 +149,7 @@ class RigDriverNode(LifecycleNode):
             setting = setting_for(RIG_SETTINGS, exc.field)
             name = setting.name if setting else (
                 'sim.specimen.parameter_set' if exc.field.startswith('sim.specimen') else exc.field)
-            raise ParameterError(self.get_name(), name, str(exc)) from None
+            raise ParameterError(self, name, str(exc)) from None
 
     # -- lifecycle ----------------------------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
