@@ -19,19 +19,25 @@ what is wrong, never a Python traceback.
 * element_model with a parameter_set it cannot use (missing, binary, not YAML, YAML of the wrong layout) ends at
   start with one FATAL line and exit status 2; the same files set at run time (``ros2 param set``) are refused
   with the reason and the running model stays.
+* rig_driver with a sample_rate its CAN bus cannot carry stays up and unconfigured: configure fails with one
+  line naming sample_rate, the bus and its bitrates and the highest rate it carries; after ``ros2 param set``
+  of a rate that fits, configure and activate work.
 """
 import os
 from pathlib import Path
 
 import pytest
+from lifecycle_msgs.msg import State, Transition
+from lifecycle_msgs.srv import ChangeState, GetState
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 
-from msg_defs.msg import ModelParameters
+from msg_defs.msg import ModelParameters, RigStatus
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.processes import Operator, SuiteProcesses
 from rubber_rig.nodes.spin import EXIT_BAD_PARAMETER
+from rubber_rig.rig.config import RigConfig
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 
@@ -98,9 +104,13 @@ def test_element_model_with_a_bad_parameter_set_exits_with_one_line(procs, tmp_p
     assert ']: ready' not in log
 
 
-def set_parameter(op: Operator, node: str, name: str, value: str):
-    request = SetParameters.Request(parameters=[ParameterMsg(
-        name=name, value=ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value))])
+def set_parameter(op: Operator, node: str, name: str, value):
+    """``ros2 param set <node> <name> <value>`` (a string or a double); the SetParametersResult."""
+    if isinstance(value, str):
+        msg = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
+    else:
+        msg = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=float(value))
+    request = SetParameters.Request(parameters=[ParameterMsg(name=name, value=msg)])
     response = op.call(f'{node}/set_parameters', SetParameters, request, timeout=10.0)
     assert response is not None, f'{node}/set_parameters did not answer'
     return response.results[0]
@@ -127,3 +137,50 @@ def test_a_bad_parameter_set_at_run_time_is_refused_and_the_model_stays(procs, o
     assert set_parameter(operator, 'element_model', 'parameter_set', 'swing_arm_joint_0C').successful
     assert operator.wait_for(lambda: models[-1].parameter_set == 'swing_arm_joint_0C', 10.0)
     no_traceback(procs.log('element_model'))
+
+
+# -- rig_driver: sample_rate beyond the bus ------------------------------------------------------------------
+def lifecycle(op: Operator, transition: int) -> bool:
+    r = op.call('rig_driver/change_state', ChangeState, ChangeState.Request(transition=Transition(id=transition)),
+                timeout=10.0)
+    assert r is not None, 'rig_driver/change_state did not answer'
+    return r.success
+
+
+def lifecycle_state(op: Operator) -> int:
+    r = op.call('rig_driver/get_state', GetState, GetState.Request(), timeout=10.0)
+    assert r is not None, 'rig_driver/get_state did not answer'
+    return r.current_state.id
+
+
+def test_rig_driver_with_a_sample_rate_the_bus_cannot_carry_stays_unconfigured(procs, operator):
+    too_fast = 20000.0                     # the default bus (CAN FD 1/5 Mbit/s, packed frames) carries ~18 kHz
+    bus = RigConfig(sample_rate=1000.0)
+    most = bus.bus_load().rate_at(bus.max_bus_load)
+    assert too_fast > most
+    procs.start('rig_driver', {'sample_rate': too_fast})     # autostart: it configures itself at start
+    assert procs.wait_started('rig_driver', START), procs.log('rig_driver')[-3000:]
+    assert operator.wait_status(lambda s: s.state == RigStatus.STATE_UNCONFIGURED, 10.0)
+    assert operator.status.sample_rate == too_fast
+    assert lifecycle_state(operator) == State.PRIMARY_STATE_UNCONFIGURED and procs.alive('rig_driver')
+    log = procs.log('rig_driver')
+    errors = lines_with(log, 'configure failed')
+    assert len(errors) == 1, log[-3000:]
+    line = errors[0]
+    assert '[ERROR]' in line and "parameter 'sample_rate'" in line and '20000 Hz' in line and 'stays unconfigured' \
+        in line, line
+    assert '1/5 Mbit/s CAN FD bus' in line and f'this bus carries at most {most:.0f} Hz' in line, line
+    no_traceback(log)
+
+    # configure again unchanged: refused the same way, still up
+    assert not lifecycle(operator, Transition.TRANSITION_CONFIGURE)
+    assert len(lines_with(procs.log('rig_driver'), 'configure failed')) == 2 and procs.alive('rig_driver')
+    # a rate the bus carries (accepted while unconfigured), then configure and activate
+    result = set_parameter(operator, 'rig_driver', 'sample_rate', 1000.0)
+    assert result.successful, result.reason
+    assert lifecycle(operator, Transition.TRANSITION_CONFIGURE)
+    assert lifecycle_state(operator) == State.PRIMARY_STATE_INACTIVE
+    assert lifecycle(operator, Transition.TRANSITION_ACTIVATE)
+    assert operator.wait_status(lambda s: s.state == RigStatus.STATE_IDLE and s.sample_rate == 1000.0, 10.0), \
+        operator.status
+    no_traceback(procs.log('rig_driver'))

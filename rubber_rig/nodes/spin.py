@@ -27,6 +27,7 @@ A node constructor that refuses its parameters (:class:`ParameterError`: a value
 parameter_set file that is missing or not YAML) ends the process with that one line, logged as FATAL, and exit
 status EXIT_BAD_PARAMETER (2, the usage-error status of the command-line tools), not a traceback: a plain node has
 no "unconfigured" state to wait in, and ``ros2 launch`` shows the line next to "process has died [exit code 2]".
+(rig_driver, a lifecycle node, stays up unconfigured instead when only its CAN bus cannot carry the sample_rate.)
 """
 from __future__ import annotations
 
