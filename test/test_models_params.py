@@ -203,6 +203,20 @@ def test_parameter_set_from_a_fitted_yaml_file(tmp_path):
         load_parameter_set(str(bad))
 
 
+@pytest.mark.parametrize('content, why', [
+    (b'\x89PNG\r\n\x1a\n\x00\xff\xfe', 'not a YAML text file (byte 0x89 at offset 0 is not UTF-8'),
+    (b'sets: [unclosed\n  a: {b\n', 'not valid YAML (line 2, column 4: '),
+])
+def test_a_binary_or_broken_parameter_file_is_a_one_line_value_error(tmp_path, content, why):
+    """A binary file was a bare UnicodeDecodeError, broken YAML a message over several lines with a caret drawing."""
+    path = tmp_path / 'set.yaml'
+    path.write_bytes(content)
+    with pytest.raises(ValueError) as err:
+        load_parameter_set(f'{path}:s')
+    assert str(err.value).startswith(f'{path}: {why}') and '\n' not in str(err.value), str(err.value)
+    assert not isinstance(err.value, UnicodeDecodeError)
+
+
 def test_physics_names_and_the_earlier_names_give_the_same_sets():
     """Sets and model types have physics names; the earlier seed-file names still load (recordings carry them)."""
     from rubber_rig.models import (

@@ -39,6 +39,7 @@ from rubber_rig.units import to_si
 
 from .catalogue import OPERATING_POINT_TYPES, build_operating_point_spring, element_type
 from .params import ParameterValueError, load_parameter_set, parameter_set_info
+from .yamlfile import read_yaml_file
 
 _RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma')
 
@@ -288,8 +289,8 @@ def is_model_file(path) -> bool:
     if p.suffix not in ('.yaml', '.yml') or not p.is_file():
         return False
     try:
-        data = yaml.safe_load(p.read_text(encoding='utf-8'))
-    except yaml.YAMLError:
+        data = read_yaml_file(p)
+    except ValueError:   # unreadable, binary or not YAML: not a model file (whoever reads it says why)
         return False
     return isinstance(data, dict) and 'elements' in data
 
@@ -298,10 +299,7 @@ def load_model_file(path) -> ModelSpec:
     path = Path(str(path)).expanduser()
     if not path.is_file():
         raise FileNotFoundError(f'no such model file: {path}')
-    try:
-        data = yaml.safe_load(path.read_text(encoding='utf-8'))
-    except yaml.YAMLError as exc:
-        raise ValueError(f'{path}: not valid YAML ({exc})') from None
+    data = read_yaml_file(path)   # one-line ValueError: unreadable, binary, not YAML
     spec = parse_model(data, str(path))
     spec.name = spec.name or path.stem
     return spec

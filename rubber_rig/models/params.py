@@ -46,6 +46,8 @@ import numpy as np
 import yaml
 from scipy.interpolate import PchipInterpolator
 
+from .yamlfile import read_yaml_file
+
 DATA_DIR = Path(__file__).resolve().parent / 'data'
 
 
@@ -235,10 +237,7 @@ def read_parameter_file(path) -> dict:
     path = Path(path).expanduser()
     if not path.is_file():
         raise FileNotFoundError(f'no such parameter file: {path}')
-    try:
-        data = yaml.safe_load(path.read_text(encoding='utf-8')) or {}
-    except yaml.YAMLError as exc:
-        raise ValueError(f'{path}: not valid YAML ({exc})') from None
+    data = read_yaml_file(path) or {}    # one-line ValueError: unreadable, binary, not YAML
     sets = data.get('sets') if isinstance(data, dict) else None
     if not isinstance(sets, dict) or not sets:
         raise ValueError(f'{path}: no "sets" mapping of parameter sets '

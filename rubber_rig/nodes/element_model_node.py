@@ -40,9 +40,18 @@ measured displacement, whose noise would otherwise reset the friction reference 
 collapse the friction loop (see rubber_rig.online.predictor). Set it to a few times the displacement noise RMS;
 0 is the paper's rule. Changing it rebuilds the model (warmed up on the recent history) like a parameter change.
 
-No callback takes the node down: a parameter change that cannot be resolved (a missing or malformed parameter
-file, values out of range) is refused through the SetParametersResult with a reason naming the parameter - the
-parameter set is read in that validating callback, and what it read is what the post-set callback installs. A
+At start, a model choice that cannot be used (a parameter_set file that is missing, unreadable, binary, not YAML
+or not a parameter table or model file; a value out of range) ends the process with one FATAL line naming the
+parameter, the file and the problem, and exit status 2 - no traceback (rubber_rig.nodes.spin). The node does not
+stay up without a model: it is a plain node, not a managed one, so there is no "unconfigured" state a launch file
+or an operator could see or leave with a configure; a node up without a model would look healthy in ``ros2 node
+list`` while predicting nothing, and the recording would silently lack the prediction. A process that dies at once,
+its reason beside launch's "process has died [exit code 2]", is what a ROS user reads as "fix the parameter".
+
+No callback takes the node down: a parameter change that cannot be resolved (a missing, binary or malformed
+parameter file, values out of range) is refused through the SetParametersResult with a reason naming the
+parameter (``ros2 param set`` prints it), and the running model stays - the parameter set is read in that
+validating callback, and what it read is what the post-set callback installs. A
 sample batch the node cannot use (array lengths differ, a sample period that is not finite and positive) is
 dropped with a throttled warning; non-finite samples are skipped by the model and predicted as NaN (see
 rubber_rig.online.predictor) and kept out of the cycle metrics; a sequence that goes backwards (a restarted
@@ -116,11 +125,12 @@ class ElementModelNode(Node):
                                 'are noise (rig holding still) and are not reported', range=(0.0, 1e-2), units='m')
 
         try:  # validate the whole choice once at start: the error names the offending parameter
-            self._validate(self._choice(), CHOICE_PARAMS)
-            self.predictor = OnlinePredictor(self._choice(), self.get_parameter('warmup_time').value,
-                                             self.get_parameter('temperature_hysteresis').value)
-        except ChoiceError as exc:
-            raise ParameterError(self.get_name(), exc.field, str(exc)) from None
+            choice = self._choice()
+            resolved = self._checked(choice, CHOICE_PARAMS)
+        except ChoiceError as exc:   # spin_node logs it as one line and exits with status 2 (see the docstring)
+            raise ParameterError(self, exc.field, str(exc)) from None
+        self.predictor = OnlinePredictor(choice, self.get_parameter('warmup_time').value,
+                                         self.get_parameter('temperature_hysteresis').value, resolved)
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
 
@@ -268,17 +278,29 @@ class ElementModelNode(Node):
             ModelChoice(source='temperature', temperature=choice.temperature).resolve()
         return choice.resolve()
 
+    @classmethod
+    def _checked(cls, choice: ModelChoice, changed) -> tuple:
+        """``_validate`` whose every failure is a ChoiceError naming a parameter: a failure that is not one
+        (which would be a bug in a reader) names the choice parameters that changed, with the exception's type.
+        """
+        try:
+            return cls._validate(choice, changed)
+        except ChoiceError:
+            raise
+        except Exception as exc:   # noqa: BLE001 - whatever goes wrong, refuse the choice with a reason
+            names = ', '.join(sorted(set(changed) & set(CHOICE_PARAMS))) or 'parameter_set'
+            raise ChoiceError(names, f'{type(exc).__name__}: {exc}') from None
+
     def _on_set_parameters(self, params) -> SetParametersResult:
         changed = {p.name: p.value for p in params}
         if not set(changed) & set(CHOICE_PARAMS):
             return SetParametersResult(successful=True)
         try:
             choice = self._choice(changed)
-            self._validated = (choice, self._validate(choice, changed))
-        except Exception as exc:   # noqa: BLE001 - whatever goes wrong, refuse the change; never raise from here
+            self._validated = (choice, self._checked(choice, changed))
+        except ChoiceError as exc:
             self._validated = None
-            what = str(exc) if isinstance(exc, ValueError) else f'{type(exc).__name__}: {exc}'
-            return SetParametersResult(successful=False, reason=f'{getattr(exc, "field", "source")}: {what}')
+            return SetParametersResult(successful=False, reason=f'{exc.field}: {exc}')
         return SetParametersResult(successful=True)
 
     def _after_set_parameters(self, params) -> None:

@@ -126,20 +126,20 @@ class ExcitationNode(Node):
             raw = list(DEFAULTS) if default_detectors == 'default' else yaml.safe_load(default_detectors) or []
             self.default_detectors = parse_detectors(raw, 'default_detectors')
         except (DetectorError, yaml.YAMLError) as exc:
-            raise ParameterError(self.get_name(), 'default_detectors', str(exc)) from None
+            raise ParameterError(self, 'default_detectors', str(exc)) from None
         if self.stream_period >= self.lead_time / 2:
-            raise ParameterError(self.get_name(), 'stream_period', f'{self.stream_period} s must be below half '
+            raise ParameterError(self, 'stream_period', f'{self.stream_period} s must be below half '
                                  f'of lead_time ({self.lead_time} s) or the driver could starve')
         try:
             self.force_model = element_force_model(self.force_model_set) if self.force_model_set else None
         except (ValueError, OSError) as exc:
-            raise ParameterError(self.get_name(), 'force_model', str(exc)) from None
+            raise ParameterError(self, 'force_model', str(exc)) from None
         self._pending = None
         if self.program_param:  # validate at start: a wrong name fails here, naming the parameter
             try:
                 self._pending = read_program(self.program_param)
             except (ValueError, OSError) as exc:
-                raise ParameterError(self.get_name(), 'program', str(exc)) from None
+                raise ParameterError(self, 'program', str(exc)) from None
 
         self.status: RigStatus | None = None
         self._status_wall = 0.0

@@ -33,10 +33,17 @@ from .rclpy_compat import parameter_overrides
 
 
 class ParameterError(ValueError):
-    """A parameter value is invalid; the message names the parameter (``<node>.<param>: why``)."""
+    """A parameter value is invalid; the message names the parameter (``parameter 'p' of node 'n': why``).
 
-    def __init__(self, node_name: str, name: str, why: str):
+    ``node``: the node (or its name). ``logger_name`` is the node's logger (namespace included), so whoever
+    reports the error at start (rubber_rig.nodes.spin) logs it under the node's name.
+    """
+
+    def __init__(self, node, name: str, why: str):
+        node_name = node.get_name() if isinstance(node, Node) else str(node)
         self.parameter = name
+        self.why = why
+        self.logger_name = node.get_logger().name if isinstance(node, Node) else node_name
         super().__init__(f"parameter '{name}' of node '{node_name}': {why}")
 
 
@@ -61,9 +68,9 @@ def declare(node: Node, name: str, default: Any, description: str, *, range: tup
         value = node.declare_parameter(name, default, d).value
     # rclpy's range check: re-raise naming node and field
     except (InvalidParameterValueException, InvalidParameterTypeException) as exc:
-        raise ParameterError(node.get_name(), name, str(exc)) from None
+        raise ParameterError(node, name, str(exc)) from None
     if choices is not None and value not in choices:
-        raise ParameterError(node.get_name(), name, f'{value!r} is not one of {", ".join(choices)}')
+        raise ParameterError(node, name, f'{value!r} is not one of {", ".join(choices)}')
     return value
 
 
@@ -82,7 +89,7 @@ def _promote_int_override(node: Node, name: str, default: Any) -> None:
 def check(node: Node, condition: bool, name: str, why: str) -> None:
     """Raise ParameterError naming ``name`` unless ``condition`` holds."""
     if not condition:
-        raise ParameterError(node.get_name(), name, why)
+        raise ParameterError(node, name, why)
 
 
 def undeclared_overrides(node: Node) -> list[str]:

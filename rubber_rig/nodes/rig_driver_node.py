@@ -19,6 +19,15 @@ rig on python-can's virtual bus, or any python-can interface/channel/bitrate); a
 accept setpoints; deactivate = safe ramp to rest, stop streaming; cleanup = close the bus. With ``autostart``
 the node configures and activates itself (what ``ros2 launch`` users expect from a simulated rig).
 
+A sample_rate the CAN bus cannot carry (at can.bitrate / can.data_bitrate with the frame profile, within
+can.max_load) does not end the process: configure fails with one error line naming sample_rate, the bus and its
+bitrates, the load the rate needs and the highest rate the bus carries, and the node stays up and unconfigured,
+its status saying so; ``ros2 param set`` a rate that fits (accepted while unconfigured) and configure again.
+What the bus carries is, like whether the bus is there at all, a question about the bus configure opens. Values
+wrong in themselves or contradicting each other (a range, limits, heartbeat_period >= watchdog_timeout, a fault
+list that does not parse) are refused at start: one FATAL line naming the parameter, exit status 2
+(rubber_rig.nodes.spin); set at run time while unconfigured, they make configure fail the same way.
+
 Subscribes:  setpoints (msg_defs/SetpointBatch; only the open stream's owner commands the rig, see below)
 Publishes:   samples (msg_defs/RigSampleBatch, at least ``batch_size`` samples per message)
              status (msg_defs/RigStatus, latched, on change and every ``status_period``)
@@ -55,19 +64,24 @@ from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles,
 from rubber_rig.nodes.rclpy_compat import lifecycle_state
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.rig.can.driver import StreamRefused
-from rubber_rig.rig.config import ConfigError, RigConfig
+from rubber_rig.rig.config import BusLoadError, ConfigError, RigConfig
 from rubber_rig.rig.interface import open_rig
 from rubber_rig.settings import nest, setting_for, settings_of
 
 BATCH_PERIOD = 0.01   # [s] default length of a sample batch (batch_size 0)
 RIG_SETTINGS = settings_of(RigConfig)   # the core's configuration, described once (rubber_rig/rig/config.py)
 # parameters the running driver applies at once; every other one needs configure (refused while configured)
-LIVE_PARAMETERS = {s.name for s in RIG_SETTINGS if s.name.startswith('limits.')} | {
+LIMIT_PARAMETERS = tuple(s.name for s in RIG_SETTINGS if s.name.startswith('limits.'))
+LIVE_PARAMETERS = set(LIMIT_PARAMETERS) | {
     'stream_timeout', 'stream_loss_action', 'rest_position', 'batch_size', 'max_batch_delay', 'status_period',
     'diagnostics_period', 'autostart', 'owner_timeout'}
 # the simulated specimen: node parameters built into SimOptions.specimen (a model spec mapping)
 SPECIMEN_PARAMETERS = ('sim.specimen.parameter_set', 'sim.specimen.temperature',
                        'sim.specimen.friction_reversal_threshold')
+
+
+class BusCapacityError(ParameterError):
+    """sample_rate is more than the configured CAN bus carries (the node stays up, unconfigured)."""
 
 
 class RigDriverNode(LifecycleNode):
@@ -101,7 +115,12 @@ class RigDriverNode(LifecycleNode):
                                      'is stream loss, also while it holds the rig (an owner that never beat, '
                                      'e.g. a script without one, is watched by stream_timeout alone)',
                                      range=(0.3, 30.0), units='s')
-        self.config = self.rig_config()   # validated now: a bad value fails at start, naming the parameter
+        try:   # checked now: a bad value fails at start, naming the parameter (spin_node: one line, exit 2) ...
+            self.config: RigConfig | None = self.rig_config()
+        except BusCapacityError as exc:   # ... except a rate the bus cannot carry: configure fails, node stays up
+            self.config = None
+            if not self.autostart:
+                self.get_logger().error(f'{exc}; configure will fail until the parameter is changed')
 
         self.rig = None
         self.pub_samples = None
@@ -143,7 +162,7 @@ class RigDriverNode(LifecycleNode):
             try:
                 values[setting.path] = setting.value(self.get_parameter(setting.name).value)
             except ValueError as exc:
-                raise ParameterError(self.get_name(), setting.name, str(exc)) from None
+                raise ParameterError(self, setting.name, str(exc)) from None
         p = {name: self.get_parameter(name).value for name in SPECIMEN_PARAMETERS}
         specimen = ({'model': 'fractional_zener_berg', 'parameter_set': p['sim.specimen.parameter_set']}
                     if p['sim.specimen.parameter_set'] else
@@ -156,15 +175,23 @@ class RigDriverNode(LifecycleNode):
             setting = setting_for(RIG_SETTINGS, exc.field)
             name = setting.name if setting else (
                 'sim.specimen.parameter_set' if exc.field.startswith('sim.specimen') else exc.field)
-            raise ParameterError(self.get_name(), name, str(exc)) from None
+            # the field's own message when the field is the parameter; a deeper field ('sim.faults[1].type') is named
+            why = exc.why if exc.field in (name, setting and setting.path) else str(exc)
+            raise (BusCapacityError if isinstance(exc, BusLoadError) else ParameterError)(self, name, why) from None
 
     # -- lifecycle ----------------------------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
             self.config = self.rig_config()
+        except ParameterError as exc:   # parameters that do not work together: stay unconfigured, say why
+            self.config = None
+            self.get_logger().error(f'configure failed, {self.get_name()} stays unconfigured (set the parameter and '
+                                    f'configure again): {exc}')
+            return TransitionCallbackReturn.FAILURE
+        try:
             self.rig = open_rig(self.config)
-        except Exception as exc:  # bus not available, bad parameter: stay unconfigured, say why
-            self.get_logger().error(f'configure failed: {exc}')
+        except Exception as exc:  # bus not available: stay unconfigured, say why
+            self.get_logger().error(f'configure failed, {self.get_name()} stays unconfigured: {exc}')
             return TransitionCallbackReturn.FAILURE
         self.pub_samples = self.create_lifecycle_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
         self.get_logger().info(f'rig open: backend {self.config.backend}, {self.config.sample_rate:g} Hz, '
@@ -239,6 +266,12 @@ class RigDriverNode(LifecycleNode):
         if fixed and self.rig is not None:
             return SetParametersResult(successful=False, reason=f"{', '.join(fixed)}: applied at configure; the "
                                        'rig is configured (deactivate and clean up first)')
+        if self.config is None:   # no configuration in force: configure checks all parameters together
+            if 'batch_size' in changed:
+                self.batch_size = int(changed['batch_size'])
+            if 'max_batch_delay' in changed:
+                self.max_batch_delay = float(changed['max_batch_delay'])
+            return SetParametersResult(successful=True)
         lim_changes = {n.split('.', 1)[1]: float(v) for n, v in changed.items() if n.startswith('limits.')}
         try:
             limits = Limits(**dict(self.config.limits.to_dict(), **lim_changes)) if lim_changes else None
@@ -340,7 +373,15 @@ class RigDriverNode(LifecycleNode):
             snapshot = {'state': RigStatus.STATE_UNCONFIGURED}
         else:
             snapshot = self.rig.driver.status
-        return conv.status_msg(snapshot, self.config.limits, self.config.sample_rate, now)
+        if self.config is not None:
+            limits, rate = self.config.limits, self.config.sample_rate
+        else:   # parameters that make no configuration (configure says why): what they ask for
+            try:
+                limits = Limits(**{n.split('.', 1)[1]: float(self.get_parameter(n).value) for n in LIMIT_PARAMETERS})
+            except (LimitError, TypeError, ValueError):
+                limits = Limits()
+            rate = self.get_parameter('sample_rate').value
+        return conv.status_msg(snapshot, limits, rate, now)
 
     def publish_status(self) -> None:
         self.watch_owner()
@@ -359,7 +400,9 @@ class RigDriverNode(LifecycleNode):
 
     def publish_diagnostics(self) -> None:
         status = self._last_status or self.status_message()
-        hw = f'{self.config.backend}:{self.config.channel or self.get_fully_qualified_name()}'
+        backend = self.config.backend if self.config is not None else self.get_parameter('backend').value
+        channel = self.config.channel if self.config is not None else self.get_parameter('can.channel').value
+        hw = f'{backend}:{channel or self.get_fully_qualified_name()}'
         self.pub_diag.publish(conv.diagnostics_msg(status, hw, self.bus_diagnostics(),
                                                    name=self.get_fully_qualified_name()))
 

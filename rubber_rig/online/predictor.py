@@ -192,11 +192,15 @@ class ModelChoice:
 class OnlinePredictor:
     """Predicts the force of each incoming batch; rebuilds the model when the choice or the temperature changes."""
 
-    def __init__(self, choice: ModelChoice, warmup_time: float = 5.0, temperature_hysteresis: float = 0.5):
+    def __init__(self, choice: ModelChoice, warmup_time: float = 5.0, temperature_hysteresis: float = 0.5,
+                 resolved: tuple | None = None):
+        """``resolved``: what ``choice.resolve()`` returned when the caller validated the choice (a parameter
+        file is then read once); resolved here otherwise.
+        """
         self.choice = choice
         self.warmup_time = warmup_time
         self.temperature_hysteresis = temperature_hysteresis
-        self.params, self.parameter_set, self.temperature = choice.resolve()
+        self.params, self.parameter_set, self.temperature = resolved if resolved is not None else choice.resolve()
         self.model = None
         self.dt = None
         self.next_sequence = None

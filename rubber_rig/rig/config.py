@@ -42,6 +42,11 @@ class ConfigError(ValueError):
     def __init__(self, field: str, why: str):
         super().__init__(f"rig config: field '{field}': {why}")
         self.field = field
+        self.why = why
+
+
+class BusLoadError(ConfigError):
+    """The configured bus cannot carry the protocol at sample_rate within max_bus_load (field 'sample_rate')."""
 
 
 FAULT_TYPES = ('drop', 'delay', 'duplicate', 'corrupt', 'stuck_sensor', 'silent_controller', 'bus_flood')
@@ -369,10 +374,10 @@ class RigConfig:
         if load.load > self.max_bus_load:
             bus = (f'{self.bitrate / 1e6:g}/{self.data_bitrate / 1e6:g} Mbit/s CAN FD' if self.fd
                    else f'{self.bitrate / 1e6:g} Mbit/s classic CAN')
-            raise ConfigError('sample_rate', f'{self.sample_rate:g} Hz needs {load.load * 100:.0f} % of the {bus} '
-                              f'bus with {self.frame_profile} frames, more than max_bus_load '
-                              f'({self.max_bus_load * 100:.0f} %): this bus carries at most '
-                              f'{load.rate_at(self.max_bus_load):.0f} Hz')
+            raise BusLoadError('sample_rate', f'{self.sample_rate:g} Hz needs {load.load * 100:.0f} % of the {bus} '
+                               f'bus with {self.frame_profile} frames, more than max_bus_load '
+                               f'({self.max_bus_load * 100:.0f} %): this bus carries at most '
+                               f'{load.rate_at(self.max_bus_load):.0f} Hz')
 
 
 def _build(cls, data, path):
