@@ -63,12 +63,14 @@ from rubber_rig.nodes.heartbeat import Peers, start_heartbeat
 from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles, declare
 from rubber_rig.nodes.rclpy_compat import lifecycle_state
 from rubber_rig.nodes.spin import spin_node
+from rubber_rig.rig.can import FAULT_WATCHDOG
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.config import BusLoadError, ConfigError, RigConfig
 from rubber_rig.rig.interface import open_rig
 from rubber_rig.settings import nest, setting_for, settings_of
 
 BATCH_PERIOD = 0.01   # [s] default length of a sample batch (batch_size 0)
+CLOSE_RAMP_WAIT = 5.0  # [s] close() waits at most this long for a moving rig's ramp to rest to end
 RIG_SETTINGS = settings_of(RigConfig)   # the core's configuration, described once (rubber_rig/rig/config.py)
 # parameters the running driver applies at once; every other one needs configure (refused while configured)
 LIMIT_PARAMETERS = tuple(s.name for s in RIG_SETTINGS if s.name.startswith('limits.'))
@@ -230,8 +232,10 @@ class RigDriverNode(LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def close(self) -> None:
-        """Ramp to rest, then close the bus (also called by the in-process launcher at shutdown). A hardware
-        controller finishes its ramp on its own; the simulated one is polled until it is at rest (<= 5 s).
+        """Ramp to rest, then close the bus (also called by the in-process launcher at shutdown). The controller
+        is polled until it reports the ramp done (at most CLOSE_RAMP_WAIT s), unless it is silent (watchdog
+        fault): a controller that reports nothing would hold the exit for the whole wait (5 s measured), and it
+        ramps to rest on its own once the host heartbeat stops (host_timeout). An idle rig does not wait at all.
         """
         self._stop_polling()
         if self.rig is not None:
@@ -239,10 +243,14 @@ class RigDriverNode(LifecycleNode):
             driver = rig.driver
             if driver.controller_state in ('running', 'holding', 'ramping_down'):
                 driver.abort('rig_driver shutting down')
-                deadline = time.monotonic() + 5.0
-                while driver.controller_state not in ('idle', 'fault') and time.monotonic() < deadline:
+                deadline = time.monotonic() + CLOSE_RAMP_WAIT
+                while driver.controller_state not in ('idle', 'fault') and not driver.faults & FAULT_WATCHDOG \
+                        and time.monotonic() < deadline:
                     driver.poll()
                     time.sleep(0.005)
+                if driver.faults & FAULT_WATCHDOG and driver.controller_state not in ('idle', 'fault'):
+                    self.get_logger().warning('controller silent (watchdog fault): not waiting for its ramp to rest; '
+                                              'it ramps to rest on its own once the host heartbeat stops')
             self._log_events(driver)
             self.get_logger().info(f'rig closed (controller {driver.controller_state}, at '
                                    f'{driver.status.extra["position"] * 1e3:.4f} mm)')
