@@ -277,9 +277,16 @@ class Soak:
             outcomes[c] = outcomes.get(c, 0) + 1
             if c == 'false fault':
                 print(f'false fault at {p["t"]:.0f} s: {p["message"]}')
-        caused = [s for s in self.silences if self.expected_silence(s)]
-        freezes = [s for s in self.silences if self.expected_silence(s) == 'freeze']
-        spontaneous = [s for s in self.silences if not self.expected_silence(s)]
+
+        # several nodes silent at once (within 0.2 s): the observer (this process) stalled, not the nodes
+        def together(s):
+            return sum(abs(o['seen'] - s['seen']) <= 0.2 for o in self.silences) >= 2
+        single = [s for s in self.silences if not together(s)]
+        caused = [s for s in single if self.expected_silence(s)]
+        freezes = [s for s in single if self.expected_silence(s) == 'freeze']
+        spontaneous = [s for s in single if not self.expected_silence(s)]
+        stalled = sorted({round(s['seen'], 1) for s in self.silences if together(s)})
+        observer = [t for i, t in enumerate(stalled) if i == 0 or t - stalled[i - 1] > 0.5]
         detect = [s['seen'] - self.cause(s)['t'] for s in freezes]
         growth = {}
         for (node, _pid), pts in self.rss.items():
@@ -291,6 +298,7 @@ class Soak:
                 'kills': sum(e['kind'] == 'kill' for e in self.log), 'clients': self.clients,
                 'second_suite_runs': sum(e['kind'] == 'second suite up' for e in self.log),
                 'silences_caused': len(caused), 'silences_unexplained': spontaneous,
+                'observer_stalls': len(observer),
                 'freezes': len(freezes), 'freeze_detection_s': [round(d, 2) for d in detect],
                 'rss': growth, 'loss': self.ledger()}
 
@@ -319,7 +327,8 @@ def markdown(r: dict) -> str:
              f"| churn | {r['kills']} node kills, {r['clients']} short-lived clients, {r['second_suite_runs']} "
              'second-suite runs |',
              f"| silences on the heartbeats | {r['silences_caused']} caused (kills, freezes), "
-             f"{len(r['silences_unexplained'])} unexplained |",
+             f"{len(r['silences_unexplained'])} unexplained, {r['observer_stalls']} observer stalls (every node at "
+             'once: this process stalled) |',
              f"| freezes (SIGSTOP 3 s) detected | {r['freezes']}, after {r['freeze_detection_s']} s |"]
     for node, rows in sorted(r['rss'].items()):
         text = '; '.join(f'{a}->{b} MB in {m} min ({g:+} MB/h)' for a, b, m, g in rows)
