@@ -715,7 +715,7 @@ class ExcitationNode(Node):
         blind = self.detectors_blind()
         if self._recording_lost and r is not None:
             level = DiagnosticStatus.WARN
-        silent = self.peers.describe()
+        silent = ', '.join(f'{n} ({a:.1f} s)' for n, a in self._silent_now.items())   # as watch_peers saw it
         if silent:
             level = DiagnosticStatus.WARN
         if blind:
@@ -726,7 +726,7 @@ class ExcitationNode(Node):
         values = {'state': state, 'program': r.program.name if r else '', 'detector_events': len(self.events),
                   'last_event': last.message if last else '', 'detectors_blind': blind,
                   'recording_lost': self._recording_lost if r is not None else '', 'nodes_silent': silent}
-        reasons = [f'nodes {silent}' if silent else '', f'detectors blind: {blind}' if blind else '',
+        reasons = [f'nodes silent: {silent}' if silent else '', f'detectors blind: {blind}' if blind else '',
                    self._recording_lost if r is not None else '',
                    last.message if last is not None and last.action != 'record' else '']
         msg = DiagnosticArray()
@@ -738,8 +738,9 @@ class ExcitationNode(Node):
         self.pub_diagnostics.publish(msg)
 
     def watch_peers(self) -> None:
-        """Name a node that went silent (no heartbeat for 1 s) once per silence in the log; while a program runs,
-        remember it for the goal's result. The rig driver's silence ends the program elsewhere (status_timeout).
+        """Name a node that went silent (no heartbeat for heartbeat.SILENT, 0.75 s) once per silence in the log;
+        while a program runs, remember it for the goal's result. The rig driver's silence ends the program
+        elsewhere (status_timeout).
         """
         quiet = self.peers.silent()
         for name, age in quiet.items():

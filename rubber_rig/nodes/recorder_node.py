@@ -37,7 +37,6 @@ splitting, snapshots and loss accounting are rubber_rig.recording.Recorder's.
   programs), ERROR when the recording stopped on an error.
 """
 import importlib
-import json
 import time
 from pathlib import Path
 
@@ -55,9 +54,8 @@ from rubber_rig.nodes import topics
 from rubber_rig.nodes.heartbeat import start_heartbeat
 from rubber_rig.nodes.params import declare
 from rubber_rig.nodes.spin import spin_node
-from rubber_rig.recording import CLOSE_METADATA_NAME, METADATA_NAME, Recorder, RecordingError, full_definition
-from rubber_rig.recording.metadata import BOOKKEEPING_TOPIC, bookkeeping_topic
-from rubber_rig.recording.plain import plain
+from rubber_rig.recording import Recorder, RecordingError, full_definition
+from rubber_rig.recording.metadata import BOOKKEEPING_TOPIC, bookkeeping_text, bookkeeping_topic
 from rubber_rig.recording.qos import qos_entry
 
 UNSUPPORTED_SEQUENCE = 2**63   # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED is UINT64_MAX
@@ -361,9 +359,7 @@ class RecorderNode(Node):
         ``recording_info`` topic, as JSON: what a tool that drops MCAP metadata still shows.
         """
         if self.core.reports:
-            text = json.dumps(plain({METADATA_NAME: self.core.metadata, CLOSE_METADATA_NAME: self.core.reports[-1]}),
-                              sort_keys=True)
-            self._bookkeeping_pub.publish(String(data=text))
+            self._bookkeeping_pub.publish(String(data=bookkeeping_text(self.core.metadata, self.core.reports[-1])))
 
     def destroy_node(self):
         was_recording = self.core.recording

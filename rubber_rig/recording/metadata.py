@@ -35,6 +35,11 @@ def bookkeeping_topic(namespace: str = "") -> str:
     return f'{namespace.rstrip("/")}/{BOOKKEEPING_TOPIC}'
 
 
+def bookkeeping_text(metadata: dict, close_values: dict) -> str:
+    """The bookkeeping message's JSON: the ``rubber_rig`` and ``rubber_rig.close`` records of a file."""
+    return json.dumps(plain({METADATA_NAME: metadata, CLOSE_METADATA_NAME: close_values}), sort_keys=True)
+
+
 def bookkeeping_records(text: str) -> dict:
     """{record name: values} from a bookkeeping message's JSON ({} if it is not one)."""
     try:

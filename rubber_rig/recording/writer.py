@@ -26,7 +26,6 @@ sample streams (gapcheck, gaps), metadata names and values (metadata), rosbag2's
   sample streams are counted, and both go into a ``rubber_rig.close`` metadata record when the file is closed.
 """
 import errno as errno_mod
-import json
 import time
 from datetime import datetime, timezone
 from pathlib import Path
@@ -41,9 +40,8 @@ from .channels import ChannelTable
 from .errors import RecordingError, RecordingWriteError
 from .gapcheck import GapCheck
 from .gaps import LossLedger
-from .metadata import CLOSE_METADATA_NAME, METADATA_NAME, SEQUENCE_SOURCE_KEY, encode_metadata
+from .metadata import CLOSE_METADATA_NAME, METADATA_NAME, SEQUENCE_SOURCE_KEY, bookkeeping_text, encode_metadata
 from .msgdefs import MessageDefinitionError, normalize_type, type_of
-from .plain import plain
 from .rawfile import UnbufferedFile
 
 COMPRESSION = {'zstd': CompressionType.ZSTD, 'lz4': CompressionType.LZ4, 'none': CompressionType.NONE,
@@ -275,8 +273,8 @@ class RecordingWriter:
         conversion by rosbag2-compatible tools (rosbags: MCAP -> sqlite3 -> MCAP), messages do. Its counts are
         those of the other messages (the close record's).
         """
-        text = json.dumps(plain({METADATA_NAME: self.metadata, CLOSE_METADATA_NAME: close_values}), sort_keys=True)
-        self.write_message(self.bookkeeping_topic, 'std_msgs/msg/String', {'data': text})
+        self.write_message(self.bookkeeping_topic, 'std_msgs/msg/String',
+                           {'data': bookkeeping_text(self.metadata, close_values)})
 
     def __enter__(self):
         return self
