@@ -54,6 +54,19 @@ def udp_addresses(pid: int) -> set[str]:
     return {line.split()[3].rsplit(':', 1)[0] for line in out.splitlines() if f'pid={pid},' in line}
 
 
+def udp_buffers(pid: int) -> list[tuple[int, int]]:
+    """(SO_RCVBUF, SO_SNDBUF) of each UDP socket of `pid` as the kernel reports them (ss -m: rb, tb; twice the
+    value set, capped by net.core.rmem_max / wmem_max)."""
+    out = subprocess.run(['ss', '-uanpmH'], capture_output=True, text=True, check=True).stdout
+    lines, sizes = out.splitlines(), []
+    for line, nxt in zip(lines, lines[1:] + ['']):
+        if f'pid={pid},' in line:
+            mem = (line if 'skmem:' in line else nxt).split('skmem:(')[1]
+            fields = dict((f[:2], f[2:]) for f in mem.rstrip(')').split(','))
+            sizes.append((int(fields['rb']), int(fields['tb'])))
+    return sizes
+
+
 @pytest.fixture(scope='module')
 def suite(tmp_path_factory):
     base = tmp_path_factory.mktemp('dds')
@@ -80,6 +93,14 @@ def test_every_node_runs_udp_on_loopback_without_shared_memory(suite):
         assert any(n.startswith('dds.udp') for n in names), (node, names)
         assert not any(n.startswith('dds.shm') for n in names), f'{node} runs shared memory: {sorted(names)}'
         assert udp_addresses(pid) == {'127.0.0.1'}, (node, udp_addresses(pid))
+        # the profile's 4 MiB buffers, as far as the kernel allows: every receiving socket has the receive buffer,
+        # the one sending socket the send buffer
+        rmem_max = int(Path('/proc/sys/net/core/rmem_max').read_text())
+        wmem_max = int(Path('/proc/sys/net/core/wmem_max').read_text())
+        buffers = udp_buffers(pid)
+        assert all(rb >= min(4194304, rmem_max) or tb >= min(4194304, wmem_max) for rb, tb in buffers), \
+            (node, buffers)
+        assert sum(rb >= min(4194304, rmem_max) for rb, _ in buffers) >= 2, (node, buffers)
         log = procs.log(node)
         assert f'DDS: localhost only: Fast DDS profile {PROFILE}' in log, log[-1500:]
     # and they found each other: a program runs through all four, recorded, with the model predicting it
@@ -96,6 +117,9 @@ def test_the_profile_is_what_the_readme_states():
     assert [a.text for a in root.findall('.//d:interfaceWhiteList/d:address', ns)] == ['127.0.0.1']
     assert root.find('.//d:useBuiltinTransports', ns).text == 'false'
     assert root.find('.//d:maxInitialPeersRange', ns).text == '64'
+    # a datagram the kernel dropped is repaired at the writer's next heartbeat: 50 ms, not Fast DDS's 3 s
+    assert root.find('.//d:data_writer/d:times/d:heartbeatPeriod/d:nanosec', ns).text == '50000000'
+    assert root.find('.//d:receiveBufferSize', ns).text == '4194304'
     readme = (ROOT / 'README.md').read_text()
     assert 'config/fastdds_localhost.xml' in readme and 'no shared memory' in readme
 

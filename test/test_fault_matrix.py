@@ -456,6 +456,49 @@ def test_foreign_setpoints_are_refused(suite):
     next_program_completes(op, procs)
 
 
+@pytest.mark.parametrize('topic', ['setpoints', 'command'])
+def test_a_flood_of_foreign_setpoints_is_not_fatal(suite, topic):
+    """2000 foreign batches (stream id 0, 100 setpoints each, as fast as one process publishes them) while a
+    program runs, on the public `setpoints` topic (which the driver does not read) or on a command channel of the
+    flooding node's own (refused and counted until the driver mutes the channel): the program runs on until the
+    operator stops it."""
+    procs, op, base = suite
+    since = op.last_sequence + 1
+    refused0 = op.status.setpoints_refused
+    handle = start_fast_sine(op, 0.5)
+    head = op.status.next_sequence
+    def cpu():
+        out = {}
+        for name, p in procs.procs.items():
+            f = open(f'/proc/{p.pid}/stat').read().split()
+            out[name] = (int(f[13]) + int(f[14])) / os.sysconf('SC_CLK_TCK')
+        return out
+    c0 = cpu()
+    t = time.monotonic()
+    for k in range(2000):
+        op.publish_setpoints(head + 100 * k, np.full(100, 2.4e-3), topic=topic)
+    flood_s = time.monotonic() - t
+    time.sleep(1.0)
+    c1 = cpu()
+    print('CPU s', {n: round(c1[n] - c0[n], 2) for n in c0})
+    refused = op.status.setpoints_refused - refused0
+    print(f'flood of 2000 batches on {topic} published in {flood_s:.2f} s; refused {refused} setpoints')
+    assert op.status.stream_owner == f'{NS}/excitation', (op.status.state_name, list(op.status.fault_messages))
+    if topic == 'command':
+        # refused and counted until the channel is muted (more than 200 batches within 1 s), then dropped by DDS
+        assert 100 * 200 <= refused < 100 * 2000, refused
+        assert 'is muted for 10 s' in procs.log('rig_driver'), procs.log('rig_driver')[-1500:]
+    else:
+        assert refused == 0, refused
+    r = op.trigger('excitation/abort')
+    assert r.success
+    result = op.result(handle, 3.0)
+    assert 'operator abort' in result.message, result.message   # the program ran until the operator stopped it
+    wait_at_rest(op)
+    assert_applied_safe(op, since)
+    next_program_completes(op, procs)
+
+
 BAD_PROGRAMS = {
     'cycles_inf': 'blocks:\n  - {waveform: sine, frequency: 1 Hz, amplitude: 0.1 mm, cycles: .inf}\n',
     'cycles_1e8': 'blocks:\n  - {waveform: sine, frequency: 1 Hz, amplitude: 0.1 mm, cycles: 100000000}\n',

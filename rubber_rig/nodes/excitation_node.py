@@ -169,6 +169,10 @@ class ExcitationNode(Node):
         self._held_wall = 0.0            # time.monotonic() of the hold (hold_timeout)
         self._elapsed_samples = 0        # program samples measured (rig time of the program, holds excluded)
 
+        # commands to the driver's private channel, the same batches to `setpoints` for observers (topics.py)
+        self.pub_stream = self.create_publisher(
+            SetpointBatch, topics.setpoint_stream_topic(self.rig_driver, self.get_fully_qualified_name()),
+            topics.STREAM_QOS)
         self.pub_setpoints = self.create_publisher(SetpointBatch, topics.SETPOINTS, topics.STREAM_QOS)
         self.pub_program = self.create_publisher(String, topics.PROGRAM, topics.LATCHED_QOS)
         self.pub_events = self.create_publisher(DetectorEvent, topics.EVENTS, topics.EVENT_QOS)
@@ -344,6 +348,8 @@ class ExcitationNode(Node):
         for what, matched, known in (
                 ('samples subscription', self.sub_samples.get_publisher_count(),
                  self.count_publishers(self.samples_topic)),
+                ('setpoint stream publisher', self.pub_stream.get_subscription_count(),
+                 self.count_subscribers(self.pub_stream.topic_name)),
                 ('setpoints publisher', self.pub_setpoints.get_subscription_count(),
                  self.count_subscribers(self.pub_setpoints.topic_name))):
             if matched < max(known, 1):
@@ -504,9 +510,10 @@ class ExcitationNode(Node):
 
     def _publish(self, first, x, block, end=False):
         dt = 1.0 / self.status.sample_rate
-        self.pub_setpoints.publish(conv.setpoint_batch_msg(
-            first, dt, x, block, t=self.rig_time(first, dt), stream_id=self.stream_id,
-            source=self.get_fully_qualified_name(), end_of_stream=end))
+        msg = conv.setpoint_batch_msg(first, dt, x, block, t=self.rig_time(first, dt), stream_id=self.stream_id,
+                                      source=self.get_fully_qualified_name(), end_of_stream=end)
+        self.pub_stream.publish(msg)
+        self.pub_setpoints.publish(msg)
 
     def rig_time(self, sequence: int, dt: float) -> float:
         """When the rig will apply sample `sequence` [s, the rig's clock]: the stamp of the latest measured

@@ -208,7 +208,11 @@ class Operator:
         n.create_subscription(RigStatus, topics.STATUS, self._on_status, topics.LATCHED_QOS)
         n.create_subscription(RecorderStatus, topics.RECORDER_STATUS, self._on_recorder, topics.LATCHED_QOS)
         n.create_subscription(SetpointBatch, topics.SETPOINTS, self._on_setpoints, topics.STREAM_QOS)
-        self.pub_setpoints = n.create_publisher(SetpointBatch, topics.SETPOINTS, topics.STREAM_QOS)
+        self.pub_setpoints = {   # the public topic everyone watches, the driver's command channel
+            'setpoints': n.create_publisher(SetpointBatch, topics.SETPOINTS, topics.STREAM_QOS),
+            'command': n.create_publisher(
+                SetpointBatch, topics.setpoint_stream_topic('rig_driver', n.get_fully_qualified_name()),
+                topics.STREAM_QOS)}
         self.action = ActionClient(n, RunProgram, 'run_program')
         self._clients = {}
         self._stop = threading.Event()
@@ -388,6 +392,7 @@ class Operator:
         return self.call('excitation/hold', SetBool, SetBool.Request(data=on), timeout)
 
     def publish_setpoints(self, first_sequence: int, x, stream_id: int = 0, source: str = '/intruder',
-                          block_index: int = 0, sample_period: float = 1e-3):
-        self.pub_setpoints.publish(conv.setpoint_batch_msg(first_sequence, sample_period, x, block_index,
+                          block_index: int = 0, sample_period: float = 1e-3, topic: str = 'command'):
+        """Publish a batch as an intruder would: on the driver's command channel or on ``setpoints``."""
+        self.pub_setpoints[topic].publish(conv.setpoint_batch_msg(first_sequence, sample_period, x, block_index,
                                                            stream_id=stream_id, source=source))

@@ -198,7 +198,10 @@ class RecorderNode(Node):
             names = {self.resolve_topic_name(t) for t in configured if t}
             return [(n, t) for n, t in graph if n in names]
         ns = self.get_namespace().rstrip('/') + '/'
+        # a driver's command channel is left out: `ros2 bag play` of the recording must not command a rig (the
+        # same batches are recorded on `setpoints`)
         return [(n, t) for n, t in graph if n.startswith(ns) and n not in IGNORED_TOPICS
+                and topics.SETPOINT_STREAM not in n.split('/')
                 and (self.include_hidden or not any(part.startswith('_') for part in n.split('/')))]
 
     def discover(self):

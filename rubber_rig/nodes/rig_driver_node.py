@@ -28,7 +28,10 @@ wrong in themselves or contradicting each other (a range, limits, heartbeat_peri
 list that does not parse) are refused at start: one FATAL line naming the parameter, exit status 2
 (rubber_rig.nodes.spin); set at run time while unconfigured, they make configure fail the same way.
 
-Subscribes:  setpoints (msg_defs/SetpointBatch; only the open stream's owner commands the rig, see below)
+Subscribes:  ~/setpoint_stream/<owner> (msg_defs/SetpointBatch): each owner's command channel; only the open
+             stream's owner commands the rig (batches on other channels are refused and counted). The public
+             ``setpoints`` is not read: traffic there (a script, a replayed recording) never moves the rig, and
+             no traffic delays the owner's batches (topics.py)
 Publishes:   samples (msg_defs/RigSampleBatch, at least ``batch_size`` samples per message)
              status (msg_defs/RigStatus, latched, on change and every ``status_period``)
              /diagnostics (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period``)
@@ -80,6 +83,14 @@ LIVE_PARAMETERS = set(LIMIT_PARAMETERS) | {
 # the simulated specimen: node parameters built into SimOptions.specimen (a model spec mapping)
 SPECIMEN_PARAMETERS = ('sim.specimen.parameter_set', 'sim.specimen.temperature',
                        'sim.specimen.friction_reversal_threshold')
+MAX_CHANNELS = 16   # owners' command channels the driver listens to at once
+# A channel that is not the stream owner's and sends more than MUTE_AFTER batches within a second is muted for
+# MUTE_FOR seconds (its subscription destroyed: DDS drops what it sends, at no cost to this process). Why: each
+# refused batch still costs the executor a callback, and on a 2-core computer a flood of them (2000 in 0.3 s)
+# delayed the owner's batches past stream_timeout. An owner streams at most ~100 batches/s (1 kHz, 10 per batch).
+MUTE_AFTER = 200
+MUTE_FOR = 10.0     # [s]
+
 
 
 class BusCapacityError(ParameterError):
@@ -140,7 +151,10 @@ class RigDriverNode(LifecycleNode):
         self.create_service(StopStream, '~/stop_stream', self.on_stop_stream)
         accept_integers_for_doubles(self)
         self.add_on_set_parameters_callback(self.on_set_parameters)
-        self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints, topics.STREAM_QOS)
+        self._channels: dict[str, object] = {}   # owner -> subscription to its command channel
+        self._refused_in: dict[str, list] = {}    # channel -> [start of its 1 s window, batches refused in it]
+        self._muted: dict[str, float] = {}        # channel -> time.monotonic() until which it is muted
+        self.create_timer(1.0, self.find_channels)
         self._poll_timer = None
         start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig is not None else 'unconfigured')
         self.peers = Peers(self, silent=self.owner_timeout)
@@ -311,18 +325,67 @@ class RigDriverNode(LifecycleNode):
         return SetParametersResult(successful=True)
 
     # -- data path ------------------------------------------------------------------------------------------------
-    def on_setpoints(self, msg: SetpointBatch) -> None:
-        """Queue setpoints on the bus - only the open stream's, exactly continuing it (the core refuses the rest
-        and counts them; the first refusal per second is logged with the sender).
+    def find_channels(self) -> None:
+        """Subscribe to every owner's command channel the graph shows (so a program's first batch finds us)."""
+        prefix = topics.setpoint_stream_topic(self.get_fully_qualified_name(), '')
+        now = time.monotonic()
+        for name, _ in self.get_topic_names_and_types():
+            owner = '/' + name[len(prefix):]
+            if name.startswith(prefix) and len(name) > len(prefix) and self._muted.get(owner, 0.0) <= now:
+                self.listen_to(owner)
+
+    def mute(self, channel: str, batches: int) -> None:
+        """Stop listening to a flooding channel for MUTE_FOR seconds (see MUTE_AFTER)."""
+        self._muted[channel] = time.monotonic() + MUTE_FOR
+        sub = self._channels.pop(channel, None)
+        if sub is not None:
+            self.destroy_subscription(sub)
+        self.rig.driver.counters['channels_muted'] = self.rig.driver.counters.get('channels_muted', 0) + 1
+        self.get_logger().warning(f'{batches} batches from {channel} refused within 1 s: its channel is muted for '
+                                  f'{MUTE_FOR:g} s (what it sends meanwhile is dropped uncounted)')
+
+    def listen_to(self, owner: str) -> str:
+        """Subscribe to `owner`'s command channel if not yet done; '' or why it cannot be."""
+        self._muted.pop(owner, None)   # (an owner that asks for a stream is heard again at once)
+        if owner in self._channels:
+            return ''
+        if len(self._channels) >= MAX_CHANNELS:    # the oldest channel that is not the open stream's makes room
+            current = self.rig.driver.stream.owner if self.rig is not None and self.rig.driver.stream else None
+            old = next((o for o in self._channels if o != current), None)
+            if old is not None:
+                self.destroy_subscription(self._channels.pop(old))
+        topic = topics.setpoint_stream_topic(self.get_fully_qualified_name(), owner)
+        try:
+            self._channels[owner] = self.create_subscription(
+                SetpointBatch, topic, lambda msg: self.on_setpoints(msg, owner), topics.STREAM_QOS)
+        except Exception as exc:   # noqa: BLE001 - rclpy raises several types for a name it cannot take
+            return f'owner {owner!r} gives no valid topic name ({exc})'
+        self.get_logger().info(f'listening for setpoints of {owner} on {topic}')
+        return ''
+
+    def on_setpoints(self, msg: SetpointBatch, channel: str) -> None:
+        """Queue setpoints that arrived on `channel`'s command channel on the bus - only the open stream's owner's,
+        exactly continuing it (the core refuses the rest and counts them; the first refusal per second is logged
+        with the sender).
         """
         if self.rig is None or self._poll_timer is None:   # only an active driver moves the rig
             return
         driver = self.rig.driver
         grant = driver.stream
-        if grant is not None and msg.source != grant.owner:   # a copied stream id alone does not make an owner
+        if grant is not None and (channel != grant.owner or msg.source != grant.owner):
+            # the channel, not a stream id or name that anyone can copy, says who sent a batch
             driver.counters['setpoints_refused'] += len(msg.displacement)
-            driver.refusal = f'sender {msg.source or "(unnamed)"} is not the stream owner {grant.owner}'
+            driver.refusal = (f'sender {msg.source or "(unnamed)"} on the channel of {channel} is not the stream '
+                              f'owner {grant.owner}')
             ok = False
+            window = self._refused_in.setdefault(channel, [time.monotonic(), 0])
+            if time.monotonic() - window[0] > 1.0:
+                window[:] = [time.monotonic(), 0]
+            window[1] += 1
+            if window[1] > MUTE_AFTER:
+                self.mute(channel, window[1])
+                window[1] = 0
+                return
         else:
             ok = driver.queue_setpoints(msg.first_sequence, conv.as_array(msg.displacement), msg.stream_id)
         if ok:
@@ -451,6 +514,10 @@ class RigDriverNode(LifecycleNode):
             response.success, response.message = False, f'rig_driver is {self.lifecycle_state}, not active'
             return response
         driver = self.rig.driver
+        why = self.listen_to(request.owner)   # (found in the graph already, unless the owner has just started)
+        if why:
+            response.success, response.message = False, why
+            return response
         try:
             grant = driver.open_stream(request.owner, int(math.ceil(request.lead_time * self.config.sample_rate)))
         except StreamRefused as exc:

@@ -21,11 +21,22 @@ QoS choices:
 - Per-cycle results (``cycle_metrics``): RELIABLE, moderate depth.
 - State that a late joiner must see at once (``status``, ``model_parameters``, ``program``): RELIABLE +
   TRANSIENT_LOCAL, depth 1 (the last value is latched, like a ROS 1 latched topic).
+
+Commands and observations travel apart: a stream owner sends its batches on a channel of its own to its
+driver, ``<rig_driver>/setpoint_stream/<owner node>`` (setpoint_stream_topic), and the same batches on
+``setpoints`` for everyone who watches. The driver subscribes to each owner's channel (found in the graph, or
+when the owner opens a stream) and takes commands only from the channel of the open stream's owner. Traffic on
+``setpoints`` (a test script, `ros2 bag play` of a recording) never reaches the rig, and traffic on another
+channel is refused and counted; however much of either arrives, it cannot delay the owner's batches, which
+wait in a queue of their own (the executor serves each subscription in turn). The recorder leaves the channels
+out by default, so replaying a recording cannot command a rig. A process that publishes on the owner's own
+channel impersonates the owner; keeping it out is DDS security's job (SROS2 access control), not a topic name's.
 """
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
 SAMPLES = 'samples'                  # msg_defs/msg/RigSampleBatch, rig_driver -> all
-SETPOINTS = 'setpoints'              # msg_defs/msg/SetpointBatch, excitation -> rig_driver
+SETPOINTS = 'setpoints'              # msg_defs/msg/SetpointBatch, excitation -> observers (model, recorder)
+SETPOINT_STREAM = 'setpoint_stream'  # msg_defs/msg/SetpointBatch, owner -> its driver (setpoint_stream_topic)
 STATUS = 'status'                    # msg_defs/msg/RigStatus, rig_driver (latched)
 PREDICTION = 'prediction'            # msg_defs/msg/ModelPrediction, element_model
 CYCLE_METRICS = 'cycle_metrics'      # msg_defs/msg/CycleMetrics, element_model
@@ -35,6 +46,13 @@ EVENTS = 'events'                    # msg_defs/msg/DetectorEvent, excitation (d
 RECORDER_STATUS = 'recorder_status'  # msg_defs/msg/RecorderStatus, recorder (latched)
 HEARTBEAT = 'heartbeat'              # msg_defs/msg/Heartbeat, every node, every 0.25 s
 DIAGNOSTICS = '/diagnostics'         # diagnostic_msgs/msg/DiagnosticArray (absolute, as in every ROS 2 system)
+
+
+
+def setpoint_stream_topic(rig_driver: str, owner: str) -> str:
+    """The command channel of stream owner `owner` (a fully qualified node name) to driver `rig_driver`."""
+    return f'{rig_driver.rstrip("/")}/{SETPOINT_STREAM}/{owner.lstrip("/")}'
+
 
 STREAM_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
                         reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
