@@ -20,6 +20,12 @@ until its process has ended. Each must end within EXIT_WITHIN seconds with exit 
   interpreter's own teardown (the node's clean-up takes milliseconds).
 * A controller gone silent during a program: rig_driver's close() waited the whole 5 s for a ramp that no status
   frame would ever report (5.3 s measured), now it does not wait for a silent controller.
+* No "Failed to publish log message to rosout" on the way out: rclpy's signal handler shut the context down before
+  the node's close() logged ("rig closed", the recorder's "closed"); rubber_rig.nodes.spin now stops the executor
+  itself and shuts the context down last.
+* SIGINT twice at once (a terminal's Ctrl-C reaches ``ros2 launch`` and its nodes, and launch sends its own): the
+  second one interrupted the clean-up with a KeyboardInterrupt traceback (or ended the process before it), exit
+  status -2; now it is ignored while the clean-up runs.
 """
 import os
 import signal
@@ -36,6 +42,7 @@ pytestmark = [pytest.mark.ros, pytest.mark.slow]
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'rig_sim.yaml'
 NS = '/shutdown'
 EXIT_WITHIN = 2.0   # [s] from the signal to the end of the process
+ROSOUT_FAILURE = 'Failed to publish log message to rosout'   # rcl's line (stderr) for a log call after shutdown
 LONG = """name: long
 blocks:
   - {name: s5, waveform: sine, frequency: 5 Hz, amplitude: 1 mm, cycles: 200, taper_cycles: 1}
@@ -64,6 +71,7 @@ def check_clean_exit(procs: SuiteProcesses, node: str, seconds: float, code: int
     assert code == 0, f'{node}: exit status {code}\n{log[-3000:]}'
     assert seconds < EXIT_WITHIN, f'{node}: {seconds:.2f} s to exit\n{log[-3000:]}'
     assert 'Traceback' not in log, log[-3000:]
+    assert ROSOUT_FAILURE not in log, log[-3000:]
 
 
 @pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
@@ -84,6 +92,34 @@ def test_every_node_exits_within_2_s_of_the_signal_with_the_rig_idle(tmp_path, s
             times[node] = seconds
             check_clean_exit(procs, node, seconds, code)
         print(f'{signal.Signals(sig).name}: ' + ', '.join(f'{n} {t:.2f} s' for n, t in times.items()))
+    finally:
+        if op is not None:
+            op.close()
+        procs.stop_all()
+
+
+def test_sigint_twice_at_once_still_cleans_up_every_node(tmp_path):
+    procs = SuiteProcesses(CONFIG, NS, domain_id(), tmp_path / 'logs',
+                           {'recorder': {'output_dir': str(tmp_path / 'recordings')}})
+    op = None
+    try:
+        procs.start_all()
+        op = Operator(NS, domain_id())
+        assert op.wait_ready(60.0), 'suite did not come up:\n' + procs.log('rig_driver')[-2000:]
+        for node in NODES:
+            assert procs.wait_started(node, 30.0), f'{node} did not start:\n' + procs.log(node)[-2000:]
+        t0 = time.monotonic()
+        for _ in range(2):          # the terminal's and launch's SIGINT, to every node at once
+            for node in NODES:
+                procs.procs[node].send_signal(signal.SIGINT)
+        for node in NODES:
+            try:
+                code = procs.procs[node].wait(timeout=10.0)
+            except Exception:   # noqa: BLE001 - reported below
+                code = None
+            check_clean_exit(procs, node, time.monotonic() - t0, code)
+        assert 'rig closed' in procs.log('rig_driver')            # close() ran to its end
+        assert 'closed 1 file(s)' in procs.log('recorder')
     finally:
         if op is not None:
             op.close()

@@ -20,6 +20,17 @@ process, rclpy's MultiThreadedExecutor collapses to tens of callbacks per second
 The DDS configuration (rubber_rig.dds.configure_dds: transport, discovery) is chosen before rclpy.init and
 logged with the ready line.
 
+Stopping (SIGINT from Ctrl-C or ``ros2 launch``, SIGTERM): rclpy's own handlers are not installed. They shut the
+context down the moment the signal lands, so everything the node does on its way out (the driver's ramp to rest
+and "rig closed" line, the recorder's "closed" line) was logged to a dead context - "Failed to publish log message
+to rosout: publisher's context is invalid" after every stop - and they raise KeyboardInterrupt wherever the main
+thread happens to be: a second SIGINT (a terminal's Ctrl-C reaches both ``ros2 launch`` and its nodes, and launch
+forwards its own) interrupted the clean-up half way, with a traceback, a bus not shut down, or no clean-up at all.
+Here the executor spins in a thread; a signal only sets a flag that the main thread sees within STOP_POLL seconds;
+the main thread then stops the executor, lets a running callback finish (at most CALLBACK_GRACE seconds), calls
+the node's ``close()``, destroys the node and only then shuts the context down. Further signals while that runs
+are ignored. A signal during start-up (imports aside) abandons the start. Exit status 0.
+
 A node constructor that refuses its parameters (:class:`ParameterError`: a value that cannot work, e.g. a
 parameter_set file that is missing or not YAML) ends the process with that one line, logged as FATAL, and exit
 status EXIT_BAD_PARAMETER (2, the usage-error status of the command-line tools), not a traceback: a plain node has
@@ -29,53 +40,100 @@ no "unconfigured" state to wait in, and ``ros2 launch`` shows the line next to "
 from __future__ import annotations
 
 import os
+import signal
+import threading
 from typing import Callable
 
 import rclpy
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.logging import get_logger
 from rclpy.node import Node
+from rclpy.signals import SignalHandlerOptions
 
 from ..dds import configure_dds
 from .params import ParameterError, undeclared_overrides
 from .rclpy_compat import RCLError
 
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+STOP_POLL = 0.05          # [s] how often the main thread looks at the stop flag while the executor spins
+CALLBACK_GRACE = 1.0      # [s] a callback still running at the stop gets this long before close() goes ahead
 EXIT_BAD_PARAMETER = 2    # exit status when the node refuses its parameters at start
 
 
-def spin_node(node_factory: Callable[[], Node], args=None) -> None:
-    """Create the node, spin it until Ctrl-C / SIGTERM / context shutdown, then release it.
+class _Stop:
+    """The stop request, set from a signal handler: a plain flag (taking a lock in a handler can deadlock)."""
 
-    A node with a ``close()`` method (open bus, open file) has it called before ``destroy_node()``. Raises
-    SystemExit(EXIT_BAD_PARAMETER) when the node refuses its parameters at start.
+    def __init__(self):
+        self.requested = False
+        self.started = False   # the executor runs: from now on a signal only sets the flag
+
+    def __call__(self, signum, frame):
+        self.requested = True
+        if not self.started:
+            raise KeyboardInterrupt   # still starting: abandon the start (nothing to clean up but the context)
+
+
+def _spin(executor: SingleThreadedExecutor, errors: list) -> None:
+    try:
+        executor.spin()
+    except ExternalShutdownException:
+        pass
+    except BaseException as exc:   # noqa: BLE001 - handed to the main thread, which cleans up and re-raises
+        errors.append(exc)
+
+
+def spin_node(node_factory: Callable[[], Node], args=None) -> None:
+    """Create the node, spin it until SIGINT / SIGTERM / context shutdown, then release it.
+
+    A node with a ``close()`` method (open bus, open file) has it called before ``destroy_node()``, while the
+    context is still valid (its log lines reach /rosout). Raises SystemExit(EXIT_BAD_PARAMETER) when the node
+    refuses its parameters at start; an exception from a callback is re-raised after the clean-up.
     """
     dds = configure_dds()   # before the first participant exists
-    rclpy.init(args=args)
-    node = None
+    stop = _Stop()
+    previous = {sig: signal.signal(sig, stop) for sig in STOP_SIGNALS}
+    node = executor = thread = None
+    errors: list[BaseException] = []
     try:
+        rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
         try:
             node = node_factory()
         except ParameterError as exc:
             get_logger(exc.logger_name).fatal(str(exc))
             raise SystemExit(EXIT_BAD_PARAMETER) from None
         undeclared_overrides(node)   # a misspelt key in a parameter file must not pass silently
-        node.get_logger().info(f'DDS: {dds}')
-        node.get_logger().info(f'ready (pid {os.getpid()})')   # launchers and the fault-matrix tests wait for it
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
+        thread = threading.Thread(target=_spin, args=(executor, errors), name='executor', daemon=True)
+        stop.started = True
+        if not stop.requested:
+            thread.start()
+            node.get_logger().info(f'DDS: {dds}')
+            node.get_logger().info(f'ready (pid {os.getpid()})')   # launchers and the fault-matrix tests wait for it
+            while not stop.requested and thread.is_alive():
+                thread.join(STOP_POLL)   # interruptible: the signal handler runs here
+    except KeyboardInterrupt:
         pass
     except RCLError:
-        # rclpy's SIGINT/SIGTERM handler shuts the context down; when that lands while the executor builds
-        # its wait set, rcl reports "context is not valid" instead of ExternalShutdownException. That is a
-        # normal stop; any RCLError while the context is still valid is a real error.
+        # a signal during rclpy.init or the constructor can leave rcl saying "context is not valid"
         if rclpy.ok():
             raise
     finally:
+        stop.started = True          # from here on a signal changes nothing: the clean-up runs to its end
+        if executor is not None:
+            executor.shutdown(timeout_sec=0)
+            if thread is not None and thread.is_alive():
+                thread.join(CALLBACK_GRACE)
+                if thread.is_alive() and node is not None:
+                    node.get_logger().warning(f'a callback still runs {CALLBACK_GRACE:g} s after the stop; '
+                                              'closing anyway')
         if node is not None:
             close = getattr(node, 'close', None)
             if callable(close):
                 close()
             node.destroy_node()
         rclpy.try_shutdown()
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if errors:
+        raise errors[0]
