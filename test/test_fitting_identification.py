@@ -18,6 +18,7 @@ the truth, warnings for misfit and a late load cell, AIC/BIC ranking, load-cell 
 Recordings come from `rubber-rig simulate` (simulated rig, CAN path, 20 N load-cell noise) of a short
 seed-000 grid, so every test checks the fit against a known truth."""
 import json
+import math
 
 import numpy as np
 import pytest
@@ -48,11 +49,14 @@ def sims(tmp_path_factory):
            'blocks': [{'name': 'quasi_static', 'waveform': 'triangle', 'rate': '1 mm/s',
                        'amplitude': ['0.1 mm', '2 mm'], 'cycles': 2}] + PROGRAM['blocks']}
     (d / 'tri.yaml').write_text(yaml.safe_dump(tri))
-    cases = {'base': ('swing_arm_joint_20C', program, []),
-             'cubic': (d / 'cubic.yaml', program, []),
+    # a lab that declares its load cell (exactly: the simulated one is what it is said to be), and two that
+    # do not while their load cell is late or reads high
+    declared = ['--record-calibration']
+    cases = {'base': ('swing_arm_joint_20C', program, declared),
+             'cubic': (d / 'cubic.yaml', program, declared),
              'late': ('swing_arm_joint_20C', program, ['--load-cell-delay', '0.5ms']),
              'gain': ('swing_arm_joint_20C', program, ['--load-cell-gain', '1.01']),
-             'triangle': ('swing_arm_joint_20C', d / 'tri.yaml', [])}
+             'triangle': ('swing_arm_joint_20C', d / 'tri.yaml', declared)}
     out = {}
     for name, (model, prog, extra) in cases.items():
         path = d / f'{name}.mcap'
@@ -75,11 +79,18 @@ def test_the_true_model_fits_to_the_noise_with_intervals_that_cover_the_truth_an
     assert f.noise[sims['base'].name] == pytest.approx(20.0, rel=0.1)      # the noise the recording shows
     assert all(_covered(f, SEED000).values()), f.as_dict()['errors']
     assert f.warnings == []
-    # sigma is the larger of the noise-based and the block-jackknife one, and both are finite and positive
+    assert not f.misfit['misfit'] and f.misfit['p_value'] > 1e-3
+    # Type A is the larger of the noise-based and the block-jackknife sigma; the declared calibration is exact
+    # (u = 0), so it adds nothing and the total is Type A
     for k in SEED000:
         u = f.uncertainty[k]
-        assert u['sigma'] == max(u['sigma_noise'], u['sigma_blocks']) and 0 < u['relative_sigma'] < 0.1
-    assert abs(f.parameters['load_cell_delay']) < 4 * f.uncertainty['load_cell_delay']['sigma']
+        assert u['sigma_type_a'] == max(u['sigma_noise'], u['sigma_blocks']) and 0 < u['relative_sigma'] < 0.1
+        assert u['sigma'] == pytest.approx(u['sigma_type_a'], rel=1e-12)
+        assert u['budget'].get('load_cell_gain', 0.0) == 0.0 and u['budget']['load_cell_delay'] == 0.0
+    # the sensors are declared, not fitted: no delay parameter; the delay the data prefer is a diagnostic only
+    assert 'load_cell_delay' not in f.parameters
+    check = f.load_cell['delay_check']
+    assert abs(check['estimate']) < 4 * check['sigma'] and check['sigma'] < 0.05e-3
 
 
 def test_a_missing_cubic_spring_is_a_misfit_warning_and_aic_bic_pick_the_model_that_has_it(sims):
@@ -87,6 +98,7 @@ def test_a_missing_cubic_spring_is_a_misfit_warning_and_aic_bic_pick_the_model_t
     by_model = {m: fit_model([run], m)[0] for m in ('zener_berg', 'zener_berg_cubic')}
     wrong, right = by_model['zener_berg'][0], by_model['zener_berg_cubic'][0]
     assert wrong.chi2_per_dof > 3 and any(w.startswith('misfit beyond noise') for w in wrong.warnings)
+    assert 'misfit' in {w.code for w in wrong.warnings} and wrong.misfit['z'] > 10
     assert right.chi2_per_dof < 1.25 and right.warnings == []
     assert all(_covered(right, right.truth).values())
     ranking = compare_models(by_model)[0]
@@ -140,26 +152,49 @@ def test_block_covariance_is_the_leave_one_block_out_jackknife():
     assert abs(chi2 - r @ r) < 1e-9 and dof == x.size - 2
 
 
-def test_a_late_load_cell_is_estimated_and_warned_and_a_calibration_removes_it(sims):
+def test_an_undeclared_late_load_cell_is_never_fitted_away_silently(sims):
     run = load_run(sims['late'])
-    f = fit_model([run], 'zener_berg')[0][0]
+    # by default the delay is the declared one (none here): the fit misfits and says so first, names the
+    # delay the data would prefer without applying it, and says the calibration is missing
+    blind = fit_model([run], 'zener_berg')[0][0]
+    codes = [w.code for w in blind.warnings]
+    assert codes[0] == 'misfit' and 'calibration_disagrees' in codes and 'calibration_undeclared' in codes
+    # one linearised step from the misfitting optimum: an indication of the delay (0.39 ms here for 0.5 ms),
+    # not a calibration, and the warning says so
+    assert 0.25e-3 < blind.load_cell['delay_check']['estimate'] < 0.75e-3
+    assert 'load_cell_delay' not in blind.parameters
+    # asked to, the fit estimates it (never below zero) and warns that it did
+    f = fit_model([run], 'zener_berg', estimate_delay=True)[0][0]
     d, s = f.parameters['load_cell_delay'], f.uncertainty['load_cell_delay']['sigma']
     assert abs(d - 0.5e-3) < max(3 * s, 0.05e-3)
-    assert any(w.startswith('load-cell delay estimated') for w in f.warnings)
+    assert any(w.code == 'delay' and w.startswith('load-cell delay estimated') for w in f.warnings)
     assert all(_covered(f, SEED000).values())
-    # without the delay parameter the fit is wrong and says so
-    blind = fit_model([run], 'zener_berg', estimate_delay=False)[0][0]
-    assert blind.warnings and blind.chi2_per_dof > f.chi2_per_dof
-    # the calibration input: applied before fitting, nothing left to estimate, no warning
-    cal = fit_model([run], 'zener_berg', load_cell_delay=0.5e-3)[0][0]
-    assert cal.load_cell['delay'] == 0.5e-3 and cal.warnings == []
-    assert abs(cal.parameters['load_cell_delay']) < 4 * cal.uncertainty['load_cell_delay']['sigma']
+    assert blind.chi2_per_dof > f.chi2_per_dof
+    # the calibration declared: applied, nothing left over, no warning
+    cal = fit_model([run], 'zener_berg', load_cell_delay=0.5e-3, load_cell_delay_u=0.01e-3,
+                    load_cell_gain_u=0.0)[0][0]
+    assert cal.load_cell['delay'] == 0.5e-3 and cal.warnings == [], cal.warnings
+    assert all(_covered(cal, SEED000).values())
+    assert abs(cal.load_cell['delay_check']['estimate']) < 4 * cal.load_cell['delay_check']['sigma']
 
 
-def test_a_load_cell_gain_needs_the_calibration_input(sims):
+def test_a_load_cell_gain_error_is_in_the_budget_only_when_declared(sims):
     run = load_run(sims['gain'])
     raw = fit_model([run], 'zener_berg')[0][0]
     assert raw.parameters['k0'] / raw.truth['k0'] - 1 == pytest.approx(0.01, abs=0.004)   # undetectable: +1 %
+    # undeclared, the budget lacks the gain, and the fit says so, naming the force-scaled parameters
+    undeclared = [w for w in raw.warnings if w.code == 'calibration_undeclared' and 'gain' in w]
+    assert undeclared and {'k0', 'k_inf', 'f_fmax'} <= set(undeclared[0].parameters)
+    assert set(undeclared[0].parameters).isdisjoint({'tau', 'alpha', 'x2'})
+    # a certificate that says 1.000 +- 1 % (1 sigma): the Type B term covers the 1 % the load cell is off
+    declared = fit_model([run], 'zener_berg', load_cell_gain_u=0.01, load_cell_delay_u=0.0)[0][0]
+    u = declared.uncertainty['k0']
+    assert u['budget']['load_cell_gain'] == pytest.approx(0.01 * u['value'], rel=1e-9)
+    assert u['sigma'] == pytest.approx(math.hypot(u['sigma_type_a'], 0.01 * u['value']), rel=1e-9)
+    assert declared.uncertainty['tau']['budget'].get('load_cell_gain') is None   # tau is not force-scaled
+    assert 'load_cell_gain' not in declared.uncertainty['tau']['budget']
+    assert all(_covered(declared, SEED000).values())
+    assert not [w for w in declared.warnings if w.code == 'calibration_undeclared']
     cal = fit_model([run], 'zener_berg', load_cell_gain=1.01)[0][0]
     assert all(_covered(cal, SEED000).values())
 
@@ -187,14 +222,19 @@ def test_cli_fit_json_has_the_verdict_and_writes_a_model_file(sims, tmp_path, ca
                  '--json', '--no-progress']) == 0
     data = json.loads(capsys.readouterr().out)
     assert data['model'] == 'zener_berg_cubic' and data['warnings'] == [] and 0.8 < data['chi2_per_dof'] < 1.3
-    assert set(data['parameters']) == set(SEED000) | {'k3', 'load_cell_delay'}
+    assert set(data['parameters']) == set(SEED000) | {'k3'}
     assert data['comparison'][0]['selected'] == 'zener_berg_cubic'
-    assert data['candidates']['zener_berg'][0]['warnings']
+    assert data['misfit']['misfit'] is False and data['misfit']['dof'] > 1000
+    # warnings are objects with a code, the sentence and the parameters they concern
+    wrong = data['candidates']['zener_berg'][0]['warnings']
+    assert wrong and wrong[0]['code'] == 'misfit' and wrong[0]['message'].startswith('misfit beyond noise')
+    assert set(wrong[0]) == {'code', 'message', 'parameters'}
     written = yaml.safe_load(out.read_text())
     assert written['elements'][2]['type'] == 'polynomial_spring' and 'sigma' in written['elements'][2]
-    # the report reads the delay's interval from the fit record: the fit's own +-t sigma
-    assert written['fit']['load_cell']['delay_interval_95'] == pytest.approx(
-        data['uncertainty']['load_cell_delay']['interval_95'], rel=1e-9)
+    # the budget travels with the numbers: interval in the parameterisation that keeps k3's sign free
+    assert data['uncertainty']['k3']['interval_method'] == 'linear'
+    assert data['uncertainty']['alpha']['interval_method'] == 'logit'
+    assert data['uncertainty']['k0']['interval_method'] == 'log'
     assert main(['fit', str(sims['cubic']), '--model', 'zener_berg', '-o', '-', '--no-progress']) == 0
     text = capsys.readouterr().out
     assert 'WARNING: misfit beyond noise' in text and '95 % interval' in text

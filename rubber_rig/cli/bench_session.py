@@ -42,7 +42,7 @@ from rubber_rig.recording.loss import recording_loss
 from rubber_rig.units import to_si
 
 # the streams the recorder must record (matched with their publishers) before the first setpoint is sent
-RECORDED_TOPICS = ('samples', 'prediction', 'setpoints', 'cycle_metrics', 'status', 'events')
+RECORDED_TOPICS = ('samples', 'prediction', 'setpoints', 'cycle_metrics', 'status', 'events', 'rig_configuration')
 CONNECT_TIMEOUT = 30.0      # [s] nodes connected, goal accepted, recorder stopped
 ABORT_TIMEOUT = 15.0        # [s] the program ends after Ctrl-C cancelled it
 CATCH_UP_TIMEOUT = 5.0      # [s] the model predicts the last published samples

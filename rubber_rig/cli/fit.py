@@ -32,6 +32,7 @@ temperature). Tables print in the papers' units (mm, kN, kN/mm); YAML and --json
 """
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
@@ -59,8 +60,16 @@ def add_arguments(parser):
     parser.add_argument('--load-cell-gain', type=float, default=None,
                         help='known load-cell gain (calibration: reading / true force); default: the '
                              'recording\'s rig configuration, else 1')
-    parser.add_argument('--no-delay-estimate', action='store_true',
-                        help='do not estimate a residual load-cell delay in the time-domain fit')
+    parser.add_argument('--load-cell-gain-u', type=float, default=None,
+                        help='standard uncertainty of the load-cell gain (calibration certificate; class 0.5: '
+                             '0.0029); default: the recording\'s rig configuration (load_cell_gain_u)')
+    parser.add_argument('--load-cell-delay-u', default=None,
+                        help='standard uncertainty of the load-cell delay, e.g. 0.02ms; default: the recording\'s '
+                             'rig configuration (load_cell_delay_u)')
+    parser.add_argument('--estimate-delay', action='store_true',
+                        help='fit the load-cell delay as a parameter (never below zero) instead of using the '
+                             'declared one; for a load cell whose timing nobody measured (the fit then warns)')
+    parser.add_argument('--no-delay-estimate', action='store_true', help=argparse.SUPPRESS)   # the default now
     parser.add_argument('--per-block', action='store_true',
                         help='seed 004: identify K1, K3 and the elliptic damping b per block and fit their '
                              'trend over frequency and amplitude (Eq. 7)')
@@ -140,6 +149,15 @@ def print_fit(fit, out=None):
     sigma = ', '.join(f'{v:.3g} N' for v in fit.noise.values()) or 'not measured'
     print(f'  chi2/dof = {fit.chi2_per_dof:.3g} ({fit.n_points} points, load-cell noise {sigma}); '
           f'AIC {fit.aic:.1f}, BIC {fit.bic:.1f}', file=out)
+    m = fit.misfit
+    if m.get('input_noise') is not None:
+        carried = ', '.join(f'{v:.3g} N' for v in m['input_noise'].values())
+        print(f'  misfit test: chi2/dof = {m["ratio"]:.3g} against load-cell noise plus {carried} carried from the '
+              f'displacement noise; {m["z"]:+.1f} sigma, p = {m["p_value"]:.2g} '
+              f'({"misfit" if m["misfit"] else "consistent with noise"})', file=out)
+    elif m:
+        print(f'  misfit test: {m["z"]:+.1f} sigma, p = {m["p_value"]:.2g} '
+              f'({"misfit" if m["misfit"] else "consistent with noise"})', file=out)
     sk, sc = fit.max_errors('simulated' if fit.method == 'time' else 'analytic')
     print(f'  max |error| per block: K_dyn {100 * sk:.2f} %, C_eq {100 * sc:.2f} %', file=out)
     lc = fit.load_cell
@@ -163,6 +181,7 @@ def _out_path(base, fit, n_fits):
 
 
 def _write(fits, output, sources):
+    from rubber_rig.fitting.fitwarnings import warning_dict
     written = []
     if not output or output == '-':
         return written
@@ -172,7 +191,7 @@ def _write(fits, output, sources):
         if f.temperature is not None:
             f.model.meta['temperature'] = f.temperature
         f.model.meta['fit'] = {'recordings': f.runs, 'method': f.method, 'chi2_per_dof': f.chi2_per_dof,
-                               'warnings': list(f.warnings), 'load_cell': f.load_cell}
+                               'warnings': [warning_dict(w) for w in f.warnings], 'load_cell': f.load_cell}
         header = (f'# rubber-rig fit {" ".join(sources)}\n# SI units; sigma = 1 sigma, interval_95 = 95 % '
                   'interval (see rubber-rig fit --help)')
         f.model.dump(path, results=f.uncertainty, header=header)
@@ -203,11 +222,13 @@ def _per_block(args, runs, messages):
 
 
 def run(args) -> int:
+    from rubber_rig.fitting.fitwarnings import warning_dict
     from rubber_rig.fitting.identification import compare_models, fit_model
     from rubber_rig.fitting.progress import ProgressBar
     from rubber_rig.fitting.table import fit_table
     models = args.model or ['zener_berg']
     delay = None if args.load_cell_delay is None else to_si(args.load_cell_delay, 'time')
+    delay_u = None if args.load_cell_delay_u is None else to_si(args.load_cell_delay_u, 'time')
     table = str(args.recordings[0]).lower().endswith('.csv')
     messages = []
     if not table:
@@ -224,7 +245,8 @@ def run(args) -> int:
                 fits, msgs = fit_table(args.recordings[0], model, w_k=args.w_k, w_c=args.w_c, seed=args.seed)
             else:
                 fits, msgs = fit_model(runs, model, method=args.method, load_cell_delay=delay,
-                                       load_cell_gain=args.load_cell_gain, estimate_delay=not args.no_delay_estimate,
+                                       load_cell_gain=args.load_cell_gain, estimate_delay=args.estimate_delay,
+                                       load_cell_gain_u=args.load_cell_gain_u, load_cell_delay_u=delay_u,
                                        settle_cycles=args.settle_cycles, min_cycles=args.min_cycles, seed=args.seed,
                                        w_k=args.w_k, w_c=args.w_c, progress=bar)
             by_model[model] = fits
@@ -237,9 +259,9 @@ def run(args) -> int:
     written = _write(fits, args.output, [Path(p).name for p in args.recordings])
     if args.json:
         first = fits[0]
-        warnings = [w if len(fits) == 1 else f'{_t(f.temperature)}: {w}' for f in fits for w in f.warnings]
+        warnings = [dict(warning_dict(w), temperature=f.temperature) for f in fits for w in f.warnings]
         out = {'model': selected, 'parameters': first.parameters, 'uncertainty': first.uncertainty,
-               'warnings': warnings, 'chi2_per_dof': first.chi2_per_dof,
+               'warnings': warnings, 'chi2_per_dof': first.chi2_per_dof, 'misfit': first.misfit,
                'fits': [f.as_dict() for f in fits], 'comparison': comparison,
                'candidates': {m: [f.as_dict() for f in fl] for m, fl in by_model.items() if m != selected},
                'messages': messages, 'output': written}

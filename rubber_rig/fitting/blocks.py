@@ -28,6 +28,7 @@ is steady after about three cycles) and the remaining whole cycles are analysed.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -78,6 +79,25 @@ def noise_level(x) -> float:
     if d3.size == 0:
         return 0.0
     return float(1.4826 * np.median(np.abs(d3 - np.median(d3))) / np.sqrt(20.0))
+
+
+def noise_variance_uncertainty(x, segments: int = 16) -> float:
+    """Relative standard uncertainty of noise_level(x)**2, from its scatter over ``segments`` equal parts of x.
+
+    The misfit test compares the residual variance with this estimate of the noise variance, so the estimate's
+    own uncertainty belongs in the test (a 1 % uncertain noise level is a 2 % uncertain variance). The scatter of
+    the parts is measured, not assumed: it holds whatever the noise's distribution and correlation do to the
+    MAD-based estimator. Returns inf when x is too short for ``segments`` parts of 64 samples.
+    """
+    x = np.asarray(x, float)
+    n = x.size // segments
+    if n < 64:
+        return math.inf
+    v = np.array([noise_level(x[k * n:(k + 1) * n]) ** 2 for k in range(segments)])
+    mean = float(v.mean())
+    if mean <= 0:
+        return math.inf
+    return float(v.std(ddof=1) / math.sqrt(segments) / mean)
 
 
 def harmonic_sigma(noise, n_samples, amplitude, frequency):

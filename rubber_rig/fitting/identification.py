@@ -32,7 +32,8 @@ import yaml
 
 from rubber_rig.models.modelfile import ModelSpec, named_model, parse_model, resolve_model
 
-from .blocks import noise_level, split_blocks
+from .blocks import noise_level, noise_variance_uncertainty, split_blocks
+from .budget import add_budget
 from .metrics import window_properties
 from .modelfit import (
     DELAY,
@@ -46,9 +47,11 @@ from .modelfit import (
     jacobian,
     physical_uncertainty,
 )
-from .verdict import MISFIT_CHI2, notes, verdict
+from .verdict import misfit_test, notes, verdict
 
 METHODS = ('harmonic', 'time')
+RESTART_CHI2 = 1.5   # a time-domain fit this far above noise tries other starts of the global search (a search
+#                      heuristic; whether the final fit misfits is verdict.misfit_test's statistical decision)
 AIC_TIE = 2.0     # models within this many AIC units of the best are equally supported (Burnham & Anderson)
 
 
@@ -57,14 +60,7 @@ def load_cell_calibration(run, delay=None, gain=None) -> tuple:
     (``load_cell_delay``, ``load_cell_gain``: the simulated rig's ``rig_config`` mapping, or the recorder's
     ``metadata.rig_configuration`` YAML/JSON text a launch file sets), else (0, 1).
     """
-    meta = run.metadata or {}
-    cfg = meta.get('rig_config') or meta.get('rig_configuration') or {}
-    if isinstance(cfg, str):
-        try:
-            cfg = yaml.safe_load(cfg)
-        except yaml.YAMLError:
-            cfg = {}
-    cfg = cfg if isinstance(cfg, dict) else {}
+    cfg = _rig_config(run)
     sources = []
     if delay is None and cfg.get('load_cell_delay') is not None:
         delay = cfg['load_cell_delay']
@@ -93,17 +89,46 @@ def corrected_force(force, dt, delay, gain):
     return f / gain
 
 
-def calibrate(run, delay=None, gain=None):
-    """The run with its force divided by the known gain, and the calibration. A known delay is not taken out
-    of the data (interpolating between samples would filter the noise and fake a lower noise level): the fit
-    compares the model at t - delay instead.
+def declared_uncertainties(run, gain_u=None, delay_u=None) -> dict:
+    """{'gain_u': .., 'delay_u': ..}: the standard uncertainties of the load cell's gain [-] and delay [s] as
+    given, else as the recording's rig configuration declares them (``load_cell_gain_u``,
+    ``load_cell_delay_u``); None where nothing is declared (a negative value declares nothing).
+    """
+    cfg = _rig_config(run)
+    out = {}
+    for key, given in (('gain_u', gain_u), ('delay_u', delay_u)):
+        v = given if given is not None else cfg.get(f'load_cell_{key}')
+        try:
+            v = None if v is None else float(v)
+        except (TypeError, ValueError):
+            v = None
+        out[key] = v if v is not None and math.isfinite(v) and v >= 0 else None
+    return out
+
+
+def _rig_config(run) -> dict:
+    meta = run.metadata or {}
+    cfg = meta.get('rig_config') or meta.get('rig_configuration') or {}
+    if isinstance(cfg, str):
+        try:
+            cfg = yaml.safe_load(cfg)
+        except yaml.YAMLError:
+            cfg = {}
+    return cfg if isinstance(cfg, dict) else {}
+
+
+def calibrate(run, delay=None, gain=None, gain_u=None, delay_u=None):
+    """The run with its force divided by the known gain, and the calibration (delay, gain, their declared
+    standard uncertainties or None, source). A known delay is not taken out of the data (interpolating between
+    samples would filter the noise and fake a lower noise level): the fit compares the model at t - delay.
     """
     d, g, source = load_cell_calibration(run, delay, gain)
+    cal = {'delay': d, 'gain': g, 'source': source, **declared_uncertainties(run, gain_u, delay_u)}
     if d == 0.0 and g == 1.0:
-        return run, {'delay': 0.0, 'gain': 1.0, 'source': 'none'}
+        return run, cal
     out = copy.copy(run)
     out.force = np.asarray(run.force, float) / g
-    return out, {'delay': d, 'gain': g, 'source': source}
+    return out, cal
 
 
 def _temp_key(t):
@@ -225,8 +250,12 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     values = hc.values(z_h)
     timings = {'harmonic_s': time.perf_counter() - t0}
     messages = []
+    delay_shift, delay_check = None, None
     if method == 'harmonic':
         unc, corr, chi2, dof = harmonic_uncertainty(hc, z_h, ls_h, targets, w_k, w_c)
+        share = np.array([sum(b.recording == run.name for b in blocks) for run, _, _ in items], float)
+        u = [noise_variance_uncertainty(run.force) for run, _, _ in items]
+        misfit = misfit_test(chi2, dof, float(np.sqrt(np.sum((share / share.sum() * np.array(u)) ** 2))))
         coords, z, n_points, delay = hc, z_h, 2 * len(blocks), 0.0
         problem = TimeProblem(spec.with_values(values), items, points_per_block, known)
     else:
@@ -237,7 +266,7 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
             progress(0.4, 'time-domain fit')
         ls, (lo, hi) = fit_time_model(problem, coords, coords.z_of(start))
         dof_t = max(problem.m - len(coords.names) - len(problem.block_rows), 1)
-        if float(ls.fun @ ls.fun) / dof_t > MISFIT_CHI2:
+        if float(ls.fun @ ls.fun) / dof_t > RESTART_CHI2:
             # a misfit may be a wrong basin of the first-harmonic search (e.g. a large negative cubic term
             # standing in for friction): try other starts, refine the most promising if it beats this one
             better = _other_start(spec, hc, targets, problem, coords, seed, w_k, w_c, float(ls.fun @ ls.fun),
@@ -264,8 +293,15 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
         values = coords.values(z)
         n_points = problem.m
         delay = float(values.get(DELAY, 0.0))
+        misfit = time_misfit(problem, values, r, dof)
+        if DELAY not in coords.names:
+            delay_shift, delay_check = delay_sensitivity(problem, coords, z, jac, r, chi2 / max(dof, 1))
     fitted = spec.with_values({k: v for k, v in values.items() if k != DELAY})
     params = {n: float(values[n]) for n in coords.names}
+    cal = next(iter((calibration or {}).values()), {})
+    add_budget(unc, dict(zip(coords.names, coords.kinds, strict=True)),
+               {n: spec.param_spec(n).scale for n in coords.names if n != DELAY}, cal,
+               delay_shift=delay_shift, delay_estimated=DELAY in coords.names)
     predicted = problem.predict(values) if method == 'time' else problem.predict({})
     forces = dict(zip(runs, predicted, strict=True))
     # with an estimated delay the blocks are compared as the specimen behaved: the measured force corrected
@@ -276,15 +312,17 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
                 if total[name]} or None
     quality = block_quality(fitted, blocks, forces, runs, measured=measured,
                             sigmas=(targets.rel_sigma_k, targets.rel_sigma_c))
-    cal = next(iter((calibration or {}).values()), {})
     fit = ModelFit(model=fitted, temperature=temperature, runs=list(runs), blocks=blocks, method=method,
                    parameters=params, uncertainty=unc, correlation=corr.tolist(), chi2=float(chi2), dof=int(dof),
                    n_points=int(n_points), noise=noise,
                    load_cell={'delay': cal.get('delay', 0.0), 'gain': cal.get('gain', 1.0),
                               'calibration_source': cal.get('source', 'none'),
                               'delay_estimated': params.get(DELAY), 'delay_sigma': unc.get(DELAY, {}).get('sigma'),
-                              'delay_interval_95': unc.get(DELAY, {}).get('interval_95')},
+                              'delay_interval_95': unc.get(DELAY, {}).get('interval_95'),
+                              'gain_u': cal.get('gain_u'), 'delay_u': cal.get('delay_u'),
+                              'delay_check': delay_check},
                    quality=quality, messages=messages)
+    fit.misfit = misfit
     fit.bounds_hit = _at_bounds(coords, z, coords.lo, coords.hi)
     if method == 'time':
         fit.refinement_limited = [n for n in limited if n not in fit.bounds_hit]
@@ -293,6 +331,57 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     fit.notes = notes(fit)
     fit.timings = {**timings, 'total_s': time.perf_counter() - t0}
     return fit
+
+
+def delay_sensitivity(problem: TimeProblem, coords, z, jac, r, inflation: float) -> tuple:
+    """(shift, check) of a time-domain fit whose load-cell delay was held at the declared value.
+
+    shift: parameter name -> d(parameter)/d(delay) [unit/s], linearised at the optimum (Gauss-Newton:
+    dz = -(J^T J)^-1 J^T dr/dd), for the declared delay's uncertainty in the budget.
+    check: the delay the data would prefer beyond the declared one, as a diagnostic that is never applied:
+    {'estimate' [s], 'sigma' [s]} from one Gauss-Newton step with the delay freed (its sigma is the marginal
+    one, from the Schur complement of the information matrix, inflated by the misfit).
+    """
+    values = coords.values(z)
+    preds = problem.predict(values)
+    h = 1e-2 * min(run.dt for run, *_ in problem.items)
+    jd = (problem.residuals_from(preds, h) - problem.residuals_from(preds, -h)) / (2 * h)
+    info = jac.T @ jac
+    bread = np.linalg.pinv(info)
+    b = jac.T @ jd
+    dz = -bread @ b
+    eps = 1e-6
+    up, down = coords.values(z + dz * eps), coords.values(z - dz * eps)
+    shift = {n: (float(up[n]) - float(down[n])) / (2 * eps) for n in coords.names}
+    schur = float(jd @ jd - b @ bread @ b)
+    if schur <= 0:
+        return shift, None
+    estimate = -float(jd @ r - b @ bread @ (jac.T @ r)) / schur
+    return shift, {'estimate': estimate, 'sigma': math.sqrt(max(1.0, inflation) / schur)}
+
+
+def time_misfit(problem: TimeProblem, values: dict, r, dof: int) -> dict:
+    """The misfit test (verdict.misfit_test) of a time-domain fit with residual ``r`` (load-cell noise units).
+
+    The noise the residual is judged against is the load cell's plus the displacement noise carried through
+    the model (TimeProblem.input_noise: errors in variables); each recording's chi^2 share is rescaled to that
+    sum. The noise estimate's uncertainty is each recording's (blocks.noise_variance_uncertainty) for its load
+    cell share, combined over recordings by their share of the points.
+    """
+    carried = problem.input_noise(values)
+    chi2, u2, total = 0.0, 0.0, problem.m
+    inputs = {}
+    for (run, _, _, force, _, sigma), rows, s_in in zip(problem.items, problem.item_rows, carried, strict=True):
+        share = sigma ** 2 / (sigma ** 2 + s_in ** 2)
+        part = r[rows]
+        chi2 += float(part @ part) * share
+        n = part.size / max(total, 1)
+        u2 += (n * share * noise_variance_uncertainty(force)) ** 2
+        inputs[run.name] = s_in
+    out = misfit_test(chi2, dof, math.sqrt(u2))
+    out['input_noise'] = inputs
+    out['chi2_load_cell_only'] = float(r @ r)
+    return out
 
 
 def _other_start(spec, hc, targets, problem, coords, seed, w_k, w_c, chi2_now, current):
@@ -348,10 +437,16 @@ def _at_bounds(coords, z, lo, hi) -> list:
 
 
 def fit_model(runs, model='zener_berg', method='time', load_cell_delay=None, load_cell_gain=None,
-              estimate_delay=True, settle_cycles=3, min_cycles=2, seed=0, w_k=100.0, w_c=1.0,
-              progress=None) -> tuple:
+              estimate_delay=False, settle_cycles=3, min_cycles=2, seed=0, w_k=100.0, w_c=1.0,
+              progress=None, load_cell_gain_u=None, load_cell_delay_u=None) -> tuple:
     """Identify ``model`` (model file, named model, parameter set or ModelSpec) from ``runs`` (RunData), one
     fit per temperature. Returns (fits, messages).
+
+    The load cell's calibration (delay, gain and their standard uncertainties) is declared: given here, else
+    the recordings' rig configuration. It is applied, never fitted away: the delay the data would prefer is a
+    diagnostic (``load_cell['delay_check']``, a warning when it disagrees with the declared one).
+    ``estimate_delay`` makes the delay a fit parameter instead (never below zero in total), for a load cell
+    whose timing nobody measured; the fit then warns whenever the estimate is not zero.
     """
     if method not in METHODS:
         raise ValueError(f'unknown fit method {method!r} (use one of {", ".join(METHODS)})')
@@ -361,7 +456,7 @@ def fit_model(runs, model='zener_berg', method='time', load_cell_delay=None, loa
     calibrated, cals = [], {}
     for run in runs:
         if run.usable():
-            run, cal = calibrate(run, load_cell_delay, load_cell_gain)
+            run, cal = calibrate(run, load_cell_delay, load_cell_gain, load_cell_gain_u, load_cell_delay_u)
             cals[run.name] = cal
         calibrated.append(run)
     groups, messages = split_runs(calibrated, settle_cycles, min_cycles)

@@ -54,6 +54,7 @@ from rubber_rig.models.modelfile import ModelSpec, load_model_file, spec_from_pa
 from rubber_rig.units import to_si
 
 from .blocks import harmonic_sigma, noise_level
+from .fitwarnings import warning_text
 from .identification import calibrate, corrected_force
 from .metrics import window_properties
 from .modelfit import DELAY, Z95, paper_unit
@@ -603,7 +604,7 @@ def _fit_box(model: ReportModel):
     warnings = fit.get('warnings') or []
     if warnings:
         parts.append('<div class="box warnings"><b>Warnings</b><ul>'
-                     + ''.join(f'<li>{esc(str(w))}</li>' for w in warnings) + '</ul></div>')
+                     + ''.join(f'<li>{esc(warning_text(w))}</li>' for w in warnings) + '</ul></div>')
     else:
         parts.append('<div class="box ok"><b>No warnings</b>: the fit found the model describes its data to '
                      'their noise level.</div>')

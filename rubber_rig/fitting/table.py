@@ -39,7 +39,7 @@ from rubber_rig.units import to_si
 from .blocks import BlockResult
 from .identification import block_quality, harmonic_uncertainty
 from .modelfit import BlockTargets, ModelFit, coordinates, fit_harmonic_model
-from .verdict import notes, verdict
+from .verdict import misfit_test, notes, verdict
 
 COLUMNS = {'frequency': 'frequency', 'amplitude': 'length', 'preload': 'length', 'mean': 'length',
            'temperature': 'temperature', 'k_dyn': 'stiffness', 'c_eq': 'damping', 'k_dyn_sigma': 'stiffness',
@@ -135,9 +135,11 @@ def fit_table(path, model='zener_berg', w_k=100.0, w_c=1.0, seed=0) -> tuple:
                        parameters={n: float(values[n]) for n in coords.names}, uncertainty=unc,
                        correlation=corr.tolist(), chi2=chi2, dof=dof, n_points=2 * len(group), noise={},
                        load_cell={'delay': 0.0, 'gain': 1.0, 'calibration_source': 'none'},
-                       quality=block_quality(fitted, blocks, {}, {}))
+                       quality=block_quality(fitted, blocks, {}, {}, sigmas=(t.rel_sigma_k, t.rel_sigma_c)))
         if not np.all(t.rel_sigma_k > 0):
             fit.chi2, fit.dof = float('nan'), dof
+        else:   # the stated sigmas are the noise model: declared, so no estimate's uncertainty enters the test
+            fit.misfit = misfit_test(chi2, dof, 0.0)
         fit.warnings = verdict(fit, coords)
         fit.notes = notes(fit)
         fits.append(fit)

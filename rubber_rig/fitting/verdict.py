@@ -16,8 +16,10 @@
 
 Each warning is one sentence a test engineer can act on. A clean fit has none. Thresholds:
 
-* misfit: chi^2 / dof above ``MISFIT_CHI2`` (the residual is larger than the load-cell noise the
-  recording shows: the model misses something the data contain);
+* misfit: a statistical test (:func:`misfit_test`), not a fixed chi^2/dof: the residual variance against the
+  noise variance the recording shows (load cell, plus the displacement transducer's noise carried through the
+  model, errors in variables), with the chi^2 distribution's spread for these degrees of freedom and the
+  uncertainty of the noise estimate itself; a misfit when the excess has a p-value below ``MISFIT_P``;
 * per-block errors of the fitted model run over the measured displacement above the README's targets,
   ``TARGET_K`` for K_dyn and ``TARGET_C`` for C_eq, and above 3 sigma of the block's measurement (a
   small loss measured with a noisy load cell is not a target miss);
@@ -37,10 +39,13 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from scipy.stats import norm
 
+from .budget import CLASS_05_GAIN_U, undeclared
+from .fitwarnings import FitWarning
 from .modelfit import DELAY
 
-MISFIT_CHI2 = 1.5
+MISFIT_P = 1e-3      # one-sided p-value of the chi^2 excess below which the model misfits (3.1 sigma)
 TARGET_K, TARGET_C = 0.01, 0.05
 PATTERN_K, PATTERN_C = 0.005, 0.025
 MAX_CORRELATION = 0.95
@@ -65,21 +70,48 @@ def _trend(errors, x):
     return coef[1] * span, se * span
 
 
+def misfit_test(chi2: float, dof: int, noise_variance_u: float = 0.0) -> dict:
+    """The misfit test: is chi^2 (in units of the estimated noise variance) larger than noise explains.
+
+    Under the model, R = chi^2/dof has mean 1 and variance 2/dof (the chi^2 distribution) plus u^2, the relative
+    variance of the noise-variance estimate that chi^2 is divided by (``noise_variance_u``, relative standard
+    uncertainty: blocks.noise_variance_uncertainty). z = (R - 1) / sqrt(2/dof + u^2); a misfit when its
+    one-sided p-value is below MISFIT_P. With ~5000 points and a 1 % noise estimate, R above ~1.07 misfits;
+    with 40 points, R above ~1.7.
+    """
+    dof = max(int(dof), 1)
+    ratio = float(chi2) / dof
+    u = float(noise_variance_u) if math.isfinite(noise_variance_u) else 1.0
+    sd = math.sqrt(2.0 / dof + u ** 2)
+    z = (ratio - 1.0) / sd
+    p = float(norm.sf(z))
+    return {'chi2': float(chi2), 'dof': dof, 'ratio': ratio, 'sd': sd, 'z': z, 'p_value': p,
+            'noise_variance_u': u, 'misfit': p < MISFIT_P}
+
+
 def misfit_warnings(fit) -> list:
     out = []
-    if fit.chi2_per_dof > MISFIT_CHI2:
+    test = fit.misfit or (misfit_test(fit.chi2, fit.dof) if math.isfinite(fit.chi2) else {'misfit': False})
+    if test['misfit']:
+        why = (f'chi2/dof = {test["ratio"]:.3g} with {test["dof"]} degrees of freedom is {test["z"]:.1f} sigma '
+               f'beyond noise (p = {test["p_value"]:.1g}; sigma of chi2/dof {test["sd"]:.2g}, the noise '
+               f'estimate\'s own uncertainty included)')
         if fit.method == 'harmonic' and fit.runs and fit.noise:
             # the blocks' K_dyn and C_eq against the exact first harmonics of ideal sines: the actuator's
             # distortion and the rig's time scheme differ from those by more than a low noise resolves
-            out.append(f'misfit beyond noise: chi2/dof = {fit.chi2_per_dof:.3g} of the blocks\' K_dyn and C_eq '
-                       'against the first harmonics of ideal sines: the model or the idealisation (the measured '
-                       'motion is not a pure sine) does not describe the data to the noise; the uncertainties '
-                       'are inflated by this misfit; --method time runs the model over the measured motion')
+            out.append(FitWarning('misfit', f'misfit beyond noise: {why}, of the blocks\' K_dyn and C_eq against '
+                       'the first harmonics of ideal sines: the model or the idealisation (the measured motion is '
+                       'not a pure sine) does not describe the data to the noise; the uncertainties are inflated by '
+                       'this misfit; --method time runs the model over the measured motion'))
         else:
             sigma = np.mean(list(fit.noise.values())) if fit.noise else math.nan
-            out.append(f'misfit beyond noise: chi2/dof = {fit.chi2_per_dof:.3g} (the force residual is '
-                       f'{math.sqrt(fit.chi2_per_dof):.2g} x the load-cell noise of {sigma:.3g} N): the model '
-                       'does not describe what the data show; the uncertainties are inflated by this misfit')
+            inputs = test.get('input_noise') or {}
+            carried = (f', plus {np.mean(list(inputs.values())):.3g} N carried from the displacement noise through '
+                       'the model') if inputs and max(inputs.values()) > 0 else ''
+            out.append(FitWarning('misfit', f'misfit beyond noise: {why}; the force residual is '
+                       f'{math.sqrt(test["ratio"]):.2g} x the noise (load cell {sigma:.3g} N{carried}): the model '
+                       'does not describe what the data show, and no sensor delay, gain or offset may be read from '
+                       'this fit; the uncertainties are inflated by this misfit'))
     kind = 'simulated' if any('simulated' in q for q in fit.quality) else 'analytic'
     rows = [q for q in fit.quality if kind in q]
     if not rows:
@@ -93,16 +125,18 @@ def misfit_warnings(fit) -> list:
         if bad.size:
             w = bad[np.argmax(np.abs(e[bad]))]
             q = rows[w]
-            out.append(f'{name} error above the {_pct(target)} target in {bad.size} of {len(rows)} blocks '
-                       f'(worst {100 * e[w]:+.2f} % at {q["frequency"]:.3g} Hz, {1e3 * q["amplitude"]:.3g} mm)')
+            out.append(FitWarning('misfit', f'{name} error above the {_pct(target)} target in {bad.size} of '
+                                  f'{len(rows)} blocks (worst {100 * e[w]:+.2f} % at {q["frequency"]:.3g} Hz, '
+                                  f'{1e3 * q["amplitude"]:.3g} mm)'))
     lf = np.log([q['frequency'] for q in rows])
     amp = np.array([q['amplitude'] for q in rows])
     for name, e, limit in (('K_dyn', ek, PATTERN_K), ('C_eq', ec, PATTERN_C)):
         for what, x in (('frequency', lf), ('amplitude', amp)):
             change, se = _trend(e, x)
             if abs(change) > limit and abs(change) > 4 * se:
-                out.append(f'systematic {name} residual with {what}: the model error changes by '
-                           f'{100 * change:+.2f} % over the measured {what} range (a model error, not noise)')
+                out.append(FitWarning('misfit', f'systematic {name} residual with {what}: the model error changes '
+                                      f'by {100 * change:+.2f} % over the measured {what} range (a model error, '
+                                      'not noise)'))
     return out
 
 
@@ -115,27 +149,33 @@ def identifiability_warnings(fit, coords) -> list:
         # correlation comes from too); the block jackknife's scatter has its own warning above 30 %
         worst = max(_relative_noise_sigma(fit.uncertainty[names[i]]), _relative_noise_sigma(fit.uncertainty[names[j]]))
         if worst > CORRELATED_SIGMA:
-            out.append(f'{names[i]} and {names[j]} cannot be told apart by these data (correlation '
-                       f'{corr[i, j]:+.3f}, +-{100 * worst:.0f} % at 1 sigma): only a combination of them is '
-                       'identified; widen the frequency/amplitude range or fix one')
+            out.append(FitWarning('identifiability', f'{names[i]} and {names[j]} cannot be told apart by these '
+                                  f'data (correlation {corr[i, j]:+.3f}, +-{100 * worst:.0f} % at 1 sigma): only a '
+                                  'combination of them is identified; widen the frequency/amplitude range or fix one',
+                                  (names[i], names[j])))
     for k, u in fit.uncertainty.items():
         if k == DELAY:
             continue
         kind = coords.kinds[coords.names.index(k)] if k in coords.names else 'log'
         lo, hi = u['interval_95']
         if kind == 'lin' and lo <= 0 <= hi:
-            out.append(f'{k} is consistent with zero ({u["value"]:.3g} +- {u["sigma"]:.2g}): the data do not '
-                       'need this term')
+            out.append(FitWarning('identifiability', f'{k} is consistent with zero ({u["value"]:.3g} +- '
+                                  f'{u["sigma"]:.2g}): the data do not need this term', (k,)))
         elif kind != 'lin' and u['relative_sigma'] > MAX_RELATIVE_SIGMA:
-            out.append(f'{k} is poorly determined (+-{100 * u["relative_sigma"]:.0f} % at 1 sigma): the data '
-                       f'do not constrain it')
+            out.append(FitWarning('identifiability', f'{k} is poorly determined (+-{100 * u["relative_sigma"]:.0f} % '
+                                  'at 1 sigma): the data do not constrain it', (k,)))
     for k in fit.bounds_hit:
-        out.append(f'{k} ended at the edge of its search range: the optimum may lie beyond it, '
-                   'or the model structure does not suit the data')
+        if k == DELAY and fit.parameters.get(DELAY, 0.0) + fit.load_cell.get('delay', 0.0) < 1e-5:
+            out.append(FitWarning('delay', 'the fit asks for a negative load-cell delay (the force measured before '
+                                  'it acts), which is never applied: the model lags the specimen, a model error '
+                                  '(e.g. a missing viscous branch), not a sensor; the delay was held at zero', (k,)))
+            continue
+        out.append(FitWarning('bounds', f'{k} ended at the edge of its search range: the optimum may lie beyond '
+                              'it, or the model structure does not suit the data', (k,)))
     if fit.refinement_limited:
-        out.append(f'the time-domain fit stopped at the edge of its range around the first-harmonic estimate '
-                   f'({", ".join(fit.refinement_limited)}): the loops and the first harmonics disagree, a sign of '
-                   'a model or data problem')
+        out.append(FitWarning('misfit', 'the time-domain fit stopped at the edge of its range around the '
+                              f'first-harmonic estimate ({", ".join(fit.refinement_limited)}): the loops and the first '
+                              'harmonics disagree, a sign of a model or data problem', fit.refinement_limited))
     return out
 
 
@@ -165,11 +205,67 @@ def delay_warnings(fit) -> list:
     s = fit.load_cell.get('delay_sigma')
     if d is None or s is None or not (abs(d) > 4 * s):
         return []
-    return [f'load-cell delay estimated at {1e3 * d:+.3f} +- {1e3 * s:.3f} ms beyond the calibration applied '
-            f'({1e3 * fit.load_cell.get("delay", 0.0):.3f} ms): the parameters are corrected for it; check the '
-            'sensor timing and give --load-cell-delay once it is known']
+    return [FitWarning('delay', f'load-cell delay estimated at {1e3 * d:+.3f} +- {1e3 * s:.3f} ms beyond the '
+                       f'calibration applied ({1e3 * fit.load_cell.get("delay", 0.0):.3f} ms): the parameters are '
+                       'corrected for it; check the sensor timing and give --load-cell-delay once it is known',
+                       (DELAY,))]
+
+
+def calibration_warnings(fit, misfits: bool) -> list:
+    """Declared calibrations: what is missing from the budget, and a delay the data prefer beyond the declared one
+    (a diagnostic, never applied; when the model misfits it says nothing about the sensor).
+    """
+    out = []
+    missing = undeclared(fit.uncertainty)
+    if 'load_cell_gain' in missing:
+        scaled = [n for n, u in fit.uncertainty.items() if (u.get('budget') or {}).get('load_cell_gain', 0) is None]
+        out.append(FitWarning('calibration_undeclared', 'the load-cell gain uncertainty is not declared (rig '
+                              'configuration load_cell_gain_u, or --load-cell-gain-u): the force-scaled parameters '
+                              f'({", ".join(scaled)}) carry no calibration contribution; a class 0.5 load cell would '
+                              f'add {100 * CLASS_05_GAIN_U:.2f} % (1 sigma) to each', scaled))
+    if 'load_cell_delay' in missing:
+        out.append(FitWarning('calibration_undeclared', 'the load-cell delay uncertainty is not declared (rig '
+                              'configuration load_cell_delay_u, or --load-cell-delay-u): its effect on the loss '
+                              'parameters is missing from the budget', ()))
+    check = fit.load_cell.get('delay_check')
+    if check:
+        u_d = fit.load_cell.get('delay_u') or 0.0
+        est, s = check['estimate'], check['sigma']
+        declared = fit.load_cell.get('delay', 0.0)
+        if abs(est) > 3 * math.hypot(s, u_d):
+            if misfits:
+                text = (f'a load-cell delay of {1e3 * (declared + est):+.3f} ms instead of the declared '
+                        f'{1e3 * declared:.3f} ms would reduce the misfit; a delay and a model error (a missing '
+                        'viscous branch) both lag the force in proportion to frequency, so only a calibration of '
+                        'the load cell can tell them apart; nothing was applied')
+            else:
+                text = (f'the data prefer a load-cell delay of {1e3 * (declared + est):+.3f} +- {1e3 * s:.3f} ms, '
+                        f'not the declared {1e3 * declared:.3f} +- {1e3 * u_d:.3f} ms '
+                        f'({abs(est) / math.hypot(s, u_d):.1f} combined sigmas): check the calibration; nothing was '
+                        'applied')
+            out.append(FitWarning('calibration_disagrees', text, (DELAY,)))
+    return out
+
+
+SETTLED_CYCLES = 3   # seed 000: Berg's friction loop is steady after about three cycles
+
+
+def short_block_warnings(fit) -> list:
+    """Blocks analysed from fewer than SETTLED_CYCLES settling cycles (--settle-cycles below 3), or with fewer
+    than SETTLED_CYCLES analysed cycles: the friction loop and the block offset are still settling there.
+    """
+    short = [b for b in fit.blocks if b.cycles and (b.skipped_cycles < SETTLED_CYCLES or b.cycles < SETTLED_CYCLES)]
+    if not short:
+        return []
+    return [FitWarning('short_blocks', f'{len(short)} of {len(fit.blocks)} blocks have fewer than {SETTLED_CYCLES} '
+                       'settling cycles before the analysed ones, or fewer than that many analysed: the friction '
+                       'loop is not steady there and the friction parameters (x2, F_fmax) are biased low (by several '
+                       'per cent on seed 000\'s joint, README "Identification"); record longer blocks',
+                       ())]
 
 
 def verdict(fit, coords) -> list:
-    """All warnings of ``fit`` (a ModelFit) in the order: misfit, identifiability, load cell."""
-    return misfit_warnings(fit) + identifiability_warnings(fit, coords) + delay_warnings(fit)
+    """All warnings of ``fit`` (a ModelFit) in the order: misfit, identifiability, load cell, calibration."""
+    misfit = misfit_warnings(fit)
+    return (misfit + identifiability_warnings(fit, coords) + delay_warnings(fit)
+            + calibration_warnings(fit, any(w.code == 'misfit' for w in misfit)) + short_block_warnings(fit))

@@ -28,18 +28,22 @@ import subprocess
 import sys
 import threading
 import time
+import uuid
 from pathlib import Path
 from typing import Callable
 
 import numpy as np
 import rclpy
 import yaml
+from action_msgs.msg import GoalStatus
 from rclpy.action import ActionClient
+from rclpy.action.client import ClientGoalHandle
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import SetBool, Trigger
+from unique_identifier_msgs.msg import UUID
 
 from msg_defs.action import RunProgram
 from msg_defs.msg import (
@@ -347,13 +351,32 @@ class Operator:
         goal = RunProgram.Goal(program_yaml=program_yaml, program_path=program_path,
                                amplitude_control=amplitude_control)
         # A request sent before DDS matched a just (re)started server is lost (services are volatile), and the
-        # graph still lists a killed server until its lease expires: resend until one answers.
+        # graph still lists a killed server until its lease expires: resend until one answers. The answer can be
+        # lost too while the server runs the goal (a restarted server that has not matched our response reader
+        # yet: "failed to send response (timeout)"), so every resend carries the same goal id: a server that
+        # has the goal rejects the duplicate, and we take up the goal it runs instead of reading a refusal.
+        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        resent = False
         while True:
-            fut = client.send_goal_async(goal)
+            fut = client.send_goal_async(goal, goal_uuid=goal_id)
             if self.wait_for(fut.done, min(self.RETRY, max(0.0, deadline - time.monotonic()))):
-                return fut.result()
+                response = fut.result()
+                if response.accepted or not resent:
+                    return response
+                return self._known_goal(client, goal_id) or response
+            resent = True
             if time.monotonic() >= deadline:
                 return None
+
+    def _known_goal(self, client, goal_id):
+        """The handle of goal `goal_id` if the server has it (its result is not STATUS_UNKNOWN within 1 s:
+        running, or ended), else None.
+        """
+        handle = ClientGoalHandle(client, goal_id, RunProgram.Impl.SendGoalService.Response(accepted=True))
+        fut = handle.get_result_async()
+        if self.wait_for(fut.done, 1.0) and fut.result().status == GoalStatus.STATUS_UNKNOWN:
+            return None
+        return handle
 
     def result(self, handle, timeout: float):
         """The goal's result (RunProgram.Result) or None if it did not end within `timeout` seconds."""

@@ -54,6 +54,7 @@ import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
+from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
 from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
@@ -68,7 +69,7 @@ from rubber_rig.nodes.rclpy_compat import lifecycle_state
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.rig.can import FAULT_WATCHDOG
 from rubber_rig.rig.can.driver import StreamRefused
-from rubber_rig.rig.config import BusLoadError, ConfigError, RigConfig
+from rubber_rig.rig.config import BusLoadError, ConfigError, RigConfig, configuration_text
 from rubber_rig.rig.interface import open_rig
 from rubber_rig.settings import nest, setting_for, settings_of
 
@@ -90,6 +91,7 @@ MAX_CHANNELS = 16   # owners' command channels the driver listens to at once
 # delayed the owner's batches past stream_timeout. An owner streams at most ~100 batches/s (1 kHz, 10 per batch).
 MUTE_AFTER = 200
 MUTE_FOR = 10.0     # [s]
+
 
 
 
@@ -144,6 +146,9 @@ class RigDriverNode(LifecycleNode):
         self._refused_at = -1e9            # wall time of the last refusal warning (throttled)
         self._status_key = None
         self.pub_status = self.create_publisher(RigStatus, topics.STATUS, topics.LATCHED_QOS)
+        # what a recording must know of this rig (the load cell's declared calibration for rubber-rig fit):
+        # latched, so the recorder records it and a file converted by any rosbag2 tool keeps it
+        self.pub_configuration = self.create_publisher(String, topics.RIG_CONFIGURATION, topics.LATCHED_QOS)
         self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         self.create_service(Trigger, '~/abort', self.on_abort)
         self.create_service(Trigger, '~/reset', self.on_reset)
@@ -210,6 +215,7 @@ class RigDriverNode(LifecycleNode):
             self.get_logger().error(f'configure failed, {self.get_name()} stays unconfigured: {exc}')
             return TransitionCallbackReturn.FAILURE
         self.pub_samples = self.create_lifecycle_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
+        self.pub_configuration.publish(String(data=configuration_text(self.config)))
         self.get_logger().info(f'rig open: backend {self.config.backend}, {self.config.sample_rate:g} Hz, '
                                f'{self.samples_per_batch} samples per batch')
         return TransitionCallbackReturn.SUCCESS

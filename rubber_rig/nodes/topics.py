@@ -43,6 +43,7 @@ CYCLE_METRICS = 'cycle_metrics'      # msg_defs/msg/CycleMetrics, element_model
 MODEL_PARAMETERS = 'model_parameters'  # msg_defs/msg/ModelParameters, element_model (latched)
 PROGRAM = 'program'                  # std_msgs/msg/String (program YAML), excitation (latched)
 EVENTS = 'events'                    # msg_defs/msg/DetectorEvent, excitation (detector trips)
+RIG_CONFIGURATION = 'rig_configuration'  # std_msgs/msg/String (YAML), rig_driver (latched): the sensors' calibration
 RECORDER_STATUS = 'recorder_status'  # msg_defs/msg/RecorderStatus, recorder (latched)
 HEARTBEAT = 'heartbeat'              # msg_defs/msg/Heartbeat, every node, every 0.25 s
 DIAGNOSTICS = '/diagnostics'         # diagnostic_msgs/msg/DiagnosticArray (absolute, as in every ROS 2 system)

@@ -215,7 +215,8 @@ def _pick(types: dict, msg_type: str, preferred: str):
 
 def _metadata_from_topics(rec: Recording):
     """Fill what the metadata record lacks (e.g. `ros2 bag record` files) from latched topics: the
-    program YAML (std_msgs/String on ``program``) and the model parameters (ModelParameters); and, for a file
+    program YAML (std_msgs/String on ``program``), the rig's configuration with the load cell's declared
+    calibration (``rig_configuration``) and the model parameters (ModelParameters); and, for a file
     whose MCAP metadata records were lost in a conversion (rosbags: MCAP -> sqlite3 -> MCAP), the records from
     the bookkeeping messages the writer adds (``<namespace>/recording_info``, one per closed file).
     """
@@ -232,8 +233,11 @@ def _metadata_from_topics(rec: Recording):
         last = msgs[-1][1] if msgs else None
         if last is None:
             continue
-        if info['type'] == 'std_msgs/msg/String' and topic.rstrip('/').split('/')[-1] == 'program':
+        name = topic.rstrip('/').split('/')[-1]
+        if info['type'] == 'std_msgs/msg/String' and name == 'program':
             rec.metadata.setdefault('test_program', last.data)
+        elif info['type'] == 'std_msgs/msg/String' and name == 'rig_configuration':
+            rec.metadata.setdefault('rig_configuration', last.data)   # the driver's, with the load-cell calibration
         elif info['type'] == 'msg_defs/msg/ModelParameters':
             rec.metadata.setdefault('model', last.model_name)
             rec.metadata.setdefault('parameter_set', last.parameter_set)

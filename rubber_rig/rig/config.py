@@ -24,6 +24,7 @@ from dataclasses import asdict, dataclass, field, fields
 from typing import List, Optional
 
 import can
+import yaml
 
 from ..excitation.limits import LimitError, Limits
 from ..settings import setting
@@ -239,8 +240,10 @@ class RigConfig:
     rig runs in real time (True) or as fast as setpoints arrive (False) - identical waveform and physics.
     can_log: file the driver logs every CAN frame it sends and receives to ('' = off; rubber_rig.rig.can.canlog).
     load_cell_delay [s], load_cell_gain [-]: the load cell's calibration, what the lab knows about it (it reads
-    gain x the force of delay s earlier): recorded in the recording's metadata (rig_config) and applied by
-    `rubber-rig fit`; they change nothing on the rig (the simulated load cell is sim.force_delay/force_gain).
+    gain x the force of delay s earlier), with their standard uncertainties load_cell_delay_u, load_cell_gain_u
+    (negative: not declared): recorded in the recording's metadata (rig_config) and applied by `rubber-rig fit`,
+    which carries the uncertainties into each parameter's budget; they change nothing on the rig (the simulated
+    load cell is sim.force_delay/force_gain).
     max_bus_load: the bus (bitrate, data_bitrate, fd; the simulated rig stands for the same bus) must carry the
     protocol at sample_rate within this load (rubber_rig.rig.can.timing), or the configuration is refused.
     """
@@ -296,6 +299,14 @@ class RigConfig:
                                      range=(0.0, 0.1))
     load_cell_gain: float = setting(1.0, "the load cell's known gain (it reads gain x the force): recorded in "
                                     'the metadata, applied by rubber-rig fit', units='-', range=(0.01, 100.0))
+    load_cell_gain_u: float = setting(-1.0, 'standard uncertainty of load_cell_gain from its calibration '
+                                      'certificate (GUM Type B; a class 0.5 load cell, +-0.5 % of reading read as '
+                                      'a rectangular distribution: 0.0029); rubber-rig fit adds it to the '
+                                      "uncertainty budget of every force-scaled parameter; negative: not declared",
+                                      units='-', range=(-1.0, 1.0))
+    load_cell_delay_u: float = setting(-1.0, 'standard uncertainty of load_cell_delay (its measurement); '
+                                       'rubber-rig fit adds its effect to the uncertainty budget; negative: not '
+                                       'declared', units='s', range=(-1.0, 0.1))
     sim: SimOptions = setting(doc='simulated rig', nested=SimOptions, default_factory=SimOptions)
 
     @classmethod
@@ -442,3 +453,12 @@ def _convert(typ, value, fpath):
             raise bad
         return list(value)
     return value
+
+
+def configuration_text(config: RigConfig) -> str:
+    """YAML of the rig facts every recording carries (the recorder records the rig_driver's latched
+    ``rig_configuration`` topic): sample rate, backend, and the load cell's declared calibration with its
+    standard uncertainties, which ``rubber-rig fit`` applies and puts in its uncertainty budget.
+    """
+    facts = {k: v for k, v in asdict(config).items() if isinstance(v, (int, float, str, bool))}
+    return yaml.safe_dump(facts, sort_keys=True)

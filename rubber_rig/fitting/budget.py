@@ -1,0 +1,106 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The uncertainty budget of each identified parameter, in the manner of the GUM (JCGM 100:2008).
+
+Contributions (standard uncertainties, in the parameter's unit):
+
+* ``type_a``: statistical, from the data (the larger of the noise-based and the block-jackknife sigma,
+  modelfit.physical_uncertainty);
+* ``load_cell_gain`` (Type B): the declared standard uncertainty u_g of the load cell's gain g. Every force
+  the model produces scales with its force-scaled parameters (stiffnesses, dampings, friction forces,
+  fractional coefficients: FORCE_SCALES), so a gain error g(1 + e) scales each of them by 1/(1 + e) and leaves
+  the others (times, lengths, orders) alone: u = |value| u_g / g. Sensitivity coefficient exact to first order.
+* ``load_cell_delay`` (Type B): the declared standard uncertainty u_d of the load-cell delay, carried through
+  the fit: the parameters' shift for a delay change of u_d, linearised at the optimum (Gauss-Newton:
+  dz = -(J^T J)^-1 J^T dr/dd u_d).
+
+The total is the root sum of squares (contributions uncorrelated). A contribution that was not declared is
+None, and the fit's warnings say so (code ``calibration_undeclared``) with what a typical class would add.
+
+The 95 % interval is computed from the total in a parameterisation that respects the parameter's physical
+bounds (``interval_method``): ``log`` for positive parameters (value x exp(+-k u/value)), ``logit`` for a
+fractional order inside (0, 1), ``clipped`` (linear, cut to [0, 1]) for an order at its bound 1 (a legitimate
+value: a plain dashpot), ``linear`` for signed terms and the delay; k is the coverage factor the fit used for
+its Type A interval (Student's t over the blocks).
+"""
+from __future__ import annotations
+
+import math
+
+FORCE_SCALES = ('stiffness', 'force', 'damping', 'k2', 'k3', 'k5', 'frac_alpha', 'frac_beta')
+CLASS_05_GAIN_U = 0.005 / math.sqrt(3.0)   # a class 0.5 load cell: +-0.5 % of reading, rectangular
+
+
+def _expit(z: float) -> float:
+    return 1 / (1 + math.exp(-z)) if z >= 0 else math.exp(z) / (1 + math.exp(z))
+
+
+def interval(value: float, sigma: float, k: float, method: str) -> list:
+    """[lo, hi]: value -+ k sigma in the parameterisation ``method`` (log, logit, clipped or linear)."""
+    if method == 'log' and value > 0:
+        s = min(k * sigma / value, 700.0)
+        return [value * math.exp(-s), value * math.exp(s)]
+    if method == 'logit' and 0 < value < 1:
+        s = k * sigma / (value * (1 - value))
+        z = math.log(value / (1 - value))
+        return [_expit(z - s), _expit(z + s)]
+    if method == 'clipped':            # an order at its bound 1 (or 0): the linear interval within [0, 1]
+        return [max(0.0, value - k * sigma), min(1.0, value + k * sigma)]
+    return [value - k * sigma, value + k * sigma]
+
+
+def interval_method(kind: str, value: float) -> str:
+    """How a parameter of coordinate ``kind`` (modelfit.Coordinates) gets its interval."""
+    if kind == 'order':
+        return 'logit' if 1e-6 < value < 1 - 1e-6 else 'clipped'
+    if kind in ('log', 'above'):
+        return 'log'
+    return 'linear'
+
+
+def add_budget(unc: dict, kinds: dict, scales: dict, calibration: dict, delay_shift: dict | None = None,
+               delay_estimated: bool = False) -> None:
+    """Extend ``unc`` (name -> {value, sigma, interval_95, ...}) in place with each parameter's budget.
+
+    ``kinds``: name -> coordinate kind; ``scales``: name -> scale kind of the model's parameter (FORCE_SCALES);
+    ``calibration``: {'gain', 'gain_u', 'delay_u'} (None: not declared); ``delay_shift``: name -> the
+    parameter's change for a 1 s change of the declared delay (None when the delay was estimated by the fit:
+    its uncertainty is then part of Type A).
+    """
+    gain, gain_u, delay_u = calibration.get('gain', 1.0), calibration.get('gain_u'), calibration.get('delay_u')
+    for name, u in unc.items():
+        value, a = u['value'], u['sigma']
+        k = (u['interval_95'][1] - u['interval_95'][0]) / (2 * a) if a > 0 else 1.96
+        contributions = {'type_a': a}
+        if scales.get(name) in FORCE_SCALES:
+            contributions['load_cell_gain'] = None if gain_u is None else abs(value) * gain_u / gain
+        if delay_shift is not None and name in delay_shift and not delay_estimated:
+            contributions['load_cell_delay'] = None if delay_u is None else abs(delay_shift[name]) * delay_u
+        total = math.sqrt(sum(c ** 2 for c in contributions.values() if c is not None))
+        method = interval_method(kinds.get(name, 'lin'), value)
+        u.update({'budget': contributions, 'sigma_type_a': a, 'sigma': total,
+                  'relative_sigma': total / abs(value) if value else math.inf,
+                  'interval_95': [float(v) for v in interval(value, total, k, method)],
+                  'interval_method': method, 'coverage_factor': k})
+
+
+def undeclared(unc: dict) -> list:
+    """Names of the budget contributions that apply to some parameter but were not declared."""
+    out = []
+    for u in unc.values():
+        for key, c in (u.get('budget') or {}).items():
+            if c is None and key not in out:
+                out.append(key)
+    return out
