@@ -59,7 +59,7 @@ def udp_buffers(pid: int) -> list[tuple[int, int]]:
     value set, capped by net.core.rmem_max / wmem_max)."""
     out = subprocess.run(['ss', '-uanpmH'], capture_output=True, text=True, check=True).stdout
     lines, sizes = out.splitlines(), []
-    for line, nxt in zip(lines, lines[1:] + ['']):
+    for line, nxt in zip(lines, lines[1:] + [''], strict=True):
         if f'pid={pid},' in line:
             mem = (line if 'skmem:' in line else nxt).split('skmem:(')[1]
             fields = dict((f[:2], f[2:]) for f in mem.rstrip(')').split(','))
