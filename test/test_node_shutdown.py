@@ -27,6 +27,7 @@ until its process has ended. Each must end within EXIT_WITHIN seconds with exit 
   second one interrupted the clean-up with a KeyboardInterrupt traceback (or ended the process before it), exit
   status -2; now it is ignored while the clean-up runs.
 """
+import contextlib
 import os
 import signal
 import time
@@ -74,8 +75,9 @@ def check_clean_exit(procs: SuiteProcesses, node: str, seconds: float, code: int
     assert ROSOUT_FAILURE not in log, log[-3000:]
 
 
-@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
-def test_every_node_exits_within_2_s_of_the_signal_with_the_rig_idle(tmp_path, sig):
+@contextlib.contextmanager
+def started_suite(tmp_path):
+    """The four nodes started and ready, with an operator; everything stopped afterwards."""
     procs = SuiteProcesses(CONFIG, NS, domain_id(), tmp_path / 'logs',
                            {'recorder': {'output_dir': str(tmp_path / 'recordings')}})
     op = None
@@ -85,6 +87,16 @@ def test_every_node_exits_within_2_s_of_the_signal_with_the_rig_idle(tmp_path, s
         assert op.wait_ready(60.0), 'suite did not come up:\n' + procs.log('rig_driver')[-2000:]
         for node in NODES:
             assert procs.wait_started(node, 30.0), f'{node} did not start:\n' + procs.log(node)[-2000:]
+        yield procs, op
+    finally:
+        if op is not None:
+            op.close()
+        procs.stop_all()
+
+
+@pytest.mark.parametrize('sig', [signal.SIGINT, signal.SIGTERM], ids=['SIGINT', 'SIGTERM'])
+def test_every_node_exits_within_2_s_of_the_signal_with_the_rig_idle(tmp_path, sig):
+    with started_suite(tmp_path) as (procs, op):
         assert op.status.state == RigStatus.STATE_IDLE and not op.status.stream_owner   # no program running
         times = {}
         for node in NODES:   # one after the other, the rest of the suite still up
@@ -92,22 +104,10 @@ def test_every_node_exits_within_2_s_of_the_signal_with_the_rig_idle(tmp_path, s
             times[node] = seconds
             check_clean_exit(procs, node, seconds, code)
         print(f'{signal.Signals(sig).name}: ' + ', '.join(f'{n} {t:.2f} s' for n, t in times.items()))
-    finally:
-        if op is not None:
-            op.close()
-        procs.stop_all()
 
 
 def test_sigint_twice_at_once_still_cleans_up_every_node(tmp_path):
-    procs = SuiteProcesses(CONFIG, NS, domain_id(), tmp_path / 'logs',
-                           {'recorder': {'output_dir': str(tmp_path / 'recordings')}})
-    op = None
-    try:
-        procs.start_all()
-        op = Operator(NS, domain_id())
-        assert op.wait_ready(60.0), 'suite did not come up:\n' + procs.log('rig_driver')[-2000:]
-        for node in NODES:
-            assert procs.wait_started(node, 30.0), f'{node} did not start:\n' + procs.log(node)[-2000:]
+    with started_suite(tmp_path) as (procs, op):
         t0 = time.monotonic()
         for _ in range(2):          # the terminal's and launch's SIGINT, to every node at once
             for node in NODES:
@@ -120,10 +120,6 @@ def test_sigint_twice_at_once_still_cleans_up_every_node(tmp_path):
             check_clean_exit(procs, node, time.monotonic() - t0, code)
         assert 'rig closed' in procs.log('rig_driver')            # close() ran to its end
         assert 'closed 1 file(s)' in procs.log('recorder')
-    finally:
-        if op is not None:
-            op.close()
-        procs.stop_all()
 
 
 def test_rig_driver_exits_within_2_s_when_its_controller_went_silent(tmp_path):

@@ -22,13 +22,11 @@ import os
 import subprocess
 import sys
 import textwrap
-import uuid
 
 import pytest
-from unique_identifier_msgs.msg import UUID
 
 from msg_defs.action import RunProgram
-from rubber_rig.nodes.processes import Operator
+from rubber_rig.nodes.processes import Operator, new_goal_id
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 
@@ -78,7 +76,7 @@ def test_a_resent_goal_with_the_same_id_is_followed_not_run_twice(server):
     try:
         assert op.action.wait_for_server(timeout_sec=20.0)
         goal = RunProgram.Goal(program_yaml='name: x')
-        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        goal_id = new_goal_id()
         first = op.action.send_goal_async(goal, goal_uuid=goal_id)
         assert op.wait_for(first.done, 10.0) and first.result().accepted
         # the resend the operator makes when no answer came: the server knows the id and rejects the duplicate
@@ -89,7 +87,7 @@ def test_a_resent_goal_with_the_same_id_is_followed_not_run_twice(server):
         result = op.result(handle, 10.0)
         assert result is not None and result.success and result.message == 'done 1'   # ran once
         # a goal id the server never saw: no handle, the rejection stands
-        assert op._known_goal(op.action, UUID(uuid=list(uuid.uuid4().bytes))) is None
+        assert op._known_goal(op.action, new_goal_id()) is None
         # and send_goal itself still runs a fresh goal
         handle = op.send_goal('name: y', timeout=10.0)
         assert handle is not None and handle.accepted and op.result(handle, 10.0).message == 'done 2'

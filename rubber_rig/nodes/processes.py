@@ -43,7 +43,6 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 from std_srvs.srv import SetBool, Trigger
-from unique_identifier_msgs.msg import UUID
 
 from msg_defs.action import RunProgram
 from msg_defs.msg import (
@@ -175,6 +174,13 @@ class SuiteProcesses:
 
     def __exit__(self, *exc):
         self.stop_all()
+
+
+def new_goal_id():
+    """A fresh action goal id (unique_identifier_msgs/UUID, taken from the action's own request type)."""
+    goal_id = RunProgram.Impl.SendGoalService.Request().goal_id
+    goal_id.uuid = list(uuid.uuid4().bytes)
+    return goal_id
 
 
 class Operator:
@@ -355,7 +361,7 @@ class Operator:
         # lost too while the server runs the goal (a restarted server that has not matched our response reader
         # yet: "failed to send response (timeout)"), so every resend carries the same goal id: a server that
         # has the goal rejects the duplicate, and we take up the goal it runs instead of reading a refusal.
-        goal_id = UUID(uuid=list(uuid.uuid4().bytes))
+        goal_id = new_goal_id()
         resent = False
         while True:
             fut = client.send_goal_async(goal, goal_uuid=goal_id)
