@@ -24,13 +24,22 @@ one warning, how often AIC and BIC pick the true model, and the slowest fit.
 Cases: seed 000 at 20, 0, -20, -40 degC; seed 000 + cubic spring (6e11 N/m^3); a seed-003-style specimen
 (cubic spring + two-order fractional + Berg, sine grid 1-50 Hz x 0.2/0.3/0.5 mm); seed 004's pad around two
 preloads (operating-point spring with Table 3's K1(f, A) trend + elliptic damping; the true structure is
-identified per block); load cell 0.2 ms late; load cell +1 % gain (without and with the calibration
-input); only 0.5-4 Hz with the cubic spring and the late load cell. The seed-003 specimen is fitted with its
-fractional orders fixed at the truth (identifiable) and free (six viscoelastic parameters: more than a
-1-50 Hz grid pins down, so the fit must warn).
+identified per block); load cell 0.2 ms late, undeclared (fitted with the declared-sensor default and with
+--estimate-delay) and declared; load cell +1 % gain undeclared, declared as 1 +- 1 %, and corrected;
+load cell gain 0.97 undeclared and declared as 1 +- 3 %; seed 000 + a Maxwell branch (2 kN/mm, 5 kN s/m)
+fitted with the true structure, with seed 000's model and with seed 000's model and a free delay (issue 23's
+model error passed off as a sensor delay); 3-cycle blocks fitted with --settle-cycles 1; only 0.5-4 Hz with
+the cubic spring and the late load cell. The seed-003 specimen is fitted with its fractional orders fixed at
+the truth (identifiable) and free (six viscoelastic parameters: more than a 1-50 Hz grid pins down, so the fit
+must warn). Unless a case says "undeclared", the recording declares the simulated load cell's calibration
+(exact: --record-calibration).
+
+Per case and fitted model the table also gives the share of seeds carrying each warning code and the number
+of seeds whose truth fell outside a 95 % interval (or more than 3 sigma away) without a single warning.
 
 Targets: true model -> every parameter inside its 95 % interval in >= 90 % of the seeds and no warning;
-wrong model or late load cell -> a warning every time; AIC/BIC pick the true model.
+wrong model, undeclared or wrong sensor -> a warning with the right code in >= 95 % of the seeds; no
+uncovered truth without a warning; AIC/BIC pick the true model.
 
     .venv/bin/python benchmarks/bench_identification.py [--seeds 20] [--cases all|NAME,...] [--jobs 2]
 """
@@ -102,6 +111,11 @@ def _pad_specimen():
 
 
 CUBIC = {'type': 'polynomial_spring', 'k3': '6e11 N/m^3'}
+MAXWELL = {'type': 'maxwell', 'k': '2 kN/mm', 'c': '5 kNs/m'}     # issue 23's missing viscous branch
+SHORT_PROGRAM = {'name': 'short_blocks', 'defaults': {'taper_cycles': 1, 'cycles': 3, 'mean': 0.0},
+                 'blocks': [{'name': 'sine', 'waveform': 'sine', 'amplitude': ['0.5 mm', '1 mm'],
+                             'frequency': ['0.5 Hz', '1 Hz', '2 Hz', '4 Hz', '6 Hz', '8 Hz', '10 Hz', '14 Hz']}]}
+UNDECLARED = {'declare': False}   # the lab states no load-cell calibration (else: exact, --record-calibration)
 # name -> (specimen (mapping or callable), program, simulate options, [(fit label, model, fit options)], true label)
 CASES = {
     **{f'seed000_{t}': (lambda t=t: _seed000(t), GRID, {},
@@ -116,13 +130,27 @@ CASES = {
                  ('zener_berg', 'zener_berg', {})], 'seed003, orders fixed'),
     'pad': (_pad_specimen, PAD_PROGRAM, {}, [('per_block', 'per_block', {}), ('zener_berg', 'zener_berg', {})],
             'per_block'),
-    'late_0.2ms': (lambda: _seed000('20C'), GRID, {'load_cell_delay': '0.2ms'},
+    'late_0.2ms': (lambda: _seed000('20C'), GRID, {'load_cell_delay': '0.2ms', **UNDECLARED},
                    [('zener_berg', 'zener_berg', {}),
-                    ('zener_berg, no delay estimate', 'zener_berg', {'estimate_delay': False})], 'zener_berg'),
-    'gain_+1%': (lambda: _seed000('20C'), GRID, {'load_cell_gain': '1.01'},
+                    ('zener_berg, --estimate-delay', 'zener_berg', {'estimate_delay': True})], 'zener_berg'),
+    'late_0.2ms_declared': (lambda: _seed000('20C'), GRID, {'load_cell_delay': '0.2ms'},
+                            [('zener_berg', 'zener_berg', {})], 'zener_berg'),
+    'gain_+1%': (lambda: _seed000('20C'), GRID, {'load_cell_gain': '1.01', **UNDECLARED},
                  [('zener_berg, no calibration', 'zener_berg', {}),
+                  ('zener_berg, gain 1 +- 1 % declared', 'zener_berg', {'load_cell_gain_u': 0.01,
+                                                                        'load_cell_delay_u': 0.0}),
                   ('zener_berg, --load-cell-gain 1.01', 'zener_berg', {'load_cell_gain': 1.01})], None),
-    'low_band': (lambda: _seed000('20C', [CUBIC]), LOWBAND_PROGRAM, {'load_cell_delay': '0.2ms'},
+    'gain_0.97': (lambda: _seed000('20C'), GRID, {'load_cell_gain': '0.97', **UNDECLARED},
+                  [('zener_berg, no calibration', 'zener_berg', {}),
+                   ('zener_berg, gain 1 +- 3 % declared', 'zener_berg', {'load_cell_gain_u': 0.03,
+                                                                         'load_cell_delay_u': 0.0})], None),
+    'maxwell': (lambda: _seed000('20C', [MAXWELL]), GRID, {},
+                [('zener_berg + maxwell', lambda: _seed000('20C', [MAXWELL]), {}),
+                 ('zener_berg', 'zener_berg', {}), ('zener_berg, --estimate-delay', 'zener_berg',
+                                                    {'estimate_delay': True})], 'zener_berg + maxwell'),
+    'short_blocks': (lambda: _seed000('20C'), SHORT_PROGRAM, {},
+                     [('zener_berg, --settle-cycles 1', 'zener_berg', {'settle_cycles': 1})], None),
+    'low_band': (lambda: _seed000('20C', [CUBIC]), LOWBAND_PROGRAM, {'load_cell_delay': '0.2ms', **UNDECLARED},
                  [('zener_berg', 'zener_berg', {}), ('zener_berg_cubic', 'zener_berg_cubic', {})], None),
 }
 
@@ -140,10 +168,11 @@ def simulate(case, seed, out_dir: Path) -> Path:
         if not prog_file.exists():
             prog_file.write_text(yaml.safe_dump(program, sort_keys=False))
         program = str(prog_file)
-    path = d / f'seed{seed:02d}.mcap'
+    declared = sim_opts.get('declare', True)
+    path = d / f'seed{seed:02d}{"_declared" if declared else ""}.mcap'
     if not path.exists():
         args = ['simulate', '--model', str(model_file), '--program', program, '-o', str(path), '--seed', str(seed),
-                '--force-noise', '20N']
+                '--force-noise', '20N'] + (['--record-calibration'] if declared else [])
         if 'load_cell_delay' in sim_opts:
             args += ['--load-cell-delay', sim_opts['load_cell_delay']]
         if 'load_cell_gain' in sim_opts:
@@ -202,9 +231,12 @@ def fit_task(task):
         d = f.as_dict()
         errors = d.get('errors', {})
         covered = d.get('covered', {})
+        z = {k: abs(f.parameters[k] - f.truth[k]) / f.uncertainty[k]['sigma']
+             for k in covered if f.uncertainty[k]['sigma'] > 0} if f.truth else {}
         results.append({'case': case, 'seed': seed, 'fit': label, 'true': label == true_label,
                         'errors': errors, 'max_abs_error': max((abs(v) for v in errors.values()), default=math.nan),
-                        'covered': covered, 'chi2_per_dof': f.chi2_per_dof, 'warnings': f.warnings,
+                        'covered': covered, 'chi2_per_dof': f.chi2_per_dof, 'warnings': [str(w) for w in f.warnings],
+                        'codes': sorted({w.code for w in f.warnings}), 'max_z': max(z.values(), default=0.0),
                         'delay_ms': 1e3 * (f.parameters.get('load_cell_delay') or 0.0),
                         'fit_s': time.perf_counter() - t1, 'sim_s': sim_s})
     if len(by_model) > 1 and true_label in by_model:
@@ -243,21 +275,30 @@ def summarise(rows):
             'bic_true': float(np.mean([r['bic_true'] for r in rs])) if 'bic_true' in rs[0] else math.nan,
             'fit_s_max': float(max(r['fit_s'] for r in rs)),
             'example_warning': next((r['warnings'][0] for r in rs if r['warnings']), ''),
+            # each warning code: the share of seeds that carry it
+            'codes': {c: float(np.mean([c in r.get('codes', []) for r in rs]))
+                      for c in sorted({c for r in rs for c in r.get('codes', [])})},
+            # the worst outcome: a truth outside the 95 % interval (or > 3 sigma away) and not one warning
+            'silent_misses': int(sum(1 for r in rs if not r['warnings'] and not all(r['covered'].values()))),
+            'silent_3sigma': int(sum(1 for r in rs if not r['warnings'] and r.get('max_z', 0.0) > 3)),
         })
     return table
 
 
 def print_table(table, out=sys.stdout):
     print('| case | fitted model | true? | seeds | worst median abs error | 95 % coverage all / worst param | '
-          'chi2/dof (median) | seeds warned | AIC / BIC pick true | slowest fit |', file=out)
-    print('|---|---|---|---|---|---|---|---|---|---|', file=out)
+          'chi2/dof (median) | seeds warned | warning codes (share of seeds) | uncovered truth without a warning '
+          '(> 3 sigma) | AIC / BIC pick true | slowest fit |', file=out)
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|', file=out)
     for t in table:
         wp, we = t['worst_median_error']
         cp, cv = t['coverage_worst_param']
         pick = '' if math.isnan(t['aic_true']) else f'{100 * t["aic_true"]:.0f} % / {100 * t["bic_true"]:.0f} %'
         print(f'| {t["case"]} | {t["fit"]} | {"yes" if t["true_model"] else "no"} | {t["seeds"]} | '
               f'{wp} {100 * we:.2f} % | {100 * t["coverage_all"]:.0f} % / {cp} {100 * cv:.0f} % | '
-              f'{t["chi2_per_dof"]:.3g} | {100 * t["warned"]:.0f} % | {pick} | {t["fit_s_max"]:.1f} s |', file=out)
+              f'{t["chi2_per_dof"]:.3g} | {100 * t["warned"]:.0f} % | '
+              f'{", ".join(f"{c} {100 * v:.0f} %" for c, v in t["codes"].items()) or "-"} | '
+              f'{t["silent_misses"]} ({t["silent_3sigma"]}) | {pick} | {t["fit_s_max"]:.1f} s |', file=out)
     print(file=out)
     for t in table:
         if t['example_warning']:

@@ -109,3 +109,35 @@ def test_warnings_are_sentences_with_a_code_that_survive_copy_and_pickle():
     assert warning_text({'code': 'misfit', 'message': 'misfit beyond noise'}) == 'misfit beyond noise'
     with pytest.raises(ValueError, match='unknown warning code'):
         FitWarning('looks_bad', 'no such code')
+
+
+def test_repeated_branches_have_a_canonical_order_by_relaxation_time():
+    from rubber_rig.models.modelfile import parse_model
+    spec = parse_model({'elements': [{'type': 'linear_spring', 'k': '1 kN/mm'},
+                                     {'type': 'maxwell', 'k': '0.5 kN/mm', 'c': '2 kNs/m'},      # tau 4 ms
+                                     {'type': 'maxwell', 'k': '0.3 kN/mm', 'c': '0.1 kNs/m'}]}, 'x')  # 0.33 ms
+    rename = spec.canonical_names()
+    assert rename == {'linear_spring.k': 'linear_spring.k', 'maxwell_1.k': 'maxwell_2.k',
+                      'maxwell_1.c': 'maxwell_2.c', 'maxwell_2.k': 'maxwell_1.k', 'maxwell_2.c': 'maxwell_1.c'}
+    ordered = spec.with_values({rename[n]: v for n, v in spec.values().items()})
+    assert ordered.canonical_names() == {n: n for n in rename}                    # already canonical
+    v = ordered.values()
+    assert v['maxwell_1.c'] / v['maxwell_1.k'] < v['maxwell_2.c'] / v['maxwell_2.k']
+    assert ordered.first_harmonic(5.0, 1e-3) == pytest.approx(spec.first_harmonic(5.0, 1e-3), rel=1e-12)
+
+
+def test_the_fractional_order_range_of_the_time_domain_scheme_is_stated_and_checked():
+    from rubber_rig.models.elements import FractionalZener
+    from rubber_rig.models.fractional import zener_complex_stiffness
+    from rubber_rig.models.modelfile import parse_model
+    f = np.array([0.05, 0.5, 5.0, 50.0])
+    for alpha in (0.1, 0.3, 0.66, 0.99):            # inside the range: the stated bound holds
+        z = FractionalZener(12.29e6, 14.01e6, 0.043, alpha, 1e-3)
+        k = z.discrete_complex_stiffness(f)
+        exact = zener_complex_stiffness(2 * np.pi * f, 12.29e6, 14.01e6, 0.043, alpha)
+        assert np.max(np.abs(k.real / exact.real - 1)) < 0.0015 and np.max(np.abs(k.imag / exact.imag - 1)) < 0.009
+    with pytest.raises(ValueError, match='alpha 0.05 outside 0.1..1'):
+        FractionalZener(12.29e6, 14.01e6, 0.043, 0.05, 1e-3)
+    with pytest.raises(ValueError, match='alpha'):
+        parse_model({'elements': [{'type': 'fractional_zener', 'k0': '12 kN/mm', 'k_inf': '14 kN/mm',
+                                   'tau': '43 ms', 'alpha': 0.01}]}, 'small_order.yaml')

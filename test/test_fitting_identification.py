@@ -235,6 +235,12 @@ def test_cli_fit_json_has_the_verdict_and_writes_a_model_file(sims, tmp_path, ca
     assert data['uncertainty']['k3']['interval_method'] == 'linear'
     assert data['uncertainty']['alpha']['interval_method'] == 'logit'
     assert data['uncertainty']['k0']['interval_method'] == 'log'
+    # the budget is in the model file, and the report reads it back (HTML parameter table, CLI table)
+    from rubber_rig.fitting.report import budget_text, read_model_file
+    assert set(written['elements'][0]['budget']['k0']) == {'type_a', 'load_cell_gain', 'load_cell_delay'}
+    model = read_model_file(out)
+    text = budget_text(model.results['k0'], model.spec.values()['k0'])
+    assert text.startswith('Type A ') and text.endswith('load-cell gain 0, load-cell delay 0'), text
     assert main(['fit', str(sims['cubic']), '--model', 'zener_berg', '-o', '-', '--no-progress']) == 0
     text = capsys.readouterr().out
     assert 'WARNING: misfit beyond noise' in text and '95 % interval' in text

@@ -131,6 +131,7 @@ def _t(temp):
 
 def print_fit(fit, out=None):
     from rubber_rig.fitting.modelfit import paper_unit
+    from rubber_rig.fitting.report import budget_text
     out = out or sys.stdout
     print(f'{fit.model.name or "model"} at {_t(fit.temperature)}: {len(fit.blocks)} blocks from '
           f'{", ".join(fit.runs)}; method {fit.method}; {fit.timings.get("total_s", math.nan):.1f} s', file=out)
@@ -146,6 +147,12 @@ def print_fit(fit, out=None):
             ok = lo <= truth[name] <= hi
             line += f'  {100 * (u["value"] / truth[name] - 1):+7.2f} %  {"yes" if ok else "NO"}'
         print(line, file=out)
+    budgets = [(n, budget_text(u, u['value'])) for n, u in fit.uncertainty.items() if u.get('budget')]
+    if budgets:
+        print('  uncertainty budget (1 sigma, % of value; GUM Type A and the declared calibrations, total = root sum '
+              'of squares):', file=out)
+        for name, text in budgets:
+            print(f'    {name:18s} {text}', file=out)
     sigma = ', '.join(f'{v:.3g} N' for v in fit.noise.values()) or 'not measured'
     print(f'  chi2/dof = {fit.chi2_per_dof:.3g} ({fit.n_points} points, load-cell noise {sigma}); '
           f'AIC {fit.aic:.1f}, BIC {fit.bic:.1f}', file=out)

@@ -220,7 +220,8 @@ def truth_of(spec: ModelSpec, runs) -> dict | None:
             continue
         if [e.type for e in true.elements] != [e.type for e in spec.elements]:
             return None
-        tv = true.values()
+        canonical = true.canonical_names()     # the fit's repeated elements are in this order too
+        tv = {canonical[n]: v for n, v in true.values().items()}
         return {n: tv[n] for n, _, _ in spec.free() if n in tv}
     return None
 
@@ -296,12 +297,19 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
         misfit = time_misfit(problem, values, r, dof)
         if DELAY not in coords.names:
             delay_shift, delay_check = delay_sensitivity(problem, coords, z, jac, r, chi2 / max(dof, 1))
+    # repeated elements (two Maxwell branches) in canonical order, by relaxation time: the labels the
+    # optimiser happened to give them mean nothing (the correlation matrix keeps its positions)
+    rename = spec.canonical_names({**spec.values(), **{k: v for k, v in values.items() if k != DELAY}})
+    values = {rename.get(k, k): v for k, v in values.items()}
+    unc = {rename.get(k, k): u for k, u in unc.items()}
+    names = [rename.get(n, n) for n in coords.names]
     fitted = spec.with_values({k: v for k, v in values.items() if k != DELAY})
-    params = {n: float(values[n]) for n in coords.names}
+    params = {n: float(values[n]) for n in names}
     cal = next(iter((calibration or {}).values()), {})
     add_budget(unc, dict(zip(coords.names, coords.kinds, strict=True)),
                {n: spec.param_spec(n).scale for n in coords.names if n != DELAY}, cal,
-               delay_shift=delay_shift, delay_estimated=DELAY in coords.names)
+               delay_shift=None if delay_shift is None else {rename.get(k, k): v for k, v in delay_shift.items()},
+               delay_estimated=DELAY in coords.names)
     predicted = problem.predict(values) if method == 'time' else problem.predict({})
     forces = dict(zip(runs, predicted, strict=True))
     # with an estimated delay the blocks are compared as the specimen behaved: the measured force corrected
@@ -323,9 +331,9 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
                               'delay_check': delay_check},
                    quality=quality, messages=messages)
     fit.misfit = misfit
-    fit.bounds_hit = _at_bounds(coords, z, coords.lo, coords.hi)
+    fit.bounds_hit = [rename.get(n, n) for n in _at_bounds(coords, z, coords.lo, coords.hi)]
     if method == 'time':
-        fit.refinement_limited = [n for n in limited if n not in fit.bounds_hit]
+        fit.refinement_limited = [rename.get(n, n) for n in limited if rename.get(n, n) not in fit.bounds_hit]
     fit.truth = truth_of(spec, [run for run, _, _ in items])
     fit.warnings = verdict(fit, coords)
     fit.notes = notes(fit)

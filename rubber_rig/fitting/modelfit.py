@@ -180,7 +180,7 @@ def coordinates(spec: ModelSpec, t: BlockTargets, dt: float, delay: bool = False
         scale, a, b = sc[p.scale]
         ref = None
         if p.scale == 'order':
-            kind, zlo, zhi = 'order', a, min(b, p.upper or b)
+            kind, zlo, zhi = 'order', max(a, p.lower or a), min(b, p.upper or b)
         elif p.signed:
             kind, zlo, zhi = 'lin', -b, b
         elif p.above and _sibling(spec, name, p.above) in free:

@@ -65,7 +65,7 @@ from .timefit import run_input
 _NO_MODEL = defaultdict(lambda: math.nan)
 FIGURES = ('loops', 'kdyn_ceq', 'ratios', 'traces', 'cycles', 'errors')
 BAND_SAMPLES = 50          # parameter sets drawn for the model band of kdyn_ceq.png
-_RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma')
+_RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma', 'budget', 'interval_method')
 
 
 # ---- the model reported on ---------------------------------------------------------------------------
@@ -140,6 +140,13 @@ def read_model_file(path) -> ReportModel:
             for p, raw in got.items():
                 name = names.get((i, p))
                 if name is None:
+                    continue
+                if key == 'budget':        # {contribution: standard uncertainty in SI, or None: undeclared}
+                    results.setdefault(name, {})[key] = {c: None if v is None else float(v)
+                                                         for c, v in (raw or {}).items()}
+                    continue
+                if key == 'interval_method':
+                    results.setdefault(name, {})[key] = str(raw)
                     continue
                 dim = 'number' if key == 'relative_sigma' else spec.param_spec(name).dimension
                 results.setdefault(name, {})[key] = _si(raw, dim)
@@ -558,6 +565,18 @@ def _g(v, fmt='.5g'):
     return '&ndash;' if v is None or not math.isfinite(v) else format(v, fmt)
 
 
+def budget_text(result: dict, value: float) -> str:
+    """'type A 0.12, load cell gain 0.29, load cell delay undeclared' (% of the value) for a result with a
+    ``budget``; '' without one (a model file written before budgets, a fixed parameter).
+    """
+    budget = result.get('budget') or {}
+    if not budget or not value:
+        return ''
+    label = {'type_a': 'Type A', 'load_cell_gain': 'load-cell gain', 'load_cell_delay': 'load-cell delay'}
+    return ', '.join(f'{label.get(k, k)} ' + ('undeclared' if v is None else f'{_g(100 * v / abs(value), ".2g")}')
+                     for k, v in budget.items())
+
+
 def _param_table(model: ReportModel):
     spec, res = model.spec, model.results
     labels = spec.labels()
@@ -566,7 +585,8 @@ def _param_table(model: ReportModel):
     if DELAY in res:
         rows.append((DELAY, 'load cell', model.estimated_delay, False))
     parts = ['<table class="params"><tr><th class="l">parameter</th><th class="l">element</th><th>value</th>'
-             '<th>&plusmn;1 sigma</th><th>&plusmn;1 sigma [%]</th><th>95 % interval</th><th class="l">unit</th></tr>']
+             '<th>&plusmn;1 sigma</th><th>&plusmn;1 sigma [%]</th><th>95 % interval</th><th class="l">unit</th>'
+             '<th class="l">budget, 1 sigma [% of value]</th></tr>']
     for name, label, value, fixed in rows:
         f, unit = paper_unit(spec, name)
         r = res.get(name, {})
@@ -579,7 +599,7 @@ def _param_table(model: ReportModel):
         ivs = '' if not iv else f'[{_g(iv[0] * f)}, {_g(iv[1] * f)}]'
         parts.append(f'<tr><td class="l">{html.escape(name)}</td><td class="l">{html.escape(label)}</td>'
                      f'<td>{_g(value * f)}</td><td>{sig}</td><td>{rel_s}</td><td>{ivs}</td>'
-                     f'<td class="l">{html.escape(unit)}</td></tr>')
+                     f'<td class="l">{html.escape(unit)}</td><td class="l">{budget_text(r, value)}</td></tr>')
     parts.append('</table>')
     return parts
 

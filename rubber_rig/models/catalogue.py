@@ -49,7 +49,8 @@ class ParamSpec:
     ``dimension``: the :mod:`rubber_rig.units` dimension a model file may write it in (``'number'``: SI
     only). ``scale``: what sets its search range in a fit (see ``rubber_rig.fitting.modelfit``).
     ``signed``: may be zero or negative (fitted on a linear scale, else on a log scale). ``upper``: a
-    hard upper limit (orders <= 1). ``optional``: absent from a file means 0 and not part of the model.
+    hard upper limit (orders <= 1); ``lower`` a hard lower one (the fractional Zener's order, whose time-domain
+    scheme is accurate from 0.1). ``optional``: absent from a file means 0 and not part of the model.
     ``above``: a parameter of the same element this one must not fall below (K_inf >= K0).
     """
 
@@ -61,6 +62,7 @@ class ParamSpec:
     signed: bool = False
     upper: float | None = None
     optional: bool = False
+    lower: float | None = None
     above: str | None = None
 
 
@@ -174,7 +176,8 @@ TYPES = {t.name: t for t in (
         (_stiffness('k0', 'static stiffness'),
          _stiffness('k_inf', 'high-frequency stiffness', above='k0'),
          ParamSpec('tau', 's', 'time', 'relaxation time', 'time'),
-         ParamSpec('alpha', doc='fractional order in (0, 1]', **_ORDER)),
+         ParamSpec('alpha', doc='fractional order in [0.1, 1] (where the time-domain scheme keeps its stated '
+                   'accuracy, rubber_rig.models.fractional)', lower=0.1, **_ORDER)),
         _zener_build, _zener_fh, 'viscoelastic',
         {'scheme': "fractional operator: 'default' (sum of exponentials), 'paper' (GL, N_t = 200, h = 1 ms), 'gl'"}),
     ElementType(

@@ -41,7 +41,7 @@ from .catalogue import OPERATING_POINT_TYPES, build_operating_point_spring, elem
 from .params import ParameterValueError, load_parameter_set, parameter_set_info
 from .yamlfile import read_yaml_file
 
-_RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma')
+_RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma', 'budget', 'interval_method')
 
 
 @dataclass
@@ -94,6 +94,43 @@ class ModelSpec:
                 return element_type(self.elements[i].type).param(p)
         raise KeyError(name)
 
+    def canonical_names(self, values: dict | None = None) -> dict:
+        """{parameter name: the name it has once repeated elements of a type are in canonical order}.
+
+        Two Maxwell branches (or Zener elements) fitted to data can come back in either order: the model is
+        the same with their labels swapped. The canonical order is by relaxation time, shortest first
+        (Maxwell c / k, Zener tau), so that branch 1 of a fit is branch 1 of the truth and of the next fit.
+        Identity for a model without such repeats. ``values``: parameter values to order by (default: the
+        spec's own).
+        """
+        values = self.values() if values is None else values
+        params = self.parameters()
+        name_of = {(i, p): n for n, i, p in params}
+
+        def relaxation(i):
+            e = self.elements[i]
+            v = {p: float(values.get(name_of.get((i, p)), e.values[p])) for p in e.values if (i, p) in name_of}
+            if 'tau' in v:
+                return v['tau']
+            if 'c' in v and 'k' in v and v['k'] > 0:
+                return v['c'] / v['k']
+            return None
+
+        mapping = {n: n for n, _, _ in params}
+        types = [e.type for e in self.elements]
+        for t in set(types):
+            idx = [i for i, ti in enumerate(types) if ti == t]
+            taus = [relaxation(i) for i in idx]
+            if len(idx) < 2 or any(x is None for x in taus) or any(
+                    self.elements[i].fixed != self.elements[idx[0]].fixed for i in idx):
+                continue
+            order = [idx[k] for k in sorted(range(len(idx)), key=lambda k: taus[k])]
+            for slot, src in zip(idx, order, strict=True):      # element src's values go to position slot
+                for p in self.elements[src].values:
+                    if (src, p) in name_of and (slot, p) in name_of:
+                        mapping[name_of[(src, p)]] = name_of[(slot, p)]
+        return mapping
+
     def with_values(self, values: dict) -> 'ModelSpec':
         """A copy with some parameters (by ``parameters()`` name) replaced."""
         out = copy.deepcopy(self)
@@ -112,6 +149,8 @@ class ModelSpec:
                 raise ParameterValueError(n, f'must be > 0 [{spec.unit}], got {v:g}')
             if spec.upper is not None and v > spec.upper:
                 raise ParameterValueError(n, f'must be <= {spec.upper:g}, got {v:g}')
+            if spec.lower is not None and v < spec.lower:
+                raise ParameterValueError(n, f'must be >= {spec.lower:g} ({spec.doc}), got {v:g}')
             if spec.above and v < self.elements[i].values[spec.above]:
                 raise ParameterValueError(n, f'({v:g} {spec.unit}) must be >= {spec.above} '
                                              f'({self.elements[i].values[spec.above]:g} {spec.unit})')
