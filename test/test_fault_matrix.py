@@ -456,6 +456,15 @@ def test_foreign_setpoints_are_refused(suite):
     next_program_completes(op, procs)
 
 
+def cpu_seconds(procs) -> dict:
+    """CPU time [s] each node process has used so far (user + system, /proc/<pid>/stat)."""
+    out = {}
+    for name, p in procs.procs.items():
+        fields = Path(f'/proc/{p.pid}/stat').read_text().split()
+        out[name] = (int(fields[13]) + int(fields[14])) / os.sysconf('SC_CLK_TCK')
+    return out
+
+
 @pytest.mark.parametrize('topic', ['setpoints', 'command'])
 def test_a_flood_of_foreign_setpoints_is_not_fatal(suite, topic):
     """2000 foreign batches (stream id 0, 100 setpoints each, as fast as one process publishes them) while a
@@ -467,20 +476,14 @@ def test_a_flood_of_foreign_setpoints_is_not_fatal(suite, topic):
     refused0 = op.status.setpoints_refused
     handle = start_fast_sine(op, 0.5)
     head = op.status.next_sequence
-    def cpu():
-        out = {}
-        for name, p in procs.procs.items():
-            f = open(f'/proc/{p.pid}/stat').read().split()
-            out[name] = (int(f[13]) + int(f[14])) / os.sysconf('SC_CLK_TCK')
-        return out
-    c0 = cpu()
+    c0 = cpu_seconds(procs)
     t = time.monotonic()
     for k in range(2000):
         op.publish_setpoints(head + 100 * k, np.full(100, 2.4e-3), topic=topic)
     flood_s = time.monotonic() - t
     time.sleep(1.0)
-    c1 = cpu()
-    print('CPU s', {n: round(c1[n] - c0[n], 2) for n in c0})
+    c1 = cpu_seconds(procs)
+    print('CPU s', {n: round(c1[n] - c0[n], 2) for n in c0})   # what the flood cost each node
     refused = op.status.setpoints_refused - refused0
     print(f'flood of 2000 batches on {topic} published in {flood_s:.2f} s; refused {refused} setpoints')
     assert op.status.stream_owner == f'{NS}/excitation', (op.status.state_name, list(op.status.fault_messages))

@@ -99,19 +99,21 @@ def misfit_warnings(fit) -> list:
         if fit.method == 'harmonic' and fit.runs and fit.noise:
             # the blocks' K_dyn and C_eq against the exact first harmonics of ideal sines: the actuator's
             # distortion and the rig's time scheme differ from those by more than a low noise resolves
-            out.append(FitWarning('misfit', f'misfit beyond noise: {why}, of the blocks\' K_dyn and C_eq against '
-                       'the first harmonics of ideal sines: the model or the idealisation (the measured motion is '
-                       'not a pure sine) does not describe the data to the noise; the uncertainties are inflated by '
-                       'this misfit; --method time runs the model over the measured motion'))
+            out.append(FitWarning(
+                'misfit', f'misfit beyond noise: {why}, of the blocks\' K_dyn and C_eq against the first harmonics '
+                'of ideal sines: the model or the idealisation (the measured motion is not a pure sine) does not '
+                'describe the data to the noise; the uncertainties are inflated by this misfit; --method time runs '
+                'the model over the measured motion'))
         else:
             sigma = np.mean(list(fit.noise.values())) if fit.noise else math.nan
             inputs = test.get('input_noise') or {}
             carried = (f', plus {np.mean(list(inputs.values())):.3g} N carried from the displacement noise through '
                        'the model') if inputs and max(inputs.values()) > 0 else ''
-            out.append(FitWarning('misfit', f'misfit beyond noise: {why}; the force residual is '
-                       f'{math.sqrt(test["ratio"]):.2g} x the noise (load cell {sigma:.3g} N{carried}): the model '
-                       'does not describe what the data show, and no sensor delay, gain or offset may be read from '
-                       'this fit; the uncertainties are inflated by this misfit'))
+            out.append(FitWarning(
+                'misfit', f'misfit beyond noise: {why}; the force residual is {math.sqrt(test["ratio"]):.2g} x the '
+                f'noise (load cell {sigma:.3g} N{carried}): the model does not describe what the data show, and no '
+                'sensor delay, gain or offset may be read from this fit; the uncertainties are inflated by this '
+                'misfit'))
     kind = 'simulated' if any('simulated' in q for q in fit.quality) else 'analytic'
     rows = [q for q in fit.quality if kind in q]
     if not rows:

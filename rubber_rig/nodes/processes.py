@@ -424,4 +424,4 @@ class Operator:
                           block_index: int = 0, sample_period: float = 1e-3, topic: str = 'command'):
         """Publish a batch as an intruder would: on the driver's command channel or on ``setpoints``."""
         self.pub_setpoints[topic].publish(conv.setpoint_batch_msg(first_sequence, sample_period, x, block_index,
-                                                           stream_id=stream_id, source=source))
+                                                                  stream_id=stream_id, source=source))

@@ -93,8 +93,6 @@ MUTE_AFTER = 200
 MUTE_FOR = 10.0     # [s]
 
 
-
-
 class BusCapacityError(ParameterError):
     """sample_rate is more than the configured CAN bus carries (the node stays up, unconfigured)."""
 

@@ -49,7 +49,6 @@ HEARTBEAT = 'heartbeat'              # msg_defs/msg/Heartbeat, every node, every
 DIAGNOSTICS = '/diagnostics'         # diagnostic_msgs/msg/DiagnosticArray (absolute, as in every ROS 2 system)
 
 
-
 def setpoint_stream_topic(rig_driver: str, owner: str) -> str:
     """The command channel of stream owner `owner` (a fully qualified node name) to driver `rig_driver`."""
     return f'{rig_driver.rstrip("/")}/{SETPOINT_STREAM}/{owner.lstrip("/")}'
