@@ -105,11 +105,13 @@ def test_report_with_a_fitted_model_file(recording, tmp_path, capsys):
     assert str(fitted) in page and 'chi2/dof' in page
     # parameters shown in the papers' units with their uncertainty: K0 about 12.3 kN/mm
     rows = _param_rows(page)
-    element, k0, sigma, _, interval, unit = rows['k0']
+    element, k0, sigma, _, interval, unit, budget = rows['k0']
     assert element == 'fractional_zener' and unit == 'kN/mm'
     assert float(k0) == pytest.approx(12.29, rel=0.02)
     assert sigma.startswith('&plusmn;') and float(sigma[8:]) > 0 and interval.startswith('[')
-    assert rows['x2'][-1] == 'mm' and rows['f_fmax'][-1] == 'kN' and rows['alpha'][-1] == '-'
+    # the uncertainty budget: Type A from the data; this simulated load cell is declared exact (0 %)
+    assert budget.startswith('Type A ') and 'load-cell gain 0' in budget, budget
+    assert rows['x2'][5] == 'mm' and rows['f_fmax'][5] == 'kN' and rows['alpha'][5] == '-'
     assert 'class="box warnings"' in page or 'class="box ok"' in page
 
 
@@ -125,10 +127,11 @@ def test_report_from_a_model_file_with_a_cubic_spring(recording, tmp_path, capsy
     assert 'not fractional Zener + Berg, so the figure is left out' in page
     rows = _param_rows(page)
     assert set(rows) == {'k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax', 'k3', 'load_cell_delay'}
-    assert rows['k0'][1:3] == ['12.29', '&plusmn;0.05'] and rows['k0'][-1] == 'kN/mm'
-    assert rows['k3'][1:3] == ['0.6', '&plusmn;0.2'] and rows['k3'][-1] == 'kN/mm^3'
+    assert rows['k0'][1:3] == ['12.29', '&plusmn;0.05'] and rows['k0'][5] == 'kN/mm'
+    assert rows['k3'][1:3] == ['0.6', '&plusmn;0.2'] and rows['k3'][5] == 'kN/mm^3'
+    assert rows['k0'][6] == ''          # a model file written without a budget shows none
     assert rows['k3'][4] == '[0.208, 0.992]'
-    assert rows['load_cell_delay'][1:3] == ['0.1', '&plusmn;0.02'] and rows['load_cell_delay'][-1] == 'ms'
+    assert rows['load_cell_delay'][1:3] == ['0.1', '&plusmn;0.02'] and rows['load_cell_delay'][5] == 'ms'
     assert '<b>4.2</b>' in page                                   # chi2/dof of the fit
     box = page.split('class="box warnings"')[1].split('</div>')[0]
     assert 'misfit: chi2/dof = 4.2, the model misses something the data show' in box
