@@ -265,7 +265,8 @@ def summarise(rows):
         table.append({
             'case': case, 'fit': fit, 'true_model': rs[0]['true'], 'seeds': len(rs),
             'worst_median_error': (worst_param, med.get(worst_param, math.nan)) if med else
-            ('per block', float(np.median([r['max_abs_error'] for r in rs]))),
+            ('per block', float(np.median([r['max_abs_error'] for r in rs]))) if fit == 'per_block' else
+            ('- (no truth in this structure)', math.nan),
             'coverage_all': float(np.mean(cover_all)) if cover_all else math.nan,
             'coverage_worst_param': (min(cov_by_param, key=cov_by_param.get), min(cov_by_param.values()))
             if cov_by_param else ('', math.nan),
