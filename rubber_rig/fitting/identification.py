@@ -294,9 +294,10 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
         values = coords.values(z)
         n_points = problem.m
         delay = float(values.get(DELAY, 0.0))
-        misfit = time_misfit(problem, values, r, dof)
+        predicted = problem.predict(values)     # the fitted model over every recording, once
+        misfit = time_misfit(problem, values, r, dof, predicted)
         if DELAY not in coords.names:
-            delay_shift, delay_check = delay_sensitivity(problem, coords, z, jac, r, chi2 / max(dof, 1))
+            delay_shift, delay_check = delay_sensitivity(problem, coords, z, jac, r, chi2 / max(dof, 1), predicted)
     # repeated elements (two Maxwell branches) in canonical order, by relaxation time: the labels the
     # optimiser happened to give them mean nothing (the correlation matrix keeps its positions)
     rename = spec.canonical_names({**spec.values(), **{k: v for k, v in values.items() if k != DELAY}})
@@ -310,7 +311,8 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
                {n: spec.param_spec(n).scale for n in coords.names if n != DELAY}, cal,
                delay_shift=None if delay_shift is None else {rename.get(k, k): v for k, v in delay_shift.items()},
                delay_estimated=DELAY in coords.names)
-    predicted = problem.predict(values) if method == 'time' else problem.predict({})
+    if method == 'harmonic':
+        predicted = problem.predict({})
     forces = dict(zip(runs, predicted, strict=True))
     # with an estimated delay the blocks are compared as the specimen behaved: the measured force corrected
     # for it (compared as measured, a late load cell's phase would remove most of the loss at high frequency
@@ -341,7 +343,7 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     return fit
 
 
-def delay_sensitivity(problem: TimeProblem, coords, z, jac, r, inflation: float) -> tuple:
+def delay_sensitivity(problem: TimeProblem, coords, z, jac, r, inflation: float, preds) -> tuple:
     """(shift, check) of a time-domain fit whose load-cell delay was held at the declared value.
 
     shift: parameter name -> d(parameter)/d(delay) [unit/s], linearised at the optimum (Gauss-Newton:
@@ -350,8 +352,6 @@ def delay_sensitivity(problem: TimeProblem, coords, z, jac, r, inflation: float)
     {'estimate' [s], 'sigma' [s]} from one Gauss-Newton step with the delay freed (its sigma is the marginal
     one, from the Schur complement of the information matrix, inflated by the misfit).
     """
-    values = coords.values(z)
-    preds = problem.predict(values)
     h = 1e-2 * min(run.dt for run, *_ in problem.items)
     jd = (problem.residuals_from(preds, h) - problem.residuals_from(preds, -h)) / (2 * h)
     info = jac.T @ jac
@@ -368,7 +368,7 @@ def delay_sensitivity(problem: TimeProblem, coords, z, jac, r, inflation: float)
     return shift, {'estimate': estimate, 'sigma': math.sqrt(max(1.0, inflation) / schur)}
 
 
-def time_misfit(problem: TimeProblem, values: dict, r, dof: int) -> dict:
+def time_misfit(problem: TimeProblem, values: dict, r, dof: int, predictions) -> dict:
     """The misfit test (verdict.misfit_test) of a time-domain fit with residual ``r`` (load-cell noise units).
 
     The noise the residual is judged against is the load cell's plus the displacement noise carried through
@@ -376,7 +376,7 @@ def time_misfit(problem: TimeProblem, values: dict, r, dof: int) -> dict:
     sum. The noise estimate's uncertainty is each recording's (blocks.noise_variance_uncertainty) for its load
     cell share, combined over recordings by their share of the points.
     """
-    carried = problem.input_noise(values)
+    carried = problem.input_noise(values, predictions)
     chi2, u2, total = 0.0, 0.0, problem.m
     inputs = {}
     for (run, _, _, force, _, sigma), rows, s_in in zip(problem.items, problem.item_rows, carried, strict=True):

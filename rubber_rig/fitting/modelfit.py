@@ -318,19 +318,20 @@ class TimeProblem:
         r = np.concatenate(out)
         return np.where(np.isfinite(r), r, 1e6)
 
-    def input_noise(self, values, seed: int = 0) -> list:
+    def input_noise(self, values, predictions, seed: int = 0) -> list:
         """Per item: sigma [N] of the force residual that the displacement transducer's own noise causes through
         the model (errors in variables), at the residual's points.
 
         The model runs over the measured displacement, so that displacement's noise reaches the model force
         through the model's stiffness at the noise frequencies the input low-pass keeps (0.2 um on a 14 kN/mm
         specimen: ~3 N beside a 10 N load cell). Measured by running the model once more over the displacement
-        plus white noise of the same level (noise_level), through the same low-pass: the difference is one more
+        plus white noise of the same level (noise_level), through the same low-pass: the difference from
+        ``predictions`` (TimeProblem.predict at ``values``) is one more
         realisation of that propagated noise (the model is linear in small input changes).
         """
         rng = np.random.default_rng(seed)
         out = []
-        for (run, x, h, force, windows, _), f_max in zip(self.items, self.f_max, strict=True):
+        for (run, _x, h, force, windows, _), f_max, pred in zip(self.items, self.f_max, predictions, strict=True):
             raw = np.asarray(run.displacement[:force.size], float)
             sx = noise_level(raw)
             if sx <= 0:
@@ -338,8 +339,7 @@ class TimeProblem:
                 continue
             x2, _ = model_input(raw + rng.normal(0.0, sx, raw.size), run.dt, f_max)
             try:
-                model = self.model(values, run.dt, h)
-                d = self.model(values, run.dt, h).run(x2) - model.run(x)
+                d = self.model(values, run.dt, h).run(x2) - pred
             except ValueError:
                 out.append(0.0)
                 continue
