@@ -45,6 +45,9 @@ def sims(tmp_path_factory):
     cubic = named_model('swing_arm_joint_20C').to_dict()
     cubic['elements'].append({'type': 'polynomial_spring', 'k3': 6e11})
     (d / 'cubic.yaml').write_text(yaml.safe_dump(cubic))
+    maxwell = named_model('swing_arm_joint_20C').to_dict()     # issue 23's specimen: one more viscous branch
+    maxwell['elements'].append({'type': 'maxwell', 'k': '2 kN/mm', 'c': '5 kNs/m'})
+    (d / 'maxwell.yaml').write_text(yaml.safe_dump(maxwell))
     tri = {'name': 'triangle_then_grid', 'defaults': {'taper_cycles': 1, 'cycles': 6, 'mean': 0.0},
            'blocks': [{'name': 'quasi_static', 'waveform': 'triangle', 'rate': '1 mm/s',
                        'amplitude': ['0.1 mm', '2 mm'], 'cycles': 2}] + PROGRAM['blocks']}
@@ -54,6 +57,7 @@ def sims(tmp_path_factory):
     declared = ['--record-calibration']
     cases = {'base': ('swing_arm_joint_20C', program, declared),
              'cubic': (d / 'cubic.yaml', program, declared),
+             'maxwell': (d / 'maxwell.yaml', program, declared),
              'late': ('swing_arm_joint_20C', program, ['--load-cell-delay', '0.5ms']),
              'gain': ('swing_arm_joint_20C', program, ['--load-cell-gain', '1.01']),
              'triangle': ('swing_arm_joint_20C', d / 'tri.yaml', declared)}
@@ -80,6 +84,9 @@ def test_the_true_model_fits_to_the_noise_with_intervals_that_cover_the_truth_an
     assert all(_covered(f, SEED000).values()), f.as_dict()['errors']
     assert f.warnings == []
     assert not f.misfit['misfit'] and f.misfit['p_value'] > 1e-3
+    structure = f.misfit['structure']           # the residual is shaped like noise: no harmonic, white
+    assert not structure['harmonic_1']['misfit'] and not structure['harmonic_3']['misfit']
+    assert abs(structure['whiteness']['z']) < 3.3 and structure['blocks'] == []
     # Type A is the larger of the noise-based and the block-jackknife sigma; the declared calibration is exact
     # (u = 0), so it adds nothing and the total is Type A
     for k in SEED000:
@@ -105,6 +112,25 @@ def test_a_missing_cubic_spring_is_a_misfit_warning_and_aic_bic_pick_the_model_t
     assert ranking['selected'] == ranking['selected_bic'] == ranking['selected_aic'] == 'zener_berg_cubic'
     assert ranking['ranking'][1]['delta_aic'] > 10 and ranking['ranking'][1]['delta_bic'] > 10
     assert 'support zener_berg_cubic decisively' in ranking['verdict'] and 'AIC agrees' in ranking['verdict']
+
+
+def test_a_missing_viscous_branch_leaves_a_residual_at_the_excitation_frequency(sims):
+    # issue 23: a Maxwell branch the model lacks; the overall chi^2 of the record sees it, the residual at the
+    # excitation frequency sees it about ten times more clearly, and the residual is smooth (not white)
+    run = load_run(sims['maxwell'])
+    wrong = fit_model([run], 'zener_berg')[0][0]
+    structure = wrong.misfit['structure']
+    assert structure['harmonic_1']['misfit'] and structure['harmonic_1']['z'] > 5 * wrong.misfit['z'] > 20
+    assert not structure['harmonic_3']['misfit']          # the loop's shape (friction) is right
+    assert structure['whiteness']['misfit'] and structure['whiteness']['lag1'] > 0.15
+    found = [w for w in wrong.warnings if w.code == 'misfit' and w.startswith('residual structure')]
+    assert found and set(found[0].parameters) >= {'harmonic_1', 'whiteness'}
+    assert 'excitation frequency' in found[0]
+    right = fit_model([run], named_model('swing_arm_joint_20C').to_dict() | {
+        'elements': named_model('swing_arm_joint_20C').to_dict()['elements'] + [
+            {'type': 'maxwell', 'k': '2 kN/mm', 'c': '5 kNs/m'}]})[0][0]
+    assert not right.misfit['misfit'] and not right.misfit['structure']['harmonic_1']['misfit']
+    assert not [w for w in right.warnings if w.code == 'misfit']
 
 
 def _scored(chi2, k, n=5000):

@@ -47,6 +47,7 @@ from .modelfit import (
     jacobian,
     physical_uncertainty,
 )
+from .structure import residual_structure
 from .verdict import misfit_test, notes, verdict
 
 METHODS = ('harmonic', 'time')
@@ -378,9 +379,12 @@ def time_misfit(problem: TimeProblem, values: dict, r, dof: int, predictions) ->
     """
     carried = problem.input_noise(values, predictions)
     chi2, u2, total = 0.0, 0.0, problem.m
-    inputs = {}
-    for (run, _, _, force, _, sigma), rows, s_in in zip(problem.items, problem.item_rows, carried, strict=True):
+    inputs, shares, lag1 = {}, [], []
+    for (run, _, _, force, _, sigma), rows, (s_in, rho) in zip(problem.items, problem.item_rows, carried,
+                                                               strict=True):
         share = sigma ** 2 / (sigma ** 2 + s_in ** 2)
+        shares.append(share)
+        lag1.append((1.0 - share) * rho)       # a correct model's residual correlates this much (input noise)
         part = r[rows]
         chi2 += float(part @ part) * share
         n = part.size / max(total, 1)
@@ -389,6 +393,7 @@ def time_misfit(problem: TimeProblem, values: dict, r, dof: int, predictions) ->
     out = misfit_test(chi2, dof, math.sqrt(u2))
     out['input_noise'] = inputs
     out['chi2_load_cell_only'] = float(r @ r)
+    out['structure'] = residual_structure(problem, r, shares, math.sqrt(u2), lag1, n_free=len(values))
     return out
 
 

@@ -268,6 +268,7 @@ class TimeProblem:
         self.block_rows = []       # slices of the residual vector, one per block or quasi-static window
         self.f_max = []            # highest block frequency per item [Hz] (the model input's low-pass)
         self.item_rows = []        # slice of the residual vector per item (recording)
+        self.block_frequency = []  # per block_rows entry: the block's frequency [Hz], None for quasi-static windows
         row = 0
         for item in runs_blocks:
             run, blocks = item[0], item[1]
@@ -277,6 +278,7 @@ class TimeProblem:
             end, x, h = run_input(run, blocks, max((s for _, s in extra), default=0))
             sigma = max(noise_level(run.force[:end]), 1e-9 * float(np.max(np.abs(run.force[:end]))))
             windows, first_row = [], row
+            self.block_frequency += [b.frequency for b in blocks] + [None] * len(extra)
             for start, stop in [(b.start, b.stop) for b in blocks] + [(a, min(s, end)) for a, s in extra]:
                 step = max(1, (stop - start) // points_per_block)
                 idx = np.arange(start, stop, step)
@@ -319,15 +321,17 @@ class TimeProblem:
         return np.where(np.isfinite(r), r, 1e6)
 
     def input_noise(self, values, predictions, seed: int = 0) -> list:
-        """Per item: sigma [N] of the force residual that the displacement transducer's own noise causes through
-        the model (errors in variables), at the residual's points.
+        """Per item: (sigma [N], lag-1 autocorrelation) of the force residual that the displacement transducer's
+        own noise causes through the model (errors in variables), at the residual's points.
 
         The model runs over the measured displacement, so that displacement's noise reaches the model force
         through the model's stiffness at the noise frequencies the input low-pass keeps (0.2 um on a 14 kN/mm
         specimen: ~3 N beside a 10 N load cell). Measured by running the model once more over the displacement
         plus white noise of the same level (noise_level), through the same low-pass: the difference from
-        ``predictions`` (TimeProblem.predict at ``values``) is one more
-        realisation of that propagated noise (the model is linear in small input changes).
+        ``predictions`` (TimeProblem.predict at ``values``) is one more realisation of that propagated noise
+        (the model is linear in small input changes). The low-pass makes it coloured: its autocorrelation
+        between neighbouring analysed points is what a correct model's residual shows too
+        (structure.residual_structure).
         """
         rng = np.random.default_rng(seed)
         out = []
@@ -335,16 +339,18 @@ class TimeProblem:
             raw = np.asarray(run.displacement[:force.size], float)
             sx = noise_level(raw)
             if sx <= 0:
-                out.append(0.0)
+                out.append((0.0, 0.0))
                 continue
             x2, _ = model_input(raw + rng.normal(0.0, sx, raw.size), run.dt, f_max)
             try:
                 d = self.model(values, run.dt, h).run(x2) - pred
             except ValueError:
-                out.append(0.0)
+                out.append((0.0, 0.0))
                 continue
             parts = [d[idx] - d[idx].mean() for idx in windows]
-            out.append(float(np.sqrt(np.mean(np.concatenate(parts) ** 2))))
+            power = sum(float(p @ p) for p in parts)
+            lag1 = sum(float(p[1:] @ p[:-1]) for p in parts) / power if power > 0 else 0.0
+            out.append((float(np.sqrt(np.mean(np.concatenate(parts) ** 2))), lag1))
         return out
 
     def residuals(self, values):

@@ -114,6 +114,7 @@ def misfit_warnings(fit) -> list:
                 f'noise (load cell {sigma:.3g} N{carried}): the model does not describe what the data show, and no '
                 'sensor delay, gain or offset may be read from this fit; the uncertainties are inflated by this '
                 'misfit'))
+    out += structure_warnings((fit.misfit or {}).get('structure'))
     kind = 'simulated' if any('simulated' in q for q in fit.quality) else 'analytic'
     rows = [q for q in fit.quality if kind in q]
     if not rows:
@@ -140,6 +141,37 @@ def misfit_warnings(fit) -> list:
                                       f'by {100 * change:+.2f} % over the measured {what} range (a model error, '
                                       'not noise)'))
     return out
+
+
+def structure_warnings(structure) -> list:
+    """One 'misfit' warning naming each residual-structure test (structure.residual_structure) that fails."""
+    if not structure:
+        return []
+    found, names = [], []
+    for k, what in ((1, 'K_dyn and C_eq'), (3, 'the loop\'s shape (friction, a nonlinear spring)')):
+        test = structure.get(f'harmonic_{k}')
+        if test and test['misfit']:
+            w = test['worst']
+            times = 'the excitation frequency' if k == 1 else f'{k} x the excitation frequency'
+            found.append(f'a residual at {times} {test["z"]:.0f} sigma beyond noise over {structure["n_blocks"]} '
+                         'blocks '
+                         f'(up to {w["amplitude_sigmas"]:.2g} noise sigmas at {w["frequency"]:.3g} Hz): {what} not '
+                         'described to the noise')
+            names.append(f'harmonic_{k}')
+    if structure.get('blocks'):
+        worst = max(structure['blocks'], key=lambda b: b['chi2_per_dof'])
+        found.append(f'{len(structure["blocks"])} of {structure["n_blocks"]} blocks misfit on their own (worst '
+                     f'chi2/dof {worst["chi2_per_dof"]:.2f} at {worst["frequency"]:.3g} Hz)')
+        names.append('blocks')
+    white = structure.get('whiteness')
+    if white and white['misfit']:
+        found.append(f'the residual is not white (lag-1 autocorrelation {white["lag1"]:+.2f} where the noise gives '
+                     f'{white["expected"]:+.2f}, z = {white["z"]:.0f}): it is smooth, systematic')
+        names.append('whiteness')
+    if not found:
+        return []
+    return [FitWarning('misfit', 'residual structure beyond noise: ' + '; '.join(found) + '; a model error, which no '
+                       'sensor delay, gain or offset may be read from', tuple(names))]
 
 
 def identifiability_warnings(fit, coords) -> list:
