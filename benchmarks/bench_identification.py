@@ -22,13 +22,18 @@ interval covers the truth (worst parameter and all), the median chi2/dof, the sh
 one warning, how often AIC and BIC pick the true model, and the slowest fit.
 
 Cases: seed 000 at 20, 0, -20, -40 degC; seed 000 + cubic spring (6e11 N/m^3); a seed-003-style specimen
-(cubic spring + two-order fractional + Berg, sine grid 1-50 Hz x 0.2/0.3/0.5 mm); seed 004's pad around two
-preloads (operating-point spring with Table 3's K1(f, A) trend + elliptic damping; the true structure is
-identified per block); load cell 0.2 ms late, undeclared (fitted with the declared-sensor default and with
---estimate-delay) and declared; load cell +1 % gain undeclared, declared as 1 +- 1 %, and corrected;
+(cubic spring + two-order fractional + Berg, sine grid 1-50 Hz x 0.2/0.3/0.5 mm); seed 004's pad at Table 1's
+15 cases (0.3, 0.5, 0.7 mm about -0.9, -1.1, -1.3 mm, 2-10 Hz; operating-point spring with K1(f, A) and K3(f, A)
+interpolating Table 2 + elliptic damping; the true structure is identified per block); load cell 0.2 ms late,
+undeclared (fitted with the declared-sensor default and with --estimate-delay) and declared; load cell +1 % gain
+undeclared, declared as 1 +- 1 %, and corrected;
 load cell gain 0.97 undeclared and declared as 1 +- 3 %; seed 000 + a Maxwell branch (2 kN/mm, 5 kN s/m)
 fitted with the true structure, with seed 000's model and with seed 000's model and a free delay (issue 23's
-model error passed off as a sensor delay); 3-cycle blocks fitted with --settle-cycles 1; only 0.5-4 Hz with
+model error passed off as a sensor delay); seed 000 + a dashpot (2 kN s/m) fitted with and without it;
+seed 000's viscoelastic part with a velocity-driven friction law (tanh Coulomb, seed 002 Eq. 46) instead of
+Berg's, fitted with Berg's; a load-cell offset of 200 N and zero drifts of 2 N/s and 20 N/s (not declared:
+the per-block offsets absorb an offset and a slow drift, so those cases must cover the truth without a
+warning; a fast drift must warn); 3-cycle blocks fitted with --settle-cycles 1; only 0.5-4 Hz with
 the cubic spring and the late load cell. The seed-003 specimen is fitted with its fractional orders fixed at
 the truth (identifiable) and free (six viscoelastic parameters: more than a 1-50 Hz grid pins down, so the fit
 must warn). Unless a case says "undeclared", the recording declares the simulated load cell's calibration
@@ -70,14 +75,19 @@ SEED003_PROGRAM = {'name': 'seed003_grid', 'defaults': {'taper_cycles': 2, 'cycl
 LOWBAND_PROGRAM = {'name': 'low_band', 'defaults': {'taper_cycles': 2, 'cycles': 8, 'mean': 0.0},
                    'blocks': [{'name': 'sine', 'waveform': 'sine', 'amplitude': ['0.5 mm', '1 mm'],
                                'frequency': ['0.5 Hz', '1 Hz', '2 Hz', '3 Hz', '4 Hz']}]}
-PAD_PROGRAM = {'name': 'pad_two_preloads', 'defaults': {'taper_cycles': 2, 'cycles': 10}, 'blocks': [
+# seed 004 Table 1: 15 cases, each amplitude about its own preload (0.3 mm at -0.9 mm, 0.5 at -1.1, 0.7 at -1.3)
+PAD_PROGRAM = {'name': 'pad_table1', 'defaults': {'taper_cycles': 2, 'cycles': 10}, 'blocks': [
     {'name': 'preload_0.9mm', 'waveform': 'ramp', 'target': '-0.9 mm', 'rate': '0.5 mm/s'},
     {'name': 'settle_1', 'waveform': 'hold', 'duration': '2 s'},
-    {'name': 'pad', 'waveform': 'sine', 'mean': '-0.9 mm', 'amplitude': ['0.3 mm', '0.5 mm'],
+    {'name': 'pad', 'waveform': 'sine', 'mean': '-0.9 mm', 'amplitude': '0.3 mm',
+     'frequency': ['2 Hz', '4 Hz', '6 Hz', '8 Hz', '10 Hz']},
+    {'name': 'preload_1.1mm', 'waveform': 'ramp', 'target': '-1.1 mm', 'rate': '0.5 mm/s'},
+    {'name': 'settle_2', 'waveform': 'hold', 'duration': '2 s'},
+    {'name': 'pad', 'waveform': 'sine', 'mean': '-1.1 mm', 'amplitude': '0.5 mm',
      'frequency': ['2 Hz', '4 Hz', '6 Hz', '8 Hz', '10 Hz']},
     {'name': 'preload_1.3mm', 'waveform': 'ramp', 'target': '-1.3 mm', 'rate': '0.5 mm/s'},
-    {'name': 'settle_2', 'waveform': 'hold', 'duration': '2 s'},
-    {'name': 'pad', 'waveform': 'sine', 'mean': '-1.3 mm', 'amplitude': ['0.3 mm', '0.5 mm'],
+    {'name': 'settle_3', 'waveform': 'hold', 'duration': '2 s'},
+    {'name': 'pad', 'waveform': 'sine', 'mean': '-1.3 mm', 'amplitude': '0.7 mm',
      'frequency': ['2 Hz', '4 Hz', '6 Hz', '8 Hz', '10 Hz']},
     {'name': 'unload', 'waveform': 'ramp', 'target': '0 mm', 'rate': '0.5 mm/s'}]}
 
@@ -101,17 +111,31 @@ def _fixed_orders():
 
 
 def _pad_specimen():
+    """Seed 004's pad as a model file: :func:`rubber_rig.models.pad.seed004_pad_spec`'s K1, K3 (Table 2).
+
+    The elliptic damping is a constant b = 0.34 kN (Fig. 5-1's P4 at 0.3 mm, 2 Hz): a model file's elliptic_damping
+    takes a number, not the spec's b ~ A table.
+    """
     from rubber_rig.models.pad import seed004_pad_spec
-    spec = seed004_pad_spec()
-    k1, k3 = spec['k_odd']
+    k_odd = seed004_pad_spec()['k_odd']
     return {'name': 'seed004_pad', 'elements': [
-        {'type': 'operating_point_spring', 'k_odd': [[list(r) for r in k1] if not np.isscalar(k1) else k1, k3],
+        {'type': 'operating_point_spring', 'k_odd': [k if np.isscalar(k) else [list(r) for r in k] for k in k_odd],
          'frequency': 2.0, 'amplitude': 0.3e-3, 'reversal_threshold': 2e-6},
         {'type': 'elliptic_damping', 'b': '0.34 kN', 'reversal_threshold': 2e-6}]}
 
 
 CUBIC = {'type': 'polynomial_spring', 'k3': '6e11 N/m^3'}
 MAXWELL = {'type': 'maxwell', 'k': '2 kN/mm', 'c': '5 kNs/m'}     # issue 23's missing viscous branch
+DASHPOT = {'type': 'dashpot', 'c': '2 kNs/m'}                     # a plain viscous term seed 000's model lacks
+
+
+def _tanh_friction():
+    """Seed 000's viscoelastic part with a velocity-driven friction law (seed 002 Eq. 46) instead of Berg's."""
+    d = _seed000('20C')
+    d['elements'][1] = {'type': 'tanh_coulomb', 'f_c': '4.57 kN', 'a': '2000 s/m'}
+    return d
+
+
 SHORT_PROGRAM = {'name': 'short_blocks', 'defaults': {'taper_cycles': 1, 'cycles': 3, 'mean': 0.0},
                  'blocks': [{'name': 'sine', 'waveform': 'sine', 'amplitude': ['0.5 mm', '1 mm'],
                              'frequency': ['0.5 Hz', '1 Hz', '2 Hz', '4 Hz', '6 Hz', '8 Hz', '10 Hz', '14 Hz']}]}
@@ -150,9 +174,30 @@ CASES = {
                                                     {'estimate_delay': True})], 'zener_berg + maxwell'),
     'short_blocks': (lambda: _seed000('20C'), SHORT_PROGRAM, {},
                      [('zener_berg, --settle-cycles 1', 'zener_berg', {'settle_cycles': 1})], None),
+    'dashpot': (lambda: _seed000('20C', [DASHPOT]), GRID, {},
+                [('zener_berg + dashpot', lambda: _seed000('20C', [DASHPOT]), {}), ('zener_berg', 'zener_berg', {})],
+                'zener_berg + dashpot'),
+    'friction_tanh': (_tanh_friction, GRID, {}, [('zener_berg', 'zener_berg', {})], None),
+    'offset_200N': (lambda: _seed000('20C'), GRID, {'force_offset': '200N'},
+                    [('zener_berg', 'zener_berg', {})], 'zener_berg'),
+    'drift_2N_per_s': (lambda: _seed000('20C'), GRID, {'force_drift': '2N/s'},
+                       [('zener_berg', 'zener_berg', {})], 'zener_berg'),
+    'drift_20N_per_s': (lambda: _seed000('20C'), GRID, {'force_drift': '20N/s'},
+                        [('zener_berg', 'zener_berg', {})], None),
     'low_band': (lambda: _seed000('20C', [CUBIC]), LOWBAND_PROGRAM, {'load_cell_delay': '0.2ms', **UNDECLARED},
                  [('zener_berg', 'zener_berg', {}), ('zener_berg_cubic', 'zener_berg_cubic', {})], None),
 }
+
+
+def _keep(path: Path, text: str) -> None:
+    """Write ``text`` to ``path``; if it held something else, the recordings beside it are stale: remove them."""
+    if path.exists() and path.read_text() == text:
+        return
+    for old in path.parent.glob('*.mcap'):
+        old.unlink(missing_ok=True)
+    tmp = path.with_suffix(f'.{os.getpid()}.tmp')
+    tmp.write_text(text)
+    os.replace(tmp, path)        # atomic: a second worker reads the old or the new file, never half of one
 
 
 def simulate(case, seed, out_dir: Path) -> Path:
@@ -161,12 +206,10 @@ def simulate(case, seed, out_dir: Path) -> Path:
     d = out_dir / case
     d.mkdir(parents=True, exist_ok=True)
     model_file = d / 'specimen.yaml'
-    if not model_file.exists():
-        model_file.write_text(yaml.safe_dump(specimen() if callable(specimen) else specimen, sort_keys=False))
+    _keep(model_file, yaml.safe_dump(specimen() if callable(specimen) else specimen, sort_keys=False))
     if isinstance(program, dict):
         prog_file = d / 'program.yaml'
-        if not prog_file.exists():
-            prog_file.write_text(yaml.safe_dump(program, sort_keys=False))
+        _keep(prog_file, yaml.safe_dump(program, sort_keys=False))
         program = str(prog_file)
     declared = sim_opts.get('declare', True)
     path = d / f'seed{seed:02d}{"_declared" if declared else ""}.mcap'
@@ -177,6 +220,9 @@ def simulate(case, seed, out_dir: Path) -> Path:
             args += ['--load-cell-delay', sim_opts['load_cell_delay']]
         if 'load_cell_gain' in sim_opts:
             args += ['--load-cell-gain', sim_opts['load_cell_gain']]
+        for key in ('force_offset', 'force_drift'):
+            if key in sim_opts:
+                args += ['--' + key.replace('_', '-'), sim_opts[key]]
         with contextlib.redirect_stdout(io.StringIO()):
             rc = main(args)
         if rc != 0:

@@ -38,6 +38,7 @@ UNITS = {
     'stiffness3': {'N/m^3': 1.0, 'N/mm^3': 1e9, 'kN/mm^3': 1e12},
     'stiffness5': {'N/m^5': 1.0, 'N/mm^5': 1e15, 'kN/mm^5': 1e18},
     'slowness': {'s/m': 1.0, 's/mm': 1e3},
+    'force_rate': {'N/s': 1.0, 'kN/s': 1e3},
     'temperature': {'degC': 0.0, 'C': 0.0, '°C': 0.0, 'K': -273.15},
     'number': {},
 }

@@ -280,20 +280,20 @@ def test_cli_models_lists_types_and_fit_rejects_an_unknown_model(sims, capsys):
     assert 'no_such_model' in capsys.readouterr().err
 
 
-def _table(tmp_path, rel_noise=0.005, seed=0, sigma=True):
+def _table(tmp_path, rel_noise=0.005, seed=0, sigma=True, delay=0.0, name='table.csv'):
     spec = named_model('swing_arm_joint_0C')
     rng = np.random.default_rng(seed)
     lines = ['frequency [Hz], amplitude [mm], temperature [degC], k_dyn [kN/mm], c_eq [kNs/m]'
              + (', k_dyn_sigma [kN/mm], c_eq_sigma [kNs/m]' if sigma else '')]
     for f in (0.5, 1, 2, 4, 6, 8, 10, 14):
         for a in (0.5, 1.0):
-            k = spec.first_harmonic(f, a * 1e-3)
+            k = spec.first_harmonic(f, a * 1e-3) * np.exp(-2j * np.pi * f * delay)    # a late load cell
             kd, ce = abs(k) * 1e-6, k.imag / (2 * np.pi * f) * 1e-3
             kd_m = kd * (1 + 0.2 * rel_noise * rng.standard_normal())
             ce_m = ce * (1 + rel_noise * rng.standard_normal())
             row = f'{f}, {a}, 0, {kd_m:.8g}, {ce_m:.8g}'
             lines.append(row + (f', {0.2 * rel_noise * kd:.6g}, {rel_noise * ce:.6g}' if sigma else ''))
-    path = tmp_path / 'table.csv'
+    path = tmp_path / name
     path.write_text('\n'.join(lines) + '\n')
     return path, spec.values()
 
@@ -310,6 +310,30 @@ def test_a_kdyn_ceq_table_is_fitted_with_honest_intervals(tmp_path):
     fits, messages = fit_table(path, 'zener_berg')
     assert any('no k_dyn_sigma' in m for m in messages) and fits[0].parameters['k0'] == pytest.approx(truth['k0'],
                                                                                                       rel=0.02)
+
+
+def test_a_table_fit_carries_the_declared_calibration_in_its_budget(tmp_path):
+    # a table holds no calibration: undeclared, the fit says what its budget lacks
+    path, _ = _table(tmp_path)
+    bare = fit_table(path, 'zener_berg')[0][0]
+    assert {w.code for w in bare.warnings} == {'calibration_undeclared'}
+    assert bare.uncertainty['k0']['budget']['load_cell_gain'] is None
+    # declared: the gain's share is |value| u_g for force-scaled parameters, none for tau and alpha
+    fit = fit_table(path, 'zener_berg', gain_u=0.01, delay_u=20e-6)[0][0]
+    assert fit.warnings == []
+    u = fit.uncertainty
+    assert u['k0']['budget']['load_cell_gain'] == pytest.approx(0.01 * fit.parameters['k0'], rel=1e-9)
+    assert 'load_cell_gain' not in u['tau']['budget'] and 'load_cell_gain' not in u['alpha']['budget']
+    assert u['k0']['sigma'] == pytest.approx(math.hypot(*[c for c in u['k0']['budget'].values()]), rel=1e-9)
+    # the delay's share is the linearised shift times u_d: checked against the same table measured through a
+    # load cell 50 us late (same noise draws), fitted again
+    late, _ = _table(tmp_path, delay=50e-6, name='late.csv')
+    moved = fit_table(late, 'zener_berg')[0][0]
+    for k in ('tau', 'alpha', 'k_inf'):
+        predicted = u[k]['budget']['load_cell_delay'] / 20e-6 * 50e-6
+        actual = abs(moved.parameters[k] - fit.parameters[k])
+        assert actual == pytest.approx(predicted, rel=0.25), (k, actual, predicted)
+        assert actual > 3 * u[k]['sigma_type_a']          # large enough to mean something here
 
 
 @pytest.mark.parametrize('text, match', [

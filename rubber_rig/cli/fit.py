@@ -249,7 +249,8 @@ def run(args) -> int:
     try:
         for model in models:
             if table:
-                fits, msgs = fit_table(args.recordings[0], model, w_k=args.w_k, w_c=args.w_c, seed=args.seed)
+                fits, msgs = fit_table(args.recordings[0], model, w_k=args.w_k, w_c=args.w_c, seed=args.seed,
+                                       gain_u=args.load_cell_gain_u, delay_u=delay_u)
             else:
                 fits, msgs = fit_model(runs, model, method=args.method, load_cell_delay=delay,
                                        load_cell_gain=args.load_cell_gain, estimate_delay=args.estimate_delay,

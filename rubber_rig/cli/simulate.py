@@ -22,8 +22,8 @@ The recording has the bench's format (RigSampleBatch, SetpointBatch with block i
 metadata), so `rubber-rig fit`, `report` and `info` read it like a bench run. The model (a model file
 with "elements", a named model or a parameter set, see `rubber-rig fit --model`) is written inline
 into the metadata ('specimen': the model file's mapping in SI) so a fit can be compared with the truth.
---load-cell-delay/--load-cell-gain/--force-offset make the simulated load cell imperfect (it reads
-gain x the force of delay s earlier + offset + noise; rig_config.sim.force_* in the metadata); with
+--load-cell-delay/--load-cell-gain/--force-offset/--force-drift make the simulated load cell imperfect (it reads
+gain x the force of delay s earlier + offset + drift x t + noise; rig_config.sim.force_* in the metadata); with
 --record-calibration they are also recorded as the lab's known calibration (rig_config.load_cell_delay
 and load_cell_gain), which `rubber-rig fit` then corrects for. Values take unit suffixes (0.2ms, 2N).
 """
@@ -44,6 +44,7 @@ DISPLACEMENT_NOISE_RANGE = (0.0, 1e-3)  # [m]
 DELAY_RANGE = (0.0, 0.1)                # [s] (SimOptions.force_delay)
 GAIN_RANGE = (0.01, 100.0)              # [-] (SimOptions.force_gain)
 OFFSET_RANGE = (-1e5, 1e5)              # [N] (SimOptions.force_offset)
+DRIFT_RANGE = (-1e3, 1e3)                # [N/s] (SimOptions.force_drift)
 SEED_RANGE = (0, 2**31 - 1)
 
 
@@ -66,6 +67,8 @@ def add_arguments(parser):
                         help='the load cell reads the force of this long ago (default 0s; at most 0.1s)')
     parser.add_argument('--load-cell-gain', default='1', help='the load cell reads gain x the force (default 1)')
     parser.add_argument('--force-offset', default='0N', help='load cell offset (default 0N)')
+    parser.add_argument('--force-drift', default='0N/s', help='load cell zero drift: the offset grows by this '
+                        'much per second (default 0N/s)')
     parser.add_argument('--record-calibration', action='store_true',
                         help='also record the load-cell delay and gain as known calibration (rig_config.'
                              'load_cell_delay/load_cell_gain), which rubber-rig fit applies, known exactly '
@@ -128,6 +131,7 @@ def run(args) -> int:
     delay = _quantity('--load-cell-delay', args.load_cell_delay, 'time', DELAY_RANGE, 's')
     gain = _quantity('--load-cell-gain', args.load_cell_gain, 'number', GAIN_RANGE, '')
     offset = _quantity('--force-offset', args.force_offset, 'force', OFFSET_RANGE, 'N')
+    drift = _quantity('--force-drift', args.force_drift, 'force_rate', DRIFT_RANGE, 'N/s')
     if not SEED_RANGE[0] <= args.seed <= SEED_RANGE[1]:
         raise ValueError(f'--seed {args.seed} is outside the allowed range {SEED_RANGE[0]} .. {SEED_RANGE[1]}')
     spec = resolve_specimen(args.model)
@@ -150,14 +154,15 @@ def run(args) -> int:
     if model_temperature is not None and not math.isclose(float(model_temperature), temperature, abs_tol=1e-9):
         print(f"rubber-rig simulate: note: the model's values are for {float(model_temperature):g} degC; they are "
               f'simulated unchanged and recorded as {temperature:g} degC', file=sys.stderr)
-    load_cell = {'force_delay': delay, 'force_gain': gain, 'force_offset': offset}
+    load_cell = {'force_delay': delay, 'force_gain': gain, 'force_offset': offset, 'force_drift': drift}
     calibration = {'load_cell_delay': delay, 'load_cell_gain': gain, 'load_cell_delay_u': 0.0,
                    'load_cell_gain_u': 0.0} if args.record_calibration else {}
     result, text, config = run_simulated(text, specimen, temperature, force_noise=force_noise,
                                          displacement_noise=disp_noise, sample_rate=rate, seed=args.seed,
                                          sim_options=load_cell, config_options=calibration)
     meta = {'source': 'rubber-rig simulate', 'model': spec.name,
-            'simulated_load_cell': {'delay': delay, 'gain': gain, 'offset': offset, 'noise': force_noise}}
+            'simulated_load_cell': {'delay': delay, 'gain': gain, 'offset': offset, 'drift': drift,
+                                    'noise': force_noise}}
     try:
         path = write_recording(args.output, result, text, specimen, temperature, config, metadata=meta)
     except RecordingWriteError as exc:     # the output cannot be written: the inputs are fine, the job failed

@@ -39,6 +39,8 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
+
 FORCE_SCALES = ('stiffness', 'force', 'damping', 'k2', 'k3', 'k5', 'frac_alpha', 'frac_beta')
 CLASS_05_GAIN_U = 0.005 / math.sqrt(3.0)   # a class 0.5 load cell: +-0.5 % of reading, rectangular
 
@@ -94,6 +96,19 @@ def add_budget(unc: dict, kinds: dict, scales: dict, calibration: dict, delay_sh
                   'relative_sigma': total / abs(value) if value else math.inf,
                   'interval_95': [float(v) for v in interval(value, total, k, method)],
                   'interval_method': method, 'coverage_factor': k})
+
+
+def linearised_shift(coords, z, jac, jd) -> tuple:
+    """(shift, dz): each parameter's change [its unit per unit of the perturbation] when the residuals change
+    by ``jd`` per unit of a perturbation (a delay, say), the other parameters refitted: one Gauss-Newton step at
+    the optimum ``z`` of search coordinates ``coords`` with Jacobian ``jac`` (dz = -(J^T J)^-1 J^T jd), mapped
+    to the physical parameters by central differences along dz.
+    """
+    bread = np.linalg.pinv(jac.T @ jac)
+    dz = -bread @ (jac.T @ jd)
+    eps = 1e-6
+    up, down = coords.values(z + dz * eps), coords.values(z - dz * eps)
+    return {n: (float(up[n]) - float(down[n])) / (2 * eps) for n in coords.names}, dz
 
 
 def undeclared(unc: dict) -> list:

@@ -33,7 +33,7 @@ import yaml
 from rubber_rig.models.modelfile import ModelSpec, named_model, parse_model, resolve_model
 
 from .blocks import noise_level, noise_variance_uncertainty, split_blocks
-from .budget import add_budget
+from .budget import add_budget, linearised_shift
 from .metrics import window_properties
 from .modelfit import (
     DELAY,
@@ -355,13 +355,9 @@ def delay_sensitivity(problem: TimeProblem, coords, z, jac, r, inflation: float,
     """
     h = 1e-2 * min(run.dt for run, *_ in problem.items)
     jd = (problem.residuals_from(preds, h) - problem.residuals_from(preds, -h)) / (2 * h)
-    info = jac.T @ jac
-    bread = np.linalg.pinv(info)
+    shift, _ = linearised_shift(coords, z, jac, jd)
+    bread = np.linalg.pinv(jac.T @ jac)
     b = jac.T @ jd
-    dz = -bread @ b
-    eps = 1e-6
-    up, down = coords.values(z + dz * eps), coords.values(z - dz * eps)
-    shift = {n: (float(up[n]) - float(down[n])) / (2 * eps) for n in coords.names}
     schur = float(jd @ jd - b @ bread @ b)
     if schur <= 0:
         return shift, None

@@ -23,6 +23,12 @@ Required: frequency, amplitude, k_dyn, c_eq. Optional: preload (the mean displac
 temperature (rows are fitted per temperature), k_dyn_sigma and c_eq_sigma (1-sigma measurement
 uncertainty, same units as their value; without them the scatter of the fit sets the uncertainty).
 Only the harmonic objective applies (seed 000 Eq. 29 with the model's exact first harmonics).
+
+A table carries no calibration: the load cell's gain and delay uncertainties of the test that measured it are
+given to the fit (``gain_u``, ``delay_u``: ``rubber-rig fit --load-cell-gain-u/--load-cell-delay-u``) and enter
+each parameter's budget (budget.add_budget) as for a recording: a gain error scales K_dyn and C_eq alike; a
+delay d shifts each row's phase by w d, so C_eq by K_dyn cos(phi) d. Without them the fit warns
+(calibration_undeclared).
 """
 from __future__ import annotations
 
@@ -37,8 +43,9 @@ from rubber_rig.models.modelfile import resolve_model
 from rubber_rig.units import to_si
 
 from .blocks import BlockResult
+from .budget import add_budget, linearised_shift
 from .identification import block_quality, harmonic_uncertainty
-from .modelfit import BlockTargets, ModelFit, coordinates, fit_harmonic_model
+from .modelfit import BlockTargets, ModelFit, coordinates, fit_harmonic_model, harmonic_residuals
 from .verdict import misfit_test, notes, verdict
 
 COLUMNS = {'frequency': 'frequency', 'amplitude': 'length', 'preload': 'length', 'mean': 'length',
@@ -104,8 +111,29 @@ def _blocks(rows, name):
     return out
 
 
-def fit_table(path, model='zener_berg', w_k=100.0, w_c=1.0, seed=0) -> tuple:
-    """Fit ``model`` to the table at ``path``; one fit per temperature. Returns (fits, messages)."""
+def _delay_shift(spec, coords, z, ls, t, w_k, w_c) -> dict:
+    """Each parameter's change per second of load-cell delay behind the table's rows (budget.linearised_shift)."""
+    h = 1e-6
+    base = t.delay
+
+    def residuals(d):
+        t.delay = base + d
+        try:
+            return harmonic_residuals(z, spec, coords, t, w_k, w_c)
+        finally:
+            t.delay = base
+    # the model seen through a load cell late by d looks like data measured through one early by d
+    jd = -(residuals(h) - residuals(-h)) / (2 * h)
+    shift, _ = linearised_shift(coords, z, ls.jac, jd)
+    return shift
+
+
+def fit_table(path, model='zener_berg', w_k=100.0, w_c=1.0, seed=0, gain_u=None, delay_u=None) -> tuple:
+    """Fit ``model`` to the table at ``path``; one fit per temperature. Returns (fits, messages).
+
+    gain_u: relative standard uncertainty of the load-cell gain the table was measured with; delay_u: standard
+    uncertainty [s] of its delay; None: not declared (the fit warns, calibration_undeclared).
+    """
     spec = resolve_model(model)
     rows = read_table(path)
     groups = {}
@@ -129,12 +157,17 @@ def fit_table(path, model='zener_berg', w_k=100.0, w_c=1.0, seed=0) -> tuple:
         coords = coordinates(spec, t, 1e-3)
         z, ls = fit_harmonic_model(spec, coords, t, w_k, w_c, seed=seed)
         unc, corr, chi2, dof = harmonic_uncertainty(coords, z, ls, t, w_k, w_c)
+        add_budget(unc, dict(zip(coords.names, coords.kinds, strict=True)),
+                   {n: spec.param_spec(n).scale for n in coords.names},
+                   {'gain': 1.0, 'gain_u': gain_u, 'delay_u': delay_u},
+                   delay_shift=_delay_shift(spec, coords, z, ls, t, w_k, w_c))
         values = coords.values(z)
         fitted = spec.with_values(values)
         fit = ModelFit(model=fitted, temperature=temp, runs=[Path(path).name], blocks=blocks, method='harmonic',
                        parameters={n: float(values[n]) for n in coords.names}, uncertainty=unc,
                        correlation=corr.tolist(), chi2=chi2, dof=dof, n_points=2 * len(group), noise={},
-                       load_cell={'delay': 0.0, 'gain': 1.0, 'calibration_source': 'none'},
+                       load_cell={'delay': 0.0, 'gain': 1.0, 'calibration_source': 'declared' if gain_u is not None
+                                  and delay_u is not None else 'none', 'gain_u': gain_u, 'delay_u': delay_u},
                        quality=block_quality(fitted, blocks, {}, {}, sigmas=(t.rel_sigma_k, t.rel_sigma_c)))
         if not np.all(t.rel_sigma_k > 0):
             fit.chi2, fit.dof = float('nan'), dof

@@ -154,7 +154,7 @@ class SimOptions:
     {"model": "linear", "stiffness": N/m, "damping": N s/m}. The actuator is a second-order position loop
     (natural frequency [Hz], damping ratio) with a velocity limit [m/s]. Sensors: noise (std), offset,
     resolution; temperature [degC]. The load cell reports force_gain x the true force of force_delay [s]
-    earlier (a delay line, linear interpolation between samples) + force_offset + noise, quantised.
+    earlier (a delay line, linear interpolation between samples) + force_offset + force_drift x t + noise, quantised.
     host_timeout [s]: host heartbeat silence after which the controller ramps to rest on its own.
     """
 
@@ -171,6 +171,8 @@ class SimOptions:
                                              range=(1e-12, 1e-3))
     force_noise: float = setting(2.0, 'load cell noise, standard deviation', units='N', range=(0.0, 1e4))
     force_offset: float = setting(0.0, 'load cell offset', units='N', range=(-1e5, 1e5))
+    force_drift: float = setting(0.0, 'load cell zero drift: the offset grows by this much per second of the run',
+                                 units='N/s', range=(-1e3, 1e3))
     force_resolution: float = setting(0.01, 'load cell resolution', units='N', range=(1e-9, 100.0))
     force_delay: float = setting(0.0, 'load cell delay: it reports the true force of this long ago (linear '
                                  'interpolation between samples)', units='s', range=(0.0, 0.1))

@@ -90,7 +90,7 @@ class SimController:
         self.disp_sensor = Sensor(options.displacement_noise, options.displacement_offset,
                                   options.displacement_resolution, rng_x)
         self.force_sensor = Sensor(options.force_noise, options.force_offset, options.force_resolution, rng_f,
-                                   gain=options.force_gain)
+                                   gain=options.force_gain, drift=options.force_drift / self.fs)
         # the load cell reads the true force of force_delay ago (None: no delay, the true force as it is)
         delay = options.force_delay * self.fs
         delay = float(round(delay)) if abs(delay - round(delay)) < 1e-9 else delay

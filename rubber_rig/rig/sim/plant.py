@@ -110,14 +110,15 @@ class DelayLine:
 
 
 class Sensor:
-    """Transducer with gain, Gaussian noise (std), offset and resolution (quantisation step), all in its unit:
-    reads gain x true + offset + noise, quantised. Noise is drawn in blocks from a seeded generator so runs are
-    reproducible.
+    """Transducer with gain, Gaussian noise (std), offset, zero drift (per reading) and resolution (quantisation
+    step), all in its unit: reads gain x true + offset + drift x readings so far + noise, quantised. Noise is
+    drawn in blocks from a seeded generator so runs are reproducible.
     """
 
     def __init__(self, noise: float, offset: float, resolution: float, rng: np.random.Generator, block=4096,
-                 gain: float = 1.0):
+                 gain: float = 1.0, drift: float = 0.0):
         self.noise, self.offset, self.res, self.gain = noise, offset, resolution, gain
+        self.drift, self._reads = drift, 0     # zero drift per reading (a load cell warming up)
         self._rng, self._block = rng, block
         self._buf, self._i = np.empty(0), 0
         self.stuck_value = None
@@ -135,7 +136,9 @@ class Sensor:
             self._buf, self._i = self._rng.standard_normal(self._block) * self.noise, 0
         n = float(self._buf[self._i])   # Python floats: an overflow is inf, without a numpy warning
         self._i += 1
-        counts = (self.gain * true_value + self.offset + n) / self.res
+        offset = self.offset + self.drift * self._reads
+        self._reads += 1
+        counts = (self.gain * true_value + offset + n) / self.res
         if not math.isfinite(counts):
             return math.nan
         return round(counts) * self.res
@@ -155,8 +158,10 @@ class Sensor:
             noise[done:done + take] = self._buf[self._i:self._i + take]
             self._i += take
             done += take
+        offset = self.offset + self.drift * (self._reads + np.arange(n)) if self.drift else self.offset
+        self._reads += n
         with np.errstate(over='ignore', invalid='ignore'):
-            counts = (self.gain * true_values + self.offset + noise) / self.res
+            counts = (self.gain * true_values + offset + noise) / self.res
             out = np.round(counts) * self.res
         out[~np.isfinite(counts)] = np.nan
         return out
