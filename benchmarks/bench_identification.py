@@ -66,6 +66,7 @@ from pathlib import Path
 
 import numpy as np
 import yaml
+from scipy.stats import binom
 
 GRID = 'seed000_grid'
 SEED003_PROGRAM = {'name': 'seed003_grid', 'defaults': {'taper_cycles': 2, 'cycles': 8, 'mean': 0.0},
@@ -187,6 +188,35 @@ CASES = {
     'low_band': (lambda: _seed000('20C', [CUBIC]), LOWBAND_PROGRAM, {'load_cell_delay': '0.2ms', **UNDECLARED},
                  [('zener_berg', 'zener_berg', {}), ('zener_berg_cubic', 'zener_berg_cubic', {})], None),
 }
+
+
+# what each fit must show (issue 23's targets): None = clean (every parameter covered in >= 90 % of the seeds,
+# no warning); a code = that warning in >= 95 % of the seeds. The true structure of each case is clean unless
+# listed; fits not listed (and not the true one) are shown without a target (e.g. seed 000 fitted with an
+# unneeded cubic term: not wrong, and its "k3 consistent with zero" share is in the codes column).
+EXPECT = {
+    'cubic': {'zener_berg': 'misfit'},
+    'seed003': {'seed003, all free': 'identifiability', 'zener_berg': 'misfit'},
+    'pad': {'zener_berg': 'misfit'},
+    'late_0.2ms': {'zener_berg': 'calibration_disagrees', 'zener_berg, --estimate-delay': 'delay'},
+    'gain_+1%': {'zener_berg, no calibration': 'calibration_undeclared', 'zener_berg, gain 1 +- 1 % declared': None,
+                 'zener_berg, --load-cell-gain 1.01': 'calibration_undeclared'},
+    'gain_0.97': {'zener_berg, no calibration': 'calibration_undeclared',
+                  'zener_berg, gain 1 +- 3 % declared': None},
+    'maxwell': {'zener_berg': 'misfit', 'zener_berg, --estimate-delay': 'misfit'},
+    'short_blocks': {'zener_berg, --settle-cycles 1': 'short_blocks'},
+    'dashpot': {'zener_berg': 'misfit'},
+    'friction_tanh': {'zener_berg': 'misfit'},
+    'drift_20N_per_s': {'zener_berg': 'misfit'},
+    'low_band': {'zener_berg': 'misfit', 'zener_berg_cubic': 'calibration_undeclared'},
+}
+
+
+def expected(case, fit, true):
+    """(judged?, code or None) of a fit: see EXPECT."""
+    if fit in EXPECT.get(case, {}):
+        return True, EXPECT[case][fit]
+    return (True, None) if true else (False, None)
 
 
 def _keep(path: Path, text: str) -> None:
@@ -329,14 +359,30 @@ def summarise(rows):
             'silent_misses': int(sum(1 for r in rs if not r['warnings'] and not all(r['covered'].values()))),
             'silent_3sigma': int(sum(1 for r in rs if not r['warnings'] and r.get('max_z', 0.0) > 3)),
         })
+        judged, code = expected(case, fit, rs[0]['true'])
+        t = table[-1]
+        if not judged:
+            t['target'] = ''
+        elif code is None:
+            cp, cv = t['coverage_worst_param']
+            covered = cv >= 0.9 or fit == 'per_block'
+            t['target'] = f'clean: {"met" if covered and t["warned"] == 0 else "MISSED"}'
+            if not covered:
+                # with 10 seeds a true 95 % interval shows <= 8/10 in 9 % of the parameters: say how likely
+                n = len(rs)
+                k = round(cv * n)
+                t['target'] += f' ({cp} {k}/{n}; P = {binom.cdf(k, n, 0.95):.2g} for a true 95 % interval)'
+        else:
+            share = t['codes'].get(code, 0.0)
+            t['target'] = f'{code} in {100 * share:.0f} %: {"met" if share >= 0.95 else "MISSED"}'
     return table
 
 
 def print_table(table, out=sys.stdout):
     print('| case | fitted model | true? | seeds | worst median abs error | 95 % coverage all / worst param | '
           'chi2/dof (median) | seeds warned | warning codes (share of seeds) | uncovered truth without a warning '
-          '(> 3 sigma) | AIC / BIC pick true | slowest fit |', file=out)
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|', file=out)
+          '(> 3 sigma) | target | AIC / BIC pick true | slowest fit |', file=out)
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|', file=out)
     for t in table:
         wp, we = t['worst_median_error']
         cp, cv = t['coverage_worst_param']
@@ -345,7 +391,8 @@ def print_table(table, out=sys.stdout):
               f'{wp} {100 * we:.2f} % | {100 * t["coverage_all"]:.0f} % / {cp} {100 * cv:.0f} % | '
               f'{t["chi2_per_dof"]:.3g} | {100 * t["warned"]:.0f} % | '
               f'{", ".join(f"{c} {100 * v:.0f} %" for c, v in t["codes"].items()) or "-"} | '
-              f'{t["silent_misses"]} ({t["silent_3sigma"]}) | {pick} | {t["fit_s_max"]:.1f} s |', file=out)
+              f'{t["silent_misses"]} ({t["silent_3sigma"]}) | {t.get("target", "")} | {pick} | '
+              f'{t["fit_s_max"]:.1f} s |', file=out)
     print(file=out)
     for t in table:
         if t['example_warning']:
@@ -359,22 +406,50 @@ def main(argv=None) -> int:
     ap.add_argument('--jobs', type=int, default=min(2, os.cpu_count() or 1))
     ap.add_argument('--dir', default='/tmp/rubber_rig_bench_identification', help='recordings (reused)')
     ap.add_argument('--json', default=None, help='also write all rows to this JSON file')
+    ap.add_argument('--markdown', default=None, help='also write the table to this Markdown file (the README '
+                    'links docs/benchmarks/identification.md)')
+    ap.add_argument('--first-seed', type=int, default=0, help='seeds first-seed .. first-seed + seeds - 1')
+    ap.add_argument('--from-json', default=None, nargs='+', help='no run: summarise the rows of earlier --json '
+                    'files together (e.g. seeds 0-9 and a second run of seeds 10-19)')
     args = ap.parse_args(argv)
+    if args.from_json:
+        runs = [json.loads(Path(p).read_text()) for p in args.from_json]
+        rows = [r for d in runs for r in d['rows']]
+        header = '; '.join(d.get('header', p) for d, p in zip(runs, args.from_json, strict=True))
+        return report(summarise(rows), header, args.markdown)
     cases = list(CASES) if args.cases == 'all' else args.cases.split(',')
     unknown = [c for c in cases if c not in CASES]
     if unknown:
         ap.error(f'unknown case(s) {unknown}; known: {", ".join(CASES)}')
-    tasks = [(c, s, args.dir) for c in cases for s in range(args.seeds)]
+    tasks = [(c, s, args.dir) for c in cases for s in range(args.first_seed, args.first_seed + args.seeds)]
     t0 = time.perf_counter()
     with Pool(args.jobs) as pool:
         rows = [r for rs in pool.imap(fit_task, tasks) for r in rs]
     table = summarise(rows)
-    print(f'identification benchmark: {args.seeds} noise seeds per case, 20 N load-cell noise, 1 kHz, '
-          f'{time.perf_counter() - t0:.0f} s wall, {args.jobs} jobs')
-    print_table(table)
+    header = (f'identification benchmark: {args.seeds} noise seeds per case ({", ".join(cases)}; seeds '
+              f'{args.first_seed}-{args.first_seed + args.seeds - 1}), 20 N load-cell noise, 1 kHz, '
+              f'{time.perf_counter() - t0:.0f} s wall, {args.jobs} jobs')
     if args.json:
-        Path(args.json).write_text(json.dumps({'rows': rows, 'table': table}, indent=1, default=str))
-    return 0
+        Path(args.json).write_text(json.dumps({'rows': rows, 'table': table, 'header': header}, indent=1,
+                                              default=str))
+    return report(table, header, args.markdown)
+
+
+def report(table, header, markdown=None) -> int:
+    """Print the table (and write it to ``markdown``); exit status 1 when a target was missed."""
+    print(header)
+    print_table(table)
+    if markdown:
+        buf = io.StringIO()
+        print(f'# Identification benchmark\n\nGenerated by `benchmarks/bench_identification.py` (its docstring says '
+              f'what each case is). {header}.\n', file=buf)
+        print_table(table, buf)
+        Path(markdown).parent.mkdir(parents=True, exist_ok=True)
+        Path(markdown).write_text(buf.getvalue())
+    missed = [f'{t["case"]} / {t["fit"]}' for t in table if 'MISSED' in t.get('target', '')]
+    if missed:
+        print(f'targets missed: {"; ".join(missed)}')
+    return 1 if missed else 0
 
 
 if __name__ == '__main__':

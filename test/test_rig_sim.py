@@ -23,6 +23,7 @@ from rubber_rig.excitation import Program, load_program
 from rubber_rig.rig import RigConfig, open_rig, run_program
 from rubber_rig.rig.config import SimOptions
 from rubber_rig.rig.sim.controller import SimController
+from rubber_rig.rig.sim.plant import Sensor
 
 from support.rig import FAST, expected_plant, poll_samples
 
@@ -232,6 +233,26 @@ def test_sensor_offset_resolution_and_noise_are_applied():
     np.testing.assert_allclose(r.force / 1.0, np.round(r.force), atol=1e-6)      # 1 N resolution
     assert np.mean(r.force - f) == pytest.approx(-50.0, abs=0.5)
     assert np.std(r.force - f) == pytest.approx(5.0, rel=0.1)
+
+
+def test_load_cell_zero_drift_grows_with_the_run_time():
+    # a load cell warming up: the offset grows by force_drift per second of the run, read one by one or in
+    # blocks alike
+    prog = Program.from_yaml_text('name: s\nblocks:\n  - {waveform: sine, frequency: 5 Hz, amplitude: 0.5 mm, '
+                                  'cycles: 20}\n')
+    opt = {'force_drift': 10.0, 'force_noise': 0.0, 'force_resolution': 1e-3,
+           'specimen': {'model': 'linear', 'stiffness': 1.3e7, 'damping': 0.0}}
+    r = run_program(prog, dict(FAST, sim=opt))
+    assert r.completed
+    _, f = expected_plant(r, SimOptions(**{k: v for k, v in opt.items() if k != 'force_drift'}))
+    t = np.arange(r.force.size) / 1000.0
+    slope, offset = np.polyfit(t, r.force - f, 1)
+    assert slope == pytest.approx(10.0, rel=1e-3) and abs(offset) < 0.05
+    one = Sensor(0.0, 1.0, 1e-6, np.random.default_rng(0), drift=0.5)
+    many = Sensor(0.0, 1.0, 1e-6, np.random.default_rng(0), drift=0.5)
+    singles = [one.read(0.0) for _ in range(5)]
+    np.testing.assert_allclose(singles, [1.0, 1.5, 2.0, 2.5, 3.0])
+    np.testing.assert_allclose(np.concatenate([many.read_many(np.zeros(2)), many.read_many(np.zeros(3))]), singles)
 
 
 def test_rig_config_settings_describe_every_parameter_once():

@@ -165,6 +165,15 @@ def print_fit(fit, out=None):
     elif m:
         print(f'  misfit test: {m["z"]:+.1f} sigma, p = {m["p_value"]:.2g} '
               f'({"misfit" if m["misfit"] else "consistent with noise"})', file=out)
+    st = m.get('structure') if m else None
+    if st:
+        parts = [f'{k} x excitation frequency {st[f"harmonic_{k}"]["z"]:+.1f} sigma' for k in (1, 3)
+                 if f'harmonic_{k}' in st]
+        if st.get('whiteness'):
+            parts.append(f'lag-1 autocorrelation {st["whiteness"]["lag1"]:+.3f} (noise {st["whiteness"]["expected"]:+.3f},'
+                         f' {st["whiteness"]["z"]:+.1f} sigma)')
+        parts.append(f'{len(st["blocks"])} of {st["n_blocks"]} blocks misfit alone')
+        print('  residual structure: ' + '; '.join(parts), file=out)
     sk, sc = fit.max_errors('simulated' if fit.method == 'time' else 'analytic')
     print(f'  max |error| per block: K_dyn {100 * sk:.2f} %, C_eq {100 * sc:.2f} %', file=out)
     lc = fit.load_cell
