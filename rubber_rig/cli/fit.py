@@ -170,8 +170,8 @@ def print_fit(fit, out=None):
         parts = [f'{k} x excitation frequency {st[f"harmonic_{k}"]["z"]:+.1f} sigma' for k in (1, 3)
                  if f'harmonic_{k}' in st]
         if st.get('whiteness'):
-            parts.append(f'lag-1 autocorrelation {st["whiteness"]["lag1"]:+.3f} (noise {st["whiteness"]["expected"]:+.3f},'
-                         f' {st["whiteness"]["z"]:+.1f} sigma)')
+            w = st['whiteness']
+            parts.append(f'lag-1 autocorrelation {w["lag1"]:+.3f} (noise {w["expected"]:+.3f}, {w["z"]:+.1f} sigma)')
         parts.append(f'{len(st["blocks"])} of {st["n_blocks"]} blocks misfit alone')
         print('  residual structure: ' + '; '.join(parts), file=out)
     sk, sc = fit.max_errors('simulated' if fit.method == 'time' else 'analytic')
