@@ -40,6 +40,7 @@ UNITS = {
     'slowness': {'s/m': 1.0, 's/mm': 1e3},
     'force_rate': {'N/s': 1.0, 'kN/s': 1e3},
     'temperature': {'degC': 0.0, 'C': 0.0, '°C': 0.0, 'K': -273.15},
+    'temperature_difference': {'K': 1.0, 'mK': 1e-3},    # an uncertainty or a step: no offset
     'number': {},
 }
 _QUANTITY = re.compile(r'^\s*([-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?)\s*(.*?)\s*$')

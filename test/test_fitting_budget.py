@@ -141,3 +141,9 @@ def test_the_fractional_order_range_of_the_time_domain_scheme_is_stated_and_chec
     with pytest.raises(ValueError, match='alpha'):
         parse_model({'elements': [{'type': 'fractional_zener', 'k0': '12 kN/mm', 'k_inf': '14 kN/mm',
                                    'tau': '43 ms', 'alpha': 0.01}]}, 'small_order.yaml')
+
+
+def test_the_power_of_length_in_each_catalogue_unit():
+    from rubber_rig.fitting.budget import length_exponent
+    assert [length_exponent(u) for u in ('N/m', 'N/m^3', 'm', 'N s^alpha/m', 's/m', 's', '-', 'N', 'N/m^5')] == [
+        -1, -3, 1, -1, -1, 0, 0, 0, -5]

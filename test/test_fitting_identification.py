@@ -35,6 +35,7 @@ PROGRAM = {'name': 'short_grid', 'defaults': {'taper_cycles': 1, 'cycles': 6, 'm
            'blocks': [{'name': 'sine', 'waveform': 'sine', 'amplitude': ['0.5 mm', '1 mm'],
                        'frequency': ['0.5 Hz', '2 Hz', '6 Hz', '14 Hz']}]}
 SEED000 = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
+EXACT_OTHERS = {'displacement_gain_u': 0.0, 'temperature_u': 0.0}   # the simulated transducers are exact
 
 
 @pytest.fixture(scope='module')
@@ -198,7 +199,7 @@ def test_an_undeclared_late_load_cell_is_never_fitted_away_silently(sims):
     assert blind.chi2_per_dof > f.chi2_per_dof
     # the calibration declared: applied, nothing left over, no warning
     cal = fit_model([run], 'zener_berg', load_cell_delay=0.5e-3, load_cell_delay_u=0.01e-3,
-                    load_cell_gain_u=0.0)[0][0]
+                    load_cell_gain_u=0.0, **EXACT_OTHERS)[0][0]
     assert cal.load_cell['delay'] == 0.5e-3 and cal.warnings == [], cal.warnings
     assert all(_covered(cal, SEED000).values())
     assert abs(cal.load_cell['delay_check']['estimate']) < 4 * cal.load_cell['delay_check']['sigma']
@@ -213,7 +214,7 @@ def test_a_load_cell_gain_error_is_in_the_budget_only_when_declared(sims):
     assert undeclared and {'k0', 'k_inf', 'f_fmax'} <= set(undeclared[0].parameters)
     assert set(undeclared[0].parameters).isdisjoint({'tau', 'alpha', 'x2'})
     # a certificate that says 1.000 +- 1 % (1 sigma): the Type B term covers the 1 % the load cell is off
-    declared = fit_model([run], 'zener_berg', load_cell_gain_u=0.01, load_cell_delay_u=0.0)[0][0]
+    declared = fit_model([run], 'zener_berg', load_cell_gain_u=0.01, load_cell_delay_u=0.0, **EXACT_OTHERS)[0][0]
     u = declared.uncertainty['k0']
     assert u['budget']['load_cell_gain'] == pytest.approx(0.01 * u['value'], rel=1e-9)
     assert u['sigma'] == pytest.approx(math.hypot(u['sigma_type_a'], 0.01 * u['value']), rel=1e-9)
@@ -223,6 +224,26 @@ def test_a_load_cell_gain_error_is_in_the_budget_only_when_declared(sims):
     assert not [w for w in declared.warnings if w.code == 'calibration_undeclared']
     cal = fit_model([run], 'zener_berg', load_cell_gain=1.01)[0][0]
     assert all(_covered(cal, SEED000).values())
+
+
+def test_the_displacement_transducer_and_the_temperature_sensor_are_declared_too(sims):
+    run = load_run(sims['base'])         # --record-calibration: every simulated transducer declared exact
+    clean = fit_model([run], 'zener_berg')[0][0]
+    assert clean.warnings == [] and clean.load_cell['temperature_u'] == 0.0
+    assert clean.uncertainty['x2']['budget']['displacement_gain'] == 0.0
+    # a displacement gain known to 1 %: stiffnesses (N/m) and Berg's x2 (m) carry 1 % each, tau, alpha and the
+    # friction force none (their units hold no length)
+    f = fit_model([run], 'zener_berg', displacement_gain_u=0.01)[0][0]
+    u = f.uncertainty
+    for name in ('k0', 'k_inf', 'x2'):
+        assert u[name]['budget']['displacement_gain'] == pytest.approx(0.01 * f.parameters[name], rel=1e-9)
+    assert not any('displacement_gain' in u[n]['budget'] for n in ('tau', 'alpha', 'f_fmax'))
+    # undeclared, the fit says which parameters lack it, and that the temperature is unqualified
+    bare = fit_model([load_run(sims['gain'])], 'zener_berg', load_cell_gain=1.01, load_cell_gain_u=0.001,
+                     load_cell_delay_u=0.0)[0][0]
+    texts = [w for w in bare.warnings if w.code == 'calibration_undeclared']
+    assert len(texts) == 2 and set(texts[0].parameters) == {'k0', 'k_inf', 'x2'}
+    assert 'displacement transducer' in texts[0] and 'temperature sensor' in texts[1]
 
 
 def test_triangle_blocks_join_the_time_domain_fit(sims):
@@ -263,10 +284,12 @@ def test_cli_fit_json_has_the_verdict_and_writes_a_model_file(sims, tmp_path, ca
     assert data['uncertainty']['k0']['interval_method'] == 'log'
     # the budget is in the model file, and the report reads it back (HTML parameter table, CLI table)
     from rubber_rig.fitting.report import budget_text, read_model_file
-    assert set(written['elements'][0]['budget']['k0']) == {'type_a', 'load_cell_gain', 'load_cell_delay'}
+    budget_keys = {'type_a', 'load_cell_gain', 'load_cell_delay', 'displacement_gain'}
+    assert set(written['elements'][0]['budget']['k0']) == budget_keys
     model = read_model_file(out)
     text = budget_text(model.results['k0'], model.spec.values()['k0'])
-    assert text.startswith('Type A ') and text.endswith('load-cell gain 0, load-cell delay 0'), text
+    assert text.startswith('Type A ') and text.endswith('load-cell gain 0, load-cell delay 0, displacement gain 0'), \
+        text
     assert main(['fit', str(sims['cubic']), '--model', 'zener_berg', '-o', '-', '--no-progress']) == 0
     text = capsys.readouterr().out
     assert 'WARNING: misfit beyond noise' in text and '95 % interval' in text
@@ -319,7 +342,7 @@ def test_a_table_fit_carries_the_declared_calibration_in_its_budget(tmp_path):
     assert {w.code for w in bare.warnings} == {'calibration_undeclared'}
     assert bare.uncertainty['k0']['budget']['load_cell_gain'] is None
     # declared: the gain's share is |value| u_g for force-scaled parameters, none for tau and alpha
-    fit = fit_table(path, 'zener_berg', gain_u=0.01, delay_u=20e-6)[0][0]
+    fit = fit_table(path, 'zener_berg', gain_u=0.01, delay_u=20e-6, displacement_gain_u=0.0, temperature_u=0.1)[0][0]
     assert fit.warnings == []
     u = fit.uncertainty
     assert u['k0']['budget']['load_cell_gain'] == pytest.approx(0.01 * fit.parameters['k0'], rel=1e-9)

@@ -66,6 +66,12 @@ def add_arguments(parser):
     parser.add_argument('--load-cell-delay-u', default=None,
                         help='standard uncertainty of the load-cell delay, e.g. 0.02ms; default: the recording\'s '
                              'rig configuration (load_cell_delay_u)')
+    parser.add_argument('--displacement-gain-u', type=float, default=None,
+                        help='standard uncertainty of the displacement transducer\'s gain (calibration '
+                             'certificate); default: the recording\'s rig configuration (displacement_gain_u)')
+    parser.add_argument('--temperature-u', default=None,
+                        help='standard uncertainty of the temperature sensor, e.g. 0.5K; default: the recording\'s '
+                             'rig configuration (temperature_u)')
     parser.add_argument('--estimate-delay', action='store_true',
                         help='fit the load-cell delay as a parameter (never below zero) instead of using the '
                              'declared one; for a load cell whose timing nobody measured (the fit then warns)')
@@ -245,6 +251,8 @@ def run(args) -> int:
     models = args.model or ['zener_berg']
     delay = None if args.load_cell_delay is None else to_si(args.load_cell_delay, 'time')
     delay_u = None if args.load_cell_delay_u is None else to_si(args.load_cell_delay_u, 'time')
+    temp_u = None if args.temperature_u is None else to_si(args.temperature_u, 'temperature_difference')
+    declared = {'displacement_gain_u': args.displacement_gain_u, 'temperature_u': temp_u}
     table = str(args.recordings[0]).lower().endswith('.csv')
     messages = []
     if not table:
@@ -259,13 +267,13 @@ def run(args) -> int:
         for model in models:
             if table:
                 fits, msgs = fit_table(args.recordings[0], model, w_k=args.w_k, w_c=args.w_c, seed=args.seed,
-                                       gain_u=args.load_cell_gain_u, delay_u=delay_u)
+                                       gain_u=args.load_cell_gain_u, delay_u=delay_u, **declared)
             else:
                 fits, msgs = fit_model(runs, model, method=args.method, load_cell_delay=delay,
                                        load_cell_gain=args.load_cell_gain, estimate_delay=args.estimate_delay,
                                        load_cell_gain_u=args.load_cell_gain_u, load_cell_delay_u=delay_u,
                                        settle_cycles=args.settle_cycles, min_cycles=args.min_cycles, seed=args.seed,
-                                       w_k=args.w_k, w_c=args.w_c, progress=bar)
+                                       w_k=args.w_k, w_c=args.w_c, progress=bar, **declared)
             by_model[model] = fits
             messages += [m for m in msgs if m not in messages]
     finally:

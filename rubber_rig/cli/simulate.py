@@ -72,8 +72,9 @@ def add_arguments(parser):
     parser.add_argument('--record-calibration', action='store_true',
                         help='also record the load-cell delay and gain as known calibration (rig_config.'
                              'load_cell_delay/load_cell_gain), which rubber-rig fit applies, known exactly '
-                             '(load_cell_delay_u/load_cell_gain_u 0: the simulated load cell is what it is said '
-                             'to be); without it the recording declares no calibration and the fit says so')
+                             '(load_cell_delay_u/load_cell_gain_u, displacement_gain_u and temperature_u 0: the '
+                             'simulated sensors are what they are said to be); without it the recording declares '
+                             'no calibration and the fit says so')
     parser.add_argument('--seed', type=int, default=0, help='random seed of the simulated sensors (default 0)')
 
 
@@ -122,7 +123,7 @@ def program_text(source) -> str:
 
 
 def run(args) -> int:
-    from rubber_rig.fitting.simulate import run_simulated, write_recording
+    from rubber_rig.fitting.simulate import EXACT_SENSORS, run_simulated, write_recording
     from rubber_rig.recording import RecordingWriteError
 
     rate = _quantity('--rate', args.rate, 'frequency', RATE_RANGE, 'Hz')
@@ -155,8 +156,8 @@ def run(args) -> int:
         print(f"rubber-rig simulate: note: the model's values are for {float(model_temperature):g} degC; they are "
               f'simulated unchanged and recorded as {temperature:g} degC', file=sys.stderr)
     load_cell = {'force_delay': delay, 'force_gain': gain, 'force_offset': offset, 'force_drift': drift}
-    calibration = {'load_cell_delay': delay, 'load_cell_gain': gain, 'load_cell_delay_u': 0.0,
-                   'load_cell_gain_u': 0.0} if args.record_calibration else {}
+    calibration = {'load_cell_delay': delay, 'load_cell_gain': gain, **EXACT_SENSORS} if args.record_calibration \
+        else {}
     result, text, config = run_simulated(text, specimen, temperature, force_noise=force_noise,
                                          displacement_noise=disp_noise, sample_rate=rate, seed=args.seed,
                                          sim_options=load_cell, config_options=calibration)

@@ -25,6 +25,10 @@ Contributions (standard uncertainties, in the parameter's unit):
 * ``load_cell_delay`` (Type B): the declared standard uncertainty u_d of the load-cell delay, carried through
   the fit: the parameters' shift for a delay change of u_d, linearised at the optimum (Gauss-Newton:
   dz = -(J^T J)^-1 J^T dr/dd u_d).
+* ``displacement_gain`` (Type B): the declared standard uncertainty u_x of the displacement transducer's gain.
+  A displacement read (1 + e) x too large makes every parameter whose unit holds length to the power L come
+  out (1 + e)^L x too large (a stiffness N/m: L = -1, k3 in N/m^3: -3, Berg's x2 in m: +1; times, orders and
+  forces: 0), so u = |L| |value| u_x (:func:`length_exponent`).
 
 The total is the root sum of squares (contributions uncorrelated). A contribution that was not declared is
 None, and the fit's warnings say so (code ``calibration_undeclared``) with what a typical class would add.
@@ -72,16 +76,32 @@ def interval_method(kind: str, value: float) -> str:
     return 'linear'
 
 
+def length_exponent(unit: str) -> int:
+    """The power of metres in a unit written as catalogue.ParamSpec does: 'N/m' -> -1, 'N/m^3' -> -3, 'm' -> 1,
+    'N s^alpha/m' -> -1, 's/m' -> -1, 's' or '-' -> 0.
+    """
+    num, _, den = str(unit).partition('/')
+    power = 0
+    for sign, part in ((1, num), (-1, den)):
+        for token in part.split():
+            base, _, exp = token.partition('^')
+            if base == 'm':
+                power += sign * (int(exp) if exp.lstrip('-').isdigit() else 1)
+    return power
+
+
 def add_budget(unc: dict, kinds: dict, scales: dict, calibration: dict, delay_shift: dict | None = None,
-               delay_estimated: bool = False) -> None:
+               delay_estimated: bool = False, units: dict | None = None) -> None:
     """Extend ``unc`` (name -> {value, sigma, interval_95, ...}) in place with each parameter's budget.
 
     ``kinds``: name -> coordinate kind; ``scales``: name -> scale kind of the model's parameter (FORCE_SCALES);
-    ``calibration``: {'gain', 'gain_u', 'delay_u'} (None: not declared); ``delay_shift``: name -> the
-    parameter's change for a 1 s change of the declared delay (None when the delay was estimated by the fit:
-    its uncertainty is then part of Type A).
+    ``calibration``: {'gain', 'gain_u', 'delay_u', 'displacement_gain_u'} (None: not declared); ``delay_shift``:
+    name -> the parameter's change for a 1 s change of the declared delay (None when the delay was estimated by
+    the fit: its uncertainty is then part of Type A); ``units``: name -> the parameter's unit (for the
+    displacement gain's contribution; None: no such contribution).
     """
     gain, gain_u, delay_u = calibration.get('gain', 1.0), calibration.get('gain_u'), calibration.get('delay_u')
+    x_u = calibration.get('displacement_gain_u')
     for name, u in unc.items():
         value, a = u['value'], u['sigma']
         k = (u['interval_95'][1] - u['interval_95'][0]) / (2 * a) if a > 0 else 1.96
@@ -90,6 +110,9 @@ def add_budget(unc: dict, kinds: dict, scales: dict, calibration: dict, delay_sh
             contributions['load_cell_gain'] = None if gain_u is None else abs(value) * gain_u / gain
         if delay_shift is not None and name in delay_shift and not delay_estimated:
             contributions['load_cell_delay'] = None if delay_u is None else abs(delay_shift[name]) * delay_u
+        power = length_exponent(units[name]) if units and name in units else 0
+        if power:
+            contributions['displacement_gain'] = None if x_u is None else abs(power * value) * x_u
         total = math.sqrt(sum(c ** 2 for c in contributions.values() if c is not None))
         method = interval_method(kinds.get(name, 'lin'), value)
         u.update({'budget': contributions, 'sigma_type_a': a, 'sigma': total,

@@ -90,15 +90,19 @@ def corrected_force(force, dt, delay, gain):
     return f / gain
 
 
-def declared_uncertainties(run, gain_u=None, delay_u=None) -> dict:
-    """{'gain_u': .., 'delay_u': ..}: the standard uncertainties of the load cell's gain [-] and delay [s] as
-    given, else as the recording's rig configuration declares them (``load_cell_gain_u``,
-    ``load_cell_delay_u``); None where nothing is declared (a negative value declares nothing).
+def declared_uncertainties(run, gain_u=None, delay_u=None, displacement_gain_u=None, temperature_u=None) -> dict:
+    """{'gain_u', 'delay_u', 'displacement_gain_u', 'temperature_u'}: the standard uncertainties of the load
+    cell's gain [-] and delay [s] as given, else as the recording's rig configuration declares them
+    (``load_cell_gain_u``, ``load_cell_delay_u``), and of the displacement transducer's gain [-] and the
+    temperature sensor [K] likewise (``displacement_gain_u``, ``temperature_u``); None where nothing is
+    declared (a negative value declares nothing).
     """
     cfg = _rig_config(run)
     out = {}
-    for key, given in (('gain_u', gain_u), ('delay_u', delay_u)):
-        v = given if given is not None else cfg.get(f'load_cell_{key}')
+    for key, given in (('gain_u', gain_u), ('delay_u', delay_u), ('displacement_gain_u', displacement_gain_u),
+                       ('temperature_u', temperature_u)):
+        v = given if given is not None else cfg.get(key if key.startswith(('displacement', 'temperature'))
+                                                    else f'load_cell_{key}')
         try:
             v = None if v is None else float(v)
         except (TypeError, ValueError):
@@ -118,17 +122,26 @@ def _rig_config(run) -> dict:
     return cfg if isinstance(cfg, dict) else {}
 
 
-def calibrate(run, delay=None, gain=None, gain_u=None, delay_u=None):
+def calibrate(run, delay=None, gain=None, gain_u=None, delay_u=None, **declared):
     """The run with its force divided by the known gain, and the calibration (delay, gain, their declared
     standard uncertainties or None, source). A known delay is not taken out of the data (interpolating between
     samples would filter the noise and fake a lower noise level): the fit compares the model at t - delay.
     """
     d, g, source = load_cell_calibration(run, delay, gain)
-    cal = {'delay': d, 'gain': g, 'source': source, **declared_uncertainties(run, gain_u, delay_u)}
-    if d == 0.0 and g == 1.0:
+    g_x = _rig_config(run).get('displacement_gain', 1.0)
+    try:
+        g_x = float(g_x)
+    except (TypeError, ValueError):
+        g_x = math.nan
+    if not (math.isfinite(g_x) and g_x > 0):
+        raise ValueError(f'{run.name}: displacement gain must be > 0, got {g_x!r}')
+    cal = {'delay': d, 'gain': g, 'displacement_gain': g_x, 'source': source,
+           **declared_uncertainties(run, gain_u, delay_u, **declared)}
+    if d == 0.0 and g == 1.0 and g_x == 1.0:
         return run, cal
     out = copy.copy(run)
     out.force = np.asarray(run.force, float) / g
+    out.displacement = np.asarray(run.displacement, float) / g_x
     return out, cal
 
 
@@ -311,7 +324,8 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     add_budget(unc, dict(zip(coords.names, coords.kinds, strict=True)),
                {n: spec.param_spec(n).scale for n in coords.names if n != DELAY}, cal,
                delay_shift=None if delay_shift is None else {rename.get(k, k): v for k, v in delay_shift.items()},
-               delay_estimated=DELAY in coords.names)
+               delay_estimated=DELAY in coords.names,
+               units={rename.get(n, n): spec.param_spec(n).unit for n in coords.names if n != DELAY})
     if method == 'harmonic':
         predicted = problem.predict({})
     forces = dict(zip(runs, predicted, strict=True))
@@ -331,7 +345,9 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
                               'delay_estimated': params.get(DELAY), 'delay_sigma': unc.get(DELAY, {}).get('sigma'),
                               'delay_interval_95': unc.get(DELAY, {}).get('interval_95'),
                               'gain_u': cal.get('gain_u'), 'delay_u': cal.get('delay_u'),
-                              'delay_check': delay_check},
+                              'delay_check': delay_check, 'displacement_gain': cal.get('displacement_gain', 1.0),
+                              'displacement_gain_u': cal.get('displacement_gain_u'),
+                              'temperature_u': cal.get('temperature_u')},
                    quality=quality, messages=messages)
     fit.misfit = misfit
     fit.bounds_hit = [rename.get(n, n) for n in _at_bounds(coords, z, coords.lo, coords.hi)]
@@ -447,7 +463,8 @@ def _at_bounds(coords, z, lo, hi) -> list:
 
 def fit_model(runs, model='zener_berg', method='time', load_cell_delay=None, load_cell_gain=None,
               estimate_delay=False, settle_cycles=3, min_cycles=2, seed=0, w_k=100.0, w_c=1.0,
-              progress=None, load_cell_gain_u=None, load_cell_delay_u=None) -> tuple:
+              progress=None, load_cell_gain_u=None, load_cell_delay_u=None, displacement_gain_u=None,
+              temperature_u=None) -> tuple:
     """Identify ``model`` (model file, named model, parameter set or ModelSpec) from ``runs`` (RunData), one
     fit per temperature. Returns (fits, messages).
 
@@ -455,7 +472,9 @@ def fit_model(runs, model='zener_berg', method='time', load_cell_delay=None, loa
     the recordings' rig configuration. It is applied, never fitted away: the delay the data would prefer is a
     diagnostic (``load_cell['delay_check']``, a warning when it disagrees with the declared one).
     ``estimate_delay`` makes the delay a fit parameter instead (never below zero in total), for a load cell
-    whose timing nobody measured; the fit then warns whenever the estimate is not zero.
+    whose timing nobody measured; the fit then warns whenever the estimate is not zero. Likewise the
+    displacement transducer's gain uncertainty and the temperature sensor's (``displacement_gain_u``,
+    ``temperature_u``; the displacement gain itself comes from the rig configuration).
     """
     if method not in METHODS:
         raise ValueError(f'unknown fit method {method!r} (use one of {", ".join(METHODS)})')
@@ -465,7 +484,8 @@ def fit_model(runs, model='zener_berg', method='time', load_cell_delay=None, loa
     calibrated, cals = [], {}
     for run in runs:
         if run.usable():
-            run, cal = calibrate(run, load_cell_delay, load_cell_gain, load_cell_gain_u, load_cell_delay_u)
+            run, cal = calibrate(run, load_cell_delay, load_cell_gain, load_cell_gain_u, load_cell_delay_u,
+                                 displacement_gain_u=displacement_gain_u, temperature_u=temperature_u)
             cals[run.name] = cal
         calibrated.append(run)
     groups, messages = split_runs(calibrated, settle_cycles, min_cycles)

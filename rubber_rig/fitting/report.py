@@ -572,7 +572,8 @@ def budget_text(result: dict, value: float) -> str:
     budget = result.get('budget') or {}
     if not budget or not value:
         return ''
-    label = {'type_a': 'Type A', 'load_cell_gain': 'load-cell gain', 'load_cell_delay': 'load-cell delay'}
+    label = {'type_a': 'Type A', 'load_cell_gain': 'load-cell gain', 'load_cell_delay': 'load-cell delay',
+             'displacement_gain': 'displacement gain'}
     return ', '.join(f'{label.get(k, k)} ' + ('undeclared' if v is None else f'{_g(100 * v / abs(value), ".2g")}')
                      for k, v in budget.items())
 

@@ -105,12 +105,16 @@ def write_recording(path, result, program_text: str, specimen: dict, temperature
     return path
 
 
+# what the simulated rig's sensors declare when they are said to be what they are (standard uncertainties 0)
+EXACT_SENSORS = {'load_cell_gain_u': 0.0, 'load_cell_delay_u': 0.0, 'displacement_gain_u': 0.0, 'temperature_u': 0.0}
+
+
 def simulated_recording(path, program, parameter_set: str, temperature: float, **kw):
     """Run `program` on the simulated rig with the specimen `parameter_set` and record it to `path`. The
     recording declares the simulated load cell's calibration as exactly known (gain 1, delay 0, standard
     uncertainties 0: it is what it is said to be) unless ``config_options`` say otherwise.
     """
-    kw.setdefault('config_options', {'load_cell_gain_u': 0.0, 'load_cell_delay_u': 0.0})
+    kw.setdefault('config_options', EXACT_SENSORS)
     specimen = {'model': 'fractional_zener_berg', 'parameter_set': parameter_set}
     result, text, config = run_simulated(program, specimen, temperature, **kw)
     if not result.completed:

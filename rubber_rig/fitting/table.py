@@ -128,11 +128,14 @@ def _delay_shift(spec, coords, z, ls, t, w_k, w_c) -> dict:
     return shift
 
 
-def fit_table(path, model='zener_berg', w_k=100.0, w_c=1.0, seed=0, gain_u=None, delay_u=None) -> tuple:
+def fit_table(path, model='zener_berg', w_k=100.0, w_c=1.0, seed=0, gain_u=None, delay_u=None,
+              displacement_gain_u=None, temperature_u=None) -> tuple:
     """Fit ``model`` to the table at ``path``; one fit per temperature. Returns (fits, messages).
 
     gain_u: relative standard uncertainty of the load-cell gain the table was measured with; delay_u: standard
-    uncertainty [s] of its delay; None: not declared (the fit warns, calibration_undeclared).
+    uncertainty [s] of its delay; displacement_gain_u: relative standard uncertainty of the displacement
+    transducer's gain (the amplitude column); temperature_u: standard uncertainty [K] of the temperature
+    column; None: not declared (the fit warns, calibration_undeclared).
     """
     spec = resolve_model(model)
     rows = read_table(path)
@@ -159,15 +162,17 @@ def fit_table(path, model='zener_berg', w_k=100.0, w_c=1.0, seed=0, gain_u=None,
         unc, corr, chi2, dof = harmonic_uncertainty(coords, z, ls, t, w_k, w_c)
         add_budget(unc, dict(zip(coords.names, coords.kinds, strict=True)),
                    {n: spec.param_spec(n).scale for n in coords.names},
-                   {'gain': 1.0, 'gain_u': gain_u, 'delay_u': delay_u},
-                   delay_shift=_delay_shift(spec, coords, z, ls, t, w_k, w_c))
+                   {'gain': 1.0, 'gain_u': gain_u, 'delay_u': delay_u, 'displacement_gain_u': displacement_gain_u},
+                   delay_shift=_delay_shift(spec, coords, z, ls, t, w_k, w_c),
+                   units={n: spec.param_spec(n).unit for n in coords.names})
         values = coords.values(z)
         fitted = spec.with_values(values)
         fit = ModelFit(model=fitted, temperature=temp, runs=[Path(path).name], blocks=blocks, method='harmonic',
                        parameters={n: float(values[n]) for n in coords.names}, uncertainty=unc,
                        correlation=corr.tolist(), chi2=chi2, dof=dof, n_points=2 * len(group), noise={},
                        load_cell={'delay': 0.0, 'gain': 1.0, 'calibration_source': 'declared' if gain_u is not None
-                                  and delay_u is not None else 'none', 'gain_u': gain_u, 'delay_u': delay_u},
+                                  and delay_u is not None else 'none', 'gain_u': gain_u, 'delay_u': delay_u,
+                                  'displacement_gain_u': displacement_gain_u, 'temperature_u': temperature_u},
                        quality=block_quality(fitted, blocks, {}, {}, sigmas=(t.rel_sigma_k, t.rel_sigma_c)))
         if not np.all(t.rel_sigma_k > 0):
             fit.chi2, fit.dof = float('nan'), dof

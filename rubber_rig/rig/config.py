@@ -245,7 +245,8 @@ class RigConfig:
     gain x the force of delay s earlier), with their standard uncertainties load_cell_delay_u, load_cell_gain_u
     (negative: not declared): recorded in the recording's metadata (rig_config) and applied by `rubber-rig fit`,
     which carries the uncertainties into each parameter's budget; they change nothing on the rig (the simulated
-    load cell is sim.force_delay/force_gain).
+    load cell is sim.force_delay/force_gain). Likewise displacement_gain [-] and displacement_gain_u (the
+    displacement transducer reads gain x the displacement) and temperature_u [K] (the temperature sensor).
     max_bus_load: the bus (bitrate, data_bitrate, fd; the simulated rig stands for the same bus) must carry the
     protocol at sample_rate within this load (rubber_rig.rig.can.timing), or the configuration is refused.
     """
@@ -309,6 +310,16 @@ class RigConfig:
     load_cell_delay_u: float = setting(-1.0, 'standard uncertainty of load_cell_delay (its measurement); '
                                        'rubber-rig fit adds its effect to the uncertainty budget; negative: not '
                                        'declared', units='s', range=(-1.0, 0.1))
+    displacement_gain: float = setting(1.0, "the displacement transducer's known gain (it reads gain x the "
+                                       'displacement): recorded in the metadata, applied by rubber-rig fit', units='-',
+                                       range=(0.01, 100.0))
+    displacement_gain_u: float = setting(-1.0, 'standard uncertainty of displacement_gain (calibration certificate, '
+                                         'GUM Type B); rubber-rig fit adds it to the budget of every parameter with '
+                                         'a length in its unit; negative: not declared', units='-',
+                                         range=(-1.0, 1.0))
+    temperature_u: float = setting(-1.0, "standard uncertainty of the temperature sensor's reading: the identified "
+                                   'parameters belong to the measured temperature +- this; negative: not declared',
+                                   units='K', range=(-1.0, 50.0))
     sim: SimOptions = setting(doc='simulated rig', nested=SimOptions, default_factory=SimOptions)
 
     @classmethod
