@@ -155,7 +155,8 @@ def structure_warnings(structure) -> list:
             times = 'the excitation frequency' if k == 1 else f'{k} x the excitation frequency'
             found.append(f'a residual at {times} {test["z"]:.0f} sigma beyond noise over {structure["n_blocks"]} '
                          'blocks '
-                         f'(up to {w["amplitude_sigmas"]:.2g} noise sigmas at {w["frequency"]:.3g} Hz): {what} not '
+                         f'(up to {100 * w["relative"]:.2g} % of the force amplitude, {w["amplitude_sigmas"]:.2g} '
+                         f'noise sigmas, at {w["frequency"]:.3g} Hz): {what} not '
                          'described to the noise')
             names.append(f'harmonic_{k}')
     if structure.get('blocks'):
