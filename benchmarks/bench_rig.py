@@ -40,8 +40,9 @@ import time
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from rubber_rig.excitation import Program  # noqa: E402
-from rubber_rig.rig import open_rig, run_program  # noqa: E402
+from rubber_rig.rig import open_rig  # noqa: E402
 from rubber_rig.rig.can.timing import protocol_load  # noqa: E402
+from rubber_rig.session import run_program  # noqa: E402
 
 
 def program(duration: float) -> Program:

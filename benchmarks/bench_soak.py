@@ -48,10 +48,10 @@ import time
 from pathlib import Path
 
 from rubber_rig.nodes.heartbeat import Peers
-from rubber_rig.nodes.processes import NODES, Operator, SuiteProcesses
 from rubber_rig.recording import load_recording
 from rubber_rig.recording.errors import RecordingError
 from rubber_rig.recording.recover import recover
+from rubber_rig.testing.processes import NODES, Operator, SuiteProcesses
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / 'config' / 'rig_sim.yaml'

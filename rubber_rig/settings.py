@@ -118,3 +118,46 @@ def setting_for(settings: list[Setting], field_path: str) -> Optional[Setting]:
             if best is None or len(s.path) > len(best.path):
                 best = s
     return best
+
+
+def violations(obj, path: str = '') -> list[tuple[str, str]]:
+    """What in dataclass instance `obj` breaks its own description: (field path, why) for every setting whose
+    value lies outside its `range` or is not one of its `choices`, nested settings included, in field order.
+    The one generic check behind RigConfig.check and the nodes' parameter callbacks: a range or a set of
+    choices is written once, in setting().
+    """
+    out = []
+    for f in dataclasses.fields(obj):
+        meta = f.metadata
+        if 'doc' not in meta:
+            continue
+        value, fpath = getattr(obj, f.name), f'{path}{f.name}'
+        if meta['nested'] is not None:
+            out += violations(value, fpath + '.')
+            continue
+        why = describe_violation(meta['range'], meta['choices'], meta['units'], value)
+        if why:
+            out.append((fpath, why))
+    return out
+
+
+def describe_violation(range_: Optional[tuple], choices: Optional[tuple], units: str, value: Any) -> str:
+    """Why `value` breaks a setting's range (lo, hi) or choices ('' if it does not)."""
+    if choices is not None and value not in choices:
+        return f"{value!r} is not one of: {', '.join(repr(c) for c in choices)}"
+    if range_ is not None and value is not None and not isinstance(value, bool) and isinstance(value, (int, float)):
+        lo, hi = range_
+        if not lo <= value <= hi:
+            unit = f' {units}' if units else ''
+            return f'{value!r}{unit} outside {lo:g}..{hi:g}{unit}'
+    return ''
+
+
+def described(cls: type, field_path: str) -> Setting:
+    """The setting of dataclass `cls` at `field_path` ('sample_rate', 'limits.velocity_max'), e.g. for a command
+    line option that takes the same value and must accept the same range.
+    """
+    for s in settings_of(cls):
+        if s.path == field_path:
+            return s
+    raise KeyError(f'{cls.__name__} has no setting {field_path!r}')

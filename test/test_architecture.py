@@ -16,7 +16,8 @@
 
 * ROS (rclpy, the interface packages) is used only by the nodes/ wiring and the cli/ that starts nodes.
 * The core subpackages import one another only along the edges in ALLOWED: what a newcomer reads in the
-  layout of the README (models at the bottom; excitation, rig, recording and fitting above).
+  layout of the README (safety and models at the bottom; excitation, rig, recording above them; session
+  above excitation and rig; fitting above; nodes and cli on top). Nothing in rig/ imports excitation/.
 * No function-local imports in the core, except optional heavy ones (matplotlib, only needed for reports).
 """
 import ast
@@ -27,7 +28,7 @@ import pytest
 PACKAGE = Path(__file__).resolve().parents[1] / 'rubber_rig'
 ROS_MODULES = {'rclpy', 'msg_defs', 'rcl_interfaces', 'builtin_interfaces', 'std_msgs', 'std_srvs',
                'diagnostic_msgs', 'lifecycle_msgs', 'launch', 'launch_ros', 'ament_index_python'}
-ROS_LAYERS = {'nodes', 'cli'}
+ROS_LAYERS = {'nodes', 'cli', 'testing'}
 # subpackage (or top-level module) -> the parts of rubber_rig it may import
 ALLOWED = {
     'settings': set(),
@@ -36,16 +37,19 @@ ALLOWED = {
     'paths': set(),
     'dds': {'paths'},
     'analysis': set(),
+    'safety': {'settings'},
     'models': {'analysis', 'units'},
-    'excitation': {'models', 'settings', 'units'},
+    'excitation': {'models', 'safety', 'settings', 'units'},
     'recording': {'__init__', 'versions'},
-    'rig': {'excitation', 'models', 'settings'},
+    'rig': {'models', 'safety', 'settings'},
+    'session': {'excitation', 'rig', 'safety'},
     'online': {'analysis', 'excitation', 'models'},
-    'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig', 'units'},
-    'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'settings',
+    'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig', 'session', 'units'},
+    'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'settings',
               'versions'},
     'cli': {'__init__', 'analysis', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording', 'rig',
-            'units'},
+            'safety', 'session', 'settings', 'units'},
+    'testing': {'dds', 'nodes'},
 }
 OPTIONAL_HEAVY = {'matplotlib'}
 

@@ -33,10 +33,11 @@ import pytest
 
 from rubber_rig.cli.main import main as cli_main
 from rubber_rig.excitation import Program
-from rubber_rig.rig import ConfigError, RigConfig, open_rig, run_program
+from rubber_rig.rig import ConfigError, RigConfig, open_rig
 from rubber_rig.rig import interface as rig_interface
 from rubber_rig.rig.can.canlog import CanLogError, CanLogWarning
 from rubber_rig.rig.can.canlog_reader import MAX_SKIPPED_REPORTED, TextLogReader, decode_log
+from rubber_rig.session import run_program
 from rubber_rig.settings import settings_of
 
 FAST = {'paced': False, 'profile': 'single'}   # one frame per sample: frame counts are sample counts

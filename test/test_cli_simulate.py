@@ -28,10 +28,11 @@ from scipy.optimize import minimize_scalar
 
 from rubber_rig.cli.main import main as cli
 from rubber_rig.excitation import Program
-from rubber_rig.rig import RigConfig, run_program
+from rubber_rig.rig import RigConfig
 from rubber_rig.rig.config import ConfigError, SimOptions
 from rubber_rig.rig.sim.controller import SimController
 from rubber_rig.rig.sim.plant import DelayLine
+from rubber_rig.session import run_program
 from rubber_rig.settings import settings_of
 
 from support.rig import FAST, expected_plant

@@ -30,7 +30,7 @@ import yaml
 
 from rubber_rig.cli.main import main
 from rubber_rig.excitation import Program
-from rubber_rig.rig import open_rig, run_program
+from rubber_rig.rig import open_rig
 from rubber_rig.rig.can.protocol import Protocol
 from rubber_rig.rig.can.stream import StreamRefused
 from rubber_rig.rig.config import RigConfig
@@ -39,6 +39,7 @@ from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.report import Results, to_junit
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
 from rubber_rig.rig.sim.controller import SimController
+from rubber_rig.session import run_program
 
 from support.netns import in_private_netns, rerun_in_private_netns
 

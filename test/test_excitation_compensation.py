@@ -21,8 +21,9 @@ import math
 import numpy as np
 import pytest
 
-from rubber_rig.excitation import Limits, Program, ProgramRunner
+from rubber_rig.excitation import Program, ProgramRunner
 from rubber_rig.excitation.compensation import CompensationMemory
+from rubber_rig.safety import Limits
 
 FS = 1000.0
 

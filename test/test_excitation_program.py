@@ -19,15 +19,8 @@ import math
 import numpy as np
 import pytest
 
-from rubber_rig.excitation import (
-    LimitError,
-    Limits,
-    Program,
-    ProgramError,
-    ProgramRunner,
-    load_program,
-    shipped_programs,
-)
+from rubber_rig.excitation import Program, ProgramError, ProgramRunner, check_program, load_program, shipped_programs
+from rubber_rig.safety import LimitError, Limits
 
 FS = 1000.0
 
@@ -38,7 +31,7 @@ def test_shipped_programs_load_and_fit_default_limits():
         assert n in names
     for n in names:
         p = load_program(n)
-        Limits().check_program(p, FS)          # +-5 mm, 0.2 m/s
+        check_program(Limits(), p, FS)          # +-5 mm, 0.2 m/s
         # characterisation programs take minutes; a durability program runs until its detector ends it
         longest = 3 * 3600 if n.startswith('durability') else 600
         assert p.description and 0 < p.duration(FS) < longest
@@ -124,9 +117,9 @@ blocks:
     with pytest.raises(LimitError, match="block 1 'fast'.*velocity"):
         ProgramRunner(p, FS, Limits(velocity_max=0.1))
     with pytest.raises(LimitError, match="block 0 'ok'.*displacement"):
-        Limits(displacement_min=-0.5e-3, displacement_max=0.5e-3).check_program(p, FS)
+        check_program(Limits(displacement_min=-0.5e-3, displacement_max=0.5e-3), p, FS)
     with pytest.raises(LimitError, match='predicted force'):
-        Limits(velocity_max=1.0, force_max=10e3, stiffness_estimate=1.3e7).check_program(p, FS)
+        check_program(Limits(velocity_max=1.0, force_max=10e3, stiffness_estimate=1.3e7), p, FS)
     with pytest.raises(LimitError, match='displacement_min'):
         Limits(displacement_min=1e-3, displacement_max=0.0)
 

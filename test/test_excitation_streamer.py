@@ -16,8 +16,9 @@
 import numpy as np
 import pytest
 
-from rubber_rig.excitation import Limits, Program, ProgramRunner
+from rubber_rig.excitation import Program, ProgramRunner
 from rubber_rig.excitation.streamer import SetpointStreamer
+from rubber_rig.safety import Limits
 
 FS = 1000.0
 PROGRAM = Program.from_yaml_text(

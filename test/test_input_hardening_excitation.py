@@ -19,11 +19,12 @@ import math
 import numpy as np
 import pytest
 
-from rubber_rig.excitation import LimitError, Limits, Program, ProgramError, ProgramRunner
+from rubber_rig.excitation import Program, ProgramError, ProgramRunner
 from rubber_rig.excitation import limits as limits_module
 from rubber_rig.excitation.blocks import MAX_PROGRAM_DURATION, Block
-from rubber_rig.excitation.limits import element_force_model
+from rubber_rig.excitation.limits import check_program, element_force_model
 from rubber_rig.models import build_model, load_parameter_set
+from rubber_rig.safety import LimitError, Limits
 
 FS = 1000.0
 
@@ -83,15 +84,15 @@ def test_program_level_bounds():
 def test_frequencies_above_a_tenth_of_the_sample_rate_are_refused(block, fld, ok_rate):
     p = program(block)
     fast = Limits(velocity_max=10.0, deceleration_max=1e9)     # only the frequency rule can refuse these
-    for check in (lambda: fast.check_program(p, FS), lambda: ProgramRunner(p, FS, fast)):
+    for check in (lambda: check_program(fast, p, FS), lambda: ProgramRunner(p, FS, fast)):
         with pytest.raises(ProgramError) as exc:
             check()
         msg = str(exc.value)
         assert msg.startswith("block 0 'a'") and f"field '{fld}'" in msg and 'sample rate of 1000 Hz' in msg, msg
-    fast.check_program(p, ok_rate)                                # exactly fs/10 is accepted
+    check_program(fast, p, ok_rate)                                # exactly fs/10 is accepted
     for bad in (0.0, -1.0, math.nan, math.inf):
         with pytest.raises(ProgramError, match='sample rate'):
-            Limits().check_program(p, bad)
+            check_program(Limits(), p, bad)
 
 
 @pytest.fixture
@@ -112,14 +113,14 @@ def test_a_24_hour_program_is_checked_without_generating_it(evaluated):
     p = program(f'{{name: day, waveform: sine, frequency: 14 Hz, amplitude: 1 mm, cycles: {int(14 * day) - 4}, '
                 f'taper_cycles: 2}}')
     assert p.n_samples(10000.0) == pytest.approx(day * 10000.0, abs=1)
-    Limits(force_model=element_force_model()).check_program(p, 10000.0)
+    check_program(Limits(force_model=element_force_model()), p, 10000.0)
     assert evaluated[0] < 10000          # the two tapers, sample by sample; the rest in closed form
     with pytest.raises(LimitError, match="block 0 'day'.*velocity"):
-        Limits(velocity_max=0.05).check_program(p, 10000.0)
+        check_program(Limits(velocity_max=0.05), p, 10000.0)
     evaluated[0] = 0
     many = program(*[f'{{waveform: sine, frequency: 1 Hz, amplitude: 1 mm, cycles: {int(day / 100) - 4}, '
                      f'taper_cycles: 2}}'] * 100)
-    Limits().check_program(many, 1000.0)
+    check_program(Limits(), many, 1000.0)
     assert evaluated[0] <= limits_module.EXACT_SAMPLES + 100 * 4100
 
 
@@ -147,15 +148,15 @@ def test_closed_form_bounds_agree_with_every_setpoint(block, tapers_exact, monke
     def limits(**kw):
         return Limits(**{'deceleration_max': 1e9, 'velocity_max': 1.0, **kw})
     with pytest.raises(LimitError, match="block 1 'b'.*velocity"):
-        limits(velocity_max=v_peak * 0.999).check_program(p, FS)
+        check_program(limits(velocity_max=v_peak * 0.999), p, FS)
     with pytest.raises(LimitError, match="block 1 'b'.*displacement"):
-        limits(displacement_min=-x_peak * 0.999, displacement_max=x_peak * 0.999).check_program(p, FS)
+        check_program(limits(displacement_min=-x_peak * 0.999, displacement_max=x_peak * 0.999), p, FS)
     with pytest.raises(LimitError, match="block 1 'b'.*stiffness_estimate"):
-        limits(stiffness_estimate=1e7, force_max=1e7 * x_peak * 0.999).check_program(p, FS)
+        check_program(limits(stiffness_estimate=1e7, force_max=1e7 * x_peak * 0.999), p, FS)
     margin = 1.005 if tapers_exact or 'ramp' in block else 1.05
     room = (x_peak + brake) * 1.001
-    limits(velocity_max=v_peak * margin, displacement_min=-room, displacement_max=room,
-           stiffness_estimate=1e7, force_max=1e7 * room).check_program(p, FS)
+    check_program(limits(velocity_max=v_peak * margin, displacement_min=-room, displacement_max=room,
+                         stiffness_estimate=1e7, force_max=1e7 * room), p, FS)
 
 
 GRID = ['{name: slow, waveform: sine, frequency: 0.5 Hz, amplitude: 1 mm, cycles: 8, taper_cycles: 2}',
@@ -169,14 +170,14 @@ def test_force_limit_exceeded_only_at_the_highest_frequency_is_refused_before_st
     # K_dyn x A of the analytic steady state is 14.08 kN at 0.5 Hz and 15.12 kN at 1 mm, 14 Hz
     assert 14.08e3 < slow < 14.3e3 and 15.12e3 < fast < 15.4e3
     limits = Limits(force_max=14.8e3)
-    limits.check_program(p, FS)                        # no force prediction: passes
+    check_program(limits, p, FS)                        # no force prediction: passes
     with pytest.raises(LimitError) as exc:
-        limits.check_program(p, FS, force_model=model)
+        check_program(limits, p, FS, force_model=model)
     msg = str(exc.value)
     assert "block 1 'fast'" in msg and f'{fast:.6g} N' in msg and '14 Hz' in msg and 'force_max 14800 N' in msg
     with pytest.raises(LimitError, match="block 1 'fast'.*predicted peak force"):
         ProgramRunner(p, FS, Limits(force_max=14.8e3, force_model=model))
-    Limits(force_max=15.5e3, force_model=model).check_program(p, FS)
+    check_program(Limits(force_max=15.5e3, force_model=model), p, FS)
     # a preload adds k0 |mean|: 1 mm more mean at 0.5 Hz adds 12.3 kN
     pre = program('{waveform: ramp, target: 1 mm, rate: 1 mm/s}',
                   '{name: pre, waveform: sine, frequency: 0.5 Hz, amplitude: 1 mm, cycles: 2}')

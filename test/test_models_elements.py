@@ -23,7 +23,7 @@ from rubber_rig.models import (
     Dashpot,
     Maxwell,
     PolynomialSpring,
-    Seed001Params,
+    TangentMaxwellBergParams,
     TangentSpring,
     build_model,
     load_parameter_set,
@@ -32,7 +32,7 @@ from rubber_rig.models import (
 )
 
 P20 = load_parameter_set('seed000_20C')
-S001 = Seed001Params(k_t=2.0e6, d_t=6e-3, k1=1.0e6, c1=2.0e4, k2=0.5e6, c2=1.0e3, f_fmax=300.0, x2=0.3e-3)
+S001 = TangentMaxwellBergParams(k_t=2.0e6, d_t=6e-3, k1=1.0e6, c1=2.0e4, k2=0.5e6, c2=1.0e3, f_fmax=300.0, x2=0.3e-3)
 
 
 def steady(element_or_model, f, x0, dt, cycles=5):

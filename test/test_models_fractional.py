@@ -21,8 +21,8 @@ from rubber_rig.models import (
     FractionalZener,
     FractionalZenerGL,
     Maxwell,
-    Seed000Params,
     TwoOrderFractional,
+    ZenerBergParams,
     build_model,
     gl_complex_stiffness,
     load_parameter_set,
@@ -130,7 +130,7 @@ def test_default_scheme_beats_paper_scheme_at_low_frequency():
 
 
 def test_alpha_one_is_ordinary_zener():
-    p = Seed000Params(P20.k0, P20.k_inf, P20.tau, 1.0, P20.x2, P20.f_fmax)
+    p = ZenerBergParams(P20.k0, P20.k_inf, P20.tau, 1.0, P20.x2, P20.f_fmax)
     f = BAND
     w = 2 * np.pi * f
     np.testing.assert_allclose(zk(p, f), (p.k0 + p.k_inf * 1j * w * p.tau) / (1 + 1j * w * p.tau), rtol=1e-12)

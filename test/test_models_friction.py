@@ -18,8 +18,8 @@ import pytest
 
 from rubber_rig.models import (
     BergFriction,
-    Seed001Params,
     SmoothCoulomb,
+    TangentMaxwellBergParams,
     berg_force,
     berg_steady_state,
     build_model,
@@ -307,7 +307,8 @@ def test_reversal_threshold_through_build_model_and_validation():
     assert build_model(P20, 1e-3, friction_reversal_threshold=d).elements[1].reversal_threshold == d
     spec = {'model': 'seed000', 'values': P20.as_dict(), 'friction_reversal_threshold': d}
     assert build_model(spec, 1e-3).elements[1].reversal_threshold == d
-    s001 = Seed001Params(k_t=2.0e6, d_t=6e-3, k1=1.0e6, c1=2.0e4, k2=0.5e6, c2=1.0e3, f_fmax=300.0, x2=0.3e-3)
+    s001 = TangentMaxwellBergParams(k_t=2.0e6, d_t=6e-3, k1=1.0e6, c1=2.0e4, k2=0.5e6, c2=1.0e3, f_fmax=300.0,
+                                    x2=0.3e-3)
     assert build_model(s001, 1e-3, friction_reversal_threshold=d).elements[3].reversal_threshold == d
     par = build_model({'model': 'parallel', 'friction_reversal_threshold': d, 'elements': [
         {'type': 'berg', 'f_fmax': FM, 'x2': X2}, {'type': 'berg', 'f_fmax': FM, 'x2': X2, 'reversal_threshold': 0.0}]},

@@ -20,7 +20,7 @@ import pytest
 
 from rubber_rig.models import (
     KelvinVoigtParams,
-    Seed000Params,
+    ZenerBergParams,
     build_model,
     list_parameter_sets,
     load_parameter_set,
@@ -37,13 +37,13 @@ TABLE1 = {  # paper units: kN/mm, kN/mm, s, -, mm, kN
 
 def _si(row):
     _, k0, ki, tau, a, x2, ff = row
-    return Seed000Params(k0 * 1e6, ki * 1e6, tau, a, x2 * 1e-3, ff * 1e3)
+    return ZenerBergParams(k0 * 1e6, ki * 1e6, tau, a, x2 * 1e-3, ff * 1e3)
 
 
 def test_table1_loaded_in_si():
     for name, row in TABLE1.items():
         p = load_parameter_set(name)
-        assert isinstance(p, Seed000Params)
+        assert isinstance(p, ZenerBergParams)
         np.testing.assert_allclose(list(p.as_dict().values()), list(_si(row).as_dict().values()), rtol=1e-12)
 
 
@@ -67,9 +67,9 @@ def test_unknown_set_named_in_error():
 
 
 def test_names_and_dict():
-    assert Seed000Params.names() == ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
+    assert ZenerBergParams.names() == ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
     p = load_parameter_set('seed000_20C')
-    assert Seed000Params(**p.as_dict()) == p
+    assert ZenerBergParams(**p.as_dict()) == p
     with pytest.raises(dataclasses.FrozenInstanceError):
         p.k0 = 1.0
 
@@ -86,7 +86,7 @@ def test_bad_parameters_rejected_naming_the_field(field, value):
     d[field] = value
     if not isinstance(value, str):
         with pytest.raises(ValueError, match=field):
-            Seed000Params(**d).validate()
+            ZenerBergParams(**d).validate()
     with pytest.raises(ValueError, match=field):
         build_model({'model': 'seed000', 'values': d}, dt=1e-3)
 
@@ -95,13 +95,13 @@ def test_k_inf_below_k0_rejected():
     d = load_parameter_set('seed000_20C').as_dict()
     d['k_inf'] = d['k0'] * 0.9
     with pytest.raises(ValueError, match='k_inf'):
-        Seed000Params(**d).validate()
+        ZenerBergParams(**d).validate()
 
 
 def test_alpha_one_is_valid():
     d = load_parameter_set('seed000_20C').as_dict()
     d['alpha'] = 1.0
-    Seed000Params(**d).validate()
+    ZenerBergParams(**d).validate()
 
 
 def test_temperature_exact_at_table_points():
@@ -115,7 +115,7 @@ def test_temperature_interpolation_monotone_smooth_and_valid():
     temps = np.array([-40.0, -20.0, 0.0, 20.0])
     nodes = [parameters_at_temperature(t).as_dict() for t in temps]
     grid = [np.linspace(temps[i], temps[i + 1], 201) for i in range(3)]
-    for field in Seed000Params.names():
+    for field in ZenerBergParams.names():
         for i, tg in enumerate(grid):
             vals = np.array([getattr(parameters_at_temperature(t), field) for t in tg])
             lo, hi = sorted((nodes[i][field], nodes[i + 1][field]))
@@ -221,12 +221,10 @@ def test_physics_names_and_the_earlier_names_give_the_same_sets():
     """Sets and model types have physics names; the earlier seed-file names still load (recordings carry them)."""
     from rubber_rig.models import (
         TangentMaxwellBergParams,
-        ZenerBergParams,
         build_model,
         canonical_model,
         model_class,
     )
-    assert Seed000Params is ZenerBergParams
     for tag in ('20C', '0C', 'm20C', 'm40C', 'case1', 'case5'):
         assert load_parameter_set(f'seed000_{tag}') == load_parameter_set(f'swing_arm_joint_{tag}')
     assert canonical_model('seed000') == 'fractional_zener_berg' and model_class('seed001') is TangentMaxwellBergParams

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """Node processes stop promptly and cleanly (issue 24 point 9): the suite started the way ``ros2 launch``
-starts it (rubber_rig.nodes.processes), each node sent SIGINT (Ctrl-C, launch's shutdown) or SIGTERM and timed
+starts it (rubber_rig.testing.processes), each node sent SIGINT (Ctrl-C, launch's shutdown) or SIGTERM and timed
 until its process has ended. Each must end within EXIT_WITHIN seconds with exit status 0 and no traceback.
 
 * The rig idle and no program running (the brief's case): measured here 0.2-0.4 s per node, most of it the
@@ -36,7 +36,7 @@ from pathlib import Path
 import pytest
 
 from msg_defs.msg import RigStatus
-from rubber_rig.nodes.processes import NODES, Operator, SuiteProcesses
+from rubber_rig.testing.processes import NODES, Operator, SuiteProcesses
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

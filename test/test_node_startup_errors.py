@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """Node processes that are given bad parameters (issue 24 point 9), started the way ``ros2 launch`` starts them
-(rubber_rig.nodes.processes) and judged by their exit status and their log: one line naming the parameter and
+(rubber_rig.testing.processes) and judged by their exit status and their log: one line naming the parameter and
 what is wrong, never a Python traceback.
 
 * element_model with a parameter_set it cannot use (missing, binary, not YAML, YAML of the wrong layout) ends at
@@ -35,9 +35,9 @@ from rcl_interfaces.srv import GetParameters, SetParameters
 
 from msg_defs.msg import ModelParameters, RigStatus
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.processes import Operator, SuiteProcesses
 from rubber_rig.nodes.spin import EXIT_BAD_PARAMETER
 from rubber_rig.rig.config import RigConfig
+from rubber_rig.testing.processes import Operator, SuiteProcesses
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

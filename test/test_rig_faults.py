@@ -28,8 +28,8 @@ from rubber_rig.rig import (
     FAULT_VELOCITY_LIMIT,
     FAULT_WATCHDOG,
     open_rig,
-    run_program,
 )
+from rubber_rig.session import run_program
 
 from support.rig import FAST, contiguous_diffs, contiguous_second_diffs
 

@@ -32,7 +32,8 @@ import numpy as np
 import pytest
 
 from rubber_rig.excitation import Program
-from rubber_rig.rig import open_rig, run_program
+from rubber_rig.rig import open_rig
+from rubber_rig.session import run_program
 
 from support.netns import NETNS_MARK, ROOT, multicast_routes, netns_id, unshare_command
 

@@ -19,10 +19,12 @@ import cantools
 import numpy as np
 import pytest
 
-from rubber_rig.excitation import LimitError, Program, ProgramError
-from rubber_rig.rig import ConfigError, RigConfig, SimOptions, open_rig, run_program
+from rubber_rig.excitation import Program, ProgramError
+from rubber_rig.rig import ConfigError, RigConfig, SimOptions, open_rig
 from rubber_rig.rig.can.driver import RigDriver
 from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, Protocol, crc8, unwrap_sequence
+from rubber_rig.safety import LimitError
+from rubber_rig.session import run_program
 
 
 def test_dbc_defines_the_rig_frames_with_units_and_counters():

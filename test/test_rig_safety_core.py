@@ -21,19 +21,20 @@ import time
 import numpy as np
 import pytest
 
-from rubber_rig.excitation import Limits, Program
-from rubber_rig.excitation.ramp import SafeRamp, stopping_positions
+from rubber_rig.excitation import Program
 from rubber_rig.rig import (
     FAULT_DISPLACEMENT_LIMIT,
     FAULT_SENSOR,
     FAULT_VELOCITY_LIMIT,
     FAULT_WATCHDOG,
     open_rig,
-    run_program,
 )
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.can.protocol import FAULT_STREAM, SEQ_MOD
 from rubber_rig.rig.can.sensor_check import SensorCheck
+from rubber_rig.safety import Limits
+from rubber_rig.safety.ramp import SafeRamp, stopping_positions
+from rubber_rig.session import run_program
 
 from support.rig import FAST, contiguous_diffs
 

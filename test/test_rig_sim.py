@@ -20,10 +20,11 @@ import numpy as np
 import pytest
 
 from rubber_rig.excitation import Program, load_program
-from rubber_rig.rig import RigConfig, open_rig, run_program
+from rubber_rig.rig import RigConfig, open_rig
 from rubber_rig.rig.config import SimOptions
 from rubber_rig.rig.sim.controller import SimController
 from rubber_rig.rig.sim.plant import Sensor
+from rubber_rig.session import run_program
 
 from support.rig import FAST, expected_plant, poll_samples
 

@@ -45,6 +45,7 @@ from rubber_rig.rig.conformance.passive import check_offline
 from rubber_rig.rig.conformance.report import to_junit, to_markdown
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
 from rubber_rig.rig.conformance.trace import read_log
+from rubber_rig.settings import describe_violation, described
 from rubber_rig.units import to_si
 
 from .main import CommandError
@@ -88,8 +89,10 @@ def check_arguments(args):
         args.lower = to_si(args.envelope_lower, 'length') if args.envelope_lower else None
     except ValueError as exc:
         return f'{exc}'
-    if not 10 <= args.rate_hz <= 20000:
-        return f'argument --rate: {args.rate_hz:g} Hz outside 10..20000 Hz'
+    rate = described(RigConfig, 'sample_rate')
+    why = describe_violation(rate.range, None, rate.units, args.rate_hz)
+    if why:
+        return f'argument --rate: {why}'
     if args.log:
         if args.envelope or args.defect or args.can_log:
             return '--log checks a recording: --envelope, --defect and --can-log are for an online run'

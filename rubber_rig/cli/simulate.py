@@ -33,11 +33,13 @@ import math
 import sys
 from pathlib import Path
 
+from rubber_rig.rig.config import RigConfig
+from rubber_rig.settings import described
 from rubber_rig.units import to_si
 
 from .main import CommandError
 
-RATE_RANGE = (10.0, 20000.0)            # rig sample rate [Hz] (RigConfig.sample_rate)
+RATE_RANGE = described(RigConfig, 'sample_rate').range   # rig sample rate [Hz]
 TEMPERATURE_RANGE = (-60.0, 150.0)      # [degC] (SimOptions.temperature)
 FORCE_NOISE_RANGE = (0.0, 1e4)          # [N]
 DISPLACEMENT_NOISE_RANGE = (0.0, 1e-3)  # [m]

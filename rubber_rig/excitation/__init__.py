@@ -12,17 +12,16 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Excitation: waveforms, test programs (YAML), limits, amplitude control and the abort ramp.
+"""Excitation: waveforms, test programs (YAML), their pre-start check against the safe envelope, amplitude control.
 
 Everything is generated from the sample index at a fixed rate, never from wall-clock time. Pure Python.
 """
 from .blocks import Block, ProgramError
-from .limits import LimitError, Limits
+from .limits import check_program, element_force_model
 from .program import PROGRAM_DIR, Program, load_program, program_source, read_program, shipped_programs
-from .ramp import SafeRamp
 from .runner import BlockResult, ProgramRunner, Progress
 from .waveforms import WAVEFORMS
 
-__all__ = ['Block', 'BlockResult', 'LimitError', 'Limits', 'PROGRAM_DIR', 'Program', 'ProgramError',
-           'ProgramRunner', 'Progress', 'SafeRamp', 'WAVEFORMS', 'load_program', 'program_source', 'read_program',
+__all__ = ['Block', 'BlockResult', 'PROGRAM_DIR', 'Program', 'ProgramError', 'ProgramRunner', 'Progress', 'WAVEFORMS',
+           'check_program', 'element_force_model', 'load_program', 'program_source', 'read_program',
            'shipped_programs']

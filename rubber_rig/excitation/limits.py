@@ -12,9 +12,9 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Safety limits on displacement, velocity and force, checked before a program starts and on every setpoint.
+"""The pre-start check of a program against the safe envelope (safety.Limits), block by block.
 
-The pre-start check (Limits.check_program) has a bounded cost for every program that loads (at most 24 h, see
+The pre-start check (check_program) has a bounded cost for every program that loads (at most 24 h, see
 blocks.MAX_PROGRAM_DURATION): it generates and checks the setpoints exactly, block by block, as long as the
 program has generated at most EXACT_SAMPLES of them; a block beyond that budget is checked from closed-form
 bounds instead (its taper in and out still sample by sample while the budget lasts). Those bounds are the
@@ -28,7 +28,6 @@ predicts each block's force, so a program whose force limit is exceeded only at 
 refused before anything moves.
 """
 import math
-from dataclasses import dataclass, field, fields
 from typing import Callable, Optional
 
 import numpy as np
@@ -37,225 +36,113 @@ from rubber_rig.models import ZenerBergParams, load_parameter_set
 from rubber_rig.models.fractional import zener_complex_stiffness
 from rubber_rig.models.friction import berg_peak_force
 
-from ..settings import setting
+from ..safety import LimitError, Limits
 from . import waveforms as wf
-from .ramp import stopping_positions
 
 # setpoints the pre-start check generates at most per program (about 0.1 s of numpy); the rest is bounded
 EXACT_SAMPLES = 1 << 21
 _CHUNK = 1 << 18
 
 
-class LimitError(ValueError):
-    """A program or setpoint would leave the safe envelope; the message names the limit and where. `field`: the
-    Limits field a bad configuration value concerns ('' for a program or setpoint outside the envelope).
+def check_program(limits: Limits, program, sample_rate: float, force_model: Optional[Callable] = None):
+    """Check `program` (open loop) at sample_rate [Hz] before it starts, block by block, so the error names
+    the block: the sample-rate rule (ProgramError, see Program.check_sample_rate), displacement, velocity,
+    and the peak force predicted by stiffness_estimate and by `force_model` (default: limits.force_model), a
+    callable block -> predicted peak |force| [N]. Bounded cost (module docstring).
     """
+    program.check_sample_rate(sample_rate)
+    fs = float(sample_rate)
+    model = force_model if force_model is not None else limits.force_model
+    starts = program.block_starts(fs)
+    prev = program.initial_position
+    if not limits.displacement_min <= prev <= limits.displacement_max:
+        raise LimitError(f'program {program.name!r}: initial_position {prev:g} m outside the limits')
+    if not limits.displacement_min <= program.rest_position <= limits.displacement_max:
+        raise LimitError(f'program {program.name!r}: rest_position {program.rest_position:g} m outside '
+                         f'the limits')
+    budget = EXACT_SAMPLES
+    for i, blk in enumerate(program.blocks):
+        where = f"program {program.name!r} block {i} '{blk.name}'"
+        n = int(starts[i + 1] - starts[i])
+        if n <= budget:
+            budget -= n
+            for lo in range(0, n, _CHUNK):
+                x = blk.evaluate(np.arange(lo, min(lo + _CHUNK, n)) / fs)
+                limits.check_setpoints(x, fs, prev, where)
+                limits.check_stiffness_force(float(np.max(np.abs(x))), where)
+                prev = float(x[-1])
+        else:
+            prev, budget = _check_block_bounds(limits, blk, fs, n, prev, budget, where)
+        if model is not None:
+            _check_model_force(limits, model, blk, where)
 
-    def __init__(self, message: str, field: str = ''):
-        super().__init__(message)
-        self.field = field
+def _check_model_force(limits: Limits, model, blk, where: str):
+    try:
+        f = model(blk)
+    except (ValueError, ArithmeticError) as exc:
+        raise LimitError(f'{where}: the force model cannot predict the force: {exc}') from None
+    if f is None:
+        return
+    f = float(f)
+    if not math.isfinite(f):
+        raise LimitError(f'{where}: the force model predicts a non-finite force ({f})')
+    if f > limits.force_max:
+        what = (f'{_max_frequency(blk):g} Hz, {blk.amplitude * 1e3:g} mm amplitude, {blk.mean * 1e3:g} mm mean'
+                if blk.oscillating else f'{blk.waveform} to {blk.end_level * 1e3:g} mm')
+        raise LimitError(f'{where}: predicted peak force {f:.6g} N (element model, {what}) above force_max '
+                         f'{limits.force_max:g} N')
 
+def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, budget: int, where: str):
+    """Check a block of n samples (more than the exact budget) from closed-form bounds on its samples.
 
-@dataclass
-class Limits:
-    """Safe envelope, SI: displacement_min/max [m], velocity_max [m/s], force_max [N] (absolute),
-    deceleration_max [m/s^2]: the hardest braking an abort ramp may use, so every setpoint must be able to stop
-    inside the displacement range at it (ramp.stopping_positions) - then an abort at any phase stays inside.
-
-    stiffness_estimate [N/m], if given, lets the pre-start check predict the peak force k * |x|; force_model, if
-    given, is a callable block -> predicted peak |force| [N] that the pre-start check asks for every block
-    (see element_force_model); check_program(force_model=...) overrides it for one check.
+    Returns (its last setpoint, the budget left). The taper in and out (and the step from `prev` into the
+    block) are generated exactly if they fit the budget; the rest is bounded by the supremum of its samples.
     """
+    first = blk.start_level if not blk.oscillating else blk.mean          # every block starts at its level
+    limits.check_setpoints([first], fs, prev, where)                    # the step into the block
+    last = None
+    if blk.oscillating:
+        a, f_top = blk.amplitude, _max_frequency(blk)
+        lo, hi = blk.mean - a, blk.mean + a
+        h = f_top / fs                                                 # <= 0.1 (check_sample_rate)
+        if blk.waveform == 'triangle':
+            steady = 4.0 * blk.frequency * a                           # constant edge slope
+        elif blk.waveform == 'square':
+            steady = min(4.0 * blk.frequency * a * blk.square_slope, 2.0 * a * fs)
+        else:                                                          # sine, sweeps: |sin(p + d) - sin p|
+            steady = 2.0 * a * fs * math.sin(math.pi * min(h, 0.5))   # <= 2 sin(d / 2), d = 2 pi f / fs
+        f_out = blk.frequency_end if blk.waveform in wf.SWEEPS else blk.frequency
+        k_in = min(n, int(math.ceil(blk.taper_cycles / blk.frequency * fs)) + 2)
+        k_out = min(n, int(math.ceil(blk.taper_cycles / f_out * fs)) + 2)
+        if k_in + k_out <= budget:                                     # the tapers sample by sample
+            budget -= k_in + k_out
+            limits.check_setpoints(blk.evaluate(np.arange(k_in) / fs), fs, prev, where)
+            tail = blk.evaluate(np.arange(n - k_out, n) / fs)
+            limits.check_setpoints(tail, fs, None, where)
+            last, v = float(tail[-1]), steady
+        else:
+            v = max(steady, a * f_top * _taper_slope(blk))
+    elif blk.waveform == 'ramp':
+        d = abs(blk.target - blk.start_level)
+        lo, hi = min(blk.start_level, blk.target), max(blk.start_level, blk.target)
+        # raised cosine sampled every 1/(D fs) of its length: steps <= d sin(pi / (2 D fs))
+        v = d * fs * math.sin(0.5 * math.pi * min(1.0, 1.0 / (blk.duration * fs))) if blk.duration > 0 else 0.0
+    else:                                                              # hold
+        lo = hi = blk.start_level
+        v = 0.0
+    if blk.oscillating and not (blk.waveform != 'triangle' and blk.waveform != 'square'
+                                and (2 * math.pi * f_top) ** 2 * a <= limits.deceleration_max):
+        # where an abort can stop: a sine whose acceleration stays below deceleration_max stops inside its
+        # own peaks; otherwise allow for the braking distance at the peak speed
+        brake = v * v / (2 * limits.deceleration_max) + v / fs
+        lo, hi = lo - brake, hi + brake
+    limits.check_range(lo, hi, where)
+    limits.check_velocity(v, where)
+    limits.check_stiffness_force(max(abs(lo), abs(hi)), where)
+    if last is None:
+        last = float(blk.evaluate(np.array([(n - 1) / fs]))[0])
+    return last, budget
 
-    displacement_min: float = setting(-5e-3, 'lowest allowed displacement', units='m', range=(-1.0, 1.0))
-    displacement_max: float = setting(5e-3, 'highest allowed displacement', units='m', range=(-1.0, 1.0))
-    velocity_max: float = setting(0.2, 'highest allowed velocity', units='m/s', range=(1e-6, 100.0))
-    force_max: float = setting(60e3, 'highest allowed absolute force', units='N', range=(1.0, 1e7))
-    deceleration_max: float = setting(100.0, 'hardest braking of a ramp; every setpoint must be able to stop inside '
-                                      'the displacement limits at it', units='m/s^2', range=(0.1, 500.0))
-    stiffness_estimate: Optional[float] = None
-    force_model: Optional[Callable] = field(default=None, repr=False, compare=False)
-
-    def __post_init__(self):
-        for name in ('displacement_min', 'displacement_max', 'velocity_max', 'force_max', 'deceleration_max'):
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                raise LimitError(f"limits: field '{name}': expected a finite number, got {v!r}", name)
-        if self.displacement_min >= self.displacement_max:
-            raise LimitError(f"limits: field 'displacement_min': {self.displacement_min:g} m must be below "
-                             f"displacement_max {self.displacement_max:g} m", 'displacement_min')
-        for name in ('velocity_max', 'force_max', 'deceleration_max'):
-            if getattr(self, name) <= 0:
-                raise LimitError(f"limits: field '{name}': must be > 0", name)
-        k = self.stiffness_estimate
-        if k is not None and (isinstance(k, bool) or not isinstance(k, (int, float)) or not math.isfinite(k)
-                              or k < 0):
-            raise LimitError(f"limits: field 'stiffness_estimate': expected a finite stiffness >= 0 [N/m], "
-                             f"got {k!r}", 'stiffness_estimate')
-        if self.force_model is not None and not callable(self.force_model):
-            raise LimitError(f"limits: field 'force_model': expected a callable block -> peak force [N], got "
-                             f"{type(self.force_model).__name__}")
-
-    @classmethod
-    def from_dict(cls, data) -> 'Limits':
-        """Build from a mapping; unknown keys are an error naming the key."""
-        if data is None:
-            return cls()
-        if isinstance(data, Limits):
-            return data
-        if not isinstance(data, dict):
-            raise LimitError(f'limits: expected a mapping, got {type(data).__name__}')
-        known = set(cls.__dataclass_fields__)
-        for key in data:
-            if key not in known:
-                raise LimitError(f"limits: field '{key}': unknown (known: {', '.join(sorted(known))})", key)
-        return cls(**data)
-
-    def to_dict(self) -> dict:
-        """The numeric fields (not the force model)."""
-        return {f.name: getattr(self, f.name) for f in fields(self) if f.name != 'force_model'}
-
-    def clamp_position(self, x: float) -> float:
-        """X [m] moved inside the displacement range."""
-        return min(max(x, self.displacement_min), self.displacement_max)
-
-    def check_setpoints(self, x, sample_rate: float, previous: Optional[float] = None, where: str = 'setpoint'):
-        """Raise LimitError if setpoints x [m] (shape (n,)) leave the displacement range or their velocity
-        (finite difference at sample_rate [Hz], starting from `previous` if given) exceeds velocity_max.
-        """
-        x = np.asarray(x, dtype=float)
-        if x.size == 0:
-            return
-        if not np.all(np.isfinite(x)):
-            raise LimitError(f'{where}: not finite')
-        lo, hi = float(x.min()), float(x.max())
-        self._check_range(lo, hi, where)
-        seq = x if previous is None else np.concatenate([[previous], x])
-        if seq.size > 1:
-            v = np.diff(seq) * sample_rate
-            self._check_velocity(float(np.max(np.abs(v))), where)
-            stop = stopping_positions(seq[1:], v, self.deceleration_max, sample_rate)
-            k = int(np.argmax(np.maximum(self.displacement_min - stop, stop - self.displacement_max)))
-            if stop[k] < self.displacement_min - 1e-9 or stop[k] > self.displacement_max + 1e-9:
-                raise LimitError(f'{where}: at {seq[k + 1] * 1e3:.4f} mm and {v[k]:.4g} m/s an abort braking at '
-                                 f'deceleration_max {self.deceleration_max:g} m/s^2 would stop at '
-                                 f'{stop[k] * 1e3:.4f} mm, outside the limits {self.displacement_min * 1e3:g}..'
-                                 f'{self.displacement_max * 1e3:g} mm')
-
-    def _check_range(self, lo: float, hi: float, where: str):
-        if lo < self.displacement_min - 1e-12 or hi > self.displacement_max + 1e-12:
-            raise LimitError(f'{where}: displacement {lo:.6g}..{hi:.6g} m outside the limits '
-                             f'{self.displacement_min:g}..{self.displacement_max:g} m')
-
-    def _check_velocity(self, v: float, where: str):
-        if not v <= self.velocity_max * (1 + 1e-9):
-            raise LimitError(f'{where}: velocity {v:.6g} m/s above velocity_max {self.velocity_max:g} m/s')
-
-    def _check_stiffness_force(self, peak_x: float, where: str):
-        if self.stiffness_estimate:
-            f = self.stiffness_estimate * peak_x
-            if f > self.force_max:
-                raise LimitError(f'{where}: predicted force {f:.6g} N (stiffness_estimate x |x|) above '
-                                 f'force_max {self.force_max:g} N')
-
-    def check_program(self, program, sample_rate: float, force_model: Optional[Callable] = None):
-        """Check `program` (open loop) at sample_rate [Hz] before it starts, block by block, so the error names
-        the block: the sample-rate rule (ProgramError, see Program.check_sample_rate), displacement, velocity,
-        and the peak force predicted by stiffness_estimate and by `force_model` (default: self.force_model), a
-        callable block -> predicted peak |force| [N]. Bounded cost (module docstring).
-        """
-        program.check_sample_rate(sample_rate)
-        fs = float(sample_rate)
-        model = force_model if force_model is not None else self.force_model
-        starts = program.block_starts(fs)
-        prev = program.initial_position
-        if not self.displacement_min <= prev <= self.displacement_max:
-            raise LimitError(f'program {program.name!r}: initial_position {prev:g} m outside the limits')
-        if not self.displacement_min <= program.rest_position <= self.displacement_max:
-            raise LimitError(f'program {program.name!r}: rest_position {program.rest_position:g} m outside '
-                             f'the limits')
-        budget = EXACT_SAMPLES
-        for i, blk in enumerate(program.blocks):
-            where = f"program {program.name!r} block {i} '{blk.name}'"
-            n = int(starts[i + 1] - starts[i])
-            if n <= budget:
-                budget -= n
-                for lo in range(0, n, _CHUNK):
-                    x = blk.evaluate(np.arange(lo, min(lo + _CHUNK, n)) / fs)
-                    self.check_setpoints(x, fs, prev, where)
-                    self._check_stiffness_force(float(np.max(np.abs(x))), where)
-                    prev = float(x[-1])
-            else:
-                prev, budget = self._check_block_bounds(blk, fs, n, prev, budget, where)
-            if model is not None:
-                self._check_model_force(model, blk, where)
-
-    def _check_model_force(self, model, blk, where: str):
-        try:
-            f = model(blk)
-        except (ValueError, ArithmeticError) as exc:
-            raise LimitError(f'{where}: the force model cannot predict the force: {exc}') from None
-        if f is None:
-            return
-        f = float(f)
-        if not math.isfinite(f):
-            raise LimitError(f'{where}: the force model predicts a non-finite force ({f})')
-        if f > self.force_max:
-            what = (f'{_max_frequency(blk):g} Hz, {blk.amplitude * 1e3:g} mm amplitude, {blk.mean * 1e3:g} mm mean'
-                    if blk.oscillating else f'{blk.waveform} to {blk.end_level * 1e3:g} mm')
-            raise LimitError(f'{where}: predicted peak force {f:.6g} N (element model, {what}) above force_max '
-                             f'{self.force_max:g} N')
-
-    def _check_block_bounds(self, blk, fs: float, n: int, prev: float, budget: int, where: str):
-        """Check a block of n samples (more than the exact budget) from closed-form bounds on its samples.
-
-        Returns (its last setpoint, the budget left). The taper in and out (and the step from `prev` into the
-        block) are generated exactly if they fit the budget; the rest is bounded by the supremum of its samples.
-        """
-        first = blk.start_level if not blk.oscillating else blk.mean          # every block starts at its level
-        self.check_setpoints([first], fs, prev, where)                    # the step into the block
-        last = None
-        if blk.oscillating:
-            a, f_top = blk.amplitude, _max_frequency(blk)
-            lo, hi = blk.mean - a, blk.mean + a
-            h = f_top / fs                                                 # <= 0.1 (check_sample_rate)
-            if blk.waveform == 'triangle':
-                steady = 4.0 * blk.frequency * a                           # constant edge slope
-            elif blk.waveform == 'square':
-                steady = min(4.0 * blk.frequency * a * blk.square_slope, 2.0 * a * fs)
-            else:                                                          # sine, sweeps: |sin(p + d) - sin p|
-                steady = 2.0 * a * fs * math.sin(math.pi * min(h, 0.5))   # <= 2 sin(d / 2), d = 2 pi f / fs
-            f_out = blk.frequency_end if blk.waveform in wf.SWEEPS else blk.frequency
-            k_in = min(n, int(math.ceil(blk.taper_cycles / blk.frequency * fs)) + 2)
-            k_out = min(n, int(math.ceil(blk.taper_cycles / f_out * fs)) + 2)
-            if k_in + k_out <= budget:                                     # the tapers sample by sample
-                budget -= k_in + k_out
-                self.check_setpoints(blk.evaluate(np.arange(k_in) / fs), fs, prev, where)
-                tail = blk.evaluate(np.arange(n - k_out, n) / fs)
-                self.check_setpoints(tail, fs, None, where)
-                last, v = float(tail[-1]), steady
-            else:
-                v = max(steady, a * f_top * _taper_slope(blk))
-        elif blk.waveform == 'ramp':
-            d = abs(blk.target - blk.start_level)
-            lo, hi = min(blk.start_level, blk.target), max(blk.start_level, blk.target)
-            # raised cosine sampled every 1/(D fs) of its length: steps <= d sin(pi / (2 D fs))
-            v = d * fs * math.sin(0.5 * math.pi * min(1.0, 1.0 / (blk.duration * fs))) if blk.duration > 0 else 0.0
-        else:                                                              # hold
-            lo = hi = blk.start_level
-            v = 0.0
-        if blk.oscillating and not (blk.waveform != 'triangle' and blk.waveform != 'square'
-                                    and (2 * math.pi * f_top) ** 2 * a <= self.deceleration_max):
-            # where an abort can stop: a sine whose acceleration stays below deceleration_max stops inside its
-            # own peaks; otherwise allow for the braking distance at the peak speed
-            brake = v * v / (2 * self.deceleration_max) + v / fs
-            lo, hi = lo - brake, hi + brake
-        self._check_range(lo, hi, where)
-        self._check_velocity(v, where)
-        self._check_stiffness_force(max(abs(lo), abs(hi)), where)
-        if last is None:
-            last = float(blk.evaluate(np.array([(n - 1) / fs]))[0])
-        return last, budget
 
 
 _U = np.linspace(0.0, 1.0, 1025)

@@ -22,10 +22,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..safety import LimitError, Limits, SafeRamp, abort_ramp_velocity
 from .amplitude import BlockLoop
 from .compensation import CompensationMemory
-from .limits import LimitError, Limits
-from .ramp import RAMP_VELOCITY, SafeRamp
+from .limits import check_program as precheck
 from .waveforms import PERIODIC
 
 
@@ -87,7 +87,7 @@ class ProgramRunner:
         self.program, self.fs = program, float(sample_rate)
         self.limits = limits if limits is not None else Limits()
         if check_program:
-            self.limits.check_program(program, self.fs)
+            precheck(self.limits, program, self.fs)
         self.amplitude_control = amplitude_control
         # what the amplitude loop learned per block (gain, offset vs frequency): the next block's starting point
         self.compensation = CompensationMemory() if amplitude_control and compensation_memory else None
@@ -246,7 +246,7 @@ class ProgramRunner:
     def _start_ramp(self, target):
         lim = self.limits
         self._ramp = SafeRamp(self._x, self._velocity(), target, self.fs,
-                              velocity_max=min(RAMP_VELOCITY, 0.5 * lim.velocity_max),
+                              velocity_max=abort_ramp_velocity(lim),
                               decel_max=lim.deceleration_max, lower=lim.displacement_min,
                               upper=lim.displacement_max)
 

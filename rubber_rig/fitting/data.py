@@ -131,21 +131,6 @@ def from_arrays(name, dt, displacement, force, **kw) -> RunData:
     return _finish(RunData(name=name, dt=float(dt), displacement=_arr(displacement), force=_arr(force), **kw))
 
 
-def from_run_result(result, program=None, name='run', temperature=None, true_params=None) -> RunData:
-    """A `rubber_rig.rig.run_program` result (arrays time, displacement, force, block_index, ...)."""
-    time = np.asarray(result.time, float)
-    dt = float(np.median(np.diff(time)))
-    temp = temperature
-    if temp is None and getattr(result, 'temperature', None) is not None:
-        temp = float(np.nanmedian(np.asarray(result.temperature, float)))
-    bi = getattr(result, 'block_index', None)
-    return _finish(RunData(name=name, dt=dt, displacement=_arr(getattr(result, 'displacement', None)),
-                           force=_arr(getattr(result, 'force', None)),
-                           setpoint=_arr(getattr(result, 'setpoint', None)), temperature=temp,
-                           block_index=None if bi is None else np.asarray(bi),
-                           program_blocks=_program_blocks(program), true_params=true_params))
-
-
 def load_run(path) -> RunData:
     """Read an MCAP recording with rubber_rig.recording and keep what fitting needs."""
     path = Path(path)

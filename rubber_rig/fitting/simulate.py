@@ -29,7 +29,7 @@ import yaml
 
 from rubber_rig.excitation.program import Program, program_source
 from rubber_rig.recording import RecordingWriter
-from rubber_rig.rig import run_program
+from rubber_rig.session import run_program
 
 SAMPLES_TOPIC = '/rubber_rig/samples'
 SETPOINTS_TOPIC = '/rubber_rig/setpoints'

@@ -28,8 +28,6 @@ from .composite import (
                         ParallelModel,
                         build_model,
                         resolve_params,
-                        seed000_model,
-                        seed001_model,
                         tangent_maxwell_berg_model,
                         zener_berg_model,
 )
@@ -50,8 +48,6 @@ from .params import (
                        MODEL_ALIASES,
                        PARAM_CLASSES,
                        KelvinVoigtParams,
-                       Seed000Params,
-                       Seed001Params,
                        TangentMaxwellBergParams,
                        ZenerBergParams,
                        canonical_model,
@@ -68,12 +64,11 @@ from .steady_state import steady_state_properties
 
 __all__ = [
     'ParallelModel', 'build_model', 'resolve_params', 'zener_berg_model', 'tangent_maxwell_berg_model',
-    'seed000_model', 'seed001_model',
     'Dashpot', 'FractionalZener', 'FractionalZenerGL', 'LinearSpring', 'Maxwell', 'PolynomialSpring',
     'TangentSpring', 'TwoOrderFractional', 'Zener', 'BergFriction', 'SmoothCoulomb',
     'gl_complex_stiffness', 'two_order_complex_stiffness', 'zener_complex_stiffness', 'zener_storage_loss',
     'berg_force', 'berg_steady_state',
-    'KelvinVoigtParams', 'ZenerBergParams', 'TangentMaxwellBergParams', 'Seed000Params', 'Seed001Params',
+    'KelvinVoigtParams', 'ZenerBergParams', 'TangentMaxwellBergParams',
     'PARAM_CLASSES', 'MODEL_ALIASES', 'canonical_model', 'model_class', 'list_parameter_sets', 'load_parameter_set',
     'parameter_set_info', 'sets_with_aliases', 'parameters_at_temperature', 'read_parameter_file',
     'steady_state_properties', 'sine_displacement', 'time_domain_properties',

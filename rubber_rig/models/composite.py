@@ -248,5 +248,3 @@ def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_t
     return _from_params(resolve_params(params_or_spec), float(dt), scheme, friction_reversal_threshold)
 
 
-seed000_model = zener_berg_model                 # earlier names, kept for code written against them
-seed001_model = tangent_maxwell_berg_model

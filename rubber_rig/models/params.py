@@ -173,8 +173,6 @@ class TangentMaxwellBergParams(_Params):
         return self
 
 
-Seed000Params = ZenerBergParams            # earlier names, kept for code written against them
-Seed001Params = TangentMaxwellBergParams
 
 PARAM_CLASSES = {'fractional_zener_berg': ZenerBergParams, 'kelvin_voigt': KelvinVoigtParams,
                  'tangent_maxwell_berg': TangentMaxwellBergParams}

@@ -40,9 +40,9 @@ from msg_defs.msg import (
     RigStatus,
     SetpointBatch,
 )
-from rubber_rig.excitation import Limits
 from rubber_rig.online import PROPERTY_FIELDS, cycle_properties
 from rubber_rig.rig.can.protocol import STATE_CODE, STATES, fault_names
+from rubber_rig.safety import Limits
 
 # RigStatus.STATE_* and FAULT_* equal the DBC's codes (test_rig_protocol checks it): one table serves both
 STATE_NAMES = dict(enumerate(STATES))

@@ -68,7 +68,7 @@ from rubber_rig.excitation.detectors import (
     strongest,
     with_defaults,
 )
-from rubber_rig.excitation.limits import element_force_model
+from rubber_rig.excitation.limits import check_program, element_force_model
 from rubber_rig.excitation.streamer import SetpointStreamer
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
@@ -407,7 +407,7 @@ class ExcitationNode(Node):
         """
         limits = conv.limits_from_msg(self.status.limits)
         limits.force_model = self.force_model
-        limits.check_program(program, self.status.sample_rate)
+        check_program(limits, program, self.status.sample_rate)
 
     async def _open_stream(self):
         """Ask the driver for the stream (new program or resume); the grant, or None if it did not answer."""
@@ -780,7 +780,7 @@ class ExcitationNode(Node):
             if self.status is not None:
                 limits = conv.limits_from_msg(self.status.limits)
                 limits.force_model = self.force_model
-                limits.check_program(program, rate)
+                check_program(limits, program, rate)
             response.success, response.message = True, f"program '{program.name}' is valid"
             response.block_count, response.duration = len(program.blocks), program.duration(rate)
         except (ValueError, OSError) as exc:

@@ -59,8 +59,6 @@ from std_srvs.srv import Trigger
 
 from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import OpenStream, StopStream
-from rubber_rig.excitation import Limits
-from rubber_rig.excitation.limits import LimitError
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.heartbeat import Peers, start_heartbeat
@@ -71,7 +69,8 @@ from rubber_rig.rig.can import FAULT_WATCHDOG
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.config import BusLoadError, ConfigError, RigConfig, configuration_text
 from rubber_rig.rig.interface import open_rig
-from rubber_rig.settings import nest, setting_for, settings_of
+from rubber_rig.safety import LimitError, Limits
+from rubber_rig.settings import describe_violation, nest, setting_for, settings_of
 
 BATCH_PERIOD = 0.01   # [s] default length of a sample batch (batch_size 0)
 CLOSE_RAMP_WAIT = 5.0  # [s] close() waits at most this long for a moving rig's ramp to rest to end
@@ -308,8 +307,10 @@ class RigDriverNode(LifecycleNode):
         if not lim.displacement_min <= rest <= lim.displacement_max:
             return SetParametersResult(successful=False, reason=f'rest_position {rest:g} m outside the '
                                        'displacement limits')
-        if 'stream_loss_action' in changed and changed['stream_loss_action'] not in ('ramp', 'hold'):
-            return SetParametersResult(successful=False, reason="stream_loss_action: 'ramp' or 'hold'")
+        for setting in RIG_SETTINGS:                     # choices (ranges: the parameter descriptors)
+            why = setting.name in changed and describe_violation(None, setting.choices, '', changed[setting.name])
+            if why:
+                return SetParametersResult(successful=False, reason=f'{setting.name}: {why}')
         self.config.rest_position = rest
         for name in ('stream_timeout', 'stream_loss_action'):
             if name in changed:

@@ -17,7 +17,8 @@
 QoS choices:
 - Streams that must not lose a sample (``samples``, ``setpoints``, ``prediction``): RELIABLE with a deep
   KEEP_LAST history. Sensor-data QoS (best effort) would silently drop batches under load, and the suite
-  promises to count every gap; batching keeps the message rate low (1 kHz rig -> ~50 msg/s).
+  promises to count every gap; batching keeps the message rate low (10 ms of samples per batch by default:
+  100 msg/s at any rate).
 - Per-cycle results (``cycle_metrics``): RELIABLE, moderate depth.
 - State that a late joiner must see at once (``status``, ``model_parameters``, ``program``): RELIABLE +
   TRANSIENT_LOCAL, depth 1 (the last value is latched, like a ROS 1 latched topic).

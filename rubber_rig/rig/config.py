@@ -26,8 +26,8 @@ from typing import List, Optional
 import can
 import yaml
 
-from ..excitation.limits import LimitError, Limits
-from ..settings import setting
+from ..safety import LimitError, Limits
+from ..settings import setting, violations
 from .can.canlog import CanLogError, log_format
 from .can.frames import PROFILES, default_profile
 from .can.protocol import PROTOCOL_VERSION, cycle_time
@@ -343,8 +343,8 @@ class RigConfig:
             if self.backend not in can.interfaces.VALID_INTERFACES:
                 raise ConfigError('backend', f"unknown python-can interface {self.backend!r} "
                                   f"(use 'sim' or one of: {', '.join(sorted(can.interfaces.VALID_INTERFACES))})")
-        if not 10 <= self.sample_rate <= 20000:
-            raise ConfigError('sample_rate', f"{self.sample_rate!r} Hz outside 10..20000")
+        for path, why in violations(self):                 # ranges and choices, as each setting() describes them
+            raise ConfigError(path, why)
         for name in ('watchdog_timeout', 'heartbeat_period', 'lost_burst_max'):
             if not getattr(self, name) > 0:
                 raise ConfigError(name, "must be > 0")
@@ -352,9 +352,6 @@ class RigConfig:
             raise ConfigError('heartbeat_period', "must be shorter than watchdog_timeout")
         if not self.stream_timeout > 0:
             raise ConfigError('stream_timeout', "must be > 0")
-        if self.stream_loss_action not in ('ramp', 'hold'):
-            raise ConfigError('stream_loss_action', "'ramp' or 'hold', got "
-                              f"{self.stream_loss_action!r}")
         if not self.limits.displacement_min <= self.rest_position <= self.limits.displacement_max:
             raise ConfigError('rest_position', f"{self.rest_position:g} m outside the "
                               "displacement limits")

@@ -23,7 +23,7 @@ import time
 import can
 import numpy as np
 
-from ...excitation.ramp import stopping_positions
+from ...safety import abort_ramp_velocity, setpoint_violation
 from .frames import SampleFrames
 from .protocol import (
     CMD_ABORT,
@@ -163,7 +163,8 @@ class RigDriver:
         lim = self.limits
         self._send(self.proto.encode('HostLimits', {
             'HL_DisplacementMin': lim.displacement_min, 'HL_DisplacementMax': lim.displacement_max,
-            'HL_Deceleration': min(510.0, math.floor(lim.deceleration_max / 2) * 2.0)}))
+            # multiples of 2 m/s^2, never above the limit, and never 0 (which would mean the controller's default)
+            'HL_Deceleration': max(2.0, min(510.0, math.floor(lim.deceleration_max / 2) * 2.0))}))
 
     # ---- streams
     @property
@@ -248,39 +249,24 @@ class RigDriver:
             self.refusal = why
             self.counters['setpoints_refused'] += int(x.size)
             return False
-        if not np.all(np.isfinite(x)):
+        bad = setpoint_violation(self.limits, x, self.fs, s.last_queued)
+        if bad is not None and bad.kind == 'not_finite':
             # never a setpoint of a program (the excitation cannot make one): a corrupted or forged batch. It is
             # refused without a fault, so a forged one that copied the owner's stream id and name cannot end its
             # program; the owner's own next batch then continues the queue as if it never came (were it the
             # owner's, its next batch would not continue and the stream would be lost after stream_timeout)
-            k = int(np.argmin(np.isfinite(x)))
-            self.refusal = f'non-finite setpoint {float(x[k])} at sample {first_sequence + k}: batch refused'
+            self.refusal = f'non-finite setpoint {float(x[bad.index])} at sample {first_sequence + bad.index}: ' \
+                           f'batch refused'
             self.counters['setpoints_refused'] += int(x.size)
             return False
         s.last_rx_wall = self._clock()
         s.batches += 1
         if x.size == 0:
             return True
-        lim = self.limits
-        lo, hi = float(np.min(x)), float(np.max(x))
-        if not (lim.displacement_min <= lo and hi <= lim.displacement_max):
-            self._fault(FAULT_DISPLACEMENT_LIMIT, f'setpoints {lo:.6g}..{hi:.6g} m outside the displacement '
-                                                  f'limits {lim.displacement_min:g}..{lim.displacement_max:g} m')
-            return False
-        v = np.diff(np.concatenate([[s.last_queued], x])) * self.fs
-        vmax = float(np.max(np.abs(v)))
-        if vmax > lim.velocity_max * (1 + 1e-9):
-            self._fault(FAULT_VELOCITY_LIMIT, f'setpoint velocity {vmax:.6g} m/s above {lim.velocity_max:g} m/s '
-                                              f'(continuing from {s.last_queued * 1e3:.4f} mm at sample '
-                                              f'{first_sequence})')
-            return False
-        stop = stopping_positions(x, v, lim.deceleration_max, self.fs)
-        if float(np.min(stop)) < lim.displacement_min - 1e-9 or float(np.max(stop)) > lim.displacement_max + 1e-9:
-            k = int(np.argmax(np.maximum(lim.displacement_min - stop, stop - lim.displacement_max)))
-            self._fault(FAULT_DISPLACEMENT_LIMIT, f'setpoint {x[k] * 1e3:.4f} mm at {v[k]:.4g} m/s could not stop '
-                                                  f'inside the limits at deceleration_max '
-                                                  f'{lim.deceleration_max:g} m/s^2 (would stop at '
-                                                  f'{stop[k] * 1e3:.4f} mm)')
+        if bad is not None:
+            code = FAULT_VELOCITY_LIMIT if bad.kind == 'velocity' else FAULT_DISPLACEMENT_LIMIT
+            self._fault(code, f'setpoints from sample {first_sequence} (continuing from {s.last_queued * 1e3:.4f} '
+                              f'mm): {bad.message}')
             return False
         if first_sequence <= self.controller_sequence:
             self._fault(FAULT_STREAM, f'setpoints for sample {first_sequence} arrived after the rig passed it '
@@ -302,7 +288,8 @@ class RigDriver:
             send(msg)
         s.queued_end = first_sequence + x.size
         self._sent_end = max(self._sent_end, s.queued_end)
-        s.last_queued, s.last_velocity = float(x[-1]), float(v[-1])
+        before = float(x[-2]) if x.size > 1 else s.last_queued
+        s.last_queued, s.last_velocity = float(x[-1]), (float(x[-1]) - before) * self.fs
         self.counters['setpoints_sent'] += int(x.size)
         return True
 
@@ -361,8 +348,8 @@ class RigDriver:
     def _command_ramp(self, code, target, text):
         target = self.limits.clamp_position(self.cfg.rest_position if target is None else float(target))
         lim = self.limits
-        # the travel speed: at most half the velocity limit (and 50 mm/s), in whole mm/s as the frame carries it
-        ramp_v = max(0.001, math.floor(min(0.5 * lim.velocity_max, 0.05) * 1000) / 1000)
+        # the travel speed, in whole mm/s as the frame carries it (velocity_max >= 2 mm/s: >= 1 mm/s)
+        ramp_v = max(0.001, math.floor(abort_ramp_velocity(lim) * 1000) / 1000)
         # the command goes before any setpoint still waiting for room (the controller would flush them anyway)
         self._outbox = collections.deque(m for m in self._outbox if m.arbitration_id not in self._setpoint_ids)
         self._send(self.proto.encode('HostCommand', {'CMD_Code': code, 'CMD_Counter': 0,

@@ -26,7 +26,7 @@ import time
 import can
 import numpy as np
 
-from ...excitation.ramp import DECEL_MAX, RAMP_ACCEL, SafeRamp, stopping_positions
+from ...safety import DECEL_MAX, RAMP_ACCEL, RAMP_VELOCITY, SafeRamp, stopping_positions
 from ..can.frames import SampleFrames
 from ..can.protocol import (
     CMD_ABORT,
@@ -63,7 +63,6 @@ class SimController:
     the frame profile `profile` (rubber_rig.rig.can.frames) for setpoints and samples.
     """
 
-    RAMP_VELOCITY_MAX = 0.05   # [m/s] controller-side abort ramp (it does not know the host's limits)
     MAX_BLOCK = 1024           # ticks computed at once (numpy) while nothing but the stream happens
     MIN_RUN = 32               # from this many ticks the specimen model's batch run beats its per-sample step
 
@@ -334,7 +333,7 @@ class SimController:
     def abort(self, target: float = 0.0, fault_bits: int = 0, velocity_max: float = None):
         """Flush queued setpoints and ramp from the current command and velocity to target [m] (None: stop
         where the motion can stop, braking at the host's deceleration limit), at most velocity_max [m/s]
-        (default RAMP_VELOCITY_MAX; the host sends half its velocity limit), inside the host's limits
+        (default safety.RAMP_VELOCITY; the host sends half its velocity limit), inside the host's limits
         (CTRL-RAMP-1, CTRL-RAMP-2, CTRL-LIM-1).
         """
         self.fault_bits |= fault_bits
@@ -343,7 +342,7 @@ class SimController:
             v = (self.u - self.u_prev) * self.fs
             if target is None:
                 target = float(stopping_positions(self.u, v, self.decel_max, self.fs))
-            velocity = min(velocity_max or self.RAMP_VELOCITY_MAX, self.RAMP_VELOCITY_MAX)
+            velocity = min(velocity_max or RAMP_VELOCITY, RAMP_VELOCITY)
             if 'slow_ramp' in self.defects:
                 velocity /= 5.0
             self.ramp = SafeRamp(self.u, v, target, self.fs,

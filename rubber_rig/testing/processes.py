@@ -56,8 +56,8 @@ from msg_defs.msg import (
 )
 
 from ..dds import configure_dds
-from . import conversions as conv
-from . import topics
+from ..nodes import conversions as conv
+from ..nodes import topics
 
 NODES = ('rig_driver', 'excitation', 'element_model', 'recorder')
 

@@ -22,9 +22,9 @@ import numpy as np
 from ..excitation.program import Program, load_program
 from ..excitation.runner import BlockResult, ProgramRunner
 from ..excitation.streamer import SetpointStreamer
-from .can.driver import DriverStatus
-from .config import RigConfig
-from .interface import open_rig
+from ..rig.can.driver import DriverStatus
+from ..rig.config import RigConfig
+from ..rig.interface import open_rig
 
 
 @dataclass
