@@ -112,12 +112,12 @@ def _fixed_orders():
 
 
 def _pad_specimen():
-    """Seed 004's pad as a model file: :func:`rubber_rig.models.pad.seed004_pad_spec`'s K1, K3 (Table 2).
+    """Seed 004's pad as a model file: :func:`rubber_rig.models.seed004.seed004_pad_spec`'s K1, K3 (Table 2).
 
     The elliptic damping is a constant b = 0.34 kN (Fig. 5-1's P4 at 0.3 mm, 2 Hz): a model file's elliptic_damping
     takes a number, not the spec's b ~ A table.
     """
-    from rubber_rig.models.pad import seed004_pad_spec
+    from rubber_rig.models.seed004 import seed004_pad_spec
     k_odd = seed004_pad_spec()['k_odd']
     return {'name': 'seed004_pad', 'elements': [
         {'type': 'operating_point_spring', 'k_odd': [k if np.isscalar(k) else [list(r) for r in k] for k in k_odd],
@@ -264,7 +264,7 @@ def per_block_rows(run):
     """Per-block seed-004 identification vs the specimen's operating-point coefficients."""
     from rubber_rig.fitting.blocktrend import fit_blocks
     from rubber_rig.fitting.identification import split_runs
-    from rubber_rig.models.pad import trend_value
+    from rubber_rig.models.trend import trend_value
     groups, _ = split_runs([run])
     items = [(r, b) for g in groups.values() for r, b, _ in g]
     rows = fit_blocks(items)

@@ -21,7 +21,7 @@ import pytest
 from rubber_rig.fitting.blocks import BlockResult, split_blocks
 from rubber_rig.fitting.blocktrend import fit_block, fit_blocks, fit_trend, per_block_report
 from rubber_rig.fitting.data import RunData
-from rubber_rig.models.pad import trend_value
+from rubber_rig.models.trend import trend_value
 
 DT = 1e-3
 X0 = -1.1e-3

@@ -283,7 +283,8 @@ def test_cli_fit_json_has_the_verdict_and_writes_a_model_file(sims, tmp_path, ca
     assert data['uncertainty']['alpha']['interval_method'] == 'logit'
     assert data['uncertainty']['k0']['interval_method'] == 'log'
     # the budget is in the model file, and the report reads it back (HTML parameter table, CLI table)
-    from rubber_rig.fitting.report import budget_text, read_model_file
+    from rubber_rig.fitting.report import budget_text
+    from rubber_rig.fitting.report_model import read_model_file
     budget_keys = {'type_a', 'load_cell_gain', 'load_cell_delay', 'displacement_gain'}
     assert set(written['elements'][0]['budget']['k0']) == budget_keys
     model = read_model_file(out)

@@ -18,19 +18,16 @@ import math
 import numpy as np
 import pytest
 
+from rubber_rig.models.cycle_tracker import AMPLITUDE_FLOOR, CycleTracker
 from rubber_rig.models.pad import (
-    AMPLITUDE_FLOOR,
-    CycleTracker,
     EllipticDamping,
     OperatingPointSpring,
-    check_trend,
     elliptic_first_harmonic,
     odd_polynomial_first_harmonic,
     polynomial_first_harmonic,
-    seed004_pad_spec,
-    seed004_table2_check,
-    trend_value,
 )
+from rubber_rig.models.seed004 import seed004_pad_spec, seed004_table2_check
+from rubber_rig.models.trend import check_trend, trend_value
 
 DT = 1e-3           # [s] 1 kHz
 F0, A0, X0 = 4.0, 0.5e-3, -1e-3   # [Hz], [m], [m]: a Table 1 like case (mean = preload, compression < 0)

@@ -171,7 +171,7 @@ def test_report_with_a_shipped_parameter_set(recording, tmp_path, capsys):
 
 def test_the_delay_interval_is_the_fits_own(tmp_path):
     from rubber_rig.fitting.modelfit import Z95
-    from rubber_rig.fitting.report import read_model_file
+    from rubber_rig.fitting.report_model import read_model_file
     path = tmp_path / 'm.yaml'
     path.write_text(CUBIC_MODEL.replace('delay_sigma: 2.0e-5}',
                                         'delay_sigma: 2.0e-5, delay_interval_95: [5.84e-5, 1.416e-4]}'))

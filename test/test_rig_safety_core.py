@@ -30,6 +30,7 @@ from rubber_rig.rig import (
     open_rig,
 )
 from rubber_rig.rig.can.driver import StreamRefused
+from rubber_rig.rig.can.gate import MUTE_AFTER, MUTE_FOR, StreamGate
 from rubber_rig.rig.can.protocol import FAULT_STREAM, SEQ_MOD
 from rubber_rig.rig.can.sensor_check import SensorCheck
 from rubber_rig.safety import Limits
@@ -162,6 +163,35 @@ def test_only_the_stream_owner_commands_and_checks_continue_from_the_queue_end()
         # the fault ramps the rig to rest from wherever the queue had taken it, and releases the stream
         assert _poll_until(drv, lambda: _at_rest(drv))
         assert drv.stream is None and drv.status.extra['position'] == 0.0
+
+
+def test_the_gate_admits_only_the_owners_channel_counts_the_rest_and_mutes_a_flood():
+    """StreamGate (the rig driver node's admission, ROS-free): the channel decides, not a copyable name or id;
+    refusals are counted in the driver; more than MUTE_AFTER refused batches within 1 s mute the channel for
+    MUTE_FOR s; the owner's own stream goes on meanwhile."""
+    clock = [0.0]
+    with open_rig(dict(FAST, limits=ISSUE_LIMITS)) as rig:
+        assert rig.wait_ready(5.0)
+        drv = rig.driver
+        gate = StreamGate(drv, clock=lambda: clock[0])
+        g = drv.open_stream('/rig1/excitation')
+        x = np.linspace(0.0, 0.01e-3, 10)
+        assert gate.offer('/rig1/excitation', '/rig1/excitation', g.first_sequence, x, g.stream_id).action == 'queued'
+        end = g.first_sequence + x.size
+        # the owner's name and stream id copied, on another channel: refused, counted, no fault
+        v = gate.offer('/intruder', '/rig1/excitation', end, np.full(5, 0.01e-3), g.stream_id)
+        assert v.action == 'refused' and 'not the stream owner /rig1/excitation' in v.why
+        assert drv.status.extra['setpoints_refused'] == 5 and drv.status.faults == 0
+        verdicts = [gate.offer('/intruder', '/intruder', end, np.zeros(1), 0).action for _ in range(MUTE_AFTER)]
+        assert verdicts[:-1] == ['refused'] * (MUTE_AFTER - 1) and verdicts[-1] == 'mute'
+        assert gate.muted('/intruder') and drv.counters['channels_muted'] == 1
+        assert drv.status.extra['setpoints_refused'] == 5 + MUTE_AFTER
+        clock[0] += MUTE_FOR + 0.01
+        assert not gate.muted('/intruder')
+        # the owner's next batch continues the queue as if nothing came; its end ends the stream
+        v = gate.offer('/rig1/excitation', '/rig1/excitation', end, np.full(5, 0.01e-3), g.stream_id,
+                       end_of_stream=True)
+        assert v.action == 'queued' and drv.status.setpoints_sent == 15
 
 
 def test_stream_must_stop_inside_the_limits_at_deceleration_max():

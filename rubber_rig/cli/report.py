@@ -76,7 +76,7 @@ def _choose_set(sets, name, temperature, messages):
 def _read_model(path, set_name, temperature, messages):
     """The ReportModel of --fit: a model file, or a set of a parameter-set table."""
     from rubber_rig.fitting.paramfile import load_fit_file
-    from rubber_rig.fitting.report import parameter_set_model, read_model_file
+    from rubber_rig.fitting.report_model import parameter_set_model, read_model_file
     from rubber_rig.models.modelfile import is_model_file
     if is_model_file(path):
         if set_name is not None:
@@ -95,7 +95,8 @@ def run(args) -> int:
     from rubber_rig.fitting.blocks import split_blocks
     from rubber_rig.fitting.data import load_run
     from rubber_rig.fitting.identification import fit_model
-    from rubber_rig.fitting.report import calibrated_run, make_report, model_from_fit
+    from rubber_rig.fitting.report import make_report
+    from rubber_rig.fitting.report_model import calibrated_run, model_from_fit
     run_data = load_run(args.recording)
     messages = list(run_data.messages)
     if not run_data.usable():

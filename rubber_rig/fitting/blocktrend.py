@@ -26,7 +26,7 @@ collinear over the small range x0 +- A, so offset, K1 and K3 are strongly correl
 with the values.
 
 :func:`fit_trend` then fits one identified coefficient across blocks by weighted least squares onto a table
-c[i][j] (value = sum_ij c[i][j] f^i A^j, f [Hz], A [m], SI), the form :func:`rubber_rig.models.pad.trend_value`
+c[i][j] (value = sum_ij c[i][j] f^i A^j, f [Hz], A [m], SI), the form :func:`rubber_rig.models.trend.trend_value`
 evaluates (the paper's Eq. 7-8: quadratic in A with coefficients cubic in f). :func:`per_block_report` prints both
 in the paper's units (mm, kN).
 
@@ -223,7 +223,7 @@ def fit_trend(rows, name, f_degree=3, a_degree=2) -> dict:
     Returns
     -------
     dict
-        'name'; 'coefficients' c[i][j] (nested list, SI, for :func:`rubber_rig.models.pad.trend_value`); 'sigma'
+        'name'; 'coefficients' c[i][j] (nested list, SI, for :func:`rubber_rig.models.trend.trend_value`); 'sigma'
         (same shape, scaled by sqrt(max(1, chi2/dof))); 'chi2_per_dof' (nan without degrees of freedom);
         'residuals' (value / trend - 1 per row); 'normalised_residuals' ((value - trend) / sigma per row);
         'f_degree', 'a_degree'; 'notes'; 'warnings' (chi2/dof > 2, no degrees of freedom, unusable rows).

@@ -67,6 +67,7 @@ from rubber_rig.nodes.rclpy_compat import lifecycle_state
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.rig.can import FAULT_WATCHDOG
 from rubber_rig.rig.can.driver import StreamRefused
+from rubber_rig.rig.can.gate import MUTE_AFTER, MUTE_FOR, StreamGate
 from rubber_rig.rig.config import BusLoadError, ConfigError, RigConfig, configuration_text
 from rubber_rig.rig.interface import open_rig
 from rubber_rig.safety import LimitError, Limits
@@ -84,12 +85,6 @@ LIVE_PARAMETERS = set(LIMIT_PARAMETERS) | {
 SPECIMEN_PARAMETERS = ('sim.specimen.parameter_set', 'sim.specimen.temperature',
                        'sim.specimen.friction_reversal_threshold')
 MAX_CHANNELS = 16   # owners' command channels the driver listens to at once
-# A channel that is not the stream owner's and sends more than MUTE_AFTER batches within a second is muted for
-# MUTE_FOR seconds (its subscription destroyed: DDS drops what it sends, at no cost to this process). Why: each
-# refused batch still costs the executor a callback, and on a 2-core computer a flood of them (2000 in 0.3 s)
-# delayed the owner's batches past stream_timeout. An owner streams at most ~100 batches/s (1 kHz, 10 per batch).
-MUTE_AFTER = 200
-MUTE_FOR = 10.0     # [s]
 
 
 class BusCapacityError(ParameterError):
@@ -154,8 +149,7 @@ class RigDriverNode(LifecycleNode):
         accept_integers_for_doubles(self)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         self._channels: dict[str, object] = {}   # owner -> subscription to its command channel
-        self._refused_in: dict[str, list] = {}    # channel -> [start of its 1 s window, batches refused in it]
-        self._muted: dict[str, float] = {}        # channel -> time.monotonic() until which it is muted
+        self.gate = None                          # StreamGate of the open rig: who may stream (rig.can.gate)
         self.create_timer(1.0, self.find_channels)
         self._poll_timer = None
         start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig is not None else 'unconfigured')
@@ -208,6 +202,7 @@ class RigDriverNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         try:
             self.rig = open_rig(self.config)
+            self.gate = StreamGate(self.rig.driver)
         except Exception as exc:  # bus not available: stay unconfigured, say why
             self.get_logger().error(f'configure failed, {self.get_name()} stays unconfigured: {exc}')
             return TransitionCallbackReturn.FAILURE
@@ -256,7 +251,7 @@ class RigDriverNode(LifecycleNode):
         """
         self._stop_polling()
         if self.rig is not None:
-            rig, self.rig = self.rig, None
+            rig, self.rig, self.gate = self.rig, None, None
             driver = rig.driver
             if driver.controller_state in ('running', 'holding', 'ramping_down'):
                 driver.abort('rig_driver shutting down')
@@ -333,25 +328,23 @@ class RigDriverNode(LifecycleNode):
     def find_channels(self) -> None:
         """Subscribe to every owner's command channel the graph shows (so a program's first batch finds us)."""
         prefix = topics.setpoint_stream_topic(self.get_fully_qualified_name(), '')
-        now = time.monotonic()
         for name, _ in self.get_topic_names_and_types():
             owner = '/' + name[len(prefix):]
-            if name.startswith(prefix) and len(name) > len(prefix) and self._muted.get(owner, 0.0) <= now:
+            if name.startswith(prefix) and len(name) > len(prefix) and not (self.gate and self.gate.muted(owner)):
                 self.listen_to(owner)
 
-    def mute(self, channel: str, batches: int) -> None:
-        """Stop listening to a flooding channel for MUTE_FOR seconds (see MUTE_AFTER)."""
-        self._muted[channel] = time.monotonic() + MUTE_FOR
+    def mute(self, channel: str) -> None:
+        """Stop listening to a flooding channel the gate muted (DDS then drops what it sends, at no cost here)."""
         sub = self._channels.pop(channel, None)
         if sub is not None:
             self.destroy_subscription(sub)
-        self.rig.driver.counters['channels_muted'] = self.rig.driver.counters.get('channels_muted', 0) + 1
-        self.get_logger().warning(f'{batches} batches from {channel} refused within 1 s: its channel is muted for '
-                                  f'{MUTE_FOR:g} s (what it sends meanwhile is dropped uncounted)')
+        self.get_logger().warning(f'more than {MUTE_AFTER} batches from {channel} refused within 1 s: its channel '
+                                  f'is muted for {MUTE_FOR:g} s (what it sends meanwhile is dropped uncounted)')
 
     def listen_to(self, owner: str) -> str:
         """Subscribe to `owner`'s command channel if not yet done; '' or why it cannot be."""
-        self._muted.pop(owner, None)   # (an owner that asks for a stream is heard again at once)
+        if self.gate is not None:
+            self.gate.unmute(owner)    # (an owner that asks for a stream is heard again at once)
         if owner in self._channels:
             return ''
         if len(self._channels) >= MAX_CHANNELS:    # the oldest channel that is not the open stream's makes room
@@ -375,33 +368,13 @@ class RigDriverNode(LifecycleNode):
         """
         if self.rig is None or self._poll_timer is None:   # only an active driver moves the rig
             return
-        driver = self.rig.driver
-        grant = driver.stream
-        if grant is not None and (channel != grant.owner or msg.source != grant.owner):
-            # the channel, not a stream id or name that anyone can copy, says who sent a batch
-            driver.counters['setpoints_refused'] += len(msg.displacement)
-            driver.refusal = (f'sender {msg.source or "(unnamed)"} on the channel of {channel} is not the stream '
-                              f'owner {grant.owner}')
-            ok = False
-            window = self._refused_in.setdefault(channel, [time.monotonic(), 0])
-            if time.monotonic() - window[0] > 1.0:
-                window[:] = [time.monotonic(), 0]
-            window[1] += 1
-            if window[1] > MUTE_AFTER:
-                self.mute(channel, window[1])
-                window[1] = 0
-                return
-        else:
-            ok = driver.queue_setpoints(msg.first_sequence, conv.as_array(msg.displacement), msg.stream_id)
-        if ok:
-            if msg.end_of_stream:
-                driver.end_stream(msg.stream_id)
-        else:
-            now = time.monotonic()
-            if now - self._refused_at > 1.0:
-                self._refused_at = now
-                self.get_logger().warning(f'setpoints from {msg.source or "an unnamed sender"} refused: '
-                                          f'{driver.refusal or driver.status.state}')
+        verdict = self.gate.offer(channel, msg.source, msg.first_sequence, conv.as_array(msg.displacement),
+                                  msg.stream_id, msg.end_of_stream)
+        if verdict.action == 'mute':
+            self.mute(channel)
+        elif verdict.action == 'refused' and time.monotonic() - self._refused_at > 1.0:
+            self._refused_at = time.monotonic()
+            self.get_logger().warning(f'setpoints from {msg.source or "an unnamed sender"} refused: {verdict.why}')
         self._log_events()
 
     def poll(self) -> None:

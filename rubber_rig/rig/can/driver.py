@@ -221,6 +221,15 @@ class RigDriver:
         """HostStreamStart: the controller takes setpoints from `first` on (and, after a ramp, no older ones)."""
         self._send(self.proto.encode('HostStreamStart', {'HS_FirstSequence': first % (1 << 32)}))
 
+    def refuse(self, n: int, why: str):
+        """Count n setpoints refused before they reached the queue (StreamGate: not the owner's channel)."""
+        self.refusal = why
+        self.counters['setpoints_refused'] += int(n)
+
+    def count(self, name: str, n: int = 1):
+        """Add n to the counter `name` (reported in status.extra)."""
+        self.counters[name] = self.counters.get(name, 0) + int(n)
+
     def end_stream(self, stream_id: int):
         """The owner's last batch is queued: running dry afterwards is the end of the program."""
         s = self._stream
