@@ -139,3 +139,66 @@ def test_the_readme_shows_the_layer_table_this_test_enforces():
             deps = set() if cells[1] == '-' else {d.strip() for d in cells[1].split(',')}
             shown[cells[0]] = {'__init__' if d == 'rubber_rig (version)' else d for d in deps}
     assert shown == ALLOWED
+
+
+# Size rules (issue 25): no function over MAX_FUNCTION_LINES in the core (not nodes/, cli/, testing/), no module over
+# MAX_MODULE_LINES. What exceeds them today is listed with its size: nothing may join the lists or grow, and an
+# entry that meets the rule must leave its list (so the lists only shrink).
+MAX_FUNCTION_LINES = 80
+MAX_MODULE_LINES = 400
+OVERSIZE_FUNCTIONS = {
+    'rig/can/canlog_reader.py:_decode': 132,
+    'fitting/identification.py:fit_group': 118,
+    'fitting/blocks.py:split_blocks': 102,
+    'recording/recover.py:recover': 99,
+    'excitation/blocks.py:parse_block': 94,
+    'session/run.py:_loop': 94,
+    'fitting/report.py:_html': 91,
+    'fitting/blocktrend.py:fit_trend': 89,
+    'models/cycle_tracker.py:_run': 87,
+    'fitting/blocktrend.py:fit_block': 83,
+}
+OVERSIZE_MODULES = {
+    'nodes/excitation_node.py': 798,
+    'rig/can/driver.py': 795,
+    'rig/conformance/active.py': 788,
+    'rig/can/canlog_reader.py': 598,
+    'rig/sim/controller.py': 596,
+    'fitting/identification.py': 561,
+    'nodes/rig_driver_node.py': 544,
+    'fitting/modelfit.py': 531,
+    'rig/config.py': 474,
+    'excitation/detectors.py': 446,
+    'testing/processes.py': 427,
+    'excitation/runner.py': 426,
+    'models/modelfile.py': 424,
+}
+
+
+def _sizes():
+    functions, modules = {}, {}
+    for path, layer, tree in MODULES:
+        rel = str(path.relative_to(PACKAGE))
+        modules[rel] = len(path.read_text(encoding='utf-8').splitlines())
+        if layer in ROS_LAYERS:
+            continue
+        for node in ast.walk(tree):
+            if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                functions[f'{rel}:{node.name}'] = max(functions.get(f'{rel}:{node.name}', 0),
+                                                      node.end_lineno - node.lineno + 1)
+    return functions, modules
+
+
+def test_functions_and_modules_stay_small():
+    functions, modules = _sizes()
+    problems = []
+    for sizes, listed, limit, what in ((functions, OVERSIZE_FUNCTIONS, MAX_FUNCTION_LINES, 'function'),
+                                       (modules, OVERSIZE_MODULES, MAX_MODULE_LINES, 'module')):
+        for name, n in sorted(sizes.items()):
+            if n > limit and n > listed.get(name, limit):
+                problems.append(f'{what} {name}: {n} lines (limit {limit}'
+                                + (f', listed at {listed[name]})' if name in listed else ')'))
+        for name in sorted(listed):
+            if sizes.get(name, 0) <= limit:
+                problems.append(f'{what} {name} now meets the {limit}-line rule: remove it from the list')
+    assert not problems, '\n'.join(problems)

@@ -32,6 +32,7 @@ from dataclasses import dataclass
 
 import can
 
+from ...safety import DECEL_MAX
 from ..can.frames import SampleFrames
 from ..can.protocol import (
     CMD_ABORT,
@@ -138,7 +139,7 @@ class ConformanceRun:
         self.send('HostCommand', {'CMD_Code': code, 'CMD_Counter': 0, 'CMD_Argument': argument,
                                   'CMD_RampVelocity': ramp_velocity})
 
-    def limits(self, lower: float, upper: float, decel: float = 100.0):
+    def limits(self, lower: float, upper: float, decel: float = DECEL_MAX):
         self.send('HostLimits', {'HL_DisplacementMin': lower, 'HL_DisplacementMax': upper, 'HL_Deceleration': decel})
 
     def send_setpoints(self, first: int, values: list, record: bool = True):
@@ -519,7 +520,7 @@ class ConformanceRun:
         u = [s.u for s in before[-3:] + after]
         v = [(b - a) * self.fs for a, b in zip(u, u[1:], strict=False)]
         acc = [abs(b - a) * self.fs for a, b in zip(v, v[1:], strict=False)]
-        decel = 100.0
+        decel = DECEL_MAX
         still = bool(after) and len(v) >= 2 and abs(v[-1]) <= 2 * LSB * self.fs
         peak_v = max((abs(x) for x in v[:3]), default=0.0)
         ok = done and still and max(acc, default=0) <= decel * 1.1 + 4 * LSB * self.fs ** 2 and not self.faults \
