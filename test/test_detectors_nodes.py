@@ -283,6 +283,11 @@ blocks:
     assert op.hold(False).success
     result = op.result(handle, 60.0)
     assert result is not None and result.success, result and result.message
+
+    def at_rest():   # the result can come before the program's last samples: count once they have all arrived
+        _, recent, _ = op.applied(op.last_sequence - 200)
+        return recent.size > 200 and np.ptp(recent) < 1e-7
+    assert op.wait_for(at_rest, 10.0)
     seq, u, _ = op.applied(start)
     moving = np.abs(np.diff(u)) > 1e-7
     before, after = moving[:held_at - start].sum() / FS * F, moving[held_at - start:].sum() / FS * F

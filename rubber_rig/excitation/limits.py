@@ -76,6 +76,7 @@ def check_program(limits: Limits, program, sample_rate: float, force_model: Opti
         if model is not None:
             _check_model_force(limits, model, blk, where)
 
+
 def _check_model_force(limits: Limits, model, blk, where: str):
     try:
         f = model(blk)
@@ -91,6 +92,7 @@ def _check_model_force(limits: Limits, model, blk, where: str):
                 if blk.oscillating else f'{blk.waveform} to {blk.end_level * 1e3:g} mm')
         raise LimitError(f'{where}: predicted peak force {f:.6g} N (element model, {what}) above force_max '
                          f'{limits.force_max:g} N')
+
 
 def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, budget: int, where: str):
     """Check a block of n samples (more than the exact budget) from closed-form bounds on its samples.
@@ -142,7 +144,6 @@ def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, bud
     if last is None:
         last = float(blk.evaluate(np.array([(n - 1) / fs]))[0])
     return last, budget
-
 
 
 _U = np.linspace(0.0, 1.0, 1025)

@@ -29,6 +29,7 @@ from .report_model import model_band
 
 # ---- figures -----------------------------------------------------------------------------------------
 
+
 def _plt():
     import matplotlib
     matplotlib.use('Agg')

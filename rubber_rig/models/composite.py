@@ -246,5 +246,3 @@ def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_t
         return ParallelModel(spec.build_elements(float(dt), friction_reversal_threshold), dt, spec.name or 'parallel',
                              spec)
     return _from_params(resolve_params(params_or_spec), float(dt), scheme, friction_reversal_threshold)
-
-

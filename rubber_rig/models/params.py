@@ -173,7 +173,6 @@ class TangentMaxwellBergParams(_Params):
         return self
 
 
-
 PARAM_CLASSES = {'fractional_zener_berg': ZenerBergParams, 'kelvin_voigt': KelvinVoigtParams,
                  'tangent_maxwell_berg': TangentMaxwellBergParams}
 # Model type names of files written before the physics names.
