@@ -133,12 +133,12 @@ class Limits:
 
     def check_range(self, lo: float, hi: float, where: str):
         """Raise LimitError if displacements lo..hi [m] leave the displacement range."""
-        if lo < self.displacement_min - RANGE_SLACK or hi > self.displacement_max + RANGE_SLACK:
+        if _outside_range(self, lo, hi):
             raise LimitError(f'{where}: {_range_message(self, lo, hi)}')
 
     def check_velocity(self, v: float, where: str):
         """Raise LimitError if speed v [m/s] exceeds velocity_max."""
-        if not v <= self.velocity_max * (1 + VELOCITY_SLACK):
+        if _too_fast(self, v):
             raise LimitError(f'{where}: {_velocity_message(self, v)}')
 
     def check_stiffness_force(self, peak_x: float, where: str):
@@ -170,7 +170,7 @@ def setpoint_violation(limits: Limits, x, sample_rate: float, previous: Optional
         k = int(np.argmin(finite))
         return Violation('not_finite', k, f'setpoint {float(x[k])} at sample {k} is not finite')
     lo, hi = float(x.min()), float(x.max())
-    if lo < limits.displacement_min - RANGE_SLACK or hi > limits.displacement_max + RANGE_SLACK:
+    if _outside_range(limits, lo, hi):
         k = int(np.argmax(np.maximum(limits.displacement_min - x, x - limits.displacement_max)))
         return Violation('displacement', k, _range_message(limits, lo, hi))
     seq = x if previous is None else np.concatenate([[float(previous)], x])
@@ -180,7 +180,7 @@ def setpoint_violation(limits: Limits, x, sample_rate: float, previous: Optional
     offset = x.size - v.size                     # v[i] is the velocity reaching x[i + offset]
     speed = np.abs(v)
     k = int(np.argmax(speed))
-    if not speed[k] <= limits.velocity_max * (1 + VELOCITY_SLACK):
+    if _too_fast(limits, float(speed[k])):
         return Violation('velocity', k + offset, _velocity_message(limits, float(speed[k])))
     stop = stopping_positions(seq[1:], v, limits.deceleration_max, sample_rate)
     over = np.maximum(limits.displacement_min - stop, stop - limits.displacement_max)
@@ -192,6 +192,14 @@ def setpoint_violation(limits: Limits, x, sample_rate: float, previous: Optional
                          f'{stop[k] * 1e3:.4f} mm; limits {limits.displacement_min * 1e3:g}..'
                          f'{limits.displacement_max * 1e3:g} mm)')
     return None
+
+
+def _outside_range(limits: Limits, lo: float, hi: float) -> bool:
+    return lo < limits.displacement_min - RANGE_SLACK or hi > limits.displacement_max + RANGE_SLACK
+
+
+def _too_fast(limits: Limits, v: float) -> bool:
+    return not v <= limits.velocity_max * (1 + VELOCITY_SLACK)     # (NaN is too fast)
 
 
 def _range_message(limits: Limits, lo: float, hi: float) -> str:
