@@ -1,5 +1,5 @@
 # The two commands of the README. Each sets up .venv/ (idempotently) before it runs.
-.PHONY: bench test setup clean
+.PHONY: bench benchmarks test setup clean
 export RMW_IMPLEMENTATION ?= rmw_fastrtps_cpp
 
 setup:
@@ -7,6 +7,10 @@ setup:
 
 bench: setup
 	.venv/bin/rubber-rig bench $(ARGS)
+
+# every benchmark in benchmarks/, its figures written to docs/benchmarks/ (hours; ARGS="--only models,rig")
+benchmarks: setup
+	.venv/bin/python benchmarks/run_all.py $(ARGS)
 
 test: setup
 	.venv/bin/ruff check .
