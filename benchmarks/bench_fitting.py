@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Benchmark of `rubber-rig fit` on simulated-rig recordings of the seed-000 grid (issue 7 acceptance).
+"""Benchmark of `rubber-rig fit` on simulated-rig recordings of the seed-000 grid.
 
 For each Table 1 temperature (20, 0, -20, -40 degC): run the shipped program seed000_grid (0.5-14 Hz x
 0.5 and 1 mm, 8 cycles + 2 taper cycles each side) on the simulated rig (CAN path, 80 Hz actuator,

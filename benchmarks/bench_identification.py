@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Acceptance benchmark of identification (issue 12): does every fit tell the truth.
+"""Acceptance benchmark of identification: does every fit tell the truth.
 
 For each case a specimen is simulated with `rubber-rig simulate` (simulated rig, CAN path, 80 Hz actuator,
 20 N load-cell noise, 0.2 um displacement noise, 1 kHz) over ``--seeds`` noise seeds, recorded to MCAP and
@@ -28,7 +28,7 @@ interpolating Table 2 + elliptic damping; the true structure is identified per b
 undeclared (fitted with the declared-sensor default and with --estimate-delay) and declared; load cell +1 % gain
 undeclared, declared as 1 +- 1 %, and corrected;
 load cell gain 0.97 undeclared and declared as 1 +- 3 %; seed 000 + a Maxwell branch (2 kN/mm, 5 kN s/m)
-fitted with the true structure, with seed 000's model and with seed 000's model and a free delay (issue 23's
+fitted with the true structure, with seed 000's model and with seed 000's model and a free delay (a
 model error passed off as a sensor delay); seed 000 + a dashpot (2 kN s/m) fitted with and without it;
 seed 000's viscoelastic part with a velocity-driven friction law (tanh Coulomb, seed 002 Eq. 46) instead of
 Berg's, fitted with Berg's; a load-cell offset of 200 N and zero drifts of 2 N/s and 20 N/s (not declared:
@@ -126,7 +126,7 @@ def _pad_specimen():
 
 
 CUBIC = {'type': 'polynomial_spring', 'k3': '6e11 N/m^3'}
-MAXWELL = {'type': 'maxwell', 'k': '2 kN/mm', 'c': '5 kNs/m'}     # issue 23's missing viscous branch
+MAXWELL = {'type': 'maxwell', 'k': '2 kN/mm', 'c': '5 kNs/m'}     # a viscous branch the seed-000 model lacks
 DASHPOT = {'type': 'dashpot', 'c': '2 kNs/m'}                     # a plain viscous term seed 000's model lacks
 
 
@@ -194,7 +194,7 @@ CASES = {
 }
 
 
-# what each fit must show (issue 23's targets): None = clean (every parameter covered in >= 90 % of the seeds,
+# what each fit must show (the targets): None = clean (every parameter covered in >= 90 % of the seeds,
 # no warning); a code = that warning in >= 95 % of the seeds. The true structure of each case is clean unless
 # listed; fits not listed (and not the true one) are shown without a target (e.g. seed 000 fitted with an
 # unneeded cubic term: not wrong, and its "k3 consistent with zero" share is in the codes column).

@@ -13,7 +13,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The seed-004 pad specimen against seed 004 Table 2 at its 12 points (issue 23): K1, K3 and the operating-point
+"""The seed-004 pad specimen against seed 004 Table 2 at its 12 points: K1, K3 and the operating-point
 stiffness K_op = K1 + 3 K3 x0^2 + 3/4 K3 A^2 at Table 1's preloads, from the table, from the specimen's trends and
 measured on a time series of the operating-point spring (rubber_rig.models.seed004.seed004_table2_check).
 
@@ -43,7 +43,7 @@ def table() -> str:
                      f"{r['K1_table'] / 1e6:.2f} | {r['K1'] / 1e6:.4f} | {r['K3_table'] / 1e12:.2f} | "
                      f"{r['K3'] / 1e12:.4f} | {r['K_op_table'] / 1e6:.3f} | {r['K_op'] / 1e6:.3f} | "
                      f"{100 * r['K_op_error']:+.3f} % | {r['K_sim'] / 1e6:.3f} | {100 * r['K_sim_error']:+.3f} % |")
-    lines += ['', 'Before issue 23 the specimen (K3 held at the mean of Table 2) missed K_op by -8.1 % to +8.6 % and '
+    lines += ['', 'Before it was rebuilt from Tables 1-2, the specimen (K3 held at the mean of Table 2) missed K_op by -8.1 % to +8.6 % and '
               'softened with', "frequency where Table 2's pad stiffens. Why the specimen interpolates Table 2 and not "
               'the printed Eq. 9-12:', 'REFERENCES.md (seed 004).', '']
     return '\n'.join(lines)

@@ -387,7 +387,7 @@ def test_corrupt_blf_decodes_up_to_the_damage_with_a_warning(logged_runs, tmp_pa
 
 TEXT_FORMATS = ('.asc', '.log')
 TEXT_WRITERS = {'.asc': can.ASCWriter, '.log': can.CanutilsLogWriter}
-N_FRAMES, BAD = 3085, 28     # issue 24: 0 of 3085 frames decoded although the first 28 lines were intact
+N_FRAMES, BAD = 3085, 28     # once: 0 of 3085 frames decoded although the first 28 lines were intact
 MARK = b'\xa5'               # data byte 0 of every frame: 'A5' in both formats, nowhere else on a frame line
 GARBAGE = bytes((i * 73 + 29) % 256 for i in range(64)).replace(b'\n', b'')
 
@@ -456,7 +456,7 @@ CORRUPTIONS = {
 @pytest.mark.parametrize('suffix', TEXT_FORMATS)
 @pytest.mark.parametrize('corruption', list(CORRUPTIONS))
 def test_a_bad_line_costs_only_its_frames(tmp_path, suffix, corruption):
-    """Issue 24: one bad byte dropped every frame after it (and with a non-UTF-8 byte every frame before it as
+    """Once, one bad byte dropped every frame after it (and with a non-UTF-8 byte every frame before it as
     well). Now exactly the frames on the damaged line are missing; every frame before and after it is read,
     the skipped line is counted and named by number with the reason."""
     path = tmp_path / f'frames{suffix}'

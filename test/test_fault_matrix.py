@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """Fault matrix: the four nodes as separate processes (as a launch file starts them), driven from outside
-through their ROS interfaces only, through every abnormal path of issue 11. After each one:
+through their ROS interfaces only, through every abnormal path (README 'Safety'). After each one:
 
 (a) the applied command never left the limits and never stepped faster than velocity_max;
 (b) the rig ends at rest (or in an operator-commanded hold), and status says why;

@@ -46,7 +46,7 @@ def sims(tmp_path_factory):
     cubic = named_model('swing_arm_joint_20C').to_dict()
     cubic['elements'].append({'type': 'polynomial_spring', 'k3': 6e11})
     (d / 'cubic.yaml').write_text(yaml.safe_dump(cubic))
-    maxwell = named_model('swing_arm_joint_20C').to_dict()     # issue 23's specimen: one more viscous branch
+    maxwell = named_model('swing_arm_joint_20C').to_dict()     # one more viscous branch than seed 000
     maxwell['elements'].append({'type': 'maxwell', 'k': '2 kN/mm', 'c': '5 kNs/m'})
     (d / 'maxwell.yaml').write_text(yaml.safe_dump(maxwell))
     tri = {'name': 'triangle_then_grid', 'defaults': {'taper_cycles': 1, 'cycles': 6, 'mean': 0.0},
@@ -116,7 +116,7 @@ def test_a_missing_cubic_spring_is_a_misfit_warning_and_aic_bic_pick_the_model_t
 
 
 def test_a_missing_viscous_branch_leaves_a_residual_at_the_excitation_frequency(sims):
-    # issue 23: a Maxwell branch the model lacks; the overall chi^2 of the record sees it, the residual at the
+    # a Maxwell branch the model lacks; the overall chi^2 of the record sees it, the residual at the
     # excitation frequency sees it about ten times more clearly, and the residual is smooth (not white)
     run = load_run(sims['maxwell'])
     wrong = fit_model([run], 'zener_berg')[0][0]

@@ -12,8 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Bad program requests are refused with a reason naming block and field, at a bounded cost (issue 11 item 3),
-and the pre-start check predicts the element force per block (issue 11 item 14). No rig, no ROS."""
+"""Bad program requests are refused with a reason naming block and field, at a bounded cost,
+and the pre-start check predicts the element force per block. No rig, no ROS."""
 import math
 
 import numpy as np

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Bad input never takes the element_model node down (issue 11 item 3): refused parameter changes, non-finite
+"""Bad input never takes the element_model node down: refused parameter changes, non-finite
 and malformed sample batches, a restarted driver; and the simulated load cell reads NaN for a NaN force.
 The predictor tests are ROS-free; the node ones use a real rclpy node in-process and call its callbacks."""
 import math

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Node processes stop promptly and cleanly (issue 24 point 9): the suite started the way ``ros2 launch``
+"""Node processes stop promptly and cleanly: the suite started the way ``ros2 launch``
 starts it (rubber_rig.testing.processes), each node sent SIGINT (Ctrl-C, launch's shutdown) or SIGTERM and timed
 until its process has ended. Each must end within EXIT_WITHIN seconds with exit status 0 and no traceback.
 

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Node processes that are given bad parameters (issue 24 point 9), started the way ``ros2 launch`` starts them
+"""Node processes that are given bad parameters, started the way ``ros2 launch`` starts them
 (rubber_rig.testing.processes) and judged by their exit status and their log: one line naming the parameter and
 what is wrong, never a Python traceback.
 

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""One loss ledger (issue 24): the recorder's own bookkeeping (live stats and close record), ``rubber-rig info``,
+"""One loss ledger: the recorder's own bookkeeping (live stats and close record), ``rubber-rig info``,
 ``recover`` and the bench summary count lost samples the same way and agree to the sample; ``recover`` refuses a
 corrupt file (naming the record and its offset) and recovers the readable part of a truncated one.
 
@@ -87,7 +87,7 @@ def run_file(tmp_path_factory):
 
 
 def test_recorder_info_recover_and_the_mcap_reader_agree_to_the_sample(run_file, tmp_path, capsys):
-    """The run of issue 24's kind: setpoint streams that start again below their last number (a resumed hold, a
+    """The run that once disagreed: setpoint streams that start again below their last number (a resumed hold, a
     second excitation, a restarted driver) and predictions that skip and repeat batches used to be counted as
     millions of lost samples by recover and by the recorder, but not by info. They are not samples."""
     messages, truth, published, stats, path = run_file

@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The rig driver as the one safety authority, ROS-free (issue 11 items 1, 2, 5, 6, 8, 11): the safe ramp at
+"""The rig driver as the one safety authority, ROS-free: the safe ramp at
 any phase, stream ownership and the true continuation of the command, stream loss, reset and the 16-bit
 sequence wrap, slow and small stuck sensors, limits changed at run time."""
 import math
