@@ -44,8 +44,8 @@ def table() -> str:
                      f"{r['K3'] / 1e12:.4f} | {r['K_op_table'] / 1e6:.3f} | {r['K_op'] / 1e6:.3f} | "
                      f"{100 * r['K_op_error']:+.3f} % | {r['K_sim'] / 1e6:.3f} | {100 * r['K_sim_error']:+.3f} % |")
     lines += ['', 'Before it was rebuilt from Tables 1-2, the specimen (K3 held at the mean of Table 2) missed K_op by '
-              '-8.1 % to +8.6 % and softened with', "frequency where Table 2's pad stiffens. Why the specimen interpolates Table 2 and not "
-              'the printed Eq. 9-12:', 'REFERENCES.md (seed 004).', '']
+              '-8.1 % to +8.6 % and softened with', "frequency where Table 2's pad stiffens. Why the specimen "
+              'interpolates Table 2 and not the printed Eq. 9-12:', 'REFERENCES.md (seed 004).', '']
     return '\n'.join(lines)
 
 
