@@ -136,7 +136,10 @@ def markdown(record: dict) -> str:
             f"| run | {record['started']}, {record['seconds']:.0f} s wall, {status} |",
             f"| machine | {record['machine']} |", '',
             'Written by `benchmarks/run_all.py`; what follows is the benchmark\'s own output, unedited.', '']
-    body = [record['output'].rstrip()]
+    output = record['output'].rstrip()
+    if not any(line.startswith(('|', '#')) for line in output.splitlines()):
+        output = f'```text\n{output}\n```'      # plain columns: keep them aligned
+    body = [output]
     if 'stderr' in record:
         body += ['', '## Error output (last 4000 characters)', '', '```', record['stderr'].rstrip(), '```']
     return '\n'.join(head + body) + '\n'
@@ -153,7 +156,8 @@ def write_index(out: Path = OUT) -> Path:
             lines.append(f'| {bench.name} | {bench.what} | not run yet | | |')
             continue
         rec = json.loads(path.read_text(encoding='utf-8'))
-        status = 'ok' if rec.get('returncode') == 0 else f"failed ({rec.get('returncode')})"
+        status = ('imported from an earlier README, not generated' if rec.get('imported')
+                  else 'ok' if rec.get('returncode') == 0 else f"failed ({rec.get('returncode')})")
         lines.append(f"| [{bench.name}]({bench.name}.md) | {bench.what} | {rec.get('started', '?')}, "
                      f"{rec.get('seconds', 0):.0f} s | {rec.get('commit', '?')} | {status} |")
     index = out / 'README.md'
