@@ -99,6 +99,15 @@ def test_limit_ranges_and_choices_are_checked_from_their_description():
     with pytest.raises(ConfigError, match="field 'limits.velocity_max'.*outside 0.002..100"):
         RigConfig.from_dict({'limits': {'velocity_max': 1e-3}})
     assert violations(RigConfig()) == []
+    # the same ranges hold for Limits built anywhere else (the driver's parameters, a RigLimits message, a test):
+    # one description, one check
+    with pytest.raises(LimitError, match="field 'deceleration_max': 1000.0 m/s\\^2 outside 2..510") as err:
+        Limits(deceleration_max=1000.0)
+    assert err.value.field == 'deceleration_max'
+    with pytest.raises(LimitError, match="field 'velocity_max': 0.001 m/s outside 0.002..100"):
+        Limits.from_dict({'velocity_max': 1e-3})
+    with pytest.raises(LimitError, match="field 'force_max': -5.0 N outside 1..1e"):
+        Limits(force_max=-5.0)
     assert abort_ramp_velocity(Limits(velocity_max=0.04)) == pytest.approx(0.02)
     assert abort_ramp_velocity(Limits(velocity_max=1.0)) == pytest.approx(0.05)   # RAMP_VELOCITY
 

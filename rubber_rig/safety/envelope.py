@@ -30,7 +30,7 @@ from typing import Callable, Optional
 
 import numpy as np
 
-from ..settings import setting
+from ..settings import setting, violations
 from .ramp import DECEL_MAX, RAMP_VELOCITY, stopping_positions
 
 RANGE_SLACK = 1e-12
@@ -90,9 +90,8 @@ class Limits:
         if self.displacement_min >= self.displacement_max:
             raise LimitError(f"limits: field 'displacement_min': {self.displacement_min:g} m must be below "
                              f"displacement_max {self.displacement_max:g} m", 'displacement_min')
-        for name in ('velocity_max', 'force_max', 'deceleration_max'):
-            if getattr(self, name) <= 0:
-                raise LimitError(f"limits: field '{name}': must be > 0", name)
+        for name, why in violations(self):     # the ranges of the settings above: the one place they are written
+            raise LimitError(f"limits: field '{name}': {why}", name)
         k = self.stiffness_estimate
         if k is not None and (isinstance(k, bool) or not isinstance(k, (int, float)) or not math.isfinite(k)
                               or k < 0):
