@@ -148,8 +148,6 @@ MAX_FUNCTION_LINES = 80
 MAX_MODULE_LINES = 400
 OVERSIZE_FUNCTIONS = {
     'rig/can/canlog_reader.py:_decode': 132,
-    'fitting/identification.py:fit_group': 118,
-    'fitting/blocks.py:split_blocks': 102,
     'recording/recover.py:recover': 99,
     'excitation/blocks.py:parse_block': 94,
     'session/run.py:_loop': 94,
@@ -164,7 +162,6 @@ OVERSIZE_MODULES = {
     'rig/conformance/active.py': 788,
     'rig/can/canlog_reader.py': 598,
     'rig/sim/controller.py': 596,
-    'fitting/identification.py': 561,
     'nodes/rig_driver_node.py': 544,
     'fitting/modelfit.py': 531,
     'rig/config.py': 474,

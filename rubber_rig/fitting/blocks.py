@@ -178,88 +178,103 @@ def split_blocks(displacement, force, dt, block_index=None, program_blocks=None,
         raise ValueError(f'displacement ({x.size} samples) and force ({f.size} samples) differ in length')
     report = SplitReport()
     finite = np.isfinite(x) & np.isfinite(f)
-
-    segments = []   # (label, start, stop)
-    if block_index is not None:
-        bi = np.asarray(block_index)
-        change = np.flatnonzero(np.diff(bi) != 0) + 1
-        bounds = np.concatenate([[0], change, [bi.size]])
-        for s, e in zip(bounds[:-1], bounds[1:], strict=False):
-            if bi[s] >= 0:
-                segments.append((int(bi[s]), int(s), int(e)))
-    else:
-        segments.append((None, 0, x.size))
-
     expected = list(program_blocks or [])
     seen_labels = set()
-    counter = 0
-    for label, s, e in segments:
+    counter = 0      # blocks found by detection (no block index): numbered in order
+    for label, s, e in _labelled_segments(block_index, x.size):
         if label is not None and 0 <= label < len(expected) and \
                 expected[label].get('waveform') not in (None, 'sine'):
             seen_labels.add(label)
             continue   # holds, ramps, triangles: no harmonic steady state to measure
-        seg_ok = finite[s:e]
-        if not seg_ok.all():
-            # analyse the longest finite stretch; say what was lost
-            bad = np.flatnonzero(~seg_ok)
-            report.messages.append(
-                f'{where}block {label if label is not None else "?"}: {bad.size} samples with missing '
-                f'values (NaN); only the longest complete stretch is analysed')
-            edges = np.concatenate([[-1], bad, [e - s]])
-            k = int(np.argmax(np.diff(edges)))
-            s, e = s + edges[k] + 1, s + edges[k + 1]
-        xs = x[s:e]
-        cycles = _cycles(xs)
-        runs = _steady_runs(xs, cycles, tolerance)
+        s, e = _longest_finite(finite, s, e, report, f'{where}block {label if label is not None else "?"}')
+        cycles = _cycles(x[s:e])
+        runs = _steady_runs(x[s:e], cycles, tolerance)
         if label is not None:
             runs = [max(runs, key=lambda r: r[1] - r[0])] if runs else []
         for c0, c1 in runs:
-            n_steady = c1 - c0 + 1
-            if label is None and n_steady < 2:
+            if label is None and c1 - c0 + 1 < 2:
                 continue   # detection: single odd cycles are tapers / transitions, not blocks
             lab = label if label is not None else counter
             nominal = expected[lab] if (label is not None and 0 <= lab < len(expected)) else None
-            nf, na = _nominal(nominal)
-            if n_steady < settle_cycles + min_cycles:
-                desc = f'{nf:g} Hz, {na * 1e3:g} mm' if nf and na else f'{n_steady} cycles'
-                report.messages.append(
-                    f'{where}block {lab} ({desc}): only {n_steady} steady cycles, need '
-                    f'{settle_cycles + min_cycles} ({settle_cycles} settling + {min_cycles} analysed); skipped')
-                if label is None:
-                    counter += 1
-                seen_labels.add(lab)
-                continue
-            first, last = cycles[c0 + settle_cycles], cycles[c1]
-            a0, a1 = s + first.start, s + last.end
-            ncyc = n_steady - settle_cycles
-            freq = ncyc / ((last.end_at - first.start_at) * dt)
-            if nf and abs(freq / nf - 1) < 0.005:
-                freq = nf      # the program's frequency is exact (setpoints come from the sample index)
-            props = window_properties(x, f, dt, a0, a1, freq)
-            report.blocks.append(BlockResult(
-                index=int(lab), start=int(a0), stop=int(a1), cycles=int(ncyc),
-                skipped_cycles=int(settle_cycles), frequency=float(props['frequency']),
-                amplitude=float(props['amplitude']), mean=float(props['mean']),
-                k_dyn=float(props['k_dyn']), loss_angle=float(props['loss_angle']),
-                damping=float(props['damping']), energy=float(props['energy_loop']),
-                c_eq=float(props['c_eq']), nominal_frequency=nf, nominal_amplitude=na,
-                segment=(int(s + cycles[c0].start), int(s + last.end)), recording=recording))
+            block = _measure_run(x, f, dt, s, cycles, (c0, c1), lab, nominal, settle_cycles, min_cycles, recording,
+                                 report, where)
+            if block is not None:
+                report.blocks.append(block)
             seen_labels.add(lab)
             if label is None:
                 counter += 1
-
     if block_index is not None and expected:
-        missing = [i for i in range(len(expected)) if i not in seen_labels]
-        if missing:
-            last = max(seen_labels) if seen_labels else -1
-            tail = [i for i in missing if i > last]
-            if tail:
-                report.messages.append(
-                    f'{where}recording ends before block {tail[0]} of {len(expected)} '
-                    f'(truncated): blocks {tail[0]}-{len(expected) - 1} missing')
-            inner = [i for i in missing if i <= last]
-            if inner:
-                report.messages.append(f'{where}blocks {inner} of the program are not in the recording')
+        _report_missing(expected, seen_labels, report, where)
     if not report.blocks:
         report.messages.append(f'{where}no usable steady block found')
     return report
+
+
+def _labelled_segments(block_index, n: int) -> list:
+    """(program block number, start, stop) of each stretch of one block number >= 0; the whole record as one
+    unlabelled segment (None, 0, n) when there is no block index.
+    """
+    if block_index is None:
+        return [(None, 0, n)]
+    bi = np.asarray(block_index)
+    change = np.flatnonzero(np.diff(bi) != 0) + 1
+    bounds = np.concatenate([[0], change, [bi.size]])
+    return [(int(bi[s]), int(s), int(e)) for s, e in zip(bounds[:-1], bounds[1:], strict=False) if bi[s] >= 0]
+
+
+def _longest_finite(finite, s: int, e: int, report: SplitReport, what: str) -> tuple:
+    """(start, stop) of the longest stretch of finite samples in s..e; says in `report` what was lost."""
+    seg_ok = finite[s:e]
+    if seg_ok.all():
+        return s, e
+    bad = np.flatnonzero(~seg_ok)
+    report.messages.append(f'{what}: {bad.size} samples with missing values (NaN); only the longest complete '
+                           'stretch is analysed')
+    edges = np.concatenate([[-1], bad, [e - s]])
+    k = int(np.argmax(np.diff(edges)))
+    return s + edges[k] + 1, s + edges[k + 1]
+
+
+def _measure_run(x, f, dt, s, cycles, run, lab, nominal, settle_cycles, min_cycles, recording, report, where):
+    """BlockResult of the steady cycles run = (c0, c1) of the segment starting at sample s, the first
+    `settle_cycles` skipped; None (and a message in `report`) when too few cycles are steady.
+    """
+    c0, c1 = run
+    n_steady = c1 - c0 + 1
+    nf, na = _nominal(nominal)
+    if n_steady < settle_cycles + min_cycles:
+        desc = f'{nf:g} Hz, {na * 1e3:g} mm' if nf and na else f'{n_steady} cycles'
+        report.messages.append(
+            f'{where}block {lab} ({desc}): only {n_steady} steady cycles, need '
+            f'{settle_cycles + min_cycles} ({settle_cycles} settling + {min_cycles} analysed); skipped')
+        return None
+    first, last = cycles[c0 + settle_cycles], cycles[c1]
+    a0, a1 = s + first.start, s + last.end
+    ncyc = n_steady - settle_cycles
+    freq = ncyc / ((last.end_at - first.start_at) * dt)
+    if nf and abs(freq / nf - 1) < 0.005:
+        freq = nf      # the program's frequency is exact (setpoints come from the sample index)
+    props = window_properties(x, f, dt, a0, a1, freq)
+    return BlockResult(
+        index=int(lab), start=int(a0), stop=int(a1), cycles=int(ncyc),
+        skipped_cycles=int(settle_cycles), frequency=float(props['frequency']),
+        amplitude=float(props['amplitude']), mean=float(props['mean']),
+        k_dyn=float(props['k_dyn']), loss_angle=float(props['loss_angle']),
+        damping=float(props['damping']), energy=float(props['energy_loop']),
+        c_eq=float(props['c_eq']), nominal_frequency=nf, nominal_amplitude=na,
+        segment=(int(s + cycles[c0].start), int(s + last.end)), recording=recording)
+
+
+def _report_missing(expected: list, seen_labels: set, report: SplitReport, where: str) -> None:
+    """Say which program blocks the recording lacks: a truncated tail, or blocks missing inside."""
+    missing = [i for i in range(len(expected)) if i not in seen_labels]
+    if not missing:
+        return
+    last = max(seen_labels) if seen_labels else -1
+    tail = [i for i in missing if i > last]
+    if tail:
+        report.messages.append(f'{where}recording ends before block {tail[0]} of {len(expected)} '
+                               f'(truncated): blocks {tail[0]}-{len(expected) - 1} missing')
+    inner = [i for i in missing if i <= last]
+    if inner:
+        report.messages.append(f'{where}blocks {inner} of the program are not in the recording')

@@ -33,7 +33,7 @@ from rubber_rig.models.modelfile import ModelSpec, load_model_file, spec_from_pa
 from rubber_rig.units import to_si
 
 from .blocks import harmonic_sigma
-from .identification import calibrate, corrected_force
+from .calibration import calibrate, corrected_force
 from .metrics import window_properties
 from .modelfit import DELAY, Z95
 from .paramfile import PARAM_NAMES

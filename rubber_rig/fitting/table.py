@@ -44,7 +44,7 @@ from rubber_rig.units import to_si
 
 from .blocks import BlockResult
 from .budget import add_budget, linearised_shift
-from .identification import block_quality, harmonic_uncertainty
+from .group_fit import block_quality, harmonic_uncertainty
 from .modelfit import BlockTargets, ModelFit, coordinates, fit_harmonic_model, harmonic_residuals
 from .verdict import misfit_test, notes, verdict
 
