@@ -158,6 +158,10 @@ def test_the_simulated_rig_takes_a_model_file_as_its_specimen(tmp_path):
     x = 1e-3 * np.sin(2 * np.pi * 3.0 * np.arange(1000) * 1e-3)
     np.testing.assert_array_equal(build_specimen({'model_file': str(path)}, 1e-3).run(x),
                                   build_model(str(path), 1e-3).run(x))
+    # as the rig driver's sim.specimen.parameter_set passes it (with model and deadband), like element_model's
+    driver = {'model': 'fractional_zener_berg', 'parameter_set': str(path), 'friction_reversal_threshold': 2e-6}
+    np.testing.assert_array_equal(build_specimen(driver, 1e-3).run(x),
+                                  build_model(str(path), 1e-3, friction_reversal_threshold=2e-6).run(x))
     (tmp_path / 'bad.yaml').write_text('elements: [{type: berg, x2: 1 kN, f_fmax: 4 kN}]\n')
     with pytest.raises(ConfigError, match='sim.specimen.*bad.yaml.*x2'):
         build_specimen({'model_file': str(tmp_path / 'bad.yaml')}, 1e-3)

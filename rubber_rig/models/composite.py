@@ -198,6 +198,8 @@ def _model_spec(source):
         if 'elements' in source:
             return parse_model({k: v for k, v in source.items() if k not in ('scheme', 'friction_reversal_threshold')},
                                'model spec')
+        if isinstance(source.get('parameter_set'), (str, Path)) and is_model_file(source['parameter_set']):
+            return load_model_file(source['parameter_set'])   # as element_model's parameter_set: it brings its model
         return None
     if isinstance(source, (str, Path)) and is_model_file(source):
         return load_model_file(source)
@@ -212,7 +214,9 @@ def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_t
     ``{"model": "fractional_zener_berg", "parameter_set": "swing_arm_joint_20C"}``,
     ``{"model": "fractional_zener_berg", "temperature": -10}``, ``{"model": "fractional_zener_berg", "values": {...}}``,
     ``{"elements": [{"type": "berg", "f_fmax": "4.57 kN", "x2": "1.41 mm"}, ...]}`` (a model file's mapping,
-    see :mod:`.modelfile`), ``{"model_file": "specimen.yaml"}``, a :class:`ModelSpec` or a model-file path.
+    see :mod:`.modelfile`), ``{"model_file": "specimen.yaml"}`` (or a model file as ``"parameter_set"``, whose
+    own elements then stand for ``"model"``), a :class:`ModelSpec` or a model-file path. Every source is built
+    the same way: through the :class:`ModelSpec` it describes (parameters via ``spec_from_params``).
     ``scheme`` (fractional operator): 'default' (sum of exponentials), 'paper' (GL, N_t = 200,
     h = 1 ms) or 'gl' / ``{"name": "gl", "n_terms": N_t, "h": h}``. A dict spec may carry its own
     ``"scheme"``.

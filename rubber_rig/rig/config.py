@@ -150,8 +150,8 @@ class DamageSpec:
 class SimOptions:
     """Simulated servo-hydraulic rig. SI units.
 
-    specimen: element-model spec for rubber_rig.models.build_model (default seed-000 at 20 degC; a parameter_set,
-    a model_file or a model file's elements), or {"model": "linear", "stiffness": N/m, "damping": N s/m}. The actuator is a second-order position loop
+    specimen: spec for rubber_rig.models.build_model (default seed-000 at 20 degC; parameter_set, model_file), or
+    {"model": "linear", "stiffness": N/m, "damping": N s/m}. The actuator is a second-order position loop
     (natural frequency [Hz], damping ratio) with a velocity limit [m/s]. Sensors: noise (std), offset,
     resolution; temperature [degC]. The load cell reports force_gain x the true force of force_delay [s]
     earlier (a delay line, linear interpolation between samples) + force_offset + force_drift x t + noise, quantised.

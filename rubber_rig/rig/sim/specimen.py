@@ -51,8 +51,9 @@ def build_specimen(spec: dict, dt: float, damage: list = ()):
 
     {"model": "linear", "stiffness": N/m, "damping": N s/m} builds LinearSpecimen; anything else goes to
     rubber_rig.models.build_model: {"model": "fractional_zener_berg", "temperature": 20.0}, {"parameter_set":
-    "swing_arm_joint_20C"}, {"model_file": "specimen.yaml"} or a model file's mapping {"elements": [...]}, each
-    with an optional "friction_reversal_threshold" [m] and fractional "scheme".
+    "swing_arm_joint_20C"} (a model file there too, as the rig driver's sim.specimen.parameter_set passes it),
+    {"model_file": "specimen.yaml"} or a model file's mapping {"elements": [...]}, each with an optional
+    "friction_reversal_threshold" [m] and fractional "scheme".
     """
     spec = dict(spec)
     if spec.get('model') == 'linear':
