@@ -102,7 +102,8 @@ class ElementModelNode(Node):
         super().__init__(node_name, **kwargs)
         defaults = load_parameter_set('swing_arm_joint_20C').as_dict()
         declare(self, 'model', 'fractional_zener_berg', 'element model (fractional Zener + Berg friction, '
-                'seed 000; seed000 is its earlier name); a model file in parameter_set brings its own',
+                'seed 000; seed000 is its earlier name); a model file or a set of another model type in '
+                'parameter_set brings its own',
                 choices=('fractional_zener_berg', 'seed000'), read_only=True)
         declare(self, 'source', 'parameter_set', 'where the model parameters come from', choices=SOURCES)
         declare(self, 'parameter_set', 'swing_arm_joint_20C', 'named parameter set (any model type), a parameter '
