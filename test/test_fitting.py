@@ -24,13 +24,8 @@ from rubber_rig.fitting.data import from_arrays, load_run
 from rubber_rig.fitting.identification import fit_model
 from rubber_rig.fitting.modelfit import BlockTargets, coordinates, fit_harmonic_model
 from rubber_rig.fitting.paramfile import PARAM_NAMES
-from rubber_rig.fitting.properties import (
-    berg_energy,
-    berg_peak_force,
-    friction_first_harmonic,
-    measured_style_properties,
-)
-from rubber_rig.models import build_model, load_parameter_set
+from rubber_rig.models import build_model, load_parameter_set, steady_state_properties
+from rubber_rig.models.friction import berg_energy, berg_peak_force, friction_first_harmonic
 from rubber_rig.models.modelfile import resolve_model
 
 # A short version of the shipped seed000_grid program: 4 frequencies x 2 amplitudes, 6 cycles.
@@ -96,7 +91,7 @@ def test_berg_first_harmonic_matches_a_simulated_steady_loop_and_differs_from_eq
     assert abs(k_fs_eq21 / k.real - 1) > 0.004
 
 
-def test_measured_style_properties_match_time_domain_runs_of_the_model():
+def test_first_harmonic_properties_match_time_domain_runs_of_the_model():
     """Analytic first-harmonic K_dyn / C_eq vs the models library run in the time domain."""
     from rubber_rig.fitting.metrics import window_properties
     p = load_parameter_set('seed000_m20C')
@@ -107,18 +102,17 @@ def test_measured_style_properties_match_time_domain_runs_of_the_model():
         x = a * np.sin(2 * np.pi * f * np.arange(n) / fs)
         force = build_model(p, 1 / fs).run(x)
         m = window_properties(x, force, 1 / fs, n - int(round(4 * n_per)), n - 1, f)
-        pr = measured_style_properties(*(p.as_dict()[k] for k in PARAM_NAMES), f, a)
+        pr = steady_state_properties(p, f, a, kdyn='harmonic')
         assert m['k_dyn'] == pytest.approx(pr['k_dyn'], rel=2e-3)
         assert m['c_eq'] == pytest.approx(pr['c_eq'], rel=1e-2)
 
 
 def test_energy_agrees_with_the_models_eq_27_but_k_dyn_is_the_first_harmonic_not_eq_24():
-    from rubber_rig.models import steady_state_properties
     f, a = np.meshgrid([0.5, 1, 2, 4, 8, 14], [0.5e-3, 1e-3])
     for name, worst in (('seed000_20C', (0.001, 0.003)), ('seed000_m40C', (0.008, 0.013))):
         p = load_parameter_set(name)
-        ours = measured_style_properties(*(p.as_dict()[k] for k in PARAM_NAMES), f, a)
-        paper = steady_state_properties(p, f, a)
+        ours = steady_state_properties(p, f, a, kdyn='harmonic')
+        paper = steady_state_properties(p, f, a, kdyn='eq24')
         np.testing.assert_allclose(ours['c_eq'], paper['c_eq'], rtol=1e-9)
         gap = np.max(np.abs(paper['k_dyn'] / ours['k_dyn'] - 1))
         assert worst[0] < gap < worst[1], (name, gap)
@@ -127,7 +121,7 @@ def test_energy_agrees_with_the_models_eq_27_but_k_dyn_is_the_first_harmonic_not
 def test_harmonic_fit_recovers_parameters_from_exact_properties():
     p = load_parameter_set('seed000_0C').as_dict()
     f, a = np.meshgrid([0.5, 1, 2, 4, 8, 14], [0.5e-3, 1e-3])
-    pr = measured_style_properties(*(p[k] for k in PARAM_NAMES), f.ravel(), a.ravel())
+    pr = steady_state_properties(load_parameter_set('seed000_0C'), f.ravel(), a.ravel(), kdyn='harmonic')
     zero = np.zeros(f.size)
     targets = BlockTargets(f.ravel(), a.ravel(), zero, pr['k_dyn'], pr['c_eq'], zero, zero)
     spec = resolve_model('zener_berg')

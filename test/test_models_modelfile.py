@@ -158,6 +158,39 @@ def test_the_simulated_rig_takes_a_model_file_as_its_specimen(tmp_path):
     x = 1e-3 * np.sin(2 * np.pi * 3.0 * np.arange(1000) * 1e-3)
     np.testing.assert_array_equal(build_specimen({'model_file': str(path)}, 1e-3).run(x),
                                   build_model(str(path), 1e-3).run(x))
+    # as the rig driver's sim.specimen.parameter_set passes it (with model and deadband), like element_model's
+    driver = {'model': 'fractional_zener_berg', 'parameter_set': str(path), 'friction_reversal_threshold': 2e-6}
+    np.testing.assert_array_equal(build_specimen(driver, 1e-3).run(x),
+                                  build_model(str(path), 1e-3, friction_reversal_threshold=2e-6).run(x))
     (tmp_path / 'bad.yaml').write_text('elements: [{type: berg, x2: 1 kN, f_fmax: 4 kN}]\n')
     with pytest.raises(ConfigError, match='sim.specimen.*bad.yaml.*x2'):
         build_specimen({'model_file': str(tmp_path / 'bad.yaml')}, 1e-3)
+
+
+@pytest.mark.parametrize('threshold, scheme', [(0.0, 'default'), (2e-6, 'default'), (0.0, 'paper')])
+def test_the_default_specimen_built_from_its_model_spec_gives_the_forces_of_its_elements(tmp_path, threshold, scheme):
+    """Every model is built through its ModelSpec (catalogue); the simulated rig's default specimen (seed 000 at
+    20 degC) must still give the forces of fractional Zener + Berg built element by element, as before (1e-9
+    relative), and so must the same model written as a model file, on the simulated rig and in build_model.
+    """
+    from rubber_rig.models import ParallelModel, parameters_at_temperature
+    from rubber_rig.models.catalogue import fractional_element
+    from rubber_rig.models.friction import BergFriction
+    from rubber_rig.rig.sim.specimen import build_specimen
+    p, dt = parameters_at_temperature(20.0), 1e-3 if scheme == 'paper' else 2e-4
+    t = np.arange(int(4.0 / dt)) * dt
+    x = 1e-3 * np.sin(2 * np.pi * 3.0 * t) + 2e-4 * np.sin(2 * np.pi * 11.0 * t)
+    direct = ParallelModel([fractional_element(p.k0, p.k_inf, p.tau, p.alpha, dt, scheme),
+                            BergFriction(p.f_fmax, p.x2, dt, threshold)], dt).run(x)
+    spec = {'model': 'fractional_zener_berg', 'temperature': 20.0, 'friction_reversal_threshold': threshold,
+            'scheme': scheme}
+    model = build_model(spec, dt)
+    assert model.name == 'fractional_zener_berg' and model.params == p
+    assert model.branch_names == ('elastic', 'viscous', 'friction')
+    scale = np.max(np.abs(direct))
+    for built in (build_specimen(spec, dt).run(x), model.run(x)):
+        np.testing.assert_allclose(built, direct, rtol=0, atol=1e-9 * scale)
+    path = spec_from_params(p).dump(tmp_path / 'seed000_20C.yaml')
+    from_file = {'model_file': str(path), 'friction_reversal_threshold': threshold, 'scheme': scheme}
+    for built in (build_specimen(from_file, dt).run(x), build_model(from_file, dt).run(x)):
+        np.testing.assert_allclose(built, direct, rtol=0, atol=1e-9 * scale)

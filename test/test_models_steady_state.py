@@ -16,7 +16,6 @@
 import numpy as np
 import pytest
 
-from rubber_rig.fitting.properties import measured_style_properties
 from rubber_rig.models import (
     berg_steady_state,
     build_model,
@@ -27,6 +26,8 @@ from rubber_rig.models import (
 )
 from rubber_rig.models.composite import ParallelModel
 from rubber_rig.models.elements import LinearSpring, PolynomialSpring
+from rubber_rig.models.friction import friction_first_harmonic
+from rubber_rig.models.modelfile import spec_from_params
 from rubber_rig.models.simulate import whole_cycle_dt
 
 P20, P40 = load_parameter_set('seed000_20C'), load_parameter_set('seed000_m40C')
@@ -37,7 +38,7 @@ def test_composition_equations():
     f, x0 = 4.0, 0.5e-3
     s = steady_state_properties(P20, f, x0, kdyn='eq24')
     assert set(KEYS) <= set(s) and s['kdyn_definition'] == 'eq24'
-    assert steady_state_properties(P20, f, x0)['k_dyn'] == s['k_dyn']                  # the Python default
+    assert steady_state_properties(P20, f, x0)['kdyn_definition'] == 'harmonic'         # the default, as the CLI
     kz = zener_complex_stiffness(2 * np.pi * f, P20.k0, P20.k_inf, P20.tau, P20.alpha)
     b = berg_steady_state(x0, P20.f_fmax, P20.x2)
     k_s, k_l = kz.real + b['k_fs'], kz.imag + b['k_fl']
@@ -62,14 +63,14 @@ def test_broadcasting():
 
 def test_paper_trends():
     """Seed 000 Sections 3-4: K_dyn rises with frequency, falls with amplitude; cold is stiffer and
-    more viscous (R_K, R_E > 1 at -40 degC and 14 Hz, < 1 at 20 degC and 0.5 Hz)."""
+    more viscous (R_K, R_E > 1 at -40 degC and 14 Hz, < 1 at 20 degC and 0.5 Hz), with the paper's Eq. 24."""
     f = np.array([0.5, 2, 4, 8, 14])
-    s = steady_state_properties(P20, f, 0.5e-3)
+    s = steady_state_properties(P20, f, 0.5e-3, kdyn='eq24')
     assert np.all(np.diff(s['k_dyn']) > 0) and np.all(np.diff(s['c_eq']) < 0)
-    assert np.all(steady_state_properties(P20, f, 1e-3)['k_dyn'] < s['k_dyn'])
-    assert np.all(steady_state_properties(P40, f, 0.5e-3)['k_dyn'] > s['k_dyn'])
-    cold = steady_state_properties(P40, 14.0, 1e-3)
-    warm = steady_state_properties(P20, 0.5, 0.5e-3)
+    assert np.all(steady_state_properties(P20, f, 1e-3, kdyn='eq24')['k_dyn'] < s['k_dyn'])
+    assert np.all(steady_state_properties(P40, f, 0.5e-3, kdyn='eq24')['k_dyn'] > s['k_dyn'])
+    cold = steady_state_properties(P40, 14.0, 1e-3, kdyn='eq24')
+    warm = steady_state_properties(P20, 0.5, 0.5e-3, kdyn='eq24')
     assert cold['r_k'] > 1 and cold['r_e'] > 1 and warm['r_k'] < 1 and warm['r_e'] < 1
 
 
@@ -122,14 +123,22 @@ def test_whole_cycle_dt():
         whole_cycle_dt(0.0, 1000.0)
 
 
-def test_harmonic_definition_is_the_measured_style_first_harmonic():
-    """kdyn='harmonic' is the exact first-harmonic form of rubber_rig.fitting (friction by quadrature)."""
+def test_harmonic_definition_is_the_first_harmonic_the_fits_use():
+    """kdyn='harmonic' is K* = K_ev(jw) (Eq. 11) + first harmonic of the Berg loop (by quadrature), the
+    catalogue's ModelSpec.first_harmonic that rubber_rig.fitting fits; Eq. 25-27 and 30 on top of it."""
     f, a = np.meshgrid([0.5, 1.3, 4, 14], [0.5e-3, 1e-3])
     for p in (P20, P40):
         h = steady_state_properties(p, f, a, kdyn='harmonic')
-        ms = measured_style_properties(p.k0, p.k_inf, p.tau, p.alpha, p.x2, p.f_fmax, f, a)
-        for k in ('k_dyn', 'loss_angle', 'damping', 'energy', 'c_eq', 'r_k', 'r_e'):
-            np.testing.assert_allclose(h[k], ms[k], rtol=1e-12, err_msg=k)
+        k_ev = zener_complex_stiffness(2 * np.pi * f, p.k0, p.k_inf, p.tau, p.alpha)
+        k_f = friction_first_harmonic(p.f_fmax, p.x2, a)
+        k = k_ev + k_f
+        np.testing.assert_allclose(spec_from_params(p).first_harmonic(f, a), k, rtol=1e-12)
+        energy = np.pi * a ** 2 * k.imag
+        expected = {'k_dyn': np.abs(k), 'loss_angle': np.angle(k), 'damping': energy / (np.pi * a ** 2 * np.abs(k)),
+                    'energy': energy, 'c_eq': energy / (np.pi * 2 * np.pi * f * a ** 2),
+                    'r_k': np.abs(k_ev - p.k0) / np.abs(k_f), 'r_e': k_ev.imag / k_f.imag}
+        for key, value in expected.items():
+            np.testing.assert_allclose(h[key], value, rtol=1e-12, err_msg=key)
         assert h['kdyn_definition'] == 'harmonic'
 
 

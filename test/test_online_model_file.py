@@ -20,7 +20,7 @@ import math
 import numpy as np
 import pytest
 
-from rubber_rig.models import build_model, load_parameter_set
+from rubber_rig.models import build_model, load_parameter_set, parameter_set_info
 from rubber_rig.online.predictor import (
     DEFAULT_REVERSAL_THRESHOLD,
     ChoiceError,
@@ -172,3 +172,41 @@ def test_a_missing_model_file_is_a_parameter_set_error(tmp_path, model_file):
     with pytest.raises(ChoiceError):
         p.set_choice(ModelChoice(parameter_set=str(missing)))
     assert p.params is before and p.choice.parameter_set == str(model_file)
+
+
+@pytest.mark.parametrize('choice', [ModelChoice(), ModelChoice(source='temperature', temperature=-13.0),
+                                    ModelChoice(source='values', values=load_parameter_set('swing_arm_joint_0C')
+                                                .as_dict())], ids=['parameter_set', 'temperature', 'values'])
+def test_the_seed_000_sources_give_the_forces_of_its_elements(choice):
+    """The seed-000 sources are built through their ModelSpec like a model file; the forces must stay those of
+    fractional Zener + Berg built element by element (1e-9 relative), with the friction deadband.
+    """
+    from rubber_rig.models import ParallelModel
+    from rubber_rig.models.catalogue import fractional_element
+    from rubber_rig.models.friction import BergFriction
+    x = displacement()
+    p = OnlinePredictor(choice)
+    total, branches = run_batches(p, x)
+    q = p.params
+    direct = ParallelModel([fractional_element(q.k0, q.k_inf, q.tau, q.alpha, DT),
+                            BergFriction(q.f_fmax, q.x2, DT, DEFAULT_REVERSAL_THRESHOLD)], DT)
+    ref_total, ref_branches = direct.run(x, return_branches=True)
+    assert p.model_name == 'fractional_zener_berg' and p.branch_names == ['elastic', 'viscous', 'friction']
+    np.testing.assert_allclose(total, ref_total, rtol=0, atol=1e-9 * np.max(np.abs(ref_total)))
+    np.testing.assert_allclose(branches, ref_branches, rtol=0, atol=1e-9 * np.max(np.abs(ref_total)))
+
+
+@pytest.mark.parametrize('name, model_name, names', [
+    ('swing_arm_joint_case1', 'linear_spring + dashpot', ['k', 'c']),
+])
+def test_a_parameter_set_of_another_model_type_runs_as_its_model_file(name, model_name, names):
+    """Any parameter set runs online (one model system): as the ModelSpec it describes, like a model file."""
+    p = OnlinePredictor(ModelChoice(parameter_set=name))
+    assert isinstance(p.params, ModelFileParams) and p.model_name == model_name
+    assert list(p.params.as_dict()) == names and p.parameter_set == name
+    assert str(p.params).startswith(f'parameter set {name} ')
+    expected = parameter_set_info(name)['temperature']
+    assert p.temperature == expected or (math.isnan(p.temperature) and math.isnan(expected))
+    x = displacement()
+    total, _ = run_batches(p, x)
+    np.testing.assert_allclose(total, build_model(name, DT).run(x), rtol=1e-12, atol=1e-8)

@@ -17,7 +17,6 @@
 data            recordings as arrays: MCAP (rubber_rig.recording), rig runs, plain arrays; missing channels
 blocks          split a recording into blocks (block index channel, or detected steady periodic segments),
                 skip settling cycles, measure frequency, amplitude, mean, K_dyn, loss angle, D, energy, C_eq
-properties      seed-000 model properties evaluated as the rig measures them (first harmonic, loop area)
 modelfit        any model (rubber_rig.models.modelfile): first-harmonic global search, time-domain least
                 squares against the load-cell noise, noise and block-jackknife covariances
 timefit         the displacement the time-domain fit runs its model on (low-pass, Berg deadband)
@@ -34,7 +33,7 @@ Design decisions (the figures behind them: benchmarks/bench_fitting.py and the R
   equal-energy ellipse (Eq. 19-22); the first harmonic of the real Berg loop has a different storage
   stiffness (the energy, C_eq, is exact either way). The difference grows as the temperature falls and
   fitting first-harmonic data with Eq. 24 would bias K0, x2 and F_fmax, so the objective uses the
-  exact first harmonic of the Berg loop (`properties`), by quadrature.
+  exact first harmonic of the Berg loop (rubber_rig.models.catalogue), by quadrature.
 * Eq. 29 alone (method 'harmonic') identifies all six parameters from K_dyn and C_eq at two
   amplitudes; x2 and F_fmax are the most correlated pair (their ratio, the initial friction stiffness,
   is what the data pin down). The time-domain refinement (method 'time', default) then runs the model

@@ -17,7 +17,9 @@
 * :func:`build_model` -> a :class:`ParallelModel` with ``step`` (streaming), ``run`` (batch), state
   save/restore and per-branch forces; ready models 'fractional_zener_berg' (seed 000: fractional Zener + Berg,
   6 parameters), 'tangent_maxwell_berg' (seed 001: tangent spring + 2 Maxwell + Berg), 'kelvin_voigt', or any
-  parallel composition. REFERENCES.md at the top of the repository names the papers ("seed 000" ...).
+  parallel composition. One model system: every source (parameter set, temperature, values, model file) is
+  built through the :class:`.modelfile.ModelSpec` it describes, from the element catalogue (:mod:`.catalogue`);
+  the parameter dataclasses are the tables' data. REFERENCES.md names the papers ("seed 000" ...).
 * :func:`steady_state_properties`: analytic K_dyn, loss angle, D, C_eq, E, R_K, R_E (seed 000 Eq. 11-30).
 * Parameter sets: :func:`load_parameter_set`, :func:`parameter_set_info`, :func:`list_parameter_sets`,
   :func:`parameters_at_temperature`.

@@ -21,11 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-from . import elements as el
-from .catalogue import fractional_element
-from .friction import BergFriction, check_reversal_threshold
-from .modelfile import ModelSpec, is_model_file, load_model_file, parse_model
+from .friction import check_reversal_threshold
+from .modelfile import ModelSpec, is_model_file, load_model_file, parse_model, spec_from_params
 from .params import (
+    PARAM_CLASSES,
     KelvinVoigtParams,
     TangentMaxwellBergParams,
     ZenerBergParams,
@@ -122,16 +121,21 @@ class ParallelModel:
         return np.concatenate([e.complex_stiffness(frequency, amplitude) for e in self.elements])
 
 
+def _parallel(params, dt, scheme='default', friction_reversal_threshold: float = 0.0) -> ParallelModel:
+    """The model of a parameter dataclass, built like any model file: through its :class:`ModelSpec`."""
+    params.validate()
+    name = next(n for n, cls in PARAM_CLASSES.items() if isinstance(params, cls))
+    return ParallelModel(spec_from_params(params).build_elements(dt, friction_reversal_threshold, scheme), dt, name,
+                         params)
+
+
 def zener_berg_model(params: ZenerBergParams, dt: float, scheme='default',
                      friction_reversal_threshold: float = 0.0) -> ParallelModel:
     """Seed 000's nonlinear rubber spring: fractional Zener + Berg; branches ('elastic', 'viscous', 'friction').
 
     ``friction_reversal_threshold`` [m]: Berg's reversal deadband (see :mod:`.friction`), 0 = the paper's rule.
     """
-    params.validate()
-    return ParallelModel([fractional_element(params.k0, params.k_inf, params.tau, params.alpha, dt, scheme),
-                          BergFriction(params.f_fmax, params.x2, dt, friction_reversal_threshold)],
-                         dt, 'fractional_zener_berg', params)
+    return _parallel(params, dt, scheme, friction_reversal_threshold)
 
 
 def tangent_maxwell_berg_model(params: TangentMaxwellBergParams, dt: float,
@@ -140,27 +144,11 @@ def tangent_maxwell_berg_model(params: TangentMaxwellBergParams, dt: float,
 
     Branches ('elastic', 'viscous_1', 'viscous_2', 'friction').
     """
-    params.validate()
-    return ParallelModel([el.TangentSpring(params.k_t, params.d_t), el.Maxwell(params.k1, params.c1, dt),
-                          el.Maxwell(params.k2, params.c2, dt),
-                          BergFriction(params.f_fmax, params.x2, dt, friction_reversal_threshold)],
-                         dt, 'tangent_maxwell_berg', params)
+    return _parallel(params, dt, friction_reversal_threshold=friction_reversal_threshold)
 
 
 def kelvin_voigt_model(params: KelvinVoigtParams, dt: float) -> ParallelModel:
-    params.validate()
-    return ParallelModel([el.LinearSpring(params.k), el.Dashpot(params.c, dt)], dt, 'kelvin_voigt', params)
-
-
-# element specs for {"model": "parallel", "elements": [{"type": ..., ...}, ...]}
-def _from_params(params, dt, scheme, friction_reversal_threshold=0.0):
-    if isinstance(params, ZenerBergParams):
-        return zener_berg_model(params, dt, scheme, friction_reversal_threshold)
-    if isinstance(params, TangentMaxwellBergParams):
-        return tangent_maxwell_berg_model(params, dt, friction_reversal_threshold)
-    if isinstance(params, KelvinVoigtParams):
-        return kelvin_voigt_model(params, dt)
-    raise ValueError(f'cannot build a model from {type(params).__name__}')
+    return _parallel(params, dt)
 
 
 def resolve_params(spec):
@@ -210,6 +198,8 @@ def _model_spec(source):
         if 'elements' in source:
             return parse_model({k: v for k, v in source.items() if k not in ('scheme', 'friction_reversal_threshold')},
                                'model spec')
+        if isinstance(source.get('parameter_set'), (str, Path)) and is_model_file(source['parameter_set']):
+            return load_model_file(source['parameter_set'])   # as element_model's parameter_set: it brings its model
         return None
     if isinstance(source, (str, Path)) and is_model_file(source):
         return load_model_file(source)
@@ -224,7 +214,9 @@ def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_t
     ``{"model": "fractional_zener_berg", "parameter_set": "swing_arm_joint_20C"}``,
     ``{"model": "fractional_zener_berg", "temperature": -10}``, ``{"model": "fractional_zener_berg", "values": {...}}``,
     ``{"elements": [{"type": "berg", "f_fmax": "4.57 kN", "x2": "1.41 mm"}, ...]}`` (a model file's mapping,
-    see :mod:`.modelfile`), ``{"model_file": "specimen.yaml"}``, a :class:`ModelSpec` or a model-file path.
+    see :mod:`.modelfile`), ``{"model_file": "specimen.yaml"}`` (or a model file as ``"parameter_set"``, whose
+    own elements then stand for ``"model"``), a :class:`ModelSpec` or a model-file path. Every source is built
+    the same way: through the :class:`ModelSpec` it describes (parameters via ``spec_from_params``).
     ``scheme`` (fractional operator): 'default' (sum of exponentials), 'paper' (GL, N_t = 200,
     h = 1 ms) or 'gl' / ``{"name": "gl", "n_terms": N_t, "h": h}``. A dict spec may carry its own
     ``"scheme"``.
@@ -242,7 +234,7 @@ def build_model(params_or_spec, dt: float, scheme='default', friction_reversal_t
         friction_reversal_threshold = params_or_spec.get('friction_reversal_threshold', friction_reversal_threshold)
     friction_reversal_threshold = _check_threshold(friction_reversal_threshold)
     spec = _model_spec(params_or_spec)
-    if spec is not None:
-        return ParallelModel(spec.build_elements(float(dt), friction_reversal_threshold), dt, spec.name or 'parallel',
-                             spec)
-    return _from_params(resolve_params(params_or_spec), float(dt), scheme, friction_reversal_threshold)
+    if spec is None:   # a parameter set, a temperature or explicit values: described by their ModelSpec
+        return _parallel(resolve_params(params_or_spec), float(dt), scheme, friction_reversal_threshold)
+    return ParallelModel(spec.build_elements(float(dt), friction_reversal_threshold, scheme), dt,
+                         spec.name or 'parallel', spec)

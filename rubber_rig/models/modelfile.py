@@ -157,9 +157,9 @@ class ModelSpec:
         return self
 
     # ---- physics ---------------------------------------------------------------------------------
-    def build_elements(self, dt: float, reversal_threshold: float | None = None) -> list:
-        """Streaming/batch element objects at sample period ``dt`` [s]. ``reversal_threshold`` [m], when
-        given, is the reversal deadband of every element that has one and sets none itself.
+    def build_elements(self, dt: float, reversal_threshold: float | None = None, scheme=None) -> list:
+        """Streaming/batch element objects at sample period ``dt`` [s]. ``reversal_threshold`` [m] and the
+        fractional operator ``scheme``, when given, apply to every element that has the option and sets none.
         """
         out = []
         for e in self.elements:
@@ -168,8 +168,9 @@ class ModelSpec:
                 continue
             t = element_type(e.type)
             opts = dict(e.options)
-            if reversal_threshold is not None and 'reversal_threshold' in t.options:
-                opts.setdefault('reversal_threshold', reversal_threshold)
+            for option, value in (('reversal_threshold', reversal_threshold), ('scheme', scheme)):
+                if value is not None and option in t.options:
+                    opts.setdefault(option, value)
             out.append(t.build(e.values, float(dt), opts))
         return out
 
@@ -210,9 +211,7 @@ class ModelSpec:
                     if got:
                         d[key] = _plain(got)
             elements.append(d)
-        out = {}
-        if self.name:
-            out['name'] = self.name
+        out = {'name': self.name} if self.name else {}
         out.update(_plain(self.meta))
         out['elements'] = elements
         return out

@@ -24,11 +24,12 @@ K_b for the non-linear ones (``kdyn``):
   the branch force and the displacement. This is what a rig (and ``--method time``, and
   :func:`rubber_rig.analysis.harmonic_properties`) measures. Berg's loop by quadrature
   (:func:`.friction.friction_first_harmonic`), memoryless non-linear springs by their first
-  harmonic (the describing function). Same K_dyn as ``rubber_rig.fitting.measured_style_properties``.
-* ``'eq24'`` -- seed 000 Eq. 19-24 as printed: Berg's loop replaced by the ellipse of equal peak
-  force and energy, K_f = K_df (sqrt(1 - D_f^2) + j D_f) with K_df = F_f0 / x0 (Eq. 19-22), and
-  memoryless springs by their peak secant (F(x0) - F(-x0)) / (2 x0): each element's own
-  ``complex_stiffness``.
+  harmonic (the describing function). The default, as in ``rubber-rig props``; the same K1 as the
+  catalogue's ``ModelSpec.first_harmonic`` that the fits use.
+* ``'eq24'`` -- seed 000 Eq. 19-24 as printed (ask for it to reproduce the paper's numbers): Berg's
+  loop replaced by the ellipse of equal peak force and energy, K_f = K_df (sqrt(1 - D_f^2) + j D_f)
+  with K_df = F_f0 / x0 (Eq. 19-22), and memoryless springs by their peak secant
+  (F(x0) - F(-x0)) / (2 x0): each element's own ``complex_stiffness``.
 
 The loss parts, hence E, D's numerator, C_eq and R_E, are the same in both (only the first harmonic of
 the force does work against a sine displacement); K_dyn, the loss angle, D and R_K differ. For the
@@ -77,7 +78,7 @@ def _first_harmonic_spring(element, frequency, amplitude):
     return np.asarray(k + 0 * f, dtype=complex)[None]
 
 
-def branch_stiffness(model, frequency, amplitude, kdyn='eq24') -> np.ndarray:
+def branch_stiffness(model, frequency, amplitude, kdyn='harmonic') -> np.ndarray:
     """Complex stiffness per branch [N/m], shape (n_branch, ...), in the ``kdyn`` definition (module doc)."""
     if check_kdyn(kdyn) == 'eq24':
         return model.complex_stiffness(frequency, amplitude)
@@ -93,13 +94,13 @@ def branch_stiffness(model, frequency, amplitude, kdyn='eq24') -> np.ndarray:
     return np.concatenate(parts)
 
 
-def steady_state_properties(params, frequency, amplitude, kdyn='eq24') -> dict:
+def steady_state_properties(params, frequency, amplitude, kdyn='harmonic') -> dict:
     """Analytic steady-state properties of a model at ``frequency`` [Hz] and ``amplitude`` [m] (broadcast).
 
-    ``params``: Seed000Params (or any spec accepted by ``build_model``, or a model object).
-    ``kdyn``: 'harmonic' (exact first harmonic, what a rig and ``time_domain_properties`` measure) or
-    'eq24' (seed 000 Eq. 19-24 ellipse form; the default, kept for the callers that reproduce the paper's
-    numbers); see the module doc. K_dyn, loss_angle, damping, k_storage, k_df and r_k follow it.
+    ``params``: any model source ``build_model`` accepts (parameters, a set name, a model file...) or a model.
+    ``kdyn``: 'harmonic' (exact first harmonic, what a rig and ``time_domain_properties`` measure; the
+    default, as in ``rubber-rig props``) or 'eq24' (seed 000 Eq. 19-24 ellipse form, for reproducing the
+    paper's numbers); see the module doc. K_dyn, loss_angle, damping, k_storage, k_df and r_k follow it.
     Returns a dict of arrays (floats for scalar input): frequency [Hz], amplitude [m], k_dyn [N/m],
     loss_angle [rad], damping [-] (Eq. 26), c_eq [N s/m] (Eq. 27), energy [J per cycle] (Eq. 25 + 18),
     r_k, r_e [-] (Eq. 30; inf without friction), k_storage, k_loss [N/m], energy_viscous,

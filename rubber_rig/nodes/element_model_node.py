@@ -25,15 +25,17 @@ channel (re-evaluated when it moves by ``temperature_hysteresis``), or explicit 
 changed at run time; the on-set-parameters callback validates the new choice and refuses it with a reason
 naming the parameter, so a running model is never replaced by an invalid one.
 
-``parameter_set`` may also be a model file (``parameter_set:=specimen.yaml``: a .yaml with an ``elements`` list,
-see rubber_rig.models.modelfile); the node then runs that composite model (the temperature sources and explicit
-values stay fractional Zener + Berg). Its prediction carries one BranchForce per branch of the model, named as the
-model names it (e.g. elastic_1, viscous, friction, elastic_2 for fractional Zener + Berg + cubic spring; their sum
-is the prediction), and model_parameters says model_name = the element types ('fractional_zener + berg +
-polynomial_spring'), parameter_set = the file as given, temperature = the file's ``temperature`` (NaN if none),
-names/values = the file's parameters in SI (bare names, ``label.param`` where a name repeats). A model file that
-cannot be used (missing, not YAML, unknown element type or parameter, missing value, bad unit) is refused with a
-reason naming the file and the problem; the running model stays.
+``parameter_set`` may also be a model file (``parameter_set:=specimen.yaml``: a .yaml with an ``elements`` list, see
+rubber_rig.models.modelfile); the node then runs that composite model, as the simulated rig runs it as its specimen
+(both build every model through the element catalogue; the temperature sources and explicit values are fractional
+Zener + Berg, seed 000's table, and a parameter set of another model type runs as its model file). Its prediction
+carries one BranchForce per branch of the model, named as the model names it (e.g. elastic_1, viscous, friction,
+elastic_2 for fractional Zener + Berg + cubic spring; their sum is the prediction), and model_parameters says
+model_name = the element types ('fractional_zener + berg + polynomial_spring'), parameter_set = the file as given,
+temperature = the file's ``temperature`` (NaN if none), names/values = the file's parameters in SI (bare names,
+``label.param`` where a name repeats). A model file that cannot be used (missing, not YAML, unknown element type or
+parameter, missing value, bad unit) is refused with a reason naming the file and the problem; the running model
+stays.
 
 ``friction_reversal_threshold`` [m] is the Berg friction element's reversal deadband: the model runs on the
 measured displacement, whose noise would otherwise reset the friction reference state at every wiggle and
@@ -100,11 +102,12 @@ class ElementModelNode(Node):
         super().__init__(node_name, **kwargs)
         defaults = load_parameter_set('swing_arm_joint_20C').as_dict()
         declare(self, 'model', 'fractional_zener_berg', 'element model (fractional Zener + Berg friction, '
-                'seed 000; seed000 is its earlier name); a model file in parameter_set brings its own',
+                'seed 000; seed000 is its earlier name); a model file or a set of another model type in '
+                'parameter_set brings its own',
                 choices=('fractional_zener_berg', 'seed000'), read_only=True)
         declare(self, 'source', 'parameter_set', 'where the model parameters come from', choices=SOURCES)
-        declare(self, 'parameter_set', 'swing_arm_joint_20C', 'named parameter set, a parameter table '
-                'FILE.yaml[:SET], or a model file (.yaml with an "elements" list; source parameter_set)')
+        declare(self, 'parameter_set', 'swing_arm_joint_20C', 'named parameter set (any model type), a parameter '
+                'table FILE.yaml[:SET], or a model file (.yaml with an "elements" list; source parameter_set)')
         declare(self, 'temperature', 20.0, 'specimen temperature (source temperature; start value of '
                 'rig_temperature)', range=(-40.0, 20.0), units='degC')
         for name in VALUE_NAMES:

@@ -37,8 +37,10 @@ positive number) are refused before they get here (``batch_problem``).
 Model files: ``parameter_set`` may also name a model file (a .yaml with an ``elements`` list, see
 rubber_rig.models.modelfile): the predictor then runs that composite model (:class:`ModelFileParams`; the
 friction reversal deadband applies to its Berg elements unless an element sets its own ``reversal_threshold``)
-and its branches are the model's own (``branch_names``, e.g. elastic_1, viscous, friction, elastic_2). The
-temperature sources stay seed 000 (fractional Zener + Berg) only.
+and its branches are the model's own (``branch_names``, e.g. elastic_1, viscous, friction, elastic_2). A parameter
+set of another model type (Kelvin-Voigt, tangent spring + Maxwell + Berg) runs the same way, as the model file it
+describes. Every choice is built through its ModelSpec (rubber_rig.models.catalogue), as the simulated rig builds
+its specimen; the temperature sources stay seed 000 (fractional Zener + Berg), the only temperature table.
 """
 from __future__ import annotations
 
@@ -57,7 +59,7 @@ from rubber_rig.models import (
     parameter_set_info,
     parameters_at_temperature,
 )
-from rubber_rig.models.modelfile import ModelSpec, is_model_file, load_model_file
+from rubber_rig.models.modelfile import ModelSpec, is_model_file, load_model_file, spec_from_params
 from rubber_rig.models.params import ParameterValueError
 
 SOURCES = ('parameter_set', 'temperature', 'rig_temperature', 'values')
@@ -84,6 +86,7 @@ class ModelFileParams:
 
     path: str                 # as given in parameter_set
     spec: ModelSpec
+    what: str = 'model file'  # or 'parameter set' (of a model type other than fractional_zener_berg)
 
     @property
     def model_name(self) -> str:
@@ -101,7 +104,7 @@ class ModelFileParams:
 
     def __str__(self) -> str:
         values = ', '.join(f'{k}={v:.6g}' for k, v in self.as_dict().items())
-        return f'model file {self.path} ({self.spec.name}: {self.model_name}; {values})'
+        return f'{self.what} {self.path} ({self.spec.name}: {self.model_name}; {values})'
 
 
 def load_model_choice_file(path: str) -> ModelFileParams:
@@ -150,7 +153,7 @@ class ModelChoice:
 
     def resolve(self, temperature: float | None = None) -> tuple[ZenerBergParams | ModelFileParams, str, float]:
         """(validated parameters, parameter-set name or '', temperature [degC] or NaN); the parameters are a
-        :class:`ModelFileParams` when ``parameter_set`` is a model file.
+        :class:`ModelFileParams` when ``parameter_set`` is a model file or a set of another model type.
 
         Raises :class:`ChoiceError` whose ``field`` is the field of this choice that is wrong
         ('values.alpha', 'parameter_set', 'temperature', 'source', 'friction_reversal_threshold').
@@ -171,10 +174,12 @@ class ModelChoice:
             except (OSError, ValueError, TypeError, KeyError, AttributeError) as exc:
                 raise ChoiceError('parameter_set', f'parameter set {self.parameter_set!r}: '
                                   f'{_why(exc, self.parameter_set)}') from None
-            if not isinstance(p, ZenerBergParams):
-                raise ChoiceError('parameter_set', f'parameter set {self.parameter_set!r} is not a '
-                                  'fractional_zener_berg parameter set')
-            return p, self.parameter_set, parameter_set_info(self.parameter_set)['temperature']
+            info = parameter_set_info(self.parameter_set)
+            if not isinstance(p, ZenerBergParams):   # runs as the model file it describes
+                spec = spec_from_params(p, info['name'])
+                spec.meta['temperature'] = info['temperature']
+                p = ModelFileParams(self.parameter_set, spec, 'parameter set')
+            return p, self.parameter_set, info['temperature']
         if self.source in ('temperature', 'rig_temperature'):
             t = self.temperature if temperature is None else float(temperature)
             try:
@@ -288,11 +293,8 @@ class OnlinePredictor:
 
     # -- internals --------------------------------------------------------------------------------------
     def _rebuild(self, dt: float) -> None:
-        if isinstance(self.params, ModelFileParams):
-            source = self.params.spec
-        else:
-            source = {'model': 'fractional_zener_berg', 'values': self.params.as_dict()}
-        self.model = build_model(source, dt, friction_reversal_threshold=self.choice.friction_reversal_threshold)
+        spec = self.params.spec if isinstance(self.params, ModelFileParams) else spec_from_params(self.params)
+        self.model = build_model(spec, dt, friction_reversal_threshold=self.choice.friction_reversal_threshold)
         if self.dt is not None and math.isclose(dt, self.dt, rel_tol=1e-9) and self._history:
             self.model.run(np.concatenate(list(self._history)), return_branches=False)  # warm up (see module doc)
         else:

@@ -150,7 +150,7 @@ class DamageSpec:
 class SimOptions:
     """Simulated servo-hydraulic rig. SI units.
 
-    specimen: element-model spec for rubber_rig.models.build_model (default seed-000 at 20 degC), or
+    specimen: spec for rubber_rig.models.build_model (default seed-000 at 20 degC; parameter_set, model_file), or
     {"model": "linear", "stiffness": N/m, "damping": N s/m}. The actuator is a second-order position loop
     (natural frequency [Hz], damping ratio) with a velocity limit [m/s]. Sensors: noise (std), offset,
     resolution; temperature [degC]. The load cell reports force_gain x the true force of force_delay [s]

@@ -14,6 +14,10 @@
 
 """The specimen of the simulated rig: an element model from rubber_rig.models (default seed 000 at 20 degC),
 or a plain linear spring + dashpot for quick checks.
+
+Every element model is built the one way the element_model node builds its model too: through its ModelSpec and
+the element catalogue (rubber_rig.models.catalogue), so any model file runs both as the simulated specimen and
+online, and a parameter set or a temperature of seed 000 is the model file it describes.
 """
 from rubber_rig.models import build_model
 
@@ -46,7 +50,10 @@ def build_specimen(spec: dict, dt: float, damage: list = ()):
     """Streaming specimen model for `spec` at time step dt [s], failing as `damage` (DamageSpec list) says.
 
     {"model": "linear", "stiffness": N/m, "damping": N s/m} builds LinearSpecimen; anything else goes to
-    rubber_rig.models.build_model (e.g. {"model": "fractional_zener_berg", "temperature": 20.0}).
+    rubber_rig.models.build_model: {"model": "fractional_zener_berg", "temperature": 20.0}, {"parameter_set":
+    "swing_arm_joint_20C"} (a model file there too, as the rig driver's sim.specimen.parameter_set passes it),
+    {"model_file": "specimen.yaml"} or a model file's mapping {"elements": [...]}, each with an optional
+    "friction_reversal_threshold" [m] and fractional "scheme".
     """
     spec = dict(spec)
     if spec.get('model') == 'linear':
