@@ -148,7 +148,6 @@ MAX_FUNCTION_LINES = 80
 MAX_MODULE_LINES = 400
 OVERSIZE_FUNCTIONS = {
     'rig/can/canlog_reader.py:_decode': 132,
-    'recording/recover.py:recover': 99,
     'excitation/blocks.py:parse_block': 94,
     'session/run.py:_loop': 94,
     'fitting/report.py:_html': 91,

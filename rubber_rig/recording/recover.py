@@ -95,64 +95,22 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
         target = Path(output) if output else path.with_name(path.stem + '.recovered.mcap')
     if target.resolve() == path.resolve():
         raise RecordingError(f'{path}: output must differ from the input (use --in-place)')
-    counts = {'messages': 0, 'metadata': 0, 'undecodable': 0}
-    ledger = LossLedger()
-    decoders = Decoders(path)
-    header_seen = False
-    last = {'log_time': 0, 'sequence': None}
     try:
         with open(target, 'wb' if in_place else 'xb') as out:
-            writer = McapWriter(out, chunk_size=chunk_size, compression=CompressionType.ZSTD)
-            schemas, channels = {}, {}        # ids in the source -> ids in the output
-            schema_records, channel_types = {}, {}
+            copier = _Copier(McapWriter(out, chunk_size=chunk_size, compression=CompressionType.ZSTD), path)
             for _, record in scan:            # file order: the order the recorder wrote (and counted) them
-                if isinstance(record, Header):
-                    writer.start(record.profile, record.library)
-                    header_seen = True
-                elif isinstance(record, Schema) and record.id not in schemas:
-                    schemas[record.id] = writer.register_schema(record.name, record.encoding,
-                                                                record.data)
-                    schema_records[record.id] = record
-                elif isinstance(record, Channel) and record.id not in channels:
-                    channels[record.id] = writer.register_channel(
-                        record.topic, record.message_encoding, schemas.get(record.schema_id, 0),
-                        dict(record.metadata))
-                    channel_types[record.id] = (record.topic, schema_records.get(record.schema_id),
-                                                record.metadata.get(SEQUENCE_SOURCE_KEY) == 'publication')
-                elif isinstance(record, Message) and record.channel_id in channels:
-                    writer.add_message(channels[record.channel_id], record.log_time, record.data,
-                                       record.publish_time, record.sequence)
-                    counts['messages'] += 1
-                    last['log_time'] = max(last['log_time'], record.log_time)
-                    topic, schema, pubseq = channel_types[record.channel_id]
-                    if schema is not None and schema.name in SAMPLE_TYPES:
-                        try:
-                            msg = decoders.decode(schema, record.data, topic)
-                        except RecordingError:   # copied as it is; the recorder did not count it either
-                            counts['undecodable'] += 1
-                            continue
-                        ledger.observe(topic, schema.name, msg, record.log_time,
-                                       record.sequence if pubseq else None)
-                        span = sequence_span(schema.name, msg)
-                        if span and span[1]:
-                            last['sequence'] = span[0] + span[1] - 1
-                elif isinstance(record, Metadata):
-                    writer.add_metadata(record.name, dict(record.metadata))
-                    counts['metadata'] += 1
-                elif isinstance(record, Attachment):
-                    writer.add_attachment(record.create_time, record.log_time, record.name,
-                                          record.media_type, record.data)
-            if not header_seen:
+                copier.copy(record)
+            if not copier.header_seen:
                 raise RecordingError(f'{path}: no complete MCAP header record: nothing to recover')
-            loss = ledger.summary()
+            loss, counts, last = copier.ledger.summary(), copier.counts, copier.last
             report = dict(loss, source=str(path), was_complete=was_complete,
                           messages_recovered=counts['messages'], undecodable_sample_messages=counts['undecodable'],
-                          gap_events=ledger.events, last_log_time_ns=last['log_time'],
+                          gap_events=copier.ledger.events, last_log_time_ns=last['log_time'],
                           last_sample_sequence=last['sequence'], intact_end=scan.intact_end,
                           source_size=scan.size, summary_error=scan.summary_error or '',
                           tail_unaccounted=not was_complete)
-            writer.add_metadata(RECOVERED_METADATA_NAME, encode_metadata(report))
-            writer.finish()
+            copier.writer.add_metadata(RECOVERED_METADATA_NAME, encode_metadata(report))
+            copier.writer.finish()
             out.flush()
             os.fsync(out.fileno())
     except FileExistsError:
@@ -164,20 +122,81 @@ def recover(path, output=None, *, in_place: bool = False, backup: bool = True,
         _discard(target)
         raise
     if in_place:
-        try:
-            if backup:
-                os.replace(path, path.with_name(path.name + '.bak'))
-            os.replace(target, path)
-        except OSError as exc:
-            _discard(target)
-            raise _write_error(Path(exc.filename or path), exc) from None
-        target = path
-        if (path.parent / METADATA_FILE).exists():   # part of a bag: index the recovered file too
-            write_bag_metadata(path.parent)
-    return RecoverResult(str(path), str(target), was_complete, counts['messages'], len(channels),
+        target = _replace(path, target, backup)
+    return RecoverResult(str(path), str(target), was_complete, counts['messages'], len(copier.channels),
                          counts['metadata'], loss['samples_lost'], loss['sequence_gaps'], last['log_time'],
                          last['sequence'], loss, scan.intact_end, scan.size, scan.summary_error,
                          counts['undecodable'])
+
+
+class _Copier:
+    """Writes the records of a scanned file into `writer`, renumbering schemas and channels, and counts the
+    sample loss of what it copies in one LossLedger (the recorder's own bookkeeping, so both count alike).
+    """
+
+    def __init__(self, writer, path):
+        self.writer, self.decoders = writer, Decoders(path)
+        self.counts = {'messages': 0, 'metadata': 0, 'undecodable': 0}
+        self.ledger = LossLedger()
+        self.header_seen = False
+        self.last = {'log_time': 0, 'sequence': None}
+        self.schemas, self.channels = {}, {}        # ids in the source -> ids in the output
+        self.schema_records, self.channel_types = {}, {}
+
+    def copy(self, record) -> None:
+        """Copy one record (a second schema or channel with a known id is a repeat: skipped)."""
+        w = self.writer
+        if isinstance(record, Header):
+            w.start(record.profile, record.library)
+            self.header_seen = True
+        elif isinstance(record, Schema) and record.id not in self.schemas:
+            self.schemas[record.id] = w.register_schema(record.name, record.encoding, record.data)
+            self.schema_records[record.id] = record
+        elif isinstance(record, Channel) and record.id not in self.channels:
+            self.channels[record.id] = w.register_channel(record.topic, record.message_encoding,
+                                                          self.schemas.get(record.schema_id, 0),
+                                                          dict(record.metadata))
+            self.channel_types[record.id] = (record.topic, self.schema_records.get(record.schema_id),
+                                             record.metadata.get(SEQUENCE_SOURCE_KEY) == 'publication')
+        elif isinstance(record, Message) and record.channel_id in self.channels:
+            w.add_message(self.channels[record.channel_id], record.log_time, record.data, record.publish_time,
+                          record.sequence)
+            self.counts['messages'] += 1
+            self.last['log_time'] = max(self.last['log_time'], record.log_time)
+            self._observe(record)
+        elif isinstance(record, Metadata):
+            w.add_metadata(record.name, dict(record.metadata))
+            self.counts['metadata'] += 1
+        elif isinstance(record, Attachment):
+            w.add_attachment(record.create_time, record.log_time, record.name, record.media_type, record.data)
+
+    def _observe(self, record) -> None:
+        topic, schema, pubseq = self.channel_types[record.channel_id]
+        if schema is None or schema.name not in SAMPLE_TYPES:
+            return
+        try:
+            msg = self.decoders.decode(schema, record.data, topic)
+        except RecordingError:   # copied as it is; the recorder did not count it either
+            self.counts['undecodable'] += 1
+            return
+        self.ledger.observe(topic, schema.name, msg, record.log_time, record.sequence if pubseq else None)
+        span = sequence_span(schema.name, msg)
+        if span and span[1]:
+            self.last['sequence'] = span[0] + span[1] - 1
+
+
+def _replace(path: Path, target: Path, backup: bool) -> Path:
+    """Put the recovered `target` in the place of `path` (the original kept as .bak if `backup`)."""
+    try:
+        if backup:
+            os.replace(path, path.with_name(path.name + '.bak'))
+        os.replace(target, path)
+    except OSError as exc:
+        _discard(target)
+        raise _write_error(Path(exc.filename or path), exc) from None
+    if (path.parent / METADATA_FILE).exists():   # part of a bag: index the recovered file too
+        write_bag_metadata(path.parent)
+    return path
 
 
 def _write_error(target: Path, exc: OSError) -> RecordingWriteError:
