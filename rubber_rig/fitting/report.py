@@ -208,58 +208,85 @@ def _html(run, blocks, model, quality, images, title, messages, sigma_f, stats, 
         parts.append(f'<p>Load-cell calibration applied to the measured force ({esc(str(calibration["source"]))}): '
                      f'delay {1e3 * calibration["delay"]:.4g} ms, gain {calibration["gain"]:.6g}.</p>')
     if model is not None:
-        spec = model.spec
-        temp = spec.meta.get('temperature')
-        parts.append(f'<h2>Model: {esc(spec.name or "model")}</h2>'
-                     f'<p>Elements in parallel: {esc(" + ".join(e.type for e in spec.elements))}'
-                     + (f'; identified at {temp:g} &deg;C' if isinstance(temp, (int, float)) else '')
-                     + (f'. Source: {esc(model.source)}' if model.source else '') + '.</p>')
-        parts += _fit_box(model)
-        parts.append('<h3>Parameters (papers\' units)</h3>')
-        parts += _param_table(model)
-        if not model.results:
-            parts.append('<p>No uncertainties in this model (no sigma beside the values).</p>')
-        if stats is not None:
-            msr, n = stats
-            parts.append(f'<p>On this recording: mean (residual / sigma_F)<sup>2</sup> = <b>{msr:.3g}</b> over '
-                         f'{n} analysed samples (offset per block removed; no parameter fitted here, so near 1 '
-                         'means the model reproduces this recording to its noise).</p>')
+        parts += _model_html(model, stats)
     if quality:
-        has_a = quality[0].get('analytic') is not None        # a report without a model has neither
-        has_s = quality[0].get('simulated') is not None
-        head = ['f [Hz]', 'x0 [mm]', 'cycles', 'K_dyn [kN/mm]', '&plusmn;1 sigma']
-        head += ['model run'] * has_s + ['model 1st harm.'] * has_a + ['e_K run [%]'] * has_s
-        head += ['e_K 1st harm. [%]'] * has_a + ['C_eq [kN s/m]', '&plusmn;1 sigma'] + ['model run'] * has_s
-        head += ['model 1st harm.'] * has_a + ['e_C run [%]'] * has_s + ['e_C 1st harm. [%]'] * has_a
-        head += ['loss angle [deg]', 'E [J]']
-        parts.append('<h2>Blocks</h2><table class="blocks"><tr>' + ''.join(f'<th>{h}</th>' for h in head) + '</tr>')
-        for q in quality:
-            # without a model the columns are absent; the NaN rows only keep the expressions below evaluable
-            m, s, a = q['measured'], q.get('simulated') or _NO_MODEL, q.get('analytic') or _NO_MODEL
-            cells = [f'{q["frequency"]:.3g}', f'{q["amplitude"] * 1e3:.3g}', str(q['cycles']),
-                     f'{m["k_dyn"] * 1e-6:.4g}', f'{m["sigma_k"] * 1e-6:.2g}']
-            cells += [f'{s["k_dyn"] * 1e-6:.4g}'] * has_s + [f'{a["k_dyn"] * 1e-6:.4g}'] * has_a
-            cells += [f'{100 * s["e_k"]:.2f}'] * has_s + [f'{100 * a["e_k"]:.2f}'] * has_a
-            cells += [f'{m["c_eq"] * 1e-3:.4g}', f'{m["sigma_c"] * 1e-3:.2g}']
-            cells += [f'{s["c_eq"] * 1e-3:.4g}'] * has_s + [f'{a["c_eq"] * 1e-3:.4g}'] * has_a
-            cells += [f'{100 * s["e_c"]:.2f}'] * has_s + [f'{100 * a["e_c"]:.2f}'] * has_a
-            cells += [f'{np.degrees(m["loss_angle"]):.2f}', f'{m["energy"]:.4g}']
-            parts.append('<tr>' + ''.join(f'<td>{c}</td>' for c in cells) + '</tr>')
-        parts.append('</table>')
-        for kind, what in (('simulated', 'run over the measured displacement'), ('analytic', 'first harmonic')):
-            if quality[0].get(kind) is not None:
-                ek = max(abs(q[kind]['e_k']) for q in quality)
-                ec = max(abs(q[kind]['e_c']) for q in quality)
-                parts.append(f'<p>Max |error|, model {what}: K_dyn {100 * ek:.2f} %, C_eq {100 * ec:.2f} %.</p>')
+        parts += _blocks_html(quality)
     parts += events_html(getattr(run, 'events', []))
     if messages:
         parts.append('<h2>Notes</h2><ul>' + ''.join(f'<li>{esc(m)}</li>' for m in messages) + '</ul>')
+    captions = _captions(sigma_f, band_used)
+    for name in FIGURES:
+        head, text = captions[name]
+        if name in images:
+            parts.append(f'<h2>{esc(head)}</h2><img alt="{name}" src="data:image/png;base64,{images[name]}">'
+                         + (f'<p class="caption">{esc(text)}</p>' if text else ''))
+        elif name in skipped:
+            parts.append(f'<h2>{esc(head)}</h2><p class="caption">{esc(skipped[name])}</p>')
+    parts.append('</body></html>')
+    return '\n'.join(parts)
+
+
+def _model_html(model, stats) -> list:
+    """The model section: its elements, the fit box, the parameter table and how it reproduces the recording."""
+    esc = html.escape
+    spec = model.spec
+    temp = spec.meta.get('temperature')
+    parts = [f'<h2>Model: {esc(spec.name or "model")}</h2>'
+             f'<p>Elements in parallel: {esc(" + ".join(e.type for e in spec.elements))}'
+             + (f'; identified at {temp:g} &deg;C' if isinstance(temp, (int, float)) else '')
+             + (f'. Source: {esc(model.source)}' if model.source else '') + '.</p>']
+    parts += _fit_box(model)
+    parts.append('<h3>Parameters (papers\' units)</h3>')
+    parts += _param_table(model)
+    if not model.results:
+        parts.append('<p>No uncertainties in this model (no sigma beside the values).</p>')
+    if stats is not None:
+        msr, n = stats
+        parts.append(f'<p>On this recording: mean (residual / sigma_F)<sup>2</sup> = <b>{msr:.3g}</b> over '
+                     f'{n} analysed samples (offset per block removed; no parameter fitted here, so near 1 '
+                     'means the model reproduces this recording to its noise).</p>')
+    return parts
+
+
+def _blocks_html(quality) -> list:
+    """The block table (measured, and the model run and first harmonic where there is a model) and its maxima."""
+    has_a = quality[0].get('analytic') is not None        # a report without a model has neither
+    has_s = quality[0].get('simulated') is not None
+    head = ['f [Hz]', 'x0 [mm]', 'cycles', 'K_dyn [kN/mm]', '&plusmn;1 sigma']
+    head += ['model run'] * has_s + ['model 1st harm.'] * has_a + ['e_K run [%]'] * has_s
+    head += ['e_K 1st harm. [%]'] * has_a + ['C_eq [kN s/m]', '&plusmn;1 sigma'] + ['model run'] * has_s
+    head += ['model 1st harm.'] * has_a + ['e_C run [%]'] * has_s + ['e_C 1st harm. [%]'] * has_a
+    head += ['loss angle [deg]', 'E [J]']
+    parts = ['<h2>Blocks</h2><table class="blocks"><tr>' + ''.join(f'<th>{h}</th>' for h in head) + '</tr>']
+    for q in quality:
+        # without a model the columns are absent; the NaN rows only keep the expressions below evaluable
+        m, s, a = q['measured'], q.get('simulated') or _NO_MODEL, q.get('analytic') or _NO_MODEL
+        cells = [f'{q["frequency"]:.3g}', f'{q["amplitude"] * 1e3:.3g}', str(q['cycles']),
+                 f'{m["k_dyn"] * 1e-6:.4g}', f'{m["sigma_k"] * 1e-6:.2g}']
+        cells += [f'{s["k_dyn"] * 1e-6:.4g}'] * has_s + [f'{a["k_dyn"] * 1e-6:.4g}'] * has_a
+        cells += [f'{100 * s["e_k"]:.2f}'] * has_s + [f'{100 * a["e_k"]:.2f}'] * has_a
+        cells += [f'{m["c_eq"] * 1e-3:.4g}', f'{m["sigma_c"] * 1e-3:.2g}']
+        cells += [f'{s["c_eq"] * 1e-3:.4g}'] * has_s + [f'{a["c_eq"] * 1e-3:.4g}'] * has_a
+        cells += [f'{100 * s["e_c"]:.2f}'] * has_s + [f'{100 * a["e_c"]:.2f}'] * has_a
+        cells += [f'{np.degrees(m["loss_angle"]):.2f}', f'{m["energy"]:.4g}']
+        parts.append('<tr>' + ''.join(f'<td>{c}</td>' for c in cells) + '</tr>')
+    parts.append('</table>')
+    for kind, what in (('simulated', 'run over the measured displacement'), ('analytic', 'first harmonic')):
+        if quality[0].get(kind) is not None:
+            ek = max(abs(q[kind]['e_k']) for q in quality)
+            ec = max(abs(q[kind]['e_c']) for q in quality)
+            parts.append(f'<p>Max |error|, model {what}: K_dyn {100 * ek:.2f} %, C_eq {100 * ec:.2f} %.</p>')
+    return parts
+
+
+def _captions(sigma_f: float, band_used) -> dict:
+    """Figure name -> (heading, caption): what each figure shows and how to read it."""
     band = (f'The shaded bands are the model\'s +-1 sigma from its parameter uncertainty: {band_used} parameter '
             'sets drawn from independent normals with the reported sigmas, 16-84 % at each frequency. The file '
             'carries no correlations; ignoring them usually widens the band (parameters the data pin together, '
             'like x2 and f_fmax, move independently here).'
             if band_used else 'The model carries no parameter uncertainty: no band.')
-    captions = {
+    return {
         'loops': ('Hysteresis loops and residuals (cf. seed 000 Fig. 5/6)',
                   'Measured loops (blue) drawn on top of the model (red). Under each loop the residual F_model - '
                   'F_measured (offset per block removed) over the cycle phase (90 deg = largest displacement); '
@@ -278,12 +305,3 @@ def _html(run, blocks, model, quality, images, title, messages, sigma_f, stats, 
                    'lines: detector events (grey record, orange warn, red hold, black end).'),
         'errors': ('Relative errors per block (Eq. 28)', 'Error bars: 1 sigma of the measured K_dyn and C_eq.'),
     }
-    for name in FIGURES:
-        head, text = captions[name]
-        if name in images:
-            parts.append(f'<h2>{esc(head)}</h2><img alt="{name}" src="data:image/png;base64,{images[name]}">'
-                         + (f'<p class="caption">{esc(text)}</p>' if text else ''))
-        elif name in skipped:
-            parts.append(f'<h2>{esc(head)}</h2><p class="caption">{esc(skipped[name])}</p>')
-    parts.append('</body></html>')
-    return '\n'.join(parts)
