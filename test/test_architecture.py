@@ -150,9 +150,7 @@ OVERSIZE_FUNCTIONS = {
     'rig/can/canlog_reader.py:_decode': 132,
     'excitation/blocks.py:parse_block': 94,
     'session/run.py:_loop': 94,
-    'fitting/blocktrend.py:fit_trend': 89,
     'models/cycle_tracker.py:_run': 87,
-    'fitting/blocktrend.py:fit_block': 83,
 }
 OVERSIZE_MODULES = {
     'nodes/excitation_node.py': 798,

@@ -134,28 +134,9 @@ def fit_block(x, force, dt, block, orders=(1, 3), noise=None) -> dict:
     n, p = design.shape
     if n <= p:
         raise ValueError(f'block {getattr(block, "index", "?")}: {n} samples for {p} parameters')
-    # columns of very different size (x^3 ~ 1e-9 m^3): solve on unit-norm columns, scale back
-    scale = np.linalg.norm(design, axis=0)
-    scale[scale == 0] = 1.0
-    scaled = design / scale
-    coef_s, *_ = np.linalg.lstsq(scaled, y, rcond=None)
-    residual = y - scaled @ coef_s
-    rss = float(residual @ residual)
+    noise = float(noise_level(fs[ok]) if noise is None else noise)
+    coef, cov, rss, chi2_dof = _weighted_lstsq(design, y, noise, notes)
     dof = n - p
-    if noise is None:
-        noise = noise_level(fs[ok])
-    noise = float(noise)
-    if noise > 0 and math.isfinite(noise):
-        chi2_dof = rss / noise ** 2 / dof
-        inflation = max(1.0, chi2_dof)
-        variance = noise ** 2 * inflation
-    else:
-        chi2_dof = math.nan
-        variance = rss / dof
-        notes.append('no load-cell noise level: sigmas from the residual scatter, chi2/dof undefined')
-    cov_s = variance * np.linalg.pinv(scaled.T @ scaled)
-    coef = coef_s / scale
-    cov = cov_s / np.outer(scale, scale)
     sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
     with np.errstate(invalid='ignore', divide='ignore'):
         corr = cov / np.outer(sig, sig)
@@ -169,6 +150,31 @@ def fit_block(x, force, dt, block, orders=(1, 3), noise=None) -> dict:
                 'orders': orders, 'index': getattr(block, 'index', None),
                 'recording': getattr(block, 'recording', ''), 'notes': notes})
     return row
+
+
+def _weighted_lstsq(design, y, noise: float, notes: list) -> tuple:
+    """(coefficients, covariance, residual sum of squares, chi2/dof) of y = design @ c for load-cell noise sigma
+    `noise` [N]; the covariance is inflated by chi2/dof when that exceeds 1. Without a usable noise level the
+    sigmas come from the residual scatter (noted).
+    """
+    n, p = design.shape
+    # columns of very different size (x^3 ~ 1e-9 m^3): solve on unit-norm columns, scale back
+    scale = np.linalg.norm(design, axis=0)
+    scale[scale == 0] = 1.0
+    scaled = design / scale
+    coef_s, *_ = np.linalg.lstsq(scaled, y, rcond=None)
+    residual = y - scaled @ coef_s
+    rss = float(residual @ residual)
+    dof = n - p
+    if noise > 0 and math.isfinite(noise):
+        chi2_dof = rss / noise ** 2 / dof
+        variance = noise ** 2 * max(1.0, chi2_dof)
+    else:
+        chi2_dof = math.nan
+        variance = rss / dof
+        notes.append('no load-cell noise level: sigmas from the residual scatter, chi2/dof undefined')
+    cov_s = variance * np.linalg.pinv(scaled.T @ scaled)
+    return coef_s / scale, cov_s / np.outer(scale, scale), rss, chi2_dof
 
 
 def fit_blocks(runs_blocks, orders=(1, 3)) -> list:
@@ -243,30 +249,11 @@ def fit_trend(rows, name, f_degree=3, a_degree=2) -> dict:
         raise ValueError(f'no row has a finite {name} with a sigma > 0')
     fu, au, yu, su = f[use], a[use], y[use], sigma[use]
 
-    n_f, n_a = _distinct(fu), _distinct(au)
-    if f_degree > n_f - 1:
-        notes.append(f'{n_f} distinct frequencies: frequency degree lowered from {f_degree} to {n_f - 1}')
-        f_degree = n_f - 1
-    if a_degree > n_a - 1:
-        notes.append(f'{n_a} distinct amplitudes: amplitude degree lowered from {a_degree} to {n_a - 1}')
-        a_degree = n_a - 1
     # unit-size variables for the solve; c[i][j] = c'[i][j] / (f_s^i a_s^j)
     f_s = float(np.max(np.abs(fu))) or 1.0
     a_s = float(np.max(np.abs(au))) or 1.0
-    while True:
-        design = _design(fu / f_s, au / a_s, f_degree, a_degree) / su[:, None]
-        p = design.shape[1]
-        if np.linalg.matrix_rank(design) == p and p <= yu.size:
-            break
-        # e.g. operating points on a diagonal instead of a grid: drop the higher of the two degrees
-        old = (f_degree, a_degree)
-        if f_degree >= a_degree and f_degree > 0:
-            f_degree -= 1
-        else:
-            a_degree -= 1
-        notes.append(f'design rank-deficient for degrees (f {old[0]}, A {old[1]}): lowered to (f {f_degree}, '
-                     f'A {a_degree})')
-
+    design, f_degree, a_degree = _solvable_design(fu / f_s, au / a_s, su, f_degree, a_degree, notes)
+    p = design.shape[1]
     rhs = yu / su
     coef_s, *_ = np.linalg.lstsq(design, rhs, rcond=None)
     res = rhs - design @ coef_s
@@ -299,6 +286,33 @@ def fit_trend(rows, name, f_degree=3, a_degree=2) -> dict:
 
 
 # ----------------------------------------------------------------------------------------------------- report
+
+
+def _solvable_design(fu, au, su, f_degree: int, a_degree: int, notes: list) -> tuple:
+    """(weighted design matrix, f degree, A degree) with the degrees lowered (each with a note) to what the
+    data can determine: one less than the distinct values, then while the design is rank-deficient.
+    """
+    n_f, n_a = _distinct(fu), _distinct(au)
+    if f_degree > n_f - 1:
+        notes.append(f'{n_f} distinct frequencies: frequency degree lowered from {f_degree} to {n_f - 1}')
+        f_degree = n_f - 1
+    if a_degree > n_a - 1:
+        notes.append(f'{n_a} distinct amplitudes: amplitude degree lowered from {a_degree} to {n_a - 1}')
+        a_degree = n_a - 1
+    while True:
+        design = _design(fu, au, f_degree, a_degree) / su[:, None]
+        p = design.shape[1]
+        if np.linalg.matrix_rank(design) == p and p <= su.size:
+            return design, f_degree, a_degree
+        # e.g. operating points on a diagonal instead of a grid: drop the higher of the two degrees
+        old = (f_degree, a_degree)
+        if f_degree >= a_degree and f_degree > 0:
+            f_degree -= 1
+        else:
+            a_degree -= 1
+        notes.append(f'design rank-deficient for degrees (f {old[0]}, A {old[1]}): lowered to (f {f_degree}, '
+                     f'A {a_degree})')
+
 
 def _paper_unit(name):
     """(factor, unit): value [SI] * factor = value in the paper's units; K_k [N/m^k] -> kN/mm^k, b, offset -> kN."""
