@@ -150,7 +150,6 @@ OVERSIZE_FUNCTIONS = {
     'rig/can/canlog_reader.py:_decode': 132,
     'excitation/blocks.py:parse_block': 94,
     'session/run.py:_loop': 94,
-    'models/cycle_tracker.py:_run': 87,
 }
 OVERSIZE_MODULES = {
     'nodes/excitation_node.py': 798,

@@ -218,7 +218,15 @@ class CycleTracker:
             width, start = 2 * (i + k - start), i + k
             i += k + 1
         self.n, self.x_prev, self.amax = base + n, float(x[-1]), float(amax[-1])
-        # estimates per sample from the reversal history: sample j has seen c[j] of this batch's reversals
+        a, x0, f = self._estimates(n, n_rev0, rev_pos, hist_x, hist_t, amax)
+        counts = np.diff(np.asarray([0] + dir_pos + [n], dtype=int))
+        direction = np.repeat(np.asarray([d0] + dir_val, dtype=int), counts)
+        return a, x0, f, direction
+
+    def _estimates(self, n, n_rev0, rev_pos, hist_x, hist_t, amax):
+        """(A, x0, f) per sample of a batch of n from the reversal history: sample j has seen the reversals of
+        this batch at positions rev_pos up to j (the defaults until two reversals are known).
+        """
         c = np.searchsorted(np.asarray(rev_pos, dtype=int), np.arange(n), side='right')
         hx, ht = np.asarray(hist_x, dtype=float), np.asarray(hist_t, dtype=float)
         x1, x2, t1, t2 = hx[c + 1], hx[c], ht[c + 1], ht[c]
@@ -231,6 +239,4 @@ class CycleTracker:
                       self.default_center if self.default_center is not None else self.x_start)
         f = np.where(valid, 1.0 / (2.0 * (span * self.dt)),
                      self.default_frequency if self.default_frequency is not None else math.nan)
-        counts = np.diff(np.asarray([0] + dir_pos + [n], dtype=int))
-        direction = np.repeat(np.asarray([d0] + dir_val, dtype=int), counts)
-        return a, x0, f, direction
+        return a, x0, f
