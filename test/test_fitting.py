@@ -22,8 +22,8 @@ import pytest
 from rubber_rig.fitting.blocks import split_blocks
 from rubber_rig.fitting.data import from_arrays, load_run
 from rubber_rig.fitting.identification import fit_model
-from rubber_rig.fitting.modelfit import BlockTargets, coordinates, fit_harmonic_model
 from rubber_rig.fitting.paramfile import PARAM_NAMES
+from rubber_rig.fitting.search import BlockTargets, coordinates, fit_harmonic_model
 from rubber_rig.models import build_model, load_parameter_set, steady_state_properties
 from rubber_rig.models.friction import berg_energy, berg_peak_force, friction_first_harmonic
 from rubber_rig.models.modelfile import resolve_model

@@ -31,18 +31,8 @@ from .blocks import noise_level, noise_variance_uncertainty
 from .budget import add_budget, linearised_shift
 from .calibration import corrected_force
 from .metrics import window_properties
-from .modelfit import (
-    DELAY,
-    BlockTargets,
-    ModelFit,
-    TimeProblem,
-    coordinates,
-    covariance,
-    fit_harmonic_model,
-    fit_time_model,
-    jacobian,
-    physical_uncertainty,
-)
+from .modelfit import ModelFit, TimeProblem, covariance, fit_time_model, jacobian, physical_uncertainty
+from .search import DELAY, BlockTargets, coordinates, fit_harmonic_model
 from .structure import residual_structure
 from .verdict import misfit_test, notes, verdict
 

@@ -45,7 +45,8 @@ from rubber_rig.units import to_si
 from .blocks import BlockResult
 from .budget import add_budget, linearised_shift
 from .group_fit import block_quality, harmonic_uncertainty
-from .modelfit import BlockTargets, ModelFit, coordinates, fit_harmonic_model, harmonic_residuals
+from .modelfit import ModelFit
+from .search import BlockTargets, coordinates, fit_harmonic_model, harmonic_residuals
 from .verdict import misfit_test, notes, verdict
 
 COLUMNS = {'frequency': 'frequency', 'amplitude': 'length', 'preload': 'length', 'mean': 'length',
