@@ -151,7 +151,6 @@ OVERSIZE_FUNCTIONS = {
     'fitting/identification.py:fit_group': 118,
     'fitting/blocks.py:split_blocks': 102,
     'recording/recover.py:recover': 99,
-    'excitation/blocks.py:parse_block': 94,
     'session/run.py:_loop': 94,
     'fitting/report.py:_html': 91,
     'fitting/blocktrend.py:fit_trend': 89,
@@ -168,9 +167,9 @@ OVERSIZE_MODULES = {
     'nodes/rig_driver_node.py': 544,
     'fitting/modelfit.py': 531,
     'rig/config.py': 474,
-    'excitation/detectors.py': 446,
+    'excitation/detectors.py': 445,
     'testing/processes.py': 427,
-    'excitation/runner.py': 426,
+    'excitation/runner.py': 425,
     'models/modelfile.py': 424,
 }
 

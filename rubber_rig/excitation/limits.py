@@ -37,7 +37,6 @@ from rubber_rig.models.fractional import zener_complex_stiffness
 from rubber_rig.models.friction import berg_peak_force
 
 from ..safety import LimitError, Limits
-from . import waveforms as wf
 
 # setpoints the pre-start check generates at most per program (about 0.1 s of numpy); the rest is bounded
 EXACT_SAMPLES = 1 << 21
@@ -104,16 +103,11 @@ def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, bud
     limits.check_setpoints([first], fs, prev, where)                    # the step into the block
     last = None
     if blk.oscillating:
-        a, f_top = blk.amplitude, _max_frequency(blk)
-        lo, hi = blk.mean - a, blk.mean + a
-        h = f_top / fs                                                 # <= 0.1 (check_sample_rate)
-        if blk.waveform == 'triangle':
-            steady = 4.0 * blk.frequency * a                           # constant edge slope
-        elif blk.waveform == 'square':
-            steady = min(4.0 * blk.frequency * a * blk.square_slope, 2.0 * a * fs)
-        else:                                                          # sine, sweeps: |sin(p + d) - sin p|
-            steady = 2.0 * a * fs * math.sin(math.pi * min(h, 0.5))   # <= 2 sin(d / 2), d = 2 pi f / fs
-        f_out = blk.frequency_end if blk.waveform in wf.SWEEPS else blk.frequency
+        kind, a, f_top = blk.type, blk.amplitude, _max_frequency(blk)
+        low, high = kind.span(blk)
+        lo, hi = blk.mean + low * a, blk.mean + high * a
+        steady = a * kind.step(blk, fs)                                # sampled full-amplitude part
+        f_out = blk.frequency_end if kind.family == 'sweep' else blk.frequency
         k_in = min(n, int(math.ceil(blk.taper_cycles / blk.frequency * fs)) + 2)
         k_out = min(n, int(math.ceil(blk.taper_cycles / f_out * fs)) + 2)
         if k_in + k_out <= budget:                                     # the tapers sample by sample
@@ -123,8 +117,8 @@ def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, bud
             limits.check_setpoints(tail, fs, None, where)
             last, v = float(tail[-1]), steady
         else:
-            v = max(steady, a * f_top * _taper_slope(blk))
-    elif blk.waveform == 'ramp':
+            v = max(steady, a * kind.cycle_rate(blk) * _taper_slope(blk))
+    elif blk.type.family == 'ramp':
         d = abs(blk.target - blk.start_level)
         lo, hi = min(blk.start_level, blk.target), max(blk.start_level, blk.target)
         # raised cosine sampled every 1/(D fs) of its length: steps <= d sin(pi / (2 D fs))
@@ -132,8 +126,7 @@ def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, bud
     else:                                                              # hold
         lo = hi = blk.start_level
         v = 0.0
-    if blk.oscillating and not (blk.waveform != 'triangle' and blk.waveform != 'square'
-                                and (2 * math.pi * f_top) ** 2 * a <= limits.deceleration_max):
+    if blk.oscillating and not (blk.type.sine_like and (2 * math.pi * f_top) ** 2 * a <= limits.deceleration_max):
         # where an abort can stop: a sine whose acceleration stays below deceleration_max stops inside its
         # own peaks; otherwise allow for the braking distance at the peak speed
         brake = v * v / (2 * limits.deceleration_max) + v / fs
@@ -153,17 +146,18 @@ def _taper_slope(blk) -> float:
     """Bound of |d/dphase [env(phase) shape(phase)]| over a taper of a periodic block (per cycle).
 
     In the taper env = (1 - cos(pi u)) / 2 with u = phase / taper_cycles, so |env'| = pi sin(pi u) / (2 T);
-    with |shape| <= 1 and |shape'| <= s (2 pi sine, 4 triangle, 4 square_slope): |env' shape + env shape'| <=
-    |env'| + s env, and for a sine sqrt(env'^2 + (2 pi env)^2) (Cauchy-Schwarz on sin, cos). Maximised over u on
-    a fine grid (+1e-4 for the grid); 0.8 % above 2 pi for a sine with one taper cycle.
+    with |shape| <= p and |shape'| <= s (waveform_types: p from its span, s its slope - 2 pi sine, 4 triangle, 4
+    square_slope): |env' shape + env shape'| <= p |env'| + s env, and for a sine sqrt(env'^2 + (2 pi env)^2)
+    (Cauchy-Schwarz on sin, cos). Maximised over u on a fine grid (+1e-4 for the grid); 0.8 % above 2 pi for
+    a sine with one taper cycle.
     """
     env = 0.5 - 0.5 * np.cos(np.pi * _U)
     d_env = 0.5 * np.pi * np.sin(np.pi * _U) / blk.taper_cycles
-    if blk.waveform in ('triangle', 'square'):
-        slope = 4.0 * (blk.square_slope if blk.waveform == 'square' else 1.0)
-        g = d_env + slope * env
+    kind = blk.type
+    if kind.sine_like:
+        g = np.hypot(d_env, kind.slope(blk) * env)
     else:
-        g = np.hypot(d_env, 2 * np.pi * env)
+        g = max(abs(v) for v in kind.span(blk)) * d_env + kind.slope(blk) * env
     return float(np.max(g)) * (1 + 1e-4)
 
 
@@ -178,11 +172,12 @@ def element_force_model(params='swing_arm_joint_20C', harmonics: int = 256) -> C
     params: a parameter-set name (default swing_arm_joint_20C: the simulated specimen), a ZenerBergParams or a
     mapping of its values. Steady state, analytic (seed 000 Eq. 11, 17):
 
-        F_peak ~ k0 |mean| + max_t |F_ev(t)| + F_f0(A)
+        F_peak ~ k0 |mean + dc A| + max_t |F_ev(t)| + F_f0(A)
 
     with F_ev the fractional Zener's periodic steady force under the block's unit shape (sine: exactly
-    |K_ev(j 2 pi f)| A; triangle and square summed over `harmonics` harmonics), at the block's highest frequency
-    (|K_ev| grows with frequency, so that covers a sweep), F_f0 Berg's steady peak friction force (Eq. 17; rate
+    |K_ev(j 2 pi f)| A; other shapes summed over `harmonics` harmonics, or up to a multisine's highest line), at
+    the block's highest frequency (|K_ev| grows with frequency, so that covers a sweep), k0 |mean + dc A| the
+    static part (dc: the shape's mean, 0.5 for a haversine), F_f0 Berg's steady peak friction force (Eq. 17; rate
     independent, so the same for every shape) and the static stiffness k0 carrying the mean (preload). The peak
     of a time-domain run from rest is slightly higher (the start-up transient; test_input_hardening_excitation
     bounds the difference), well inside the margin force_max should keep anyway. Hold and ramp blocks:
@@ -197,7 +192,6 @@ def element_force_model(params='swing_arm_joint_20C', harmonics: int = 256) -> C
     if not isinstance(p, ZenerBergParams):
         raise ValueError(f'element_force_model needs fractional_zener_berg parameters, got {type(p).__name__}')
     n_grid = 8 * harmonics
-    phase = np.arange(n_grid) / n_grid
 
     def k_ev(frequency):
         return zener_complex_stiffness(2 * np.pi * np.asarray(frequency, float), p.k0, p.k_inf, p.tau, p.alpha)
@@ -206,15 +200,17 @@ def element_force_model(params='swing_arm_joint_20C', harmonics: int = 256) -> C
         if not block.oscillating:
             level = max(abs(block.start_level), abs(block.end_level))
             return float(p.k0 * level + p.f_fmax)
-        a, f = block.amplitude, _max_frequency(block)
-        if block.waveform in ('triangle', 'square'):
-            coef = np.fft.rfft(wf.shape(block.waveform, phase, block.square_slope))[:harmonics + 1]
-            n = np.arange(coef.size)
-            coef[0] = 0.0                                                  # zero-mean shapes; k0 carries the mean
-            coef[1:] *= k_ev(n[1:] * f)
-            linear = float(np.max(np.abs(np.fft.irfft(coef, n_grid)))) * a
+        kind, a = block.type, block.amplitude
+        if kind.sine_like:
+            linear = float(abs(k_ev(_max_frequency(block)))) * a
         else:
-            linear = float(abs(k_ev(f))) * a
-        return float(p.k0 * abs(block.mean) + linear + berg_peak_force(p.f_fmax, p.x2, a))
+            top = max(harmonics, kind.top_harmonic(block))
+            grid = max(n_grid, 8 * top)
+            coef = np.fft.rfft(kind.shape(block, np.arange(grid) / grid))[:top + 1]
+            n = np.arange(coef.size)
+            coef[0] = 0.0                                                  # k0 carries the mean and the shape's dc
+            coef[1:] *= k_ev(n[1:] * block.frequency)
+            linear = float(np.max(np.abs(np.fft.irfft(coef, grid)))) * a
+        return float(p.k0 * abs(block.mean + kind.dc * a) + linear + berg_peak_force(p.f_fmax, p.x2, a))
 
     return peak_force
