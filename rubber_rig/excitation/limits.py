@@ -154,7 +154,9 @@ def _taper_slope(blk) -> float:
     env = 0.5 - 0.5 * np.cos(np.pi * _U)
     d_env = 0.5 * np.pi * np.sin(np.pi * _U) / blk.taper_cycles
     kind = blk.type
-    if kind.sine_like:
+    if kind.taper_slope is not None:
+        g = kind.taper_slope(blk, env, d_env)
+    elif kind.sine_like:
         g = np.hypot(d_env, kind.slope(blk) * env)
     else:
         g = max(abs(v) for v in kind.span(blk)) * d_env + kind.slope(blk) * env
@@ -172,12 +174,12 @@ def element_force_model(params='swing_arm_joint_20C', harmonics: int = 256) -> C
     params: a parameter-set name (default swing_arm_joint_20C: the simulated specimen), a ZenerBergParams or a
     mapping of its values. Steady state, analytic (seed 000 Eq. 11, 17):
 
-        F_peak ~ k0 |mean + dc A| + max_t |F_ev(t)| + F_f0(A)
+        F_peak ~ k0 |mean| + max_t |F_ev(t)| + F_f0(A)
 
     with F_ev the fractional Zener's periodic steady force under the block's unit shape (sine: exactly
     |K_ev(j 2 pi f)| A; other shapes summed over `harmonics` harmonics, or up to a multisine's highest line), at
-    the block's highest frequency (|K_ev| grows with frequency, so that covers a sweep), k0 |mean + dc A| the
-    static part (dc: the shape's mean, 0.5 for a haversine), F_f0 Berg's steady peak friction force (Eq. 17; rate
+    the block's highest frequency (|K_ev| grows with frequency, so that covers a sweep), plus |K_ev(f)| dc A
+    for a shape with a mean of its own (dc: 0.5 for a haversine), F_f0 Berg's steady peak friction force (Eq. 17; rate
     independent, so the same for every shape) and the static stiffness k0 carrying the mean (preload). The peak
     of a time-domain run from rest is slightly higher (the start-up transient; test_input_hardening_excitation
     bounds the difference), well inside the margin force_max should keep anyway. Hold and ramp blocks:
@@ -211,6 +213,9 @@ def element_force_model(params='swing_arm_joint_20C', harmonics: int = 256) -> C
             coef[0] = 0.0                                                  # k0 carries the mean and the shape's dc
             coef[1:] *= k_ev(n[1:] * block.frequency)
             linear = float(np.max(np.abs(np.fft.irfft(coef, grid)))) * a
-        return float(p.k0 * abs(block.mean + kind.dc * a) + linear + berg_peak_force(p.f_fmax, p.x2, a))
+        # a shape's own mean (dc) builds up within its taper, too fast to relax to k0: carried at |K_ev(f)|;
+        # friction at amplitude A: a one-sided shape travels A, and a loop of 2 A bounds that (Berg is monotone)
+        static = p.k0 * abs(block.mean) + kind.dc * a * float(abs(k_ev(block.frequency)))
+        return float(static + linear + berg_peak_force(p.f_fmax, p.x2, a))
 
     return peak_force

@@ -55,6 +55,8 @@ class WaveformType:
     'bands' (a row per frequency band) or None. top_harmonic(block): highest harmonic of the base frequency
     the shape contains (for the element force model). frequency_fields(block): (field, frequency [Hz]) it runs
     at, for the lowest-frequency and sample-rate rules. log_sweep: a sweep's frequency rises exponentially.
+    taper_slope(block, env, d_env): bound of |d/dphase (env shape)| given the taper envelope and its slope
+    (arrays; default: sine_like -> hypot(d_env, slope env), else max|span| d_env + slope env).
     """
 
     name: str
@@ -74,6 +76,7 @@ class WaveformType:
     summary: Optional[str] = None
     top_harmonic: Callable = lambda block: 1
     log_sweep: bool = False
+    taper_slope: Optional[Callable] = None
     frequency_fields: Callable = lambda block: [('frequency', block.frequency)]
     aliases: tuple = ()
 
@@ -244,7 +247,9 @@ _ENTRIES = (
     # x = mean + amplitude (1 - cos(2 pi f t)) / 2: one-sided pulses from the mean up to mean + amplitude
     WaveformType('haversine', 'periodic', _PERIODIC_FIELDS, _parse_periodic, _cycles_and_frequency,
                  shape=lambda b, p: wf.haversine(p), slope=lambda b: math.pi, span=lambda b: (0.0, 1.0),
-                 step=lambda b, fs: 0.5 * _sine_step(b, fs), dc=0.5, measure='full_range', summary='steady'),
+                 step=lambda b, fs: 0.5 * _sine_step(b, fs), dc=0.5, measure='full_range', summary='steady',
+                 # env (1 - cos th) / 2 has slope env' / 2 - env' cos(th) / 2 + pi env sin(th) (Cauchy-Schwarz)
+                 taper_slope=lambda b, env, d_env: 0.5 * d_env + np.hypot(0.5 * d_env, math.pi * env)),
     # x = mean + amplitude u(f t), u an equal-line random-phase multisine scaled to peak 1 (waveforms.py)
     WaveformType('multisine', 'periodic', _PERIODIC_FIELDS | {'f_start', 'f_end', 'seed'}, _parse_multisine,
                  lambda b: {**_cycles_and_frequency(b), 'f_start': b.frequency_start, 'f_end': b.frequency_end,
