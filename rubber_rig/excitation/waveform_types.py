@@ -95,7 +95,7 @@ class WaveformType:
         return max(block.frequency, block.frequency_end) if self.family == 'sweep' else block.frequency
 
     def velocity_per_metre(self, block) -> float:
-        """Sup |dx/dt| per metre of amplitude [1/s] of the full-amplitude part."""
+        """Bound of |dx/dt| per metre of amplitude [1/s] of the full-amplitude part."""
         return self.cycle_rate(block) * self.slope(block)
 
     def fit_cycle(self, phase, x):
