@@ -17,6 +17,7 @@
 validation naming the field, the pre-start limit check (sampled and closed-form), and a run on the simulated
 rig. No ROS."""
 import math
+import time
 
 import numpy as np
 import pytest
@@ -139,6 +140,19 @@ def test_multisine_limit_check_uses_the_generated_signal():
         check_program(Limits(), p, 100.0)
 
 
+def test_the_pre_start_check_of_a_day_long_multisine_of_4096_lines_has_a_bounded_cost():
+    """A sample of a multisine costs its lines: the exact budget counts them, so the longest multisine a program
+    may hold is checked from its bounds within a fraction of a second, and still refused when too fast."""
+    p = program('{name: m, waveform: multisine, frequency: 0.1 Hz, f_start: 0.1 Hz, f_end: 409.6 Hz, '
+                'amplitude: 0.1 mm, cycles: 8000}')
+    assert p.blocks[0].seconds() > 22 * 3600 and multisine_harmonics(p.blocks[0]) == (1, 4096)
+    t0 = time.process_time()
+    check_program(Limits(), p, 5000.0)
+    assert time.process_time() - t0 < 2.0
+    with pytest.raises(LimitError, match="block 0 'm'.*velocity_max"):
+        check_program(Limits(velocity_max=0.05), p, 5000.0)
+
+
 WAVES = ['{name: b, waveform: haversine, frequency: 7.3 Hz, amplitude: 1.3 mm, cycles: 300, taper_cycles: 2}',
          '{name: b, waveform: multisine, frequency: 0.25 Hz, f_start: 0.5 Hz, f_end: 23 Hz, amplitude: 1.3 mm, '
          'cycles: 5, seed: 1}']
@@ -153,7 +167,7 @@ def test_closed_form_bounds_agree_with_every_setpoint(block, tapers_exact, monke
     x = p.setpoints(FS)
     v_peak = float(np.max(np.abs(np.diff(x)))) * FS
     lo, hi = float(np.min(x)), float(np.max(x))
-    monkeypatch.setattr(limits_module, 'EXACT_SAMPLES', 1001 + (12000 if tapers_exact else 0))
+    monkeypatch.setattr(limits_module, 'EXACT_SAMPLES', 1001 + (30000 if tapers_exact else 0))
 
     def limits(**kw):
         return Limits(**{'deceleration_max': 1e9, 'velocity_max': 1.0, **kw})

@@ -16,7 +16,8 @@
 
 The pre-start check (check_program) has a bounded cost for every program that loads (at most 24 h, see
 blocks.MAX_PROGRAM_DURATION): it generates and checks the setpoints exactly, block by block, as long as the
-program has generated at most EXACT_SAMPLES of them; a block beyond that budget is checked from closed-form
+program has generated at most EXACT_SAMPLES of them (a sample of a costlier waveform counts as
+WaveformType.cost samples: a multisine's lines); a block beyond that budget is checked from closed-form
 bounds instead (its taper in and out still sample by sample while the budget lasts). Those bounds are the
 supremum of what the samples can reach - the sampled sine's peak velocity 2 A fs sin(pi f / fs) rather than
 2 pi f A - so a long block is refused only where some of its samples would come arbitrarily close to the
@@ -63,8 +64,9 @@ def check_program(limits: Limits, program, sample_rate: float, force_model: Opti
     for i, blk in enumerate(program.blocks):
         where = f"program {program.name!r} block {i} '{blk.name}'"
         n = int(starts[i + 1] - starts[i])
-        if n <= budget:
-            budget -= n
+        cost = blk.type.cost(blk)
+        if n * cost <= budget:
+            budget -= n * cost
             for lo in range(0, n, _CHUNK):
                 x = blk.evaluate(np.arange(lo, min(lo + _CHUNK, n)) / fs)
                 limits.check_setpoints(x, fs, prev, where)
@@ -93,7 +95,7 @@ def _check_model_force(limits: Limits, model, blk, where: str):
                          f'{limits.force_max:g} N')
 
 
-def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, budget: int, where: str):
+def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, budget: float, where: str):
     """Check a block of n samples (more than the exact budget) from closed-form bounds on its samples.
 
     Returns (its last setpoint, the budget left). The taper in and out (and the step from `prev` into the
@@ -110,8 +112,9 @@ def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, bud
         f_out = blk.frequency_end if kind.family == 'sweep' else blk.frequency
         k_in = min(n, int(math.ceil(blk.taper_cycles / blk.frequency * fs)) + 2)
         k_out = min(n, int(math.ceil(blk.taper_cycles / f_out * fs)) + 2)
-        if k_in + k_out <= budget:                                     # the tapers sample by sample
-            budget -= k_in + k_out
+        cost = kind.cost(blk)
+        if (k_in + k_out) * cost <= budget:                            # the tapers sample by sample
+            budget -= (k_in + k_out) * cost
             limits.check_setpoints(blk.evaluate(np.arange(k_in) / fs), fs, prev, where)
             tail = blk.evaluate(np.arange(n - k_out, n) / fs)
             limits.check_setpoints(tail, fs, None, where)

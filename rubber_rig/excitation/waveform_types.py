@@ -56,7 +56,8 @@ class WaveformType:
     the shape contains (for the element force model). frequency_fields(block): (field, frequency [Hz]) it runs
     at, for the lowest-frequency and sample-rate rules. log_sweep: a sweep's frequency rises exponentially.
     taper_slope(block, env, d_env): bound of |d/dphase (env shape)| given the taper envelope and its slope
-    (arrays; default: sine_like -> hypot(d_env, slope env), else max|span| d_env + slope env).
+    (arrays; default: sine_like -> hypot(d_env, slope env), else max|span| d_env + slope env). cost(block):
+    generating one of its samples, in samples of a sine (the pre-start check's exact budget counts it).
     """
 
     name: str
@@ -77,6 +78,7 @@ class WaveformType:
     top_harmonic: Callable = lambda block: 1
     log_sweep: bool = False
     taper_slope: Optional[Callable] = None
+    cost: Callable = lambda block: 1.0
     frequency_fields: Callable = lambda block: [('frequency', block.frequency)]
     aliases: tuple = ()
 
@@ -259,6 +261,7 @@ _ENTRIES = (
                  span=lambda b: (-_multisine_bounds(b)[0], _multisine_bounds(b)[0]),
                  step=lambda b, fs: b.frequency * _multisine_bounds(b)[1], measure='half_range',
                  controlled=False, judged=False, top_harmonic=lambda b: multisine_harmonics(b)[1],
+                 cost=lambda b: 1.0 + (multisine_harmonics(b)[1] - multisine_harmonics(b)[0] + 1) / 32,
                  frequency_fields=lambda b: [('frequency', b.frequency), ('f_end', b.frequency_end)]),
 )
 TYPES = {t.name: t for t in _ENTRIES}

@@ -54,7 +54,7 @@ def haversine(phase):
 
 # ---- random-phase multisine: equal-amplitude lines at whole multiples of the base frequency
 _MULTISINE_GRID = 64          # grid points per period of the highest line for the peak search
-_MULTISINE_CHUNK = 4096       # samples evaluated at once (chunk x lines sines)
+_MULTISINE_CHUNK = 1 << 15    # samples evaluated at once
 
 
 @functools.lru_cache(maxsize=32)
@@ -85,13 +85,24 @@ def multisine_lines(first: int, last: int, seed: int):
 
 
 def multisine(phase, first: int, last: int, seed: int):
-    """Unit random-phase multisine (see multisine_lines) at `phase` [cycles of the base frequency]."""
+    """Unit random-phase multisine (see multisine_lines) at `phase` [cycles of the base frequency].
+
+    Evaluated as Im(z^first P(z)) with z = exp(2 pi i phase) and P the polynomial of the lines' phasors (Horner:
+    one complex multiply-add per line and sample, about ten times cheaper than a sine per line; rounding
+    grows with the number of lines, ~1e-13 at 4096).
+    """
     n, phi, scale, _ = multisine_lines(first, last, seed)
+    coef = np.exp(1j * phi)
     flat = np.mod(np.asarray(phase, dtype=float), 1.0).ravel()
     out = np.empty(flat.size)
     for lo in range(0, flat.size, _MULTISINE_CHUNK):
         p = flat[lo:lo + _MULTISINE_CHUNK]
-        out[lo:lo + p.size] = np.sin(2 * np.pi * np.outer(p, n) + phi).sum(axis=1)
+        z = np.exp(2j * np.pi * p)
+        acc = np.full(p.size, coef[-1])
+        for c in coef[-2::-1]:
+            acc *= z
+            acc += c
+        out[lo:lo + p.size] = (np.exp(2j * np.pi * first * p) * acc).imag
     return (out / scale).reshape(np.shape(phase))
 
 
