@@ -18,16 +18,19 @@ validation naming the field, the pre-start limit check (sampled and closed-form)
 rig. No ROS."""
 import math
 import time
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from rubber_rig.excitation import TYPES, WAVEFORMS, Program, ProgramError
+from rubber_rig.excitation import TYPES, WAVEFORMS, Program, ProgramError, ProgramRunner
 from rubber_rig.excitation import limits as limits_module
 from rubber_rig.excitation import waveforms as wf
+from rubber_rig.excitation.detectors import blind_for, cycle_of
 from rubber_rig.excitation.limits import check_program, element_force_model
 from rubber_rig.excitation.waveform_types import MAX_MULTISINE_HARMONIC, multisine_harmonics
 from rubber_rig.models import build_model, load_parameter_set
+from rubber_rig.online.summary import BlockTable
 from rubber_rig.safety import LimitError, Limits
 from rubber_rig.session import run_program
 
@@ -214,3 +217,38 @@ def test_a_program_of_the_new_waveforms_runs_on_the_simulated_rig(control):
     assert (pulses.cycles, ms.cycles) == (12, 2)
     x = r.displacement[r.block_index == 0]                        # the pulses rise from the mean, one-sided
     assert x.min() > -0.05e-3 and 0.4e-3 < x.max() < 0.6e-3
+
+
+def test_cycle_detectors_judge_haversine_pulses_but_not_multisine_periods():
+    """A haversine cycle's amplitude is its peak-to-valley (twice the half range); a multisine's cycles are not
+    judged (the cycle tracker's cycles are not its periods), so the detectors are neither fed nor blind there."""
+    p = program('{name: h, waveform: haversine, frequency: 1 Hz, amplitude: 0.5 mm, cycles: 10}',
+                '{name: m, waveform: multisine, frequency: 0.5 Hz, f_start: 1 Hz, f_end: 5 Hz, amplitude: 0.5 mm, '
+                'cycles: 10}')
+    r = ProgramRunner(p, FS)
+    r.next_setpoints(p.n_samples(FS))
+    cycle = cycle_of(r, 3000, 4000, 0.2e-3, 0.25e-3, 0.25e-3, {}, {}, 0.0, 3.0)
+    assert cycle.block == 0 and cycle.amplitude == pytest.approx(0.5e-3)
+    assert blind_for(r, 8000, 0, FS) == pytest.approx(8.0)
+    start_m = int(p.block_starts(FS)[1])
+    assert cycle_of(r, start_m + 4000, start_m + 6000, 0.2e-3, 0.25e-3, 0.0, {}, {}, 0.0, 20.0) is None
+    assert blind_for(r, start_m + 20000, 0, FS) == 0.0
+
+
+def _metrics(block, i, f, amplitude, peak_amplitude):
+    side = SimpleNamespace(k_dyn=1e7, loss_angle=0.1, damping=0.1, c_eq=2e5, energy_harmonic=1.0, energy_loop=1.0)
+    return SimpleNamespace(block_index=block, cycle_index=i, frequency=f, amplitude=amplitude,
+                           peak_amplitude=peak_amplitude, mean=0.0, measured=side, model=side)
+
+
+def test_the_live_table_reads_a_haversine_by_its_pulse_height_and_gives_a_multisine_no_row():
+    p = program('{name: h, waveform: haversine, frequency: 2 Hz, amplitude: 0.5 mm, cycles: 8}',
+                '{name: m, waveform: multisine, frequency: 0.5 Hz, f_start: 1 Hz, f_end: 5 Hz, amplitude: 0.5 mm, '
+                'cycles: 4}')
+    table = BlockTable(p)
+    for i in range(8):                 # first harmonic 0.25 mm, half range 0.245 mm: pulses of 0.49 mm
+        table.add(_metrics(0, i, 2.0, 0.25e-3, 0.245e-3))
+    assert table.add(_metrics(1, 0, 3.0, 0.3e-3, 0.4e-3)) == [0]
+    (row,) = table.row_list(0)
+    assert row['achieved_amplitude'] == pytest.approx(0.49e-3) and row['cycles_used'] == 4
+    assert table.row_list(1) == []
