@@ -205,8 +205,8 @@ def test_progress_and_summaries_report_cycles():
 
 def test_block_to_dict_is_the_inverse_of_parse_block():
     """Every waveform round-trips through Block.to_dict (what tools that rewrite programs rely on)."""
+    from rubber_rig.excitation import WAVEFORMS
     from rubber_rig.excitation.program import with_overrides
-    from rubber_rig.excitation.waveforms import WAVEFORMS
     text = ('name: all\nblocks:\n'
             '  - {name: a, waveform: sine, frequency: 2 Hz, amplitude: 1 mm, cycles: 3, taper_cycles: 2}\n'
             '  - {name: b, waveform: triangle, rate: 4 mm/s, amplitude: 0.5 mm, cycles: 2}\n'
@@ -216,7 +216,10 @@ def test_block_to_dict_is_the_inverse_of_parse_block():
             '  - {name: f, waveform: sweep_log, f_start: 1 Hz, f_end: 8 Hz, duration: 4 s, amplitude: 0.5 mm}\n'
             '  - {name: g, waveform: hold, duration: 1 s}\n'
             '  - {name: h, waveform: ramp, target: 1 mm, rate: 2 mm/s}\n'
-            '  - {name: i, waveform: ramp, target: 0 mm, duration: 2 s}\n')
+            '  - {name: i, waveform: ramp, target: 0 mm, duration: 2 s}\n'
+            '  - {name: j, waveform: haversine, frequency: 2 Hz, amplitude: 0.5 mm, cycles: 2}\n'
+            '  - {name: k, waveform: multisine, frequency: 0.5 Hz, f_start: 1 Hz, f_end: 5 Hz, amplitude: 0.5 mm,'
+            ' cycles: 2, seed: 7}\n')
     p = Program.from_yaml_text(text)
     again, _ = with_overrides(p)
     assert again.blocks == p.blocks and {b.waveform for b in p.blocks} == set(WAVEFORMS)
@@ -231,8 +234,8 @@ def test_parse_block_of_to_dict_gives_the_same_block_for_every_waveform():
     also about a mean other than 0 and through YAML text (what a rewritten program is sent as)."""
     import yaml
 
+    from rubber_rig.excitation import WAVEFORMS
     from rubber_rig.excitation.blocks import parse_block
-    from rubber_rig.excitation.waveforms import WAVEFORMS
     text = ('name: all\nblocks:\n'
             '  - {name: up, waveform: ramp, target: 1.5 mm, duration: 1 s}\n'
             '  - {waveform: sine, frequency: 7 Hz, amplitude: 0.3 mm, cycles: 5, taper_cycles: 1.5}\n'
@@ -243,7 +246,10 @@ def test_parse_block_of_to_dict_gives_the_same_block_for_every_waveform():
             '  - {name: sg, waveform: sweep_log, f_start: 0.5 Hz, f_end: 30 Hz, duration: 6 s, amplitude: 0.1 mm,'
             ' taper_cycles: 3}\n'
             '  - {name: h, waveform: dwell, duration: 0.25 s}\n'
-            '  - {name: down, waveform: ramp, target: -0.5 mm, rate: 4 mm/s}\n')
+            '  - {name: down, waveform: ramp, target: -0.5 mm, rate: 4 mm/s}\n'
+            '  - {name: hv, waveform: haversine, frequency: 3 Hz, amplitude: 0.4 mm, cycles: 4, taper_cycles: 2}\n'
+            '  - {name: ms, waveform: multisine, frequency: 0.25 Hz, f_start: 0.5 Hz, f_end: 12 Hz, amplitude: 0.3 mm,'
+            ' cycles: 3, seed: 11}\n')
     blocks = Program.from_yaml_text(text).blocks
     assert {b.waveform for b in blocks} == set(WAVEFORMS)
     assert blocks[1].mean == pytest.approx(1.5e-3) and blocks[4].square_slope > 1

@@ -20,8 +20,8 @@ from .blocks import Block, ProgramError
 from .limits import check_program, element_force_model
 from .program import PROGRAM_DIR, Program, load_program, program_source, read_program, shipped_programs
 from .runner import BlockResult, ProgramRunner, Progress
-from .waveforms import WAVEFORMS
+from .waveform_types import TYPES, WAVEFORMS, WaveformType
 
-__all__ = ['Block', 'BlockResult', 'PROGRAM_DIR', 'Program', 'ProgramError', 'ProgramRunner', 'Progress', 'WAVEFORMS',
-           'check_program', 'element_force_model', 'load_program', 'program_source', 'read_program',
-           'shipped_programs']
+__all__ = ['Block', 'BlockResult', 'PROGRAM_DIR', 'Program', 'ProgramError', 'ProgramRunner', 'Progress', 'TYPES',
+           'WAVEFORMS', 'WaveformType', 'check_program', 'element_force_model', 'load_program', 'program_source',
+           'read_program', 'shipped_programs']

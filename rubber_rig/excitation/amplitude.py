@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from .waveform_types import TYPES
 from .waveforms import smoothstep
 
 GAIN_MIN, GAIN_MAX = 0.5, 2.0
@@ -36,17 +37,11 @@ def _clamp_gain(gain: float) -> float:
 
 
 def fit_cycle(waveform: str, phase: np.ndarray, x: np.ndarray):
-    """Amplitude [m] and mean [m] of one measured cycle.
-
-    Sine-like waveforms: least-squares fit of mean + a sin + b cos at the commanded phases (exact for any
-    samples per cycle, robust to noise); triangle/square: half the peak-valley range.
+    """Amplitude [m] and mean [m] of one measured cycle, read as its waveform's registry entry says
+    (WaveformType.fit_cycle: a least-squares sine fit for sine-like waveforms, half the peak-valley range for a
+    triangle or square, the peak-valley range above the valley for a haversine's one-sided pulses).
     """
-    if waveform in ('triangle', 'square'):
-        return 0.5 * float(x.max() - x.min()), 0.5 * float(x.max() + x.min())
-    w = 2 * math.pi * phase
-    basis = np.column_stack([np.ones_like(w), np.sin(w), np.cos(w)])
-    coef = np.linalg.lstsq(basis, x, rcond=None)[0]
-    return float(math.hypot(coef[1], coef[2])), float(coef[0])
+    return TYPES[waveform].fit_cycle(phase, x)
 
 
 class BlockLoop:
@@ -56,7 +51,9 @@ class BlockLoop:
     """
 
     def __init__(self, block, sample_rate: float, limits, control: bool):
-        self.block, self.fs, self.limits, self.control = block, sample_rate, limits, control
+        # waveforms whose amplitude one gain cannot set (a multisine's lines attenuate differently) run open loop
+        self.block, self.fs, self.limits = block, sample_rate, limits
+        self.control = control and block.type.controlled
         self.gain, self.offset = 1.0, 0.0           # wanted for cycles not yet generated
         self._committed = {}                        # cycle -> (g0, g1, o0, o1, samples generated)
         self._pending = {}                          # cycle -> ([phase arrays], [x arrays])
@@ -66,9 +63,7 @@ class BlockLoop:
         total = block.total_cycles
         self._steady = (block.taper_cycles, total - block.taper_cycles)
         # peak velocity per metre of amplitude, to cap the gain under velocity_max
-        f = max(block.frequency, block.frequency_end or 0.0)
-        unit_v = {'sine': 2 * math.pi * f, 'triangle': 4 * f, 'square': 4 * f * block.square_slope}
-        self._unit_v = unit_v.get(block.waveform, 2 * math.pi * f)
+        self._unit_v = block.type.velocity_per_metre(block)
 
     def start_from(self, gain: float, offset: float) -> None:
         """Start the block's command at `gain` and mean `offset` [m] (e.g. from the run's compensation memory)

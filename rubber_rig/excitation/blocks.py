@@ -22,6 +22,7 @@ from rubber_rig.units import to_si
 
 from . import waveforms as wf
 from .detectors import DetectorError, parse_detectors
+from .waveform_types import ALIASES, TYPES, WAVEFORMS, WaveformType
 
 
 class ProgramError(ValueError):
@@ -32,16 +33,7 @@ class ProgramError(ValueError):
 _FIELDS = {
     'name': None, 'waveform': None, 'frequency': 'frequency', 'f_start': 'frequency', 'f_end': 'frequency',
     'amplitude': 'length', 'mean': 'length', 'cycles': None, 'taper_cycles': None, 'duration': 'time',
-    'rate': 'velocity', 'target': 'length',
-}
-_ALLOWED = {
-    'sine': {'frequency', 'amplitude', 'mean', 'cycles', 'taper_cycles'},
-    'triangle': {'frequency', 'rate', 'amplitude', 'mean', 'cycles', 'taper_cycles'},
-    'square': {'frequency', 'rate', 'amplitude', 'mean', 'cycles', 'taper_cycles'},
-    'sweep_lin': {'f_start', 'f_end', 'duration', 'amplitude', 'mean', 'taper_cycles'},
-    'sweep_log': {'f_start', 'f_end', 'duration', 'amplitude', 'mean', 'taper_cycles'},
-    'hold': {'duration'},
-    'ramp': {'target', 'rate', 'duration'},
+    'rate': 'velocity', 'target': 'length', 'seed': None,
 }
 DEFAULT_TAPER_CYCLES = 1.0
 # The longest program (and so the longest block) accepted [s]: 24 h of rig time. Durations, cycle counts and
@@ -63,9 +55,12 @@ MAX_FREQUENCY_FRACTION = 0.1
 class Block:
     """A validated program block. SI units: m, Hz, s, m/s.
 
-    For periodic blocks (sine, triangle, square) `cycles` counts full-amplitude cycles; the taper in and out
-    add `taper_cycles` each. For sweeps, `frequency` is the start and `frequency_end` the end frequency and
-    `duration` the sweep time at full amplitude. `start_level` is where the block starts (previous block's end).
+    For periodic blocks (sine, triangle, square, haversine, multisine) `cycles` counts full-amplitude cycles;
+    the taper in and out add `taper_cycles` each. For sweeps, `frequency` is the start and `frequency_end` the
+    end frequency and `duration` the sweep time at full amplitude. A multisine's `frequency` is its line
+    spacing (= repetition rate), its lines the multiples of it from `frequency_start` to `frequency_end`, their
+    phases drawn from `seed`. `start_level` is where the block starts (previous block's end). What each
+    waveform is: waveform_types.TYPES.
     """
 
     index: int
@@ -81,16 +76,28 @@ class Block:
     rate: float = 0.0
     target: float = 0.0
     start_level: float = 0.0
+    frequency_start: float = 0.0
+    seed: int = 0
     square_slope: float = field(default=1.0, repr=False)
     detectors: list = field(default_factory=list, repr=False)   # DetectorSpecs of this block only
 
     # ---- classification
     @property
+    def type(self) -> WaveformType:
+        """Its waveform's registry entry (waveform_types.TYPES)."""
+        return TYPES[self.waveform]
+
+    @property
     def oscillating(self) -> bool:
-        """True for blocks with an amplitude and cycles about a mean: the periodic waveforms (``waveforms.PERIODIC``:
-        sine, triangle, square) and the sweeps (``waveforms.SWEEPS``, whose frequency changes, so not periodic).
+        """True for blocks with an amplitude and cycles about a mean: the periodic waveforms and the sweeps
+        (whose frequency changes, so not periodic).
         """
-        return self.waveform in wf.PERIODIC + wf.SWEEPS
+        return self.type.oscillating
+
+    @property
+    def periodic(self) -> bool:
+        """True for blocks of whole cycles at one base frequency (they resume after a hold and count cycles)."""
+        return self.type.periodic
 
     def to_dict(self) -> dict:
         """The block as program YAML fields in SI (the inverse of :func:`parse_block`: parsing the result at the
@@ -101,72 +108,55 @@ class Block:
             d['detectors'] = [x.to_dict() for x in self.detectors]
         if self.oscillating:
             d.update(amplitude=self.amplitude, mean=self.mean, taper_cycles=self.taper_cycles)
-        if self.waveform in wf.PERIODIC:
-            d['cycles'] = int(self.cycles)
-            if self.waveform == 'triangle' and self.rate > 0:     # given by its rate: the frequency follows
-                d['rate'] = self.rate
-            else:
-                d['frequency'] = self.frequency
-            if self.waveform == 'square':
-                d['rate'] = self.rate
-        elif self.waveform in wf.SWEEPS:
-            d.update(f_start=self.frequency, f_end=self.frequency_end, duration=self.duration)
-        elif self.waveform == 'hold':
-            d['duration'] = self.duration
-        elif self.waveform == 'ramp':
-            d['target'] = self.target
-            d.update({'rate': self.rate} if self.rate > 0 else {'duration': self.duration})
+        d.update(self.type.to_fields(self))
         return d
 
     @property
     def end_level(self) -> float:
         """Displacement [m] the block ends at."""
-        if self.waveform == 'ramp':
-            return self.target
-        if self.waveform == 'hold':
-            return self.start_level
-        return self.mean
+        family = self.type.family
+        return self.target if family == 'ramp' else self.start_level if family == 'hold' else self.mean
 
     @property
     def total_cycles(self) -> float:
         """Phase [cycles] at the end of a periodic block, taper included."""
-        if self.waveform in wf.SWEEPS:
+        if self.type.family == 'sweep':
             return wf.sweep_phase(np.array(0.0), self.frequency, self.frequency_end, self.taper_cycles,
-                                  self.duration, self.waveform == 'sweep_log')[1]
+                                  self.duration, self.type.log_sweep)[1]
         return self.cycles + 2 * self.taper_cycles
 
     def seconds(self) -> float:
         """Duration of the block [s]."""
-        if self.waveform in wf.PERIODIC:
+        if self.periodic:
             return self.total_cycles / self.frequency
-        if self.waveform in wf.SWEEPS:
+        if self.type.family == 'sweep':
             return self.taper_cycles / self.frequency + self.duration + self.taper_cycles / self.frequency_end
         return self.duration
 
     def n_samples(self, sample_rate: float) -> int:
         """Number of samples the block takes at sample_rate [Hz] (ramps include their end point)."""
         n = int(math.ceil(self.seconds() * sample_rate - 1e-9))
-        return max(1, n + 1 if self.waveform == 'ramp' else n)
+        return max(1, n + 1 if self.type.family == 'ramp' else n)
 
     # ---- evaluation
     def phase(self, t):
         """Phase [cycles] at local times t [s] (periodic blocks)."""
-        if self.waveform in wf.SWEEPS:
+        if self.type.family == 'sweep':
             return wf.sweep_phase(t, self.frequency, self.frequency_end, self.taper_cycles, self.duration,
-                                  self.waveform == 'sweep_log')[0]
+                                  self.type.log_sweep)[0]
         return self.frequency * t
 
     def frequency_at(self, t):
         """Instantaneous frequency [Hz] at local times t [s] (0 for hold and ramp)."""
-        if self.waveform in wf.SWEEPS:
+        if self.type.family == 'sweep':
             return wf.sweep_frequency(t, self.frequency, self.frequency_end, self.taper_cycles, self.duration,
-                                      self.waveform == 'sweep_log')
+                                      self.type.log_sweep)
         return np.full_like(np.asarray(t, dtype=float), self.frequency if self.oscillating else 0.0)
 
     def unit(self, phase):
         """Tapered unit waveform (-1..1) at phase [cycles]: envelope x shape."""
         return (wf.envelope(phase, self.total_cycles, self.taper_cycles)
-                * wf.shape(self.waveform, phase, self.square_slope))
+                * self.type.shape(self, phase))
 
     def evaluate_phase(self, phase, gain=1.0, offset=0.0):
         """Setpoint [m] of a periodic block at phase [cycles] (= phase(t)), with gain and offset as evaluate()."""
@@ -182,7 +172,7 @@ class Block:
         if self.oscillating:
             return self.evaluate_phase(self.phase(t), gain, offset)
         start = self.start_level if start_level is None else start_level
-        if self.waveform == 'hold':
+        if self.type.family == 'hold':
             return np.full_like(t, start)
         return start + (self.target - start) * wf.smoothstep(t / self.duration if self.duration > 0 else 1.0)
 
@@ -200,34 +190,22 @@ def parse_block(raw, index: int, start_level: float, defaults: dict) -> Block:
     name = data.get('name')
     wave = data.get('waveform')
     if wave is None:
-        raise _err(index, name, 'waveform', f"missing (one of: {', '.join(wf.WAVEFORMS)})")
-    wave = wf.ALIASES.get(wave, wave)
-    if wave not in wf.WAVEFORMS:
+        raise _err(index, name, 'waveform', f"missing (one of: {', '.join(WAVEFORMS)})")
+    wave = ALIASES.get(wave, wave)
+    if wave not in TYPES:
         raise _err(index, name, 'waveform', f"unknown waveform {data['waveform']!r} "
-                                            f"(one of: {', '.join(wf.WAVEFORMS)})")
+                                            f"(one of: {', '.join(WAVEFORMS)})")
     name = str(name) if name is not None else f'{wave}_{index}'
+    kind = TYPES[wave]
     for key in raw:
         if key == 'detectors':
             continue
         if key not in _FIELDS:
             raise _err(index, name, key, f"unknown field (known: {', '.join(sorted(_FIELDS))})")
-        if key not in ('name', 'waveform') and key not in _ALLOWED[wave]:
+        if key not in ('name', 'waveform') and key not in kind.fields:
             raise _err(index, name, key, f"not used by waveform '{wave}' "
-                                         f"(allowed: {', '.join(sorted(_ALLOWED[wave]))})")
-    values = {}
-    for key in _ALLOWED[wave]:
-        if key not in data or data[key] is None:
-            continue
-        dim = _FIELDS[key]
-        try:
-            if key == 'cycles':
-                values[key] = _whole_cycles(data[key])
-            elif key == 'taper_cycles':
-                values[key] = to_si(data[key], 'number')
-            else:
-                values[key] = to_si(data[key], dim)
-        except ValueError as exc:
-            raise _err(index, name, key, str(exc)) from None
+                                         f"(allowed: {', '.join(sorted(kind.fields))})")
+    values = _si_values(data, kind, index, name)
 
     def need(key, positive=True):
         if key not in values:
@@ -242,50 +220,48 @@ def parse_block(raw, index: int, start_level: float, defaults: dict) -> Block:
     except DetectorError as exc:
         raise ProgramError(str(exc)) from None
     if blk.oscillating:
-        blk.amplitude = need('amplitude')
-        blk.mean = values.get('mean', start_level)
-        if abs(blk.mean - start_level) > 1e-12:
-            raise _err(index, name, 'mean', f'{blk.mean:g} m differs from the level the previous block ends at '
-                                            f'({start_level:g} m): insert a ramp block so nothing steps')
-        blk.taper_cycles = values.get('taper_cycles', DEFAULT_TAPER_CYCLES)
-        if blk.taper_cycles <= 0:
-            raise _err(index, name, 'taper_cycles', 'must be > 0 so the block starts and ends without a '
-                                                    'velocity jump')
-    if wave in wf.PERIODIC:
-        blk.cycles = int(need('cycles'))
-        if wave == 'triangle' and 'rate' in values:
-            if 'frequency' in values:
-                raise _err(index, name, 'rate', "give either 'frequency' or 'rate' for a triangle, not both")
-            blk.rate = need('rate')
-            blk.frequency = blk.rate / (4.0 * blk.amplitude)
-        else:
-            blk.frequency = need('frequency')
-        if wave == 'square':
-            blk.rate = need('rate')
-            slope = blk.rate / (4.0 * blk.amplitude * blk.frequency)
-            if slope < 1.0:
-                raise _err(index, name, 'rate', f'{blk.rate:g} m/s is too slow for a square wave at '
-                                                f'{blk.frequency:g} Hz and {blk.amplitude:g} m (needs >= '
-                                                f'{4 * blk.amplitude * blk.frequency:g} m/s; use a triangle)')
-            blk.square_slope = slope
-    elif wave in wf.SWEEPS:
-        blk.frequency = need('f_start')
-        blk.frequency_end = need('f_end')
-        blk.duration = need('duration')
-    elif wave == 'hold':
-        blk.duration = need('duration')
-    elif wave == 'ramp':
-        blk.target = need('target', positive=False)
-        if ('rate' in values) == ('duration' in values):
-            raise _err(index, name, 'rate', "give exactly one of 'rate' (peak velocity) or 'duration'")
-        if 'rate' in values:
-            # raised-cosine ramp: peak velocity = pi/2 * distance / duration
-            blk.rate = need('rate')
-            blk.duration = max(math.pi / 2 * abs(blk.target - start_level) / blk.rate, 0.0)
-        else:
-            blk.duration = need('duration')
+        _parse_oscillation(blk, values, need)
+    kind.parse(blk, values, need, lambda key, msg: _err(index, name, key, msg))
     _check_duration(blk, values)
     return blk
+
+
+def _si_values(data: dict, kind: WaveformType, index: int, name: str) -> dict:
+    """The fields `kind` uses that `data` gives, in SI (cycle counts and seeds whole numbers)."""
+    values = {}
+    for key in kind.fields:
+        if key not in data or data[key] is None:
+            continue
+        try:
+            if key in ('cycles', 'seed'):
+                values[key] = _whole_cycles(data[key]) if key == 'cycles' else _seed(data[key])
+            elif key == 'taper_cycles':
+                values[key] = to_si(data[key], 'number')
+            else:
+                values[key] = to_si(data[key], _FIELDS[key])
+        except ValueError as exc:
+            raise _err(index, name, key, str(exc)) from None
+    return values
+
+
+def _parse_oscillation(blk: Block, values: dict, need) -> None:
+    """Amplitude, mean and taper of an oscillating block (every such waveform alike)."""
+    blk.amplitude = need('amplitude')
+    blk.mean = values.get('mean', blk.start_level)
+    if abs(blk.mean - blk.start_level) > 1e-12:
+        raise _err(blk.index, blk.name, 'mean', f'{blk.mean:g} m differs from the level the previous block ends at '
+                                                f'({blk.start_level:g} m): insert a ramp block so nothing steps')
+    blk.taper_cycles = values.get('taper_cycles', DEFAULT_TAPER_CYCLES)
+    if blk.taper_cycles <= 0:
+        raise _err(blk.index, blk.name, 'taper_cycles', 'must be > 0 so the block starts and ends without a '
+                                                        'velocity jump')
+
+
+def _seed(v) -> int:
+    """A random seed: a whole number from 0 to 2**32 - 1."""
+    if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v < 2 ** 32:
+        raise ValueError(f'expected a whole number from 0 to {2 ** 32 - 1}, got {v!r}')
+    return int(v)
 
 
 def _whole_cycles(v) -> int:
@@ -305,12 +281,7 @@ def _whole_cycles(v) -> int:
 def _check_duration(blk: Block, values: dict) -> None:
     """Refuse a block that cannot run within MAX_PROGRAM_DURATION, naming the field that makes it too long."""
     hours = f'{MAX_PROGRAM_DURATION / 3600:g} h'
-    if blk.waveform in wf.SWEEPS:
-        frequencies = [('f_start', blk.frequency), ('f_end', blk.frequency_end)]
-    elif blk.oscillating:
-        frequencies = [('rate' if blk.waveform == 'triangle' and 'rate' in values else 'frequency', blk.frequency)]
-    else:
-        frequencies = []
+    frequencies = blk.type.frequencies(blk)
     for key, f in frequencies:
         if f < MIN_FREQUENCY:
             raise _err(blk.index, blk.name, key, f'{f:.6g} Hz is below the lowest frequency {MIN_FREQUENCY:.6g} Hz: '
@@ -318,9 +289,9 @@ def _check_duration(blk: Block, values: dict) -> None:
     seconds = blk.seconds()
     if math.isfinite(seconds) and seconds <= MAX_PROGRAM_DURATION:
         return
-    if blk.waveform in wf.PERIODIC:        # the larger part of the block is to blame
+    if blk.periodic:        # the larger part of the block is to blame
         key = 'cycles' if blk.cycles >= 2 * blk.taper_cycles else 'taper_cycles'
-    elif blk.waveform in wf.SWEEPS:
+    elif blk.type.family == 'sweep':
         tapers = blk.taper_cycles / blk.frequency + blk.taper_cycles / blk.frequency_end
         key = 'duration' if blk.duration >= tapers else 'taper_cycles'
     else:

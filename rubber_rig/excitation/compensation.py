@@ -42,8 +42,6 @@ setpoint is still checked against the limits.
 import math
 from dataclasses import dataclass
 
-from .waveforms import PERIODIC
-
 SAME_FREQUENCY = 0.01        # |ln(f1 / f2)| below this: one column of the table
 
 
@@ -61,8 +59,13 @@ class Learned:
     order: int = 0           # update counter: later entries win ties
 
 
+def _compensated(block) -> bool:
+    """Periodic blocks whose amplitude one command gain sets (waveform_types: periodic and controlled)."""
+    return block.type.periodic and block.type.controlled
+
+
 def _key(block):
-    return block.waveform, (round(block.square_slope, 6) if block.waveform == 'square' else 1.0)
+    return block.waveform, round(block.square_slope, 6)          # square_slope is 1 for all but a square
 
 
 def _interpolate(points, x):
@@ -92,7 +95,7 @@ class CompensationMemory:
 
     def learn(self, index: int, block, gain: float, offset: float) -> None:
         """Store (or update) what block `index` learned: the command gain and mean offset [m] it needs."""
-        if block.waveform not in PERIODIC or not (math.isfinite(gain) and gain > 0 and math.isfinite(offset)):
+        if not _compensated(block) or not (math.isfinite(gain) and gain > 0 and math.isfinite(offset)):
             return
         self._count += 1
         self._entries[index] = Learned(block.waveform, block.frequency, block.amplitude, block.mean, float(gain),
@@ -107,7 +110,7 @@ class CompensationMemory:
 
         exclude: a block index whose entry is ignored.
         """
-        if block.waveform not in PERIODIC or block.frequency <= 0 or block.amplitude <= 0:
+        if not _compensated(block) or block.frequency <= 0 or block.amplitude <= 0:
             return None
         key = _key(block)
         cands = sorted((e for k, e in self._entries.items()

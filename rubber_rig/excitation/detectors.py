@@ -395,18 +395,17 @@ class Monitor:
 def cycle_of(runner, start: int, end: int, amplitude: float, peak_amplitude: float, mean: float, measured: dict,
              model: dict, residual_rms: float, elapsed: float) -> Cycle | None:
     """The Cycle a detector judges for the measured cycle of samples start..end-1 of `runner`'s program (an
-    excitation ProgramRunner), or None when it lies outside one periodic block (an approach or hold ramp, a
-    foreign stream). A triangle's or square's amplitude is its peak amplitude, a sine's its first harmonic.
+    excitation ProgramRunner), or None outside one periodic block (an approach or hold ramp, a foreign stream) or
+    in one whose cycles are not judged (WaveformType.judged). Amplitude as WaveformType.cycle_amplitude reads it.
     """
     where = runner.cycle_position(start, end)
-    if where is None:
+    blk = runner.program.blocks[where[0]] if where is not None else None
+    if blk is None or not blk.type.judged:
         return None
     block, number, steady = where
-    blk = runner.program.blocks[block]
     _, _, program_cycles = runner.cycles_done(end - 1)
-    amp = peak_amplitude if blk.waveform in ('triangle', 'square') else amplitude
-    return Cycle(block, number, steady, amp, mean, measured, model, residual_rms, blk.amplitude, blk.mean, elapsed,
-                 program_cycles, int(end))
+    return Cycle(block, number, steady, blk.type.cycle_amplitude(amplitude, peak_amplitude), mean, measured, model,
+                 residual_rms, blk.amplitude, blk.mean, elapsed, program_cycles, int(end))
 
 
 BLIND_SECONDS, BLIND_CYCLES = 2.0, 5     # no cycle judged for this long (and this many cycles): detectors blind
@@ -423,7 +422,7 @@ def blind_for(runner, sequence: int, last_cycle_end: int, sample_rate: float) ->
         return 0.0
     block, phase = located
     blk = runner.program.blocks[block]
-    if not blk.oscillating:
+    if not blk.oscillating or not blk.type.judged:
         return 0.0
     f = max(blk.frequency, blk.frequency_end or 0.0, 1e-6)
     since = (sequence - last_cycle_end) / sample_rate

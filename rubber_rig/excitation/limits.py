@@ -16,7 +16,8 @@
 
 The pre-start check (check_program) has a bounded cost for every program that loads (at most 24 h, see
 blocks.MAX_PROGRAM_DURATION): it generates and checks the setpoints exactly, block by block, as long as the
-program has generated at most EXACT_SAMPLES of them; a block beyond that budget is checked from closed-form
+program has generated at most EXACT_SAMPLES of them (a sample of a costlier waveform counts as
+WaveformType.cost samples: a multisine's lines); a block beyond that budget is checked from closed-form
 bounds instead (its taper in and out still sample by sample while the budget lasts). Those bounds are the
 supremum of what the samples can reach - the sampled sine's peak velocity 2 A fs sin(pi f / fs) rather than
 2 pi f A - so a long block is refused only where some of its samples would come arbitrarily close to the
@@ -37,7 +38,6 @@ from rubber_rig.models.fractional import zener_complex_stiffness
 from rubber_rig.models.friction import berg_peak_force
 
 from ..safety import LimitError, Limits
-from . import waveforms as wf
 
 # setpoints the pre-start check generates at most per program (about 0.1 s of numpy); the rest is bounded
 EXACT_SAMPLES = 1 << 21
@@ -64,8 +64,9 @@ def check_program(limits: Limits, program, sample_rate: float, force_model: Opti
     for i, blk in enumerate(program.blocks):
         where = f"program {program.name!r} block {i} '{blk.name}'"
         n = int(starts[i + 1] - starts[i])
-        if n <= budget:
-            budget -= n
+        cost = blk.type.cost(blk)
+        if n * cost <= budget:
+            budget -= n * cost
             for lo in range(0, n, _CHUNK):
                 x = blk.evaluate(np.arange(lo, min(lo + _CHUNK, n)) / fs)
                 limits.check_setpoints(x, fs, prev, where)
@@ -94,7 +95,7 @@ def _check_model_force(limits: Limits, model, blk, where: str):
                          f'{limits.force_max:g} N')
 
 
-def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, budget: int, where: str):
+def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, budget: float, where: str):
     """Check a block of n samples (more than the exact budget) from closed-form bounds on its samples.
 
     Returns (its last setpoint, the budget left). The taper in and out (and the step from `prev` into the
@@ -104,27 +105,23 @@ def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, bud
     limits.check_setpoints([first], fs, prev, where)                    # the step into the block
     last = None
     if blk.oscillating:
-        a, f_top = blk.amplitude, _max_frequency(blk)
-        lo, hi = blk.mean - a, blk.mean + a
-        h = f_top / fs                                                 # <= 0.1 (check_sample_rate)
-        if blk.waveform == 'triangle':
-            steady = 4.0 * blk.frequency * a                           # constant edge slope
-        elif blk.waveform == 'square':
-            steady = min(4.0 * blk.frequency * a * blk.square_slope, 2.0 * a * fs)
-        else:                                                          # sine, sweeps: |sin(p + d) - sin p|
-            steady = 2.0 * a * fs * math.sin(math.pi * min(h, 0.5))   # <= 2 sin(d / 2), d = 2 pi f / fs
-        f_out = blk.frequency_end if blk.waveform in wf.SWEEPS else blk.frequency
+        kind, a, f_top = blk.type, blk.amplitude, _max_frequency(blk)
+        low, high = kind.span(blk)
+        lo, hi = blk.mean + low * a, blk.mean + high * a
+        steady = a * kind.step(blk, fs)                                # sampled full-amplitude part
+        f_out = blk.frequency_end if kind.family == 'sweep' else blk.frequency
         k_in = min(n, int(math.ceil(blk.taper_cycles / blk.frequency * fs)) + 2)
         k_out = min(n, int(math.ceil(blk.taper_cycles / f_out * fs)) + 2)
-        if k_in + k_out <= budget:                                     # the tapers sample by sample
-            budget -= k_in + k_out
+        cost = kind.cost(blk)
+        if (k_in + k_out) * cost <= budget:                            # the tapers sample by sample
+            budget -= (k_in + k_out) * cost
             limits.check_setpoints(blk.evaluate(np.arange(k_in) / fs), fs, prev, where)
             tail = blk.evaluate(np.arange(n - k_out, n) / fs)
             limits.check_setpoints(tail, fs, None, where)
             last, v = float(tail[-1]), steady
         else:
-            v = max(steady, a * f_top * _taper_slope(blk))
-    elif blk.waveform == 'ramp':
+            v = max(steady, a * kind.cycle_rate(blk) * _taper_slope(blk))
+    elif blk.type.family == 'ramp':
         d = abs(blk.target - blk.start_level)
         lo, hi = min(blk.start_level, blk.target), max(blk.start_level, blk.target)
         # raised cosine sampled every 1/(D fs) of its length: steps <= d sin(pi / (2 D fs))
@@ -132,8 +129,7 @@ def _check_block_bounds(limits: Limits, blk, fs: float, n: int, prev: float, bud
     else:                                                              # hold
         lo = hi = blk.start_level
         v = 0.0
-    if blk.oscillating and not (blk.waveform != 'triangle' and blk.waveform != 'square'
-                                and (2 * math.pi * f_top) ** 2 * a <= limits.deceleration_max):
+    if blk.oscillating and not (blk.type.sine_like and (2 * math.pi * f_top) ** 2 * a <= limits.deceleration_max):
         # where an abort can stop: a sine whose acceleration stays below deceleration_max stops inside its
         # own peaks; otherwise allow for the braking distance at the peak speed
         brake = v * v / (2 * limits.deceleration_max) + v / fs
@@ -153,17 +149,20 @@ def _taper_slope(blk) -> float:
     """Bound of |d/dphase [env(phase) shape(phase)]| over a taper of a periodic block (per cycle).
 
     In the taper env = (1 - cos(pi u)) / 2 with u = phase / taper_cycles, so |env'| = pi sin(pi u) / (2 T);
-    with |shape| <= 1 and |shape'| <= s (2 pi sine, 4 triangle, 4 square_slope): |env' shape + env shape'| <=
-    |env'| + s env, and for a sine sqrt(env'^2 + (2 pi env)^2) (Cauchy-Schwarz on sin, cos). Maximised over u on
-    a fine grid (+1e-4 for the grid); 0.8 % above 2 pi for a sine with one taper cycle.
+    with |shape| <= p and |shape'| <= s (waveform_types: p from its span, s its slope - 2 pi sine, 4 triangle, 4
+    square_slope): |env' shape + env shape'| <= p |env'| + s env, and for a sine sqrt(env'^2 + (2 pi env)^2)
+    (Cauchy-Schwarz on sin, cos). Maximised over u on a fine grid (+1e-4 for the grid); 0.8 % above 2 pi for
+    a sine with one taper cycle.
     """
     env = 0.5 - 0.5 * np.cos(np.pi * _U)
     d_env = 0.5 * np.pi * np.sin(np.pi * _U) / blk.taper_cycles
-    if blk.waveform in ('triangle', 'square'):
-        slope = 4.0 * (blk.square_slope if blk.waveform == 'square' else 1.0)
-        g = d_env + slope * env
+    kind = blk.type
+    if kind.taper_slope is not None:
+        g = kind.taper_slope(blk, env, d_env)
+    elif kind.sine_like:
+        g = np.hypot(d_env, kind.slope(blk) * env)
     else:
-        g = np.hypot(d_env, 2 * np.pi * env)
+        g = max(abs(v) for v in kind.span(blk)) * d_env + kind.slope(blk) * env
     return float(np.max(g)) * (1 + 1e-4)
 
 
@@ -181,8 +180,9 @@ def element_force_model(params='swing_arm_joint_20C', harmonics: int = 256) -> C
         F_peak ~ k0 |mean| + max_t |F_ev(t)| + F_f0(A)
 
     with F_ev the fractional Zener's periodic steady force under the block's unit shape (sine: exactly
-    |K_ev(j 2 pi f)| A; triangle and square summed over `harmonics` harmonics), at the block's highest frequency
-    (|K_ev| grows with frequency, so that covers a sweep), F_f0 Berg's steady peak friction force (Eq. 17; rate
+    |K_ev(j 2 pi f)| A; other shapes summed over `harmonics` harmonics, or up to a multisine's highest line), at
+    the block's highest frequency (|K_ev| grows with frequency, so that covers a sweep), plus |K_ev(f)| dc A
+    for a shape with a mean of its own (dc: 0.5 for a haversine), F_f0 Berg's steady peak friction force (Eq. 17; rate
     independent, so the same for every shape) and the static stiffness k0 carrying the mean (preload). The peak
     of a time-domain run from rest is slightly higher (the start-up transient; test_input_hardening_excitation
     bounds the difference), well inside the margin force_max should keep anyway. Hold and ramp blocks:
@@ -197,7 +197,6 @@ def element_force_model(params='swing_arm_joint_20C', harmonics: int = 256) -> C
     if not isinstance(p, ZenerBergParams):
         raise ValueError(f'element_force_model needs fractional_zener_berg parameters, got {type(p).__name__}')
     n_grid = 8 * harmonics
-    phase = np.arange(n_grid) / n_grid
 
     def k_ev(frequency):
         return zener_complex_stiffness(2 * np.pi * np.asarray(frequency, float), p.k0, p.k_inf, p.tau, p.alpha)
@@ -206,15 +205,20 @@ def element_force_model(params='swing_arm_joint_20C', harmonics: int = 256) -> C
         if not block.oscillating:
             level = max(abs(block.start_level), abs(block.end_level))
             return float(p.k0 * level + p.f_fmax)
-        a, f = block.amplitude, _max_frequency(block)
-        if block.waveform in ('triangle', 'square'):
-            coef = np.fft.rfft(wf.shape(block.waveform, phase, block.square_slope))[:harmonics + 1]
-            n = np.arange(coef.size)
-            coef[0] = 0.0                                                  # zero-mean shapes; k0 carries the mean
-            coef[1:] *= k_ev(n[1:] * f)
-            linear = float(np.max(np.abs(np.fft.irfft(coef, n_grid)))) * a
+        kind, a = block.type, block.amplitude
+        if kind.sine_like:
+            linear = float(abs(k_ev(_max_frequency(block)))) * a
         else:
-            linear = float(abs(k_ev(f))) * a
-        return float(p.k0 * abs(block.mean) + linear + berg_peak_force(p.f_fmax, p.x2, a))
+            top = max(harmonics, kind.top_harmonic(block))
+            grid = max(n_grid, 8 * top)
+            coef = np.fft.rfft(kind.shape(block, np.arange(grid) / grid))[:top + 1]
+            n = np.arange(coef.size)
+            coef[0] = 0.0                                                  # k0 carries the mean and the shape's dc
+            coef[1:] *= k_ev(n[1:] * block.frequency)
+            linear = float(np.max(np.abs(np.fft.irfft(coef, grid)))) * a
+        # a shape's own mean (dc) builds up within its taper, too fast to relax to k0: carried at |K_ev(f)|;
+        # friction at amplitude A: a one-sided shape travels A, and a loop of 2 A bounds that (Berg is monotone)
+        static = p.k0 * abs(block.mean) + kind.dc * a * float(abs(k_ev(block.frequency)))
+        return float(static + linear + berg_peak_force(p.f_fmax, p.x2, a))
 
     return peak_force

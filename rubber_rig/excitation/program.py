@@ -218,7 +218,7 @@ def with_overrides(program: Program, cycles: int = None, duration_scale: float =
                 d['cycles'] = cycles
             if duration_scale:
                 d['cycles'] = max(1, int(round(d['cycles'] * duration_scale)))
-        elif 'duration' in d and duration_scale and d['waveform'] != 'ramp':
+        elif 'duration' in d and duration_scale and blk.type.family != 'ramp':
             d['duration'] *= duration_scale
         if 'taper_cycles' in d and taper_cycles is not None:
             d['taper_cycles'] = taper_cycles
@@ -270,11 +270,7 @@ def _expand_grid(raw, first_index):
 
 def _frequency_fields(blk: Block):
     """(field, frequency [Hz]) of the frequencies a block runs at (none for hold and ramp)."""
-    if blk.waveform in ('sweep_lin', 'sweep_log'):
-        return [('f_start', blk.frequency), ('f_end', blk.frequency_end)]
-    if blk.oscillating:
-        return [('rate' if blk.waveform == 'triangle' and blk.rate > 0 else 'frequency', blk.frequency)]
-    return []
+    return blk.type.frequencies(blk)
 
 
 def program_source(path_or_name) -> tuple[str, str]:

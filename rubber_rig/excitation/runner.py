@@ -26,7 +26,6 @@ from ..safety import LimitError, Limits, SafeRamp, abort_ramp_velocity
 from .amplitude import BlockLoop
 from .compensation import CompensationMemory
 from .limits import check_program as precheck
-from .waveforms import PERIODIC
 
 
 @dataclass
@@ -169,7 +168,7 @@ class ProgramRunner:
         b = self._hold_block
         located = self.locate(measured_sequence) if measured_sequence is not None else None
         blk = self.program.blocks[b]
-        if located is not None and located[0] == b and blk.waveform in PERIODIC:
+        if located is not None and located[0] == b and blk.periodic:
             done = min(max(int(math.floor(located[1] - blk.taper_cycles)), 0), blk.cycles - 1)
             if done:
                 self.program.blocks[b] = dataclasses.replace(blk, cycles=blk.cycles - done)
@@ -230,10 +229,10 @@ class ProgramRunner:
         b, phase = located
         blk = self.program.blocks[b]
         done = 0
-        if blk.waveform in PERIODIC:
+        if blk.periodic:
             done = min(max(int(math.floor(phase - blk.taper_cycles)), 0), blk.cycles) + self.cycles_before.get(b, 0)
         before = sum(blocks.cycles + self.cycles_before.get(i, 0) for i, blocks in enumerate(self.program.blocks[:b])
-                     if blocks.waveform in PERIODIC)
+                     if blocks.periodic)
         return b, done, before + done
 
     def resume(self):
@@ -340,7 +339,7 @@ class ProgramRunner:
 
     def _restart(self, b):
         blk = self.program.blocks[b]
-        if blk.waveform == 'ramp':
+        if blk.type.family == 'ramp':
             self._ramp_from[b] = self._x
         self._loops.pop(b, None)
         self._p = int(self._starts[b])

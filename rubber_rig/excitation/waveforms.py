@@ -15,13 +15,11 @@
 """Unit waveform shapes, phase laws and taper envelopes, evaluated vectorised from sample times.
 
 All functions take numpy arrays and return arrays of the same shape. Phase is in cycles (1.0 = one period).
+Which waveforms exist, and what each one needs, is the registry in waveform_types.py.
 """
-import numpy as np
+import functools
 
-PERIODIC = ('sine', 'triangle', 'square')
-SWEEPS = ('sweep_lin', 'sweep_log')
-WAVEFORMS = PERIODIC + SWEEPS + ('hold', 'ramp')
-ALIASES = {'trapezoid': 'square', 'dwell': 'hold', 'sweep': 'sweep_lin', 'sine_sweep': 'sweep_lin'}
+import numpy as np
 
 
 def smoothstep(u):
@@ -35,19 +33,77 @@ def triangle(phase):
     return 4.0 * np.abs(np.mod(phase - 0.25, 1.0) - 0.5) - 1.0
 
 
-def shape(waveform: str, phase, square_slope: float = 1.0):
-    """Unit shape (-1..1) of a periodic waveform at `phase` [cycles].
+def sine(phase):
+    """Unit sine: sin(2 pi phase)."""
+    return np.sin(2.0 * np.pi * phase)
 
-    square_slope: for 'square' (trapezoid), the edge slope relative to the triangle's (>= 1); the edges then
-    take 1/square_slope of a quarter period each, which realises a set transition rate.
+
+def square(phase, square_slope: float):
+    """Unit square (trapezoid): the triangle steepened by square_slope (>= 1) and clipped to -1..1; the edges
+    then take 1/square_slope of a quarter period each, which realises a set transition rate.
     """
-    if waveform in ('sine',) + SWEEPS:
-        return np.sin(2.0 * np.pi * phase)
-    if waveform == 'triangle':
-        return triangle(phase)
-    if waveform == 'square':
-        return np.clip(square_slope * triangle(phase), -1.0, 1.0)
-    raise ValueError(f'no periodic shape for waveform {waveform!r}')
+    return np.clip(square_slope * triangle(phase), -1.0, 1.0)
+
+
+def haversine(phase):
+    """Unit haversine pulse train (1 - cos(2 pi phase)) / 2: from 0 up to 1 at phase 0.5 and back to 0, with zero
+    slope at 0 (one-sided pulses from the base level; peak slope pi per cycle at phase 0.25).
+    """
+    return 0.5 - 0.5 * np.cos(2.0 * np.pi * phase)
+
+
+# ---- random-phase multisine: equal-amplitude lines at whole multiples of the base frequency
+_MULTISINE_GRID = 64          # grid points per period of the highest line for the peak search
+_MULTISINE_CHUNK = 1 << 15    # samples evaluated at once
+
+
+@functools.lru_cache(maxsize=32)
+def multisine_lines(first: int, last: int, seed: int):
+    """The lines of a unit multisine with harmonics first..last of its base frequency and random phases.
+
+    u(phase) = sum_k sin(2 pi n_k phase + phi_k) / S, phi_k uniform in [0, 2 pi) from numpy's default_rng(seed)
+    (the same seed gives the same signal everywhere), S chosen so the largest |u| on a grid of
+    _MULTISINE_GRID points per period of the highest line is exactly 1. Returns (n, phi, S, bounds) with
+    bounds = (peak, slope, curvature): upper bounds of sup |u|, sup |u'| and sup |u''| (per cycle of the base
+    frequency, derivatives in 1/cycle and 1/cycle^2) over continuous phase, each the grid maximum plus
+    h^2/8 sup|next derivative| (an extremum between grid points h apart is that close to one), so they are
+    never below what any sampling of the signal reaches.
+    """
+    n = np.arange(first, last + 1, dtype=float)
+    phi = np.random.default_rng(seed).uniform(0.0, 2 * np.pi, n.size)
+    size = _MULTISINE_GRID * last
+    size += size % 2
+    spectrum = np.zeros(size // 2 + 1, complex)
+    spectrum[first:last + 1] = -0.5j * size * np.exp(1j * phi)     # irfft of it: sum_k sin(2 pi n_k m / size + phi_k)
+    w = 2j * np.pi * np.arange(spectrum.size)
+    grid_max = [float(np.max(np.abs(np.fft.irfft(spectrum * w ** d, size)))) for d in range(3)]
+    scale = grid_max[0]
+    h2 = (1.0 / size) ** 2 / 8.0
+    sums = [float(np.sum((2 * np.pi * n) ** d)) for d in range(5)]
+    bounds = tuple((grid_max[d] + h2 * sums[d + 2]) / scale for d in range(3))
+    return n, phi, scale, bounds
+
+
+def multisine(phase, first: int, last: int, seed: int):
+    """Unit random-phase multisine (see multisine_lines) at `phase` [cycles of the base frequency].
+
+    Evaluated as Im(z^first P(z)) with z = exp(2 pi i phase) and P the polynomial of the lines' phasors (Horner:
+    one complex multiply-add per line and sample, about ten times cheaper than a sine per line; rounding
+    grows with the number of lines, ~1e-13 at 4096).
+    """
+    n, phi, scale, _ = multisine_lines(first, last, seed)
+    coef = np.exp(1j * phi)
+    flat = np.mod(np.asarray(phase, dtype=float), 1.0).ravel()
+    out = np.empty(flat.size)
+    for lo in range(0, flat.size, _MULTISINE_CHUNK):
+        p = flat[lo:lo + _MULTISINE_CHUNK]
+        z = np.exp(2j * np.pi * p)
+        acc = np.full(p.size, coef[-1])
+        for c in coef[-2::-1]:
+            acc *= z
+            acc += c
+        out[lo:lo + p.size] = (np.exp(2j * np.pi * first * p) * acc).imag
+    return (out / scale).reshape(np.shape(phase))
 
 
 def envelope(phase, total_cycles: float, taper_cycles: float):

@@ -24,8 +24,6 @@ from pathlib import Path
 
 import numpy as np
 
-from rubber_rig.excitation.waveforms import PERIODIC, SWEEPS
-
 
 class BlockTable:
     """Per-block averages of the steady cycles (full amplitude, second half of them) of cycle_metrics."""
@@ -50,8 +48,10 @@ class BlockTable:
 
     @staticmethod
     def _amplitude(blk, c) -> float:
-        """Measured amplitude in the program's sense: first harmonic for sines, half peak-valley otherwise."""
-        return c.amplitude if blk.waveform not in ('triangle', 'square') else c.peak_amplitude
+        """Measured amplitude in the program's sense (first harmonic for sines, half peak-valley for triangles
+        and squares: WaveformType.cycle_amplitude).
+        """
+        return blk.type.cycle_amplitude(c.amplitude, c.peak_amplitude)
 
     def _row(self, b: int, name: str, frequency: float, steady: list) -> dict:
         blk = self.blocks[b]
@@ -70,14 +70,16 @@ class BlockTable:
         return r
 
     def row_list(self, b: int) -> list[dict]:
-        """Rows of block b: one for a periodic block, one per frequency band of a sweep, none otherwise."""
+        """Rows of block b as its waveform's summary says: one at its frequency ('steady'), one per frequency band
+        of a sweep ('bands'), none otherwise.
+        """
         blk = self.blocks[b]
         cycles = self.cycles.get(b, [])
-        if blk.waveform in PERIODIC:
+        if blk.type.summary == 'steady':
             cyc = [c for c in cycles if self._amplitude(blk, c) >= 0.9 * blk.amplitude
                    and abs(c.frequency - blk.frequency) <= 0.1 * blk.frequency]
             rows = [self._row(b, blk.name, blk.frequency, cyc[len(cyc) // 2:] if len(cyc) > 1 else cyc)]
-        elif blk.waveform in SWEEPS:
+        elif blk.type.summary == 'bands':
             # a sweep has no steady state: group its cycles into bands around 1-1.5-2-3-5-7 x 10^n Hz (+-10 %),
             # past the tapers (half the target amplitude; the actuator attenuates the top of a sweep)
             lo, hi = sorted((blk.frequency, blk.frequency_end))
