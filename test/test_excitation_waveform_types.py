@@ -172,14 +172,16 @@ def test_closed_form_bounds_agree_with_every_setpoint(block, tapers_exact, monke
     lo, hi = float(np.min(x)), float(np.max(x))
     monkeypatch.setattr(limits_module, 'EXACT_SAMPLES', 1001 + (30000 if tapers_exact else 0))
 
+    decel = 510.0       # the hardest braking a rig may declare: its stopping distance adds v^2 / (2 a)
+
     def limits(**kw):
-        return Limits(**{'deceleration_max': 1e9, 'velocity_max': 1.0, **kw})
+        return Limits(**{'deceleration_max': decel, 'velocity_max': 1.0, **kw})
     with pytest.raises(LimitError, match="block 1 'b'.*velocity"):
         check_program(limits(velocity_max=v_peak * 0.999), p, FS)
     with pytest.raises(LimitError, match="block 1 'b'.*displacement"):
         check_program(limits(displacement_min=lo - 1e-6, displacement_max=hi * 0.999), p, FS)
     margin = 1.005 if tapers_exact else 1.05
-    room = (max(abs(lo), hi) + v_peak / FS) * 1.005
+    room = (max(abs(lo), hi) + v_peak / FS + v_peak ** 2 / (2 * decel)) * 1.005
     check_program(limits(velocity_max=v_peak * margin, displacement_min=-room, displacement_max=room), p, FS)
 
 
