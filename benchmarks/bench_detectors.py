@@ -197,14 +197,14 @@ def markdown(out: dict) -> str:
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    ap.add_argument('--quick', action='store_true', help='damage cases and seed000_grid only')
+    ap.add_argument('--quick', action='store_true', help='damage cases and dynamic_stiffness_grid only')
     ap.add_argument('--json', help='write the results here')
     args = ap.parse_args(argv)
     out = {}
     t0 = time.perf_counter()
     print('detection delay [cycles after onset] (durability_10hz, 300 cycles):')
     damage_table(NOISES, out)
-    programs = ['seed000_grid'] if args.quick else [p for p in shipped_programs() if p != 'durability_10hz']
+    programs = ['dynamic_stiffness_grid'] if args.quick else [p for p in shipped_programs() if p != 'durability_10hz']
     print('false trips over the clean shipped programs:')
     false_trips(NOISES, programs, out)
     print()

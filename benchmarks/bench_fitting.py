@@ -14,7 +14,7 @@
 
 """Benchmark of `rubber-rig fit` on simulated-rig recordings of the seed-000 grid.
 
-For each Table 1 temperature (20, 0, -20, -40 degC): run the shipped program seed000_grid (0.5-14 Hz x
+For each Table 1 temperature (20, 0, -20, -40 degC): run the shipped program dynamic_stiffness_grid (0.5-14 Hz x
 0.5 and 1 mm, 8 cycles + 2 taper cycles each side) on the simulated rig (CAN path, 80 Hz actuator,
 load-cell noise --force-noise N, displacement noise 0.2 um with 0.1 um resolution), record it to MCAP
 with rubber_rig.recording, read it back, and fit it. Reports per temperature: the recovered parameters
@@ -50,7 +50,7 @@ def main(argv=None) -> int:
     ap.add_argument('--method', choices=('time', 'harmonic', 'both'), default='both')
     ap.add_argument('--force-noise', type=float, default=20.0, help='load-cell noise std [N] (default 20)')
     ap.add_argument('--dir', default='/tmp/rubber_rig_bench_fitting', help='where the recordings go (reused)')
-    ap.add_argument('--program', default='seed000_grid')
+    ap.add_argument('--program', default='dynamic_stiffness_grid')
     ap.add_argument('--fresh', action='store_true', help='regenerate the recordings even if cached')
     ap.add_argument('--json', action='store_true')
     args = ap.parse_args(argv)

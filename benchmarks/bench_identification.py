@@ -68,7 +68,7 @@ import numpy as np
 import yaml
 from scipy.stats import binom
 
-GRID = 'seed000_grid'
+GRID = 'dynamic_stiffness_grid'
 SEED003_PROGRAM = {'name': 'seed003_grid', 'defaults': {'taper_cycles': 2, 'cycles': 8, 'mean': 0.0},
                    'blocks': [{'name': 'sine', 'waveform': 'sine', 'amplitude': ['0.2 mm', '0.3 mm', '0.5 mm'],
                                'frequency': ['1 Hz', '2 Hz', '5 Hz', '10 Hz', '20 Hz', '30 Hz', '40 Hz',

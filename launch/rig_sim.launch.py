@@ -15,7 +15,7 @@
 """Simulated rig: rig_driver (backend sim, paced to the wall clock), excitation, element_model and recorder.
 
     ros2 launch rubber_rig rig_sim.launch.py
-    ros2 launch rubber_rig rig_sim.launch.py namespace:=rig1 program:=seed000_grid
+    ros2 launch rubber_rig rig_sim.launch.py namespace:=rig1 program:=dynamic_stiffness_grid
 
 Same node classes and the same parameter file (config/rig_sim.yaml) as ``rubber-rig bench``, which starts
 them in one process when there is no ROS install. The rig_driver is a lifecycle node; with ``autostart: true``
@@ -44,7 +44,7 @@ def generate_launch_description():
     program = LaunchConfiguration('program')
     return LaunchDescription([
         DeclareLaunchArgument('namespace', default_value='', description='namespace of this rig'),
-        DeclareLaunchArgument('program', default_value='seed000_grid',
+        DeclareLaunchArgument('program', default_value='dynamic_stiffness_grid',
                               description='test program (shipped name or YAML path) the excitation runs at start; '
                                           'empty: wait for a RunProgram goal'),
         LifecycleNode(package='rubber_rig', executable='rig_driver', name='rig_driver', namespace=namespace,

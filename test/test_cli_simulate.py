@@ -154,7 +154,7 @@ def test_load_cell_gain_scales_the_recorded_force(files, quiet):
 
 def test_shipped_program_and_named_model(tmp_path, capsys):
     out = tmp_path / 'pad.mcap'
-    assert cli(['simulate', '--model', 'pad', '--program', 'seed004_preload', '--rate', '100Hz', '-o', str(out)]) == 0
+    assert cli(['simulate', '--model', 'pad', '--program', 'preload_sine_grid', '--rate', '100Hz', '-o', str(out)]) == 0
     assert '22 blocks' in capsys.readouterr().out
     s, meta = read(out)
     assert s['sequence'].size > 6000 and meta['specimen']['name'] == 'pad'
@@ -182,7 +182,7 @@ def test_bad_model_file_is_refused_naming_the_file(files, tmp_path, capsys, cont
 @pytest.mark.parametrize('args, names', [
     (['--model', 'missing_model.yaml'], 'missing_model.yaml'),
     (['--model', 'no_such_model'], 'no_such_model'),
-    (['--program', 'no_such_program'], 'seed004_preload'),          # the message lists the shipped programs
+    (['--program', 'no_such_program'], 'preload_sine_grid'),          # the message lists the shipped programs
     (['--load-cell-delay', '5kg'], '--load-cell-delay'),
     (['--load-cell-delay', '0.2s'], '0 .. 0.1 s'),
     (['--load-cell-gain', '0'], '--load-cell-gain'),

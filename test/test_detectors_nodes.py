@@ -244,7 +244,8 @@ blocks:
     assert list(result.events) == [] and op.events == [], [e.message for e in result.events]
 
 
-@pytest.mark.parametrize('name', ('seed000_grid', 'seed001_bushing', 'seed003_sweeps', 'seed004_preload'))
+@pytest.mark.parametrize('name', ('dynamic_stiffness_grid', 'quasi_static_then_sine', 'log_sweeps_1_50hz',
+                                  'preload_sine_grid'))
 def test_shipped_program_trips_no_default_detector_at_200_newton_noise(suite, name):
     """The whole shipped program, with amplitude control as the bench runs it, on a rig as fast as the nodes
     go (same waveform and physics as paced; 674 s of programs in minutes).

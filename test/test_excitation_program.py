@@ -27,7 +27,8 @@ FS = 1000.0
 
 def test_shipped_programs_load_and_fit_default_limits():
     names = shipped_programs()
-    for n in ('seed000_grid', 'seed001_bushing', 'seed003_sweeps', 'seed004_preload', 'durability_10hz'):
+    for n in ('dynamic_stiffness_grid', 'quasi_static_then_sine', 'log_sweeps_1_50hz', 'preload_sine_grid',
+              'durability_10hz'):
         assert n in names
     for n in names:
         p = load_program(n)
@@ -41,8 +42,19 @@ def test_shipped_programs_load_and_fit_default_limits():
     assert actions >= {('stiffness_change', 'end'), ('residual', 'hold')}
 
 
-def test_seed000_grid_is_the_paper_protocol():
-    p = load_program('seed000_grid')
+def test_programs_renamed_by_what_they_test_still_load_by_their_earlier_names():
+    from rubber_rig.excitation.program import PROGRAM_ALIASES
+    assert set(PROGRAM_ALIASES.values()) <= set(shipped_programs())
+    assert not set(PROGRAM_ALIASES) & set(shipped_programs())        # an old name never shadows a program
+    for old, new in PROGRAM_ALIASES.items():
+        a, b = load_program(old), load_program(new)
+        assert a.name == b.name == new and a.duration(FS) == b.duration(FS) and len(a.blocks) == len(b.blocks)
+    with pytest.raises(FileNotFoundError, match="no program 'seed002_grid'.*dynamic_stiffness_grid"):
+        load_program('seed002_grid')
+
+
+def test_dynamic_stiffness_grid_is_the_paper_protocol():
+    p = load_program('dynamic_stiffness_grid')
     amps = sorted({b.amplitude for b in p.blocks})
     freqs = sorted({b.frequency for b in p.blocks})
     assert amps == pytest.approx([0.5e-3, 1.0e-3])
@@ -53,12 +65,12 @@ def test_seed000_grid_is_the_paper_protocol():
 
 
 def test_seed004_sines_sit_on_the_preloads_and_seed001_starts_quasi_static():
-    p = load_program('seed004_preload')
+    p = load_program('preload_sine_grid')
     means = sorted({round(b.mean * 1e3, 6) for b in p.blocks if b.waveform == 'sine'})
     assert means == [-1.3, -1.1, -0.9]
-    q = load_program('seed001_bushing')
+    q = load_program('quasi_static_then_sine')
     assert q.blocks[0].waveform == 'triangle' and q.blocks[0].rate == pytest.approx(0.05e-3)
-    s = load_program('seed003_sweeps')
+    s = load_program('log_sweeps_1_50hz')
     sweeps = [b for b in s.blocks if b.waveform == 'sweep_log']
     assert [b.amplitude for b in sweeps] == pytest.approx([0.2e-3, 0.3e-3, 0.5e-3])
     assert all(b.frequency == 1.0 and b.frequency_end == 50.0 for b in sweeps)
@@ -104,7 +116,7 @@ def test_bad_program_structure():
             Program.from_yaml_text(text)
         if fld:
             assert f"'{fld}'" in str(exc.value)
-    with pytest.raises(FileNotFoundError, match='seed000_grid'):
+    with pytest.raises(FileNotFoundError, match='dynamic_stiffness_grid'):
         load_program('no_such_program')
 
 
@@ -125,7 +137,7 @@ blocks:
 
 
 def test_runner_chunks_equal_whole_program_from_sample_index():
-    p = load_program('seed004_preload')
+    p = load_program('preload_sine_grid')
     r = ProgramRunner(p, FS, Limits(velocity_max=0.5))
     n = 7000
     sizes = np.random.default_rng(1).integers(1, 300, 100)

@@ -28,7 +28,7 @@ from rubber_rig.models import build_model, load_parameter_set, steady_state_prop
 from rubber_rig.models.friction import berg_energy, berg_peak_force, friction_first_harmonic
 from rubber_rig.models.modelfile import resolve_model
 
-# A short version of the shipped seed000_grid program: 4 frequencies x 2 amplitudes, 6 cycles.
+# A short version of the shipped dynamic_stiffness_grid program: 4 frequencies x 2 amplitudes, 6 cycles.
 SHORT_PROGRAM = {
     'name': 'seed000_short', 'defaults': {'taper_cycles': 1, 'cycles': 6, 'mean': 0.0},
     'blocks': [{'name': 'sine', 'waveform': 'sine', 'amplitude': ['0.5 mm', '1 mm'],

@@ -26,7 +26,7 @@ from support.suite import domain_id
 
 
 def args(**kw):
-    base = dict(program='seed000_grid', cycles=None, duration_scale=None, blocks=None, taper_cycles=None)
+    base = dict(program='dynamic_stiffness_grid', cycles=None, duration_scale=None, blocks=None, taper_cycles=None)
     base.update(kw)
     return type('Args', (), base)
 

@@ -147,7 +147,7 @@ def test_block_ticks_equal_tick_by_tick(monkeypatch, rate, profile):
 
 
 def test_seed000_program_block_through_the_rig_reports_progress():
-    full = load_program('seed000_grid')
+    full = load_program('dynamic_stiffness_grid')
     prog = Program(name='seed000_two', blocks=[full.blocks[4], full.blocks[16]])  # 4 Hz 0.5 mm, 5 Hz 1 mm
     seen = []
     r = run_program(prog, FAST, on_progress=seen.append)

@@ -42,9 +42,9 @@ from rubber_rig.paths import find_config
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument('--program', default='seed000_grid',
-                        help='shipped program name or YAML file (default: seed000_grid, sine 0.5-14 Hz x 0.5 and '
-                             '1 mm at 20 degC)')
+    parser.add_argument('--program', default='dynamic_stiffness_grid',
+                        help='shipped program name or YAML file (default: dynamic_stiffness_grid, sine 0.5-14 Hz '
+                             'x 0.5 and 1 mm at 20 degC)')
     parser.add_argument('--config', default='rig_sim.yaml', help='ROS parameter file of the nodes '
                         '(default: the shipped config/rig_sim.yaml, as used by rig_sim.launch.py)')
     parser.add_argument('--rate', type=float, help='rig sample rate [Hz] (default: from the config, 1000)')

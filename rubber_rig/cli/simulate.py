@@ -16,7 +16,7 @@
 """Run a test program on the simulated rig, without ROS and faster than real time, and record it to MCAP.
 
 Examples:
-  rubber-rig simulate --model specimen.yaml --program seed004_preload -o run.mcap
+  rubber-rig simulate --model specimen.yaml --program preload_sine_grid -o run.mcap
   rubber-rig simulate --model zener_berg --program my_program.yaml --load-cell-delay 0.2ms -o run.mcap
 The recording has the bench's format (RigSampleBatch, SetpointBatch with block index, rubber_rig
 metadata), so `rubber-rig fit`, `report` and `info` read it like a bench run. The model (a model file
@@ -55,8 +55,8 @@ def add_arguments(parser):
                         help='specimen: a model file (.yaml with "elements"), a named model (zener_berg, '
                              'zener_berg_cubic, seed003, pad, ...) or a parameter set (swing_arm_joint_20C)')
     parser.add_argument('--program', '-p', required=True,
-                        help='test program: a shipped name (seed000_grid, seed001_bushing, seed003_sweeps, '
-                             'seed004_preload) or a program YAML file')
+                        help='test program: a shipped name (dynamic_stiffness_grid, quasi_static_then_sine, '
+                             'log_sweeps_1_50hz, preload_sine_grid, durability_10hz) or a program YAML file')
     parser.add_argument('--output', '-o', required=True, help='MCAP recording to write (replaced if it exists)')
     parser.add_argument('--temperature', '-T', default=None,
                         help="specimen temperature [degC] recorded (metadata and temperature channel; the model's "

@@ -44,8 +44,13 @@ from .detectors import DetectorError, parse_detectors
 from .yamltext import MAX_BYTES, YAMLLimitError, load_bounded
 
 PROGRAM_DIR = Path(__file__).with_name('programs')
-# The most blocks a program may have (after grid expansion): far above any real test plan (seed000_grid has
-# 22), low enough that parsing and checking a program stays well below half a second (bench_checks.py).
+# The shipped programs are named by what they test; recordings made before carry the names of the papers they
+# came from, so those names still load the same program (and nothing else may take them).
+PROGRAM_ALIASES = {'seed000_grid': 'dynamic_stiffness_grid', 'seed001_bushing': 'quasi_static_then_sine',
+                   'seed003_sweeps': 'log_sweeps_1_50hz', 'seed004_preload': 'preload_sine_grid'}
+# The most blocks a program may have (after grid expansion): far above any real test plan
+# (dynamic_stiffness_grid has 22), low enough that parsing and checking a program stays well below half a second
+# (bench_checks.py).
 MAX_BLOCKS = 2000
 _TOP_FIELDS = {'name', 'description', 'source', 'initial_position', 'rest_position', 'defaults', 'blocks',
                'detectors'}
@@ -277,7 +282,7 @@ def program_source(path_or_name) -> tuple[str, str]:
     """(YAML text, name) of a program given as a YAML path or the name of a shipped program."""
     path = Path(path_or_name)
     if not path.suffix and not path.exists():
-        path = PROGRAM_DIR / f'{path_or_name}.yaml'
+        path = PROGRAM_DIR / f'{PROGRAM_ALIASES.get(str(path_or_name), path_or_name)}.yaml'
     if not path.exists():
         raise FileNotFoundError(f'no program {str(path_or_name)!r} (shipped programs: '
                                 f'{", ".join(shipped_programs())})')
@@ -303,7 +308,7 @@ def read_program(path: str = '', yaml_text: str = '') -> tuple[Program, str]:
 
 
 def load_program(path_or_name) -> Program:
-    """Load a program from a YAML path, or by name from the shipped programs (e.g. "seed000_grid")."""
+    """Load a program from a YAML path, or by name from the shipped programs (e.g. "dynamic_stiffness_grid")."""
     text, name = program_source(path_or_name)
     return Program.from_yaml_text(text, name=name)
 
