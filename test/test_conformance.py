@@ -34,8 +34,9 @@ from rubber_rig.rig import open_rig
 from rubber_rig.rig.can.protocol import Protocol
 from rubber_rig.rig.can.stream import StreamRefused
 from rubber_rig.rig.config import RigConfig
-from rubber_rig.rig.conformance.active import ConformanceRun, Envelope
+from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.defects import DEFECTS
+from rubber_rig.rig.conformance.link import Envelope
 from rubber_rig.rig.conformance.report import Results, to_junit
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
 from rubber_rig.rig.sim.controller import SimController

@@ -39,8 +39,9 @@ from rubber_rig.rig.can.bus import open_bus
 from rubber_rig.rig.can.canlog import CanLogError, check_log_path
 from rubber_rig.rig.can.protocol import DBC_PATH, PROTOCOL_VERSION
 from rubber_rig.rig.config import ConfigError, RigConfig
-from rubber_rig.rig.conformance.active import Aborted, ConformanceRun, Envelope
+from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.defects import DEFECTS
+from rubber_rig.rig.conformance.link import Aborted, Envelope
 from rubber_rig.rig.conformance.passive import check_offline
 from rubber_rig.rig.conformance.report import to_junit, to_markdown
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS

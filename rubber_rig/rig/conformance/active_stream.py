@@ -1,0 +1,284 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Conformance scenarios of a controller that runs: power-up, listening, identification, streaming, stale
+setpoints, hold and reset while moving (mixed into active.ConformanceRun).
+"""
+from __future__ import annotations
+
+import math
+import time
+
+from ...safety import DECEL_MAX
+from ..can.protocol import (
+    CMD_ABORT,
+    CMD_HOLD,
+    CMD_IDENTIFY,
+    CMD_RESET,
+    PROTOCOL_VERSION,
+    STATES,
+    unwrap,
+)
+from .link import (
+    BUFFER_IN_FLIGHT,
+    BUFFER_OUTLIERS,
+    DEFAULT_HOST_TIMEOUT,
+    IDENTIFY_TIMEOUT,
+    LEAD,
+    LSB,
+    RAMP_VELOCITY,
+    REST_TIMEOUT,
+    WAVE_FREQUENCY,
+    Aborted,
+    ConformanceLink,
+)
+from .report import FAIL, NOT_TESTED, PASS
+
+
+class StreamScenarios(ConformanceLink):
+    """The scenarios of normal operation and its commands."""
+
+    def s_power_up(self):
+        """Power-up (CTRL-PWR-1)."""
+        self.power_up()
+        if not self._wait(lambda: any(f.host is False for f in self.trace.frames), 60.0):
+            raise Aborted('the controller sent nothing within 60 s of power-up')
+        with self.lock:
+            t0 = next(f.t for f in self.trace.frames if f.host is False)
+        self._sleep(1.5)
+        with self.lock:
+            first = [f for f in self.trace.frames if f.host is False and f.t <= t0 + 1.0 and not f.malformed]
+        ident = [f for f in first if f.name == 'ControllerIdentity']
+        states = {STATES[int(f.signals['ST_State'])] if int(f.signals['ST_State']) < len(STATES) else '?'
+                  for f in first if f.name == 'ControllerStatus'}
+        faults = [f for f in first if f.name == 'ControllerStatus' and int(f.signals['ST_Faults'])]
+        ticking = [f for f in first if f.samples is not None]
+        ok = (bool(ident) and int(ident[0].signals['CI_Protocol']) == PROTOCOL_VERSION and bool(states)
+              and states <= {'idle', 'unconfigured'} and not faults and not ticking)
+        self.results.put('CTRL-PWR-1', PASS if ok else FAIL,
+                         f'first second after power-up: {len(ident)} ControllerIdentity, states {sorted(states)}, '
+                         f'{len(faults)} status frames with faults, {len(ticking)} feedback frames',
+                         '' if ok else 'at power-up the controller must identify itself, idle, at rest, unfaulted')
+
+    def s_listen(self):
+        """Listen 1.5 s to the idle controller."""
+        self._sleep(1.5)
+        if self.state not in ('idle', 'fault', 'unconfigured'):
+            raise Aborted(f'the controller is {self.state}, not at rest: conformance starts from rest')
+        self.to_rest()
+
+    def s_identify(self):
+        """IDENTIFY (CTRL-ID-1)."""
+        t = time.time()
+        self.command(CMD_IDENTIFY)
+        got = self._wait(lambda: self.identity is not None and self.identity[0] >= t, 1.0)
+        if not got:
+            self.results.put('CTRL-ID-1', FAIL, 'no ControllerIdentity within 1 s of IDENTIFY', '')
+            return
+        at, sig = self.identity
+        latency = at - t
+        version = int(sig['CI_Protocol'])
+        ok = latency <= IDENTIFY_TIMEOUT and version == PROTOCOL_VERSION
+        self.results.put('CTRL-ID-1', PASS if ok else FAIL,
+                         f'answered in {latency * 1e3:.1f} ms: protocol {version}, device '
+                         f'0x{int(sig["CI_Device"]):04x}, firmware {int(sig["CI_Firmware"])}, host timeout '
+                         f'{float(sig["CI_HostTimeout"]):g} s, rated velocity {float(sig["CI_VelocityMax"]):g} m/s',
+                         '' if ok else f'expected protocol {PROTOCOL_VERSION} within {IDENTIFY_TIMEOUT * 1e3:.0f} ms')
+
+    @property
+    def host_timeout(self) -> float:
+        if self.identity and float(self.identity[1]['CI_HostTimeout']) > 0:
+            return float(self.identity[1]['CI_HostTimeout'])
+        return DEFAULT_HOST_TIMEOUT
+
+    def s_stream(self):
+        """Stream, underrun, resume, underrun, ABORT (CTRL-STREAM-1/3/4, CTRL-ST-4, CTRL-RAMP-1)."""
+        self.limits(self.env.lower, self.env.upper)
+        a = 0.4 * self.env.half
+        first, p0 = 1000, self.position
+        t0 = time.time()
+        end = self.stream(first, self.smooth(p0, a), 2.0)
+        self._sleep(LEAD + 0.3)                       # underrun: the controller holds
+        t_hold = time.time()
+        self._sleep(0.3)
+        held = self._samples_since(t_hold)
+        samples = [s for s in self._samples_since(t0) if first <= s.seq < end]
+        # CTRL-STREAM-1: started at the first setpoint with that setpoint
+        starts = [s for s in self._samples_since(t0)]
+        ok = bool(starts) and starts[0].seq == first and abs(starts[0].u - self.sent[first]) <= 1.5 * LSB
+        self.results.put('CTRL-STREAM-1', PASS if ok else FAIL,
+                         f'first sample {starts[0].seq if starts else None} (stream start {first})',
+                         '' if ok else 'the first applied sample must be the first setpoint of the stream')
+        self._judge_applied(samples, first, end, 'stream')
+        self._judge_buffer(t0, t_hold)
+        # CTRL-STREAM-3: held the last command without a fault
+        last = self.sent[end - 1]
+        still = held and all(abs(s.u - last) <= 1.5 * LSB for s in held)
+        states = {s[1] for s in self._states_since(t_hold)}
+        faults = [s[2] for s in self._states_since(t_hold) if s[2]]
+        ok = bool(still) and 'holding' in states and not faults
+        # resume from the held position, after the controller's current tick
+        first2 = self.next_sequence()
+        t1 = time.time()
+        end2 = self.stream(first2, self.smooth(last, -0.5 * a), 0.5, start=False)
+        self._sleep(LEAD + 0.2)
+        resumed = [s for s in self._samples_since(t1) if first2 <= s.seq < end2]
+        ok_resume = len(resumed) == end2 - first2 and all(abs(s.u - self.sent[s.seq]) <= 1.5 * LSB for s in resumed)
+        self.results.put('CTRL-STREAM-3', PASS if ok and ok_resume else FAIL,
+                         f'held {len(held)} samples at {last * 1e3:.4f} mm, states {sorted(states)}, resumed '
+                         f'{len(resumed)} of {end2 - first2} setpoints',
+                         '' if ok and ok_resume else 'an underrun must hold the last command without a fault and the '
+                         'stream must resume with the setpoints that follow')
+        self._judge_ramp(target=-a)
+
+    def _judge_applied(self, samples: list, first: int, end: int, what: str):
+        """CTRL-STREAM-4: every setpoint applied once, at its own sequence. A setpoint this host sent after the
+        feedback of its sequence had arrived was late by the host's fault: not judged (counted).
+        """
+        seqs = [s.seq for s in samples]
+        late = {s.seq for s in samples if self.sent_at.get(s.seq, -math.inf) > s.t - 1e-3}
+        wrong = sum(1 for s in samples if s.seq not in late and abs(s.u - self.sent.get(s.seq, math.inf)) > 1.5 * LSB)
+        ok = seqs == list(range(first, end)) and wrong == 0 and len(late) < 0.05 * len(samples)
+        self.results.put('CTRL-STREAM-4', PASS if ok else FAIL,
+                         f'{what}: {len(samples)} of {end - first} setpoints applied, {wrong} different from the '
+                         f'setpoint of their sequence, {len(late)} sent too late by this host (not judged)',
+                         '' if ok else 'each setpoint must be applied at its sequence')
+
+    def _judge_buffer(self, t0: float, t1: float):
+        """CTRL-ST-4: the buffer level the status reports is what the host has queued beyond the last sample."""
+        with self.lock:
+            log = list(self.sent_log)
+        errors = []
+        for t, state, _, last, level in self._states_since(t0):
+            if t > t1 or state != 'running':
+                continue
+            sent_end = max((f + n for ts, f, n in log if ts <= t), default=None)
+            sent_before = max((f + n for ts, f, n in log if ts <= t - BUFFER_IN_FLIGHT), default=None)
+            if sent_end is None or sent_before is None:
+                continue
+            full_last = unwrap(last, sent_end, 1 << 16)
+            hi, lo = sent_end - 1 - full_last, sent_before - 1 - full_last - self.frames.setpoints_per_frame
+            errors.append(0 if lo <= level <= hi else min(abs(level - lo), abs(level - hi)))
+        if not errors:
+            self.results.put('CTRL-ST-4', NOT_TESTED, '', 'no status frame while running')
+            return
+        bad = sum(1 for e in errors if e)
+        ok = bad <= BUFFER_OUTLIERS * len(errors)
+        self.results.put('CTRL-ST-4', PASS if ok else FAIL, f'{len(errors)} status frames while running, {bad} with '
+                         f'a level off the queued setpoints (by up to {max(errors)})',
+                         '' if ok else f'ST_BufferLevel must count the setpoints queued (at most '
+                         f'{BUFFER_OUTLIERS * 100:g} % of the status frames off)')
+
+    def _judge_ramp(self, target: float):
+        """ABORT from rest to target at RAMP_VELOCITY (CTRL-RAMP-1)."""
+        p0 = self.position
+        t = time.time()
+        self.command(CMD_ABORT, target, RAMP_VELOCITY)
+        done = self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)
+        self._sleep(0.05)
+        ramp = self._samples_since(t)
+        if not done or not ramp:
+            self.results.put('CTRL-RAMP-1', FAIL, f'state {self.state} after {REST_TIMEOUT:g} s', 'no ramp to rest')
+            return
+        u = [p0] + [s.u for s in ramp]
+        steps = [abs(b - a) * self.fs for a, b in zip(u, u[1:], strict=False)]
+        moving = [s for s, a, b in zip(ramp, u, u[1:], strict=False) if abs(b - a) > 0.5 * LSB]
+        duration = (moving[-1].seq - ramp[0].seq + 1) / self.fs if moving else 0.0
+        allowed = 1.5 * abs(target - p0) / RAMP_VELOCITY + 0.1
+        vmax = max(steps)
+        ok = (abs(u[-1] - target) <= 1e-6 and vmax <= RAMP_VELOCITY * 1.05 + 2 * LSB * self.fs
+              and duration <= allowed and not self.faults and self.state == 'idle')
+        self.results.put('CTRL-RAMP-1', PASS if ok else FAIL,
+                         f'{p0 * 1e3:.4f} -> {u[-1] * 1e3:.4f} mm (target {target * 1e3:.4f}) in {duration:.3f} s '
+                         f'(at most {allowed:.3f} s), peak {vmax * 1e3:.2f} mm/s (commanded {RAMP_VELOCITY * 1e3:g}), '
+                         f'state {self.state}',
+                         '' if ok else 'the ramp must reach its target at the commanded velocity without a step and '
+                         'end idle')
+        self.to_rest()
+
+    def s_stale(self):
+        """Setpoints of the old stream after the ramp, without HostStreamStart (CTRL-STREAM-2)."""
+        t = time.time()
+        with self.lock:
+            last = max(self.sent) if self.sent else 0
+        self.heartbeat = True
+        for k in range(10):
+            self.send_setpoints(last + 1 + 19 * k, [self.position] * 19, record=False)
+        self._sleep(0.3)
+        got = self._samples_since(t)
+        states = {s[1] for s in self._states_since(t)}
+        ok = not got and states <= {'idle'}
+        self.results.put('CTRL-STREAM-2', PASS if ok else FAIL, f'{len(got)} samples taken, states {sorted(states)}',
+                         '' if ok else 'a controller at rest must take no setpoint before the next HostStreamStart')
+        self.to_rest(self.position)
+
+    def s_hold(self):
+        """HOLD while moving (CTRL-RAMP-2)."""
+        a = 0.4 * self.env.half
+        p0 = self.position
+        first = self.next_sequence() + 1000
+        box = {}
+        base = self.smooth(p0, -a if p0 > 0 else a)
+        k_hold = int((0.25 / WAVE_FREQUENCY + LEAD) * self.fs)    # the controller is at full speed then
+
+        def wave(k):
+            if k == k_hold and 'hold' not in box:
+                box['hold'] = time.time()
+                self.command(CMD_HOLD, 0.0, RAMP_VELOCITY)
+            return base(k)
+        t = time.time()
+        self.stream(first, wave, 0.4)
+        done = self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)
+        self._sleep(0.05)
+        t_hold = box.get('hold', t)
+        before = [s for s in self._samples_since(t) if s.t < t_hold]
+        after = self._samples_since(t_hold)
+        u = [s.u for s in before[-3:] + after]
+        v = [(b - a) * self.fs for a, b in zip(u, u[1:], strict=False)]
+        acc = [abs(b - a) * self.fs for a, b in zip(v, v[1:], strict=False)]
+        decel = DECEL_MAX
+        still = bool(after) and len(v) >= 2 and abs(v[-1]) <= 2 * LSB * self.fs
+        peak_v = max((abs(x) for x in v[:3]), default=0.0)
+        ok = done and still and max(acc, default=0) <= decel * 1.1 + 4 * LSB * self.fs ** 2 and not self.faults \
+            and self.state == 'idle'
+        self.results.put('CTRL-RAMP-2', PASS if ok else FAIL,
+                         f'from {peak_v * 1e3:.2f} mm/s to a stop at {u[-1] * 1e3:.4f} mm in {len(after)} samples, '
+                         f'peak deceleration {max(acc, default=0):.1f} m/s^2 (HostLimits {decel:g}), '
+                         f'state {self.state}',
+                         '' if ok else 'HOLD must brake to a stop without a step and end idle without a fault')
+        self.to_rest(self.position)
+
+    def s_reset_moving(self):
+        """RESET while running (CTRL-RESET-1)."""
+        a = 0.4 * self.env.half
+        p0 = self.position
+        first = self.next_sequence() + 1000
+        t = time.time()
+        box = {}
+        base = self.smooth(p0, -a if p0 > 0 else a)
+
+        def wave(k):
+            if k == int(0.5 * self.fs) and 'reset' not in box:
+                box['reset'] = time.time()
+                self.command(CMD_RESET)
+            return base(k)
+        end = self.stream(first, wave, 1.2)
+        self._sleep(LEAD + 0.05)
+        after = [s for s in self._samples_since(box.get('reset', t)) if s.seq < end]
+        states = self._states_before(box.get('reset', t), end)
+        ok = bool(after) and states <= {'running'} and all(abs(s.u - self.sent[s.seq]) <= 1.5 * LSB for s in after)
+        self.results.put('CTRL-RESET-1', PASS if ok else FAIL,
+                         f'after RESET: {len(after)} samples as streamed, states {sorted(states)}',
+                         '' if ok else 'RESET while the rig moves must change nothing')
+        self.to_rest(self.position)

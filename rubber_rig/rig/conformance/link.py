@@ -1,0 +1,277 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The host end of a conformance run: frames to and from the controller, the envelope watch on every sample
+that arrives, waits and streams in the controller's sample time. The scenarios (active_stream, active_faults)
+and the run (active.ConformanceRun) are built on it; it is deliberately not the driver (see active).
+"""
+from __future__ import annotations
+
+import math
+import threading
+import time
+from dataclasses import dataclass
+
+import can
+
+from ...safety import DECEL_MAX
+from ..can.frames import SampleFrames
+from ..can.protocol import (
+    CMD_ABORT,
+    CMD_RESET,
+    STATES,
+    Protocol,
+    cycle_time,
+    unwrap,
+)
+from .report import Results
+from .trace import Trace
+
+LSB = 1e-7                  # [m] displacement resolution of the frames
+LEAD = 0.1                  # [s] setpoints streamed ahead of the controller (covers this host's pauses)
+IDENTIFY_TIMEOUT = 0.1      # [s] CTRL-ID-1
+RAMP_VELOCITY = 0.002       # [m/s] commanded velocity of the ramps the run asks for
+WAVE_FREQUENCY = 2.0        # [Hz] of the motion the run streams
+DEFAULT_HOST_TIMEOUT = 0.5  # [s] assumed when the controller states none
+BUFFER_IN_FLIGHT = 0.05     # [s] setpoints sent this recently may not be counted in ST_BufferLevel yet
+BUFFER_OUTLIERS = 0.02      # share of status frames whose level may be off (a controller busy for a moment)
+REST_TIMEOUT = 15.0         # [s] longest wait for the controller to come to rest
+
+
+class Aborted(RuntimeError):
+    """The run left the operator's envelope (or could not continue safely): ABORT was commanded."""
+
+
+@dataclass
+class Envelope:
+    """The displacement range [m] the operator allows the run to use: lower < 0 < upper."""
+
+    lower: float
+    upper: float
+
+    def __post_init__(self):
+        if not (math.isfinite(self.lower) and math.isfinite(self.upper) and self.lower < 0.0 < self.upper):
+            raise ValueError(f'envelope {self.lower * 1e3:g}..{self.upper * 1e3:g} mm: it must contain the rest '
+                             'position 0 mm (lower < 0 < upper)')
+
+    @property
+    def half(self) -> float:
+        return min(-self.lower, self.upper)
+
+
+@dataclass
+class Sample:
+    t: float
+    seq: int
+    x: float
+    u: float
+    state: str
+
+
+class ConformanceLink:
+    """The bus side of a run on `bus` (any python-can Bus) at sample_rate [Hz] with frame `profile`, inside
+    `envelope`: sending, receiving and judging what arrives against the envelope.
+    """
+
+    def __init__(self, bus: can.BusABC, sample_rate: float, envelope: Envelope, profile: str = 'packed',
+                 log=print, power_up=None):
+        self.bus, self.fs, self.env, self.log = bus, float(sample_rate), envelope, log
+        # power_up: callable that switches the controller on (or asks the operator to) once the run listens;
+        # None: the controller is already on and CTRL-PWR-1 is not tested
+        self.power_up = power_up
+        self.proto = Protocol()
+        self.frames = SampleFrames(profile, self.proto.db, self.fs)
+        self.trace = Trace(self.fs)
+        self.results = Results()
+        self.lock = threading.RLock()
+        self.state, self.faults, self.identity = 'unconfigured', 0, None
+        self.samples = []           # Sample per feedback sample received
+        self.status_log = []        # (t, state, faults, last sequence, buffer level) per ControllerStatus
+        self.sent = {}              # sequence -> setpoint sent (valid frames only)
+        self.sent_log = []          # (t, first, count) per valid setpoint frame sent
+        self.sent_at = {}           # sequence -> time its setpoint was sent
+        self.deviation = ''
+        self.heartbeat = False
+        self._fb_ref = 0
+        self._hb_counter = 0
+        self._next_hb = 0.0
+        self._stop = threading.Event()
+        self.position = 0.0         # last applied command reported [m]
+        self._rx = threading.Thread(target=self._receive_loop, name='conformance-rx', daemon=True)
+
+    # ---- bus
+    def _tx(self, msg: can.Message):
+        with self.lock:
+            self.trace.add(msg, time.time())
+        self.bus.send(msg)
+
+    def send(self, name: str, signals: dict):
+        self._tx(self.proto.encode(name, dict(signals)))
+
+    def command(self, code: int, argument: float = 0.0, ramp_velocity: float = 0.0):
+        self.send('HostCommand', {'CMD_Code': code, 'CMD_Counter': 0, 'CMD_Argument': argument,
+                                  'CMD_RampVelocity': ramp_velocity})
+
+    def limits(self, lower: float, upper: float, decel: float = DECEL_MAX):
+        self.send('HostLimits', {'HL_DisplacementMin': lower, 'HL_DisplacementMax': upper, 'HL_Deceleration': decel})
+
+    def send_setpoints(self, first: int, values: list, record: bool = True):
+        for i, msg in enumerate(self.frames.encode_setpoints(first, values)):
+            per = self.frames.setpoints_per_frame
+            chunk = values[i * per:(i + 1) * per]
+            self._tx(msg)
+            if record:
+                with self.lock:
+                    self.sent_log.append((time.time(), first + i * per, len(chunk)))
+                    now = time.time()
+                    for k, v in enumerate(chunk):
+                        self.sent[first + i * per + k] = v
+                        self.sent_at[first + i * per + k] = now
+
+    def _heartbeat(self):
+        self._hb_counter = (self._hb_counter + 1) % 256
+        self.send('HostHeartbeat', {'HH_Counter': self._hb_counter})
+
+    def _receive_loop(self):
+        period = cycle_time('HostHeartbeat')
+        while not self._stop.is_set():
+            msg = self.bus.recv(0.005)
+            now = time.monotonic()
+            if self.heartbeat and now >= self._next_hb:
+                self._heartbeat()
+                self._next_hb = max(self._next_hb + period, now)
+            if msg is None:
+                continue
+            with self.lock:
+                fr = self.trace.add(msg)
+                if fr.malformed or fr.host is not False:
+                    continue
+                if fr.samples is not None:
+                    self._on_feedback(fr)
+                elif fr.name == 'ControllerStatus':
+                    s = fr.signals
+                    code = int(s['ST_State'])
+                    self.state = STATES[code] if code < len(STATES) else f'state {code}'
+                    self.faults = int(s['ST_Faults'])
+                    self.status_log.append((fr.t, self.state, self.faults, int(s['ST_LastSequence']),
+                                            int(s['ST_BufferLevel'])))
+                elif fr.name == 'ControllerIdentity':
+                    self.identity = (fr.t, dict(fr.signals))
+
+    def _on_feedback(self, fr):
+        raw, xs, _, us = fr.samples
+        first = unwrap(int(raw), self._fb_ref, self.trace.modulus[fr.name])
+        self._fb_ref = first + len(xs)
+        for i, (x, u) in enumerate(zip(xs, us, strict=False)):
+            self.samples.append(Sample(fr.t, first + i, float(x), float(u), self.state))
+            self.position = float(u)
+            self._watch(float(x), float(u), first + i)
+
+    def _watch(self, x: float, u: float, seq: int):
+        """The operator's envelope: a sample outside it, or tracking worse than a third of it, aborts the run."""
+        if self.deviation:
+            return
+        margin = 0.02 * self.env.half + 5e-6
+        why = ''
+        if not self.env.lower - LSB <= u <= self.env.upper + LSB:
+            why = f'applied command {u * 1e3:.4f} mm at sample {seq} outside the envelope'
+        elif not self.env.lower - margin <= x <= self.env.upper + margin:
+            why = f'measured displacement {x * 1e3:.4f} mm at sample {seq} outside the envelope'
+        elif abs(x - u) > self.env.half / 3:
+            why = f'tracking error {abs(x - u) * 1e3:.4f} mm at sample {seq}'
+        if why:
+            self.deviation = why
+            self.command(CMD_ABORT, 0.0)
+
+    # ---- helpers
+    def _check(self):
+        if self.deviation:
+            raise Aborted(self.deviation)
+
+    def _wait(self, predicate, timeout: float) -> bool:
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            self._check()
+            with self.lock:
+                if predicate():
+                    return True
+            time.sleep(0.002)
+        return False
+
+    def _sleep(self, seconds: float):
+        self._wait(lambda: False, seconds)
+
+    def _samples_since(self, t: float) -> list:
+        with self.lock:
+            return [s for s in self.samples if s.t >= t]
+
+    def _states_since(self, t: float) -> list:
+        with self.lock:
+            return [s for s in self.status_log if s[0] >= t]
+
+    def _states_before(self, t: float, end: int) -> set:
+        """States the status frames since t report while the controller had not yet taken sample end - 1 (by
+        ST_LastSequence, not by arrival time: feedback may arrive later than the status of the same tick).
+        """
+        return {s[1] for s in self._states_since(t) if unwrap(s[3], end, 1 << 16) < end - 1}
+
+    def stream(self, first: int, wave, duration: float, start: bool = True) -> int:
+        """Stream wave(k) [m] (k: samples since `first`) for `duration` [s] of samples, LEAD ahead, with the host
+        heartbeat on; returns the sequence after the last setpoint sent.
+        """
+        if start:
+            self.send('HostStreamStart', {'HS_FirstSequence': first % (1 << 32)})
+        with self.lock:
+            self._fb_ref = first
+        self.heartbeat = True
+        total = int(round(duration * self.fs))
+        per = self.frames.setpoints_per_frame
+        t0, sent = time.monotonic(), first
+        while sent < first + total:
+            self._check()
+            due = first + int((time.monotonic() - t0 + LEAD) * self.fs)
+            while sent < min(due, first + total):
+                n = min(per, first + total - sent)
+                self.send_setpoints(sent, [wave(k - first) for k in range(sent, sent + n)])
+                sent += n
+            time.sleep(0.001)
+        return sent
+
+    def next_sequence(self, lead: float = LEAD) -> int:
+        """A sequence LEAD ahead of the last sample the controller reported."""
+        with self.lock:
+            last = self.samples[-1].seq if self.samples else 0
+        return last + 1 + int(lead * self.fs)
+
+    def to_rest(self, target: float = 0.0):
+        """Bring the controller to rest at target (ABORT if it ticks), clear faults (RESET), wait for idle."""
+        self.heartbeat = True
+        if self.state in ('running', 'holding'):
+            self.command(CMD_ABORT, target)
+        if not self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT):
+            raise Aborted(f'the controller did not come to rest within {REST_TIMEOUT:g} s (state {self.state})')
+        if self.state == 'fault' or self.faults:
+            self.command(CMD_RESET)
+            self._wait(lambda: self.state == 'idle' and not self.faults, 1.0)
+        self.heartbeat = False
+
+    def smooth(self, start: float, amplitude: float, frequency: float = WAVE_FREQUENCY):
+        """Start + amplitude (1 - cos 2 pi f t) / 2: begins at rest, never leaves [start, start + amplitude]."""
+        w = 2 * math.pi * frequency / self.fs
+        return lambda k: start + amplitude * (1.0 - math.cos(w * k)) / 2.0
+
+    def ramp_to(self, start: float, end: float, velocity: float):
+        """A constant-velocity move from start to end [m] at velocity [m/s], then holding end."""
+        n = max(1, int(abs(end - start) / velocity * self.fs))
+        return lambda k: start + (end - start) * min(k, n) / n
