@@ -45,8 +45,8 @@ ALLOWED = {
     'session': {'excitation', 'rig', 'safety'},
     'online': {'analysis', 'excitation', 'models'},
     'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig', 'session', 'units'},
-    'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'settings',
-              'versions'},
+    'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'session',
+              'settings', 'versions'},
     'cli': {'__init__', 'analysis', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording', 'rig',
             'safety', 'session', 'settings', 'units'},
     'testing': {'dds', 'nodes'},
@@ -159,7 +159,6 @@ OVERSIZE_FUNCTIONS = {
     'fitting/blocktrend.py:fit_block': 83,
 }
 OVERSIZE_MODULES = {
-    'nodes/excitation_node.py': 798,
     'rig/can/driver.py': 795,
     'rig/conformance/active.py': 788,
     'rig/can/canlog_reader.py': 598,
