@@ -152,7 +152,6 @@ OVERSIZE_FUNCTIONS = {
     'fitting/blocks.py:split_blocks': 102,
     'recording/recover.py:recover': 99,
     'excitation/blocks.py:parse_block': 94,
-    'session/run.py:_loop': 94,
     'fitting/report.py:_html': 91,
     'fitting/blocktrend.py:fit_trend': 89,
     'models/cycle_tracker.py:_run': 87,

@@ -104,8 +104,10 @@ class ProgramSession:
             return []
         self.runner.feed_measurement(first_sequence, np.asarray(displacement, dtype=float))
         self.elapsed_samples += n
+        if self.monitor is None:
+            return []
         block, block_cycles, program_cycles = self.runner.cycles_done(self.next_sample - 1)
-        if block < 0 or self.monitor is None:
+        if block < 0:
             return []
         return self.monitor.on_progress(block, block_cycles, program_cycles, self.elapsed, self.next_sample)
 
