@@ -28,8 +28,8 @@ Publishes:   setpoints (msg_defs/SetpointBatch), program (std_msgs/String, latch
 Calls:       <rig_driver>/open_stream, <rig_driver>/stop_stream
 
 A program starts only on a stream the driver grants (one owner at a time), from wherever the rig holds (an
-approach ramp leads to the program's start). Setpoints are generated from the sample index by
-rubber_rig.excitation.ProgramRunner (never from wall-clock time) and published ``lead_time`` ahead of the
+approach ramp leads to the program's start). Setpoints are generated from the sample index by a
+rubber_rig.session.ProgramSession (never from wall-clock time) and published ``lead_time`` ahead of the
 latest measured sample. Abort, cancel and hold go to the driver directly (its controller ramps at once,
 instead of after the queued lead); a rig that stops the stream, faults or goes silent ends the goal with the
 reason. No callback lets an exception take the node down: it ends the running program and logs.
