@@ -45,8 +45,8 @@ ALLOWED = {
     'session': {'excitation', 'rig', 'safety'},
     'online': {'analysis', 'excitation', 'models'},
     'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig', 'session', 'units'},
-    'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'settings',
-              'versions'},
+    'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'session',
+              'settings', 'versions'},
     'cli': {'__init__', 'analysis', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording', 'rig',
             'safety', 'session', 'settings', 'units'},
     'testing': {'dds', 'nodes'},
@@ -148,10 +148,8 @@ MAX_FUNCTION_LINES = 80
 MAX_MODULE_LINES = 400
 OVERSIZE_FUNCTIONS = {
     'rig/can/canlog_reader.py:_decode': 132,
-    'session/run.py:_loop': 94,
 }
 OVERSIZE_MODULES = {
-    'nodes/excitation_node.py': 798,
     'rig/can/driver.py': 795,
     'rig/can/canlog_reader.py': 598,
     'rig/sim/controller.py': 596,

@@ -138,10 +138,19 @@ def test_setpoints_outside_limits_are_refused_before_sending():
         assert drv.status.faults & FAULT_VELOCITY_LIMIT and drv.status.setpoints_sent == 0
 
 
+def abort_at(seconds: float):
+    """A before_chunk for run_program that aborts the program at `seconds` of samples (the abort path)."""
+    def abort(run, sequence):
+        runner = run.session.runner
+        if sequence >= run.session.start_sequence + int(round(seconds * runner.fs)) and not runner.aborted:
+            runner.abort('abort_after')
+    return abort
+
+
 def test_abort_ramp_respects_the_host_velocity_limit():
     prog = Program.from_yaml_text('name: slow\nblocks:\n  - {waveform: sine, frequency: 1 Hz, amplitude: 1 mm, '
                                   'cycles: 5}\n')
-    r = run_program(prog, dict(FAST, limits={'velocity_max': 0.01}), abort_after=2.3)
+    r = run_program(prog, dict(FAST, limits={'velocity_max': 0.01}), before_chunk=abort_at(2.3))
     assert not r.completed and r.setpoint[-1] == 0.0
     ramp = r.block_index == -1
     v = np.abs(contiguous_diffs(r.sequence, r.setpoint)) * r.sample_rate

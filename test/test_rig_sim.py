@@ -95,6 +95,16 @@ blocks:
     assert blk.achieved_mean == pytest.approx(-1.1e-3, abs=5e-6)
 
 
+def with_the_nodes_latency(run, sequence):
+    """run_program's before_chunk: the runner sees each measured sample only once the setpoints `lead` beyond
+    it have been generated, i.e. a measurement latency of the lookahead, which is what a streamed rig (the ROS
+    nodes with lead_time = lookahead) has. Without it a fast run feeds the measurement as soon as the simulated
+    rig has consumed the queue, so the amplitude loop sees at most one chunk of latency.
+    """
+    run.feed_on_arrival = False
+    run.feed(sequence - run.session.lead)
+
+
 def test_compensation_memory_reaches_the_target_from_the_second_block_with_the_nodes_lead():
     # 8 cycles per block, measurement seen 0.5 s after the setpoint (the excitation node's lead_time): a
     # block's own correction arrives only in its last cycles. A 60 Hz actuator (the low end of 60-100 Hz)
@@ -103,9 +113,11 @@ def test_compensation_memory_reaches_the_target_from_the_second_block_with_the_n
         f'  - {{name: s{f}, waveform: sine, frequency: {f} Hz, amplitude: 0.5 mm, cycles: 8}}\n'
         for f in (8, 10, 12, 14)))
     cfg = dict(FAST, sim={'actuator_frequency': 60.0})
-    with_memory = run_program(prog, cfg, amplitude_control=True, lookahead=0.5, lead_latency=True)
-    per_block = run_program(prog, cfg, amplitude_control=True, lookahead=0.5, lead_latency=True,
-                            compensation_memory=False)
+    # the node streams in 50-sample batches (1 kHz): bigger chunks would add latency on top of the lead
+    with_memory = run_program(prog, cfg, amplitude_control=True, lookahead=0.5, chunk=50,
+                              before_chunk=with_the_nodes_latency)
+    per_block = run_program(prog, cfg, amplitude_control=True, lookahead=0.5, chunk=50,
+                            before_chunk=with_the_nodes_latency, compensation_memory=False)
     assert with_memory.completed and per_block.completed
     err = [b.achieved_amplitude / b.target_amplitude - 1 for b in with_memory.blocks]
     assert all(b.cycles_measured == 8 for b in with_memory.blocks)

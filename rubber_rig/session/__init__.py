@@ -16,6 +16,7 @@
 """A test program run on a rig: the layer above excitation (what to move) and rig (how it moves), below the nodes
 and the command line. Pure Python (no rclpy).
 """
-from .run import RunResult, run_program
+from .program_session import ProgramSession
+from .run import ProgramRun, RunResult, run_program
 
-__all__ = ['RunResult', 'run_program']
+__all__ = ['ProgramRun', 'ProgramSession', 'RunResult', 'run_program']

@@ -1,0 +1,154 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""What the excitation node tells about a program besides its setpoints: the detector events it published, the
+nodes that went silent (heartbeats) and whether the detectors were blind, in /diagnostics and in the goal's result.
+"""
+from __future__ import annotations
+
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
+from rclpy.node import Node
+
+from msg_defs.action import RunProgram
+from msg_defs.msg import DetectorEvent
+from rubber_rig.nodes import conversions as conv
+from rubber_rig.nodes import topics
+from rubber_rig.nodes.heartbeat import Peers
+
+
+class ProgramHealth:
+    """The events, silences and detector blindness of the running (or last) program of the excitation ``node``
+    (which has ``state``, ``status``, ``session`` and ``recording``).
+    """
+
+    def __init__(self, node: Node):
+        self.node = node
+        self.events: list[DetectorEvent] = []   # detector events of the running (or last) program
+        self.blind = ''                  # why the detectors were blind during the running program
+        self.peers = Peers(node)         # the suite's other nodes: silent ones are named in diagnostics
+        self.silent_seen: dict[str, float] = {}   # node -> longest silence seen during the running program [s]
+        self.silent_now: dict[str, float] = {}
+        self.silent_before: set[str] = set()
+        self.pub_diagnostics = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
+        node.create_timer(1.0, self.publish_diagnostics)
+        node.create_timer(0.1, self.watch_peers)
+
+    def start_program(self) -> None:
+        self.blind, self.events = '', []
+        # silences that began before the program (a node restarted just before it) are not the program's
+        self.silent_seen, self.silent_before = {}, set(self.silent_now)
+
+    def annotate(self, message: str) -> str:
+        """The goal's result message with what went wrong besides: blind detectors, a lost recording, silences."""
+        if self.blind:
+            message += f' (detectors were blind: {self.blind})'
+        if self.node.recording.lost:
+            message += f' ({self.node.recording.lost})'
+        if self.silent_seen:
+            message += ' (silent during the program: ' + ', '.join(
+                f'{n} up to {a:.1f} s' for n, a in sorted(self.silent_seen.items())) + ')'
+        return message
+
+    def publish_diagnostics(self) -> None:
+        """/diagnostics: the program state and its detector events, named after the node."""
+        node = self.node
+        running = node.session is not None
+        last = self.events[-1] if self.events else None
+        level = DiagnosticStatus.OK
+        if last is not None and last.action != 'record':
+            level = DiagnosticStatus.WARN
+        blind = self.detectors_blind()
+        lost = node.recording.lost if running else ''
+        if lost:
+            level = DiagnosticStatus.WARN
+        silent = ', '.join(f'{n} ({a:.1f} s)' for n, a in self.silent_now.items())   # as watch_peers saw it
+        if silent:
+            level = DiagnosticStatus.WARN
+        if blind:
+            level = DiagnosticStatus.WARN
+            if not self.blind:
+                node.get_logger().warning(f'detectors blind: {blind}')
+            self.blind = blind
+        values = {'state': node.state, 'program': node.session.runner.program.name if running else '',
+                  'detector_events': len(self.events), 'last_event': last.message if last else '',
+                  'detectors_blind': blind, 'recording_lost': lost, 'nodes_silent': silent}
+        reasons = [f'nodes silent: {silent}' if silent else '', f'detectors blind: {blind}' if blind else '', lost,
+                   last.message if last is not None and last.action != 'record' else '']
+        msg = DiagnosticArray()
+        msg.header.stamp = node.get_clock().now().to_msg()
+        msg.status.append(DiagnosticStatus(
+            level=level, name=node.get_fully_qualified_name(), hardware_id='rubber_rig',
+            message=next((x for x in reasons if x), f'program {node.state}'),
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]))
+        self.pub_diagnostics.publish(msg)
+
+    def watch_peers(self) -> None:
+        """Name a node that went silent (no heartbeat for heartbeat.SILENT, 0.75 s) once per silence in the log;
+        while a program runs, remember it for the goal's result. The rig driver's silence ends the program
+        elsewhere (status_timeout).
+        """
+        quiet = self.peers.silent()
+        log = self.node.get_logger()
+        for name, age in quiet.items():
+            if name not in self.silent_now:
+                log.error(f'{name} is silent: no heartbeat for {age:.1f} s (stuck or gone)')
+            if self.node.session is not None and name not in self.silent_before:
+                self.silent_seen[name] = max(age, self.silent_seen.get(name, 0.0))
+        for name in set(self.silent_now) - set(quiet):
+            log.info(f'{name} beats again')
+            self.silent_before.discard(name)
+        changed = set(quiet) != set(self.silent_now)
+        self.silent_now = quiet
+        if changed:
+            self.publish_diagnostics()    # at once, not at the next 1 s tick
+
+    def publish_events(self, events, program, publisher) -> None:
+        """Publish the detector events of ``program`` on ``publisher``, keep them, and log them."""
+        t = self.node.get_clock().now().nanoseconds * 1e-9
+        for e in events:
+            msg = conv.detector_event_msg(e, program.name, program.blocks[e.block].name, t)
+            self.events.append(msg)
+            publisher.publish(msg)
+            # one call site per severity: rclpy refuses a call site whose severity changes between calls (an
+            # event recorded and then one that holds, from one line, raised and lost the hold)
+            if e.action == 'record':
+                self.node.get_logger().info(e.message)
+            else:
+                self.node.get_logger().warning(e.message)
+
+    def detectors_blind(self) -> str:
+        """Why the running program's cycle detectors cannot trip ('' when they judge cycles as they come)."""
+        session, status = self.node.session, self.node.status
+        if session is None or status is None:
+            return ''
+        since = session.detectors_blind(status.sample_rate)
+        return (f'no cycle_metrics from element_model for {since:.1f} s of a periodic block (is it running?)'
+                if since else '')
+
+    def feedback(self, p) -> RunProgram.Feedback:
+        """The goal's feedback: the runner's Progress ``p`` and the detector events so far."""
+        return RunProgram.Feedback(block_index=p.block_index, block_count=p.block_count, block_name=p.block_name,
+                                   cycle=p.cycle, cycles_total=p.cycles_total, target_amplitude=p.target_amplitude,
+                                   achieved_amplitude=p.achieved_amplitude, progress=p.fraction,
+                                   events=len(self.events),
+                                   last_event=self.events[-1] if self.events else DetectorEvent())
+
+    def result(self, runner, success: bool, ended: bool) -> RunProgram.Result:
+        """The goal's result for the program of ``runner``: a success only if asked for and it was not aborted
+        (or it ``ended`` by an end-of-test trigger), with the block summaries, the events and what went wrong.
+        """
+        return RunProgram.Result(success=success and (ended or not runner.aborted),
+                                 message=self.annotate(runner.abort_reason if runner.aborted else 'completed'),
+                                 blocks=[conv.block_summary_msg(s) for s in runner.block_summaries],
+                                 events=list(self.events))

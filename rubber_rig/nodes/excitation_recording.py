@@ -1,0 +1,146 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""What the excitation node knows of the recorder: whether this namespace's samples are being recorded (a
+program with require_recording starts only then) and whether the recording a program started in was lost.
+
+The recorder publishes its status (recorder_status, latched) every 0.5 s; a status older than ``timeout`` [s]
+means the recorder is gone. A restarted recorder or rig_driver is a new publisher on its topic: a status from
+before that change speaks for the old one and does not count.
+"""
+from __future__ import annotations
+
+import time
+
+from rclpy.node import Node
+
+from msg_defs.msg import RecorderStatus
+from rubber_rig.nodes import topics
+
+
+class RecordingWatch:
+    """The latest recorder status for ``node`` and what it means for the program that runs."""
+
+    def __init__(self, node: Node, require: bool, timeout: float):
+        self.node, self.require, self.timeout = node, require, timeout
+        self.status: RecorderStatus | None = None
+        self.wall = 0.0                  # time.monotonic() of the latest status
+        self.recorded_by = ''            # the file the running program started being recorded in ('' if none)
+        self.lost = ''                   # why the running program's recording was lost ('' if it was not)
+        # endpoint gids of the publishers of a topic and when they last changed (a node restarted)
+        self._publisher_sets: dict[str, tuple[frozenset, float]] = {}
+
+    @property
+    def samples_topic(self) -> str:
+        return f'{self.node.get_namespace().rstrip("/")}/{topics.SAMPLES}'
+
+    @property
+    def age(self) -> float:
+        """Seconds since the latest recorder status."""
+        return time.monotonic() - self.wall
+
+    def on_status(self, msg: RecorderStatus, session) -> str:
+        """A recorder status while ``session`` (a ProgramSession, or None) runs: why it must stop, or ''."""
+        self.status, self.wall = msg, time.monotonic()
+        if session is None:
+            return ''
+        if self.require and self.failed:
+            return f'recording failed: {msg.error or "recorder error"}'
+        self.check(session.next_sample)
+        return ''
+
+    @property
+    def failed(self) -> bool:
+        return self.status is not None and self.status.state == RecorderStatus.STATE_ERROR
+
+    def start_program(self) -> None:
+        """A program starts: remember the recording it starts in."""
+        self.recorded_by, self.lost = self.path(), ''
+
+    def path(self) -> str:
+        """The file the recorder reports recording this namespace's samples into ('' if none, or stale)."""
+        r = self.status
+        if r is None or self.age > self.timeout or r.state != RecorderStatus.STATE_RECORDING \
+                or self.samples_topic not in r.topics:
+            return ''
+        return r.path or '(unnamed file)'
+
+    def check(self, next_sample) -> None:
+        """A program that started while being recorded and whose recording stopped says so, once: in the log,
+        the diagnostics and the goal's result (without require_recording the program runs on; with it, the
+        node stops it).
+        """
+        if not self.recorded_by or self.lost:
+            return
+        now = self.path()
+        if now == self.recorded_by:
+            return
+        r = self.status
+        why = (f'no recorder status for {self.age:.1f} s (the recorder is gone)' if self.age > self.timeout
+               else f'the recorder is {r.state_name}' + (f': {r.error}' if r.error else '') if not now
+               else f'the recorder switched to {now}')
+        self.lost = (f'recording lost from about sample {next_sample}: {why}; the samples after it are not in '
+                     f'{self.recorded_by}')
+        self.node.get_logger().error(self.lost)
+
+    def fresh(self, since: float) -> bool:
+        """The recorder status (with require_recording) is ready to judge a goal that arrived at ``since``
+        (time.monotonic()). An error counts only if reported since then: the error of a recorder that was just
+        replaced must not refuse a goal the new one would record.
+        """
+        return not self.require or (
+            self.status is not None and self.age <= self.timeout
+            and ((self.failed and self.wall >= since) or self.ready() == ''))
+
+    def _publishers_changed(self, topic: str) -> tuple[int, float]:
+        """(number of publishers of ``topic``, time.monotonic() when that set of publishers last changed)."""
+        gids = frozenset(bytes(i.endpoint_gid) for i in self.node.get_publishers_info_by_topic(topic))
+        known, since = self._publisher_sets.get(topic, (None, 0.0))
+        if gids != known:
+            since = time.monotonic()
+            self._publisher_sets[topic] = (gids, since)
+        return len(gids), since
+
+    def ready(self) -> str:
+        """'' when a program may start as far as the recording goes, else why not."""
+        if not self.require:
+            return ''
+        r = self.status
+        if r is None:
+            return "require_recording: no recorder status on 'recorder_status' (is the recorder running?)"
+        if self.age > self.timeout:
+            return f'require_recording: no recorder status for {self.age:.1f} s'
+        # a restarted recorder is a new publisher of its status: the last status of the one it replaced
+        # (latched, fresh for recorder_timeout) must not stand for it
+        ns = self.node.get_namespace().rstrip('/')
+        _, since = self._publishers_changed(f'{ns}/{topics.RECORDER_STATUS}')
+        if self.wall <= since:
+            return 'require_recording: waiting for a status of the recorder that runs now (it was restarted)'
+        if r.state != RecorderStatus.STATE_RECORDING:
+            return f'require_recording: the recorder is {r.state_name}' + (f': {r.error}' if r.error else '')
+        if self.samples_topic not in r.topics:
+            return f'require_recording: the recorder does not record {self.samples_topic} yet'
+        # a restarted rig_driver is a new publisher: until the recorder has matched it, its first samples
+        # would be published to nobody and not even counted lost (the recorder never sees them). A recorder
+        # status from before the publishers changed counts the old ones: wait for a newer one
+        known, since = self._publishers_changed(self.samples_topic)
+        if self.wall <= since:
+            return (f'require_recording: waiting for a recorder status newer than the last change of '
+                    f'{self.samples_topic} publishers')
+        matched = (r.topic_publishers[r.topics.index(self.samples_topic)]
+                   if len(r.topic_publishers) == len(r.topics) else known)
+        if matched < known:
+            return (f'require_recording: the recorder is matched with {matched} of the {known} publishers of '
+                    f'{self.samples_topic} (it has not discovered the restarted rig_driver yet)')
+        return ''

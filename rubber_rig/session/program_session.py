@@ -1,0 +1,188 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""ProgramSession: one test program on the setpoint stream a rig driver granted, from the grant to its end.
+
+The excitation node (setpoints as ROS messages, the grant from the driver's open_stream service) and
+:func:`.run.run_program` (an in-process RigDriver) both run a program through it, so the stream's rules are
+written once: the setpoints are generated from the sample index and kept ``lead`` samples ahead of the latest
+measured sample; a hold keeps the stream (the driver holds the rig) and a resume on a new grant continues the
+held block with the full cycles it had not run, counted from the last sample measured before the hold; the
+program has ended once its last setpoint was generated and measured. The session also carries the program's
+detectors (what they judge, since when they were blind). Time is the sample index: nothing here reads a clock.
+"""
+from __future__ import annotations
+
+from typing import Callable, Iterator, Optional
+
+import numpy as np
+
+from ..excitation.detectors import Event, Monitor, blind_for, cycle_of
+from ..excitation.runner import ProgramRunner
+from ..excitation.streamer import SetpointChunk, SetpointStreamer
+
+#: publish(first_sequence, displacement [m], block_index, end_of_stream): how a session hands setpoints on
+Publish = Callable[[int, object, int, bool], None]
+
+
+class ProgramSession:
+    """A ProgramRunner on a granted stream (``grant``: stream_id, first_sequence, position [m]), streamed
+    ``lead`` samples ahead of the measurement in chunks of ``chunk`` samples; ``detectors`` (DetectorSpecs, or
+    None for none) judge its cycles and end-of-test triggers.
+    """
+
+    def __init__(self, runner: ProgramRunner, grant, lead: int, chunk: int, detectors: Optional[list] = None):
+        self.runner = runner
+        self.lead, self.chunk = int(lead), int(chunk)
+        self.monitor = Monitor(detectors) if detectors is not None else None
+        self.end_sequence: Optional[int] = None   # sequence after the last setpoint of the finished runner
+        self.held = False                 # the driver holds the stream; resume() opens it on a new grant
+        self.held_at: Optional[int] = None   # sequence after the last sample measured before the hold
+        self.elapsed_samples = 0          # program samples measured (rig time of the program, holds excluded)
+        self.last_cycle_end = grant.first_sequence   # end of the latest judged cycle (detectors' blindness)
+        self._open(grant)
+
+    @classmethod
+    def on_grant(cls, program, sample_rate: float, limits, grant, lead: int, chunk: int,
+                 amplitude_control: bool = False, compensation_memory: bool = True,
+                 detectors: Optional[list] = None) -> 'ProgramSession':
+        """A session whose runner starts at the grant: from the position [m] and velocity [m/s] the rig holds
+        (an approach ramp leads to the program's start). The program must have been checked against ``limits``
+        before the stream was asked for (from the grant on, every moment counts against the driver); a
+        ValueError here means it cannot start from where the rig is.
+        """
+        runner = ProgramRunner(program, sample_rate, limits, amplitude_control, start_sequence=grant.first_sequence,
+                               compensation_memory=compensation_memory, start_position=grant.position,
+                               start_velocity=grant.velocity, check_program=False)
+        return cls(runner, grant, lead, chunk, detectors)
+
+    def describe(self) -> str:
+        """One line for the log: the program, its stream and where the rig was when it was granted."""
+        p = self.runner.program
+        return (f"program '{p.name}': {len(p.blocks)} blocks, {p.duration(self.sample_rate):.1f} s, stream "
+                f'{self.stream_id} from sample {self.start_sequence}, rig at {self.start_position * 1e3:.4f} mm')
+
+    def _open(self, grant) -> None:
+        self.streamer = SetpointStreamer(self.runner, self.lead, self.chunk)
+        self.stream_id, self.held = grant.stream_id, False
+        self.start_sequence, self.start_position = grant.first_sequence, grant.position
+        # samples of an earlier rig (a restarted driver counts from 0) do not count
+        self.next_sample: Optional[int] = None   # sequence after the latest measured sample of this stream
+
+    # -- the measurement ----------------------------------------------------------------------------------------
+    @property
+    def sample_rate(self) -> float:
+        return self.runner.fs
+
+    @property
+    def elapsed(self) -> float:
+        """Rig time the program has been measured for [s] (holds excluded)."""
+        return self.elapsed_samples / self.sample_rate
+
+    def before_stream(self, first_sequence: int, n: int) -> bool:
+        """A batch of ``n`` samples from ``first_sequence`` lies wholly before this stream (not the program's)."""
+        return first_sequence + n <= self.start_sequence
+
+    def measured(self, first_sequence: int, displacement) -> list[Event]:
+        """A batch of measured samples [m] of this stream: to the amplitude control (not while held) and to the
+        end-of-test triggers. Returns the detector events the batch trips.
+        """
+        n = len(displacement)
+        self.next_sample = first_sequence + n
+        if not n or self.held:
+            return []
+        self.runner.feed_measurement(first_sequence, np.asarray(displacement, dtype=float))
+        self.elapsed_samples += n
+        if self.monitor is None:
+            return []
+        block, block_cycles, program_cycles = self.runner.cycles_done(self.next_sample - 1)
+        if block < 0:
+            return []
+        return self.monitor.on_progress(block, block_cycles, program_cycles, self.elapsed, self.next_sample)
+
+    @property
+    def measured_sequence(self) -> int:
+        """The sequence the stream is kept ``lead`` ahead of: after the latest measured sample, or its start."""
+        return self.start_sequence if self.next_sample is None else max(self.next_sample, self.start_sequence)
+
+    @property
+    def measured_to_end(self) -> bool:
+        """Every setpoint of the finished program has been measured: the block summaries are complete."""
+        return self.end_sequence is not None and self.next_sample is not None and self.next_sample >= self.end_sequence
+
+    # -- the setpoints ------------------------------------------------------------------------------------------
+    def due(self, measured: Optional[int] = None) -> Iterator[SetpointChunk]:
+        """The chunks that bring the stream ``lead`` ahead of ``measured`` (default: measured_sequence); a
+        generator, see SetpointStreamer.due.
+        """
+        return self.streamer.due(self.measured_sequence if measured is None else measured)
+
+    def stream(self, publish: Publish) -> None:
+        """Hand on what is due; the program's end once (an empty batch if its last setpoints went out before);
+        with nothing due, an empty keep-alive batch (the driver's stream timeout watches for one).
+        """
+        r = self.runner
+        sent = False
+        for chunk in self.due():
+            publish(chunk.first_sequence, chunk.displacement, chunk.block, chunk.end)
+            sent = True
+        if r.finished and self.end_sequence is None:
+            self.end_sequence = r.sequence
+            if not sent:
+                publish(r.sequence, [], -1, True)
+        elif not sent and not r.finished:
+            publish(r.sequence, [], r.block_index if r.state == 'running' else -1, False)
+
+    # -- hold and resume ---------------------------------------------------------------------------------------
+    def why_not_hold(self) -> str:
+        """'' when the program can hold now, else why not."""
+        if self.held or self.runner.state != 'running':
+            return f'cannot hold: the program is {"held" if self.held else self.runner.state}'
+        return ''
+
+    def hold(self) -> None:
+        """Hold at the block mean (runner.hold_target, what the driver is asked to hold the rig at)."""
+        self.runner.hold()
+        self.held, self.held_at = True, self.next_sample
+
+    def resume(self, grant) -> None:
+        """Continue the held block on the stream of a new grant with the full cycles it had not run by the last
+        sample measured before the hold.
+        """
+        self._open(grant)
+        self.runner.resume_at(grant.first_sequence, grant.position, measured_sequence=self.held_at)
+        self.last_cycle_end = grant.first_sequence     # the hold is not blindness
+        if self.monitor is not None:
+            self.monitor.rearm()
+
+    # -- detectors -------------------------------------------------------------------------------------------------
+    def judge_cycle(self, start: int, end: int, amplitude: float, peak_amplitude: float, mean: float,
+                    measured: dict, model: dict, residual_rms: float) -> list[Event]:
+        """The detector events of the measured cycle of samples start..end-1 (none outside the program's
+        periodic blocks: an approach or hold ramp, another stream's cycle).
+        """
+        if self.held or self.monitor is None:
+            return []
+        cycle = cycle_of(self.runner, start, end, amplitude, peak_amplitude, mean, measured, model, residual_rms,
+                         self.elapsed)
+        if cycle is None:
+            return []
+        self.last_cycle_end = max(self.last_cycle_end, end)
+        return self.monitor.on_cycle(cycle)
+
+    def detectors_blind(self, sample_rate: float) -> float:
+        """Rig time [s] a periodic block has run with its cycle detectors not judging (0: they are)."""
+        if self.held or self.monitor is None or not self.monitor.needs_cycles or self.next_sample is None:
+            return 0.0
+        return blind_for(self.runner, self.next_sample - 1, self.last_cycle_end, sample_rate)
