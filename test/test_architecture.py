@@ -152,7 +152,6 @@ OVERSIZE_FUNCTIONS = {
 OVERSIZE_MODULES = {
     'rig/can/driver.py': 795,
     'rig/can/canlog_reader.py': 598,
-    'rig/sim/controller.py': 596,
     'nodes/rig_driver_node.py': 544,
     'rig/config.py': 474,
     'excitation/detectors.py': 445,
