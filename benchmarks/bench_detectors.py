@@ -48,7 +48,7 @@ from rubber_rig.excitation import ProgramRunner  # noqa: E402
 from rubber_rig.excitation.detectors import DEFAULTS, Monitor, cycle_of, parse_detectors  # noqa: E402
 from rubber_rig.excitation.program import load_program, shipped_programs, with_overrides  # noqa: E402
 from rubber_rig.online import CyclePairer, ModelChoice, OnlinePredictor, cycle_properties  # noqa: E402
-from rubber_rig.rig.config import DamageSpec  # noqa: E402
+from rubber_rig.rig.options import DamageSpec  # noqa: E402
 from rubber_rig.rig.sim.damage import sample_at_cycle  # noqa: E402
 from rubber_rig.session import run_program  # noqa: E402
 

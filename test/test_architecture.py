@@ -153,7 +153,6 @@ OVERSIZE_MODULES = {
     'rig/can/driver.py': 795,
     'rig/can/canlog_reader.py': 598,
     'nodes/rig_driver_node.py': 544,
-    'rig/config.py': 474,
     'excitation/detectors.py': 445,
     'testing/processes.py': 427,
     'excitation/runner.py': 425,

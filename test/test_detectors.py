@@ -35,7 +35,7 @@ from rubber_rig.excitation.detectors import (
 )
 from rubber_rig.excitation.program import read_program, with_overrides
 from rubber_rig.excitation.runner import ProgramRunner
-from rubber_rig.rig.config import ConfigError, DamageSpec
+from rubber_rig.rig.options import ConfigError, DamageSpec
 from rubber_rig.rig.sim.damage import DamagedSpecimen
 from rubber_rig.rig.sim.specimen import LinearSpecimen
 

@@ -39,7 +39,7 @@ from rubber_rig.fitting.blocks import split_blocks
 from rubber_rig.fitting.data import load_run
 from rubber_rig.fitting.report import make_report
 from rubber_rig.recording import load_recording
-from rubber_rig.rig.config import DamageSpec
+from rubber_rig.rig.options import DamageSpec
 from rubber_rig.rig.sim.damage import DamagedSpecimen, sample_at_cycle
 from rubber_rig.testing.processes import Operator, SuiteProcesses
 

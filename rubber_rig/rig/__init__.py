@@ -28,8 +28,9 @@ from .can.protocol import (
                            STATES,
                            fault_names,
 )
-from .config import ConfigError, FaultSpec, RigConfig, SimOptions
+from .config import ConfigError, RigConfig, SimOptions
 from .interface import Rig, open_rig
+from .options import FaultSpec
 
 __all__ = ['ConfigError', 'FAULT_BUS', 'FAULT_CONTROLLER', 'FAULT_DISPLACEMENT_LIMIT', 'FAULT_FORCE_LIMIT',
            'FAULT_NONE', 'FAULT_SENSOR', 'FAULT_VELOCITY_LIMIT', 'FAULT_WATCHDOG', 'FaultSpec', 'Rig', 'RigConfig',

@@ -25,7 +25,7 @@ where F_intact is the intact element model (its memory runs on what the specimen
 """
 import numpy as np
 
-from ..config import DamageSpec
+from ..options import DamageSpec
 
 REVERSAL = 10e-6     # [m] a displacement reversal this large counts half a load cycle
 MAX_DAMAGE = 0.95    # a specimen keeps 5 % of its stiffness: a torn one still has its fixtures' friction
