@@ -93,7 +93,6 @@ class GrantedStream:
     grant: StreamGrant
     queued_end: int             # sequence after the last queued setpoint
     last_queued: float          # last queued setpoint [m] (the true continuation of the applied command)
-    last_velocity: float        # velocity at the end of the queue [m/s]
     last_rx_wall: float         # wall time of the latest batch
     ended: bool = False         # the owner sent its last batch: running dry is the end, not a loss
     batches: int = 0            # batches accepted (keep-alives included): 0 = granted, nothing sent yet
