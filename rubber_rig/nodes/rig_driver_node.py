@@ -50,7 +50,6 @@ from __future__ import annotations
 import math
 import time
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -66,21 +65,21 @@ from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles,
 from rubber_rig.nodes.rclpy_compat import lifecycle_state
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.rig.can import FAULT_WATCHDOG
+from rubber_rig.rig.can.batcher import SampleBatcher
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.can.gate import MUTE_AFTER, MUTE_FOR, StreamGate
 from rubber_rig.rig.config import BusLoadError, ConfigError, RigConfig, configuration_text
 from rubber_rig.rig.interface import open_rig
+from rubber_rig.rig.live import LIMIT_SETTINGS, LIVE_SETTINGS, RIG_SETTINGS, apply_live
 from rubber_rig.safety import LimitError, Limits
-from rubber_rig.settings import describe_violation, nest, setting_for, settings_of
+from rubber_rig.settings import nest, setting_for
 
 BATCH_PERIOD = 0.01   # [s] default length of a sample batch (batch_size 0)
 CLOSE_RAMP_WAIT = 5.0  # [s] close() waits at most this long for a moving rig's ramp to rest to end
-RIG_SETTINGS = settings_of(RigConfig)   # the core's configuration, described once (rubber_rig/rig/config.py)
-# parameters the running driver applies at once; every other one needs configure (refused while configured)
-LIMIT_PARAMETERS = tuple(s.name for s in RIG_SETTINGS if s.name.startswith('limits.'))
-LIVE_PARAMETERS = set(LIMIT_PARAMETERS) | {
-    'stream_timeout', 'stream_loss_action', 'rest_position', 'batch_size', 'max_batch_delay', 'status_period',
-    'diagnostics_period', 'autostart', 'owner_timeout'}
+# parameters the running driver applies at once (RIG_SETTINGS: the core's configuration, described once; its
+# LIVE_SETTINGS) and the node's own; every other one needs configure (refused while configured)
+LIVE_PARAMETERS = LIVE_SETTINGS | {'batch_size', 'max_batch_delay', 'status_period', 'diagnostics_period', 'autostart',
+                                   'owner_timeout'}
 # the simulated specimen: node parameters built into SimOptions.specimen (a model spec mapping)
 SPECIMEN_PARAMETERS = ('sim.specimen.parameter_set', 'sim.specimen.temperature',
                        'sim.specimen.friction_reversal_threshold')
@@ -131,9 +130,7 @@ class RigDriverNode(LifecycleNode):
 
         self.rig = None
         self.pub_samples = None
-        self._buffer: list = []
-        self._buffered = 0
-        self._buffer_since = 0.0
+        self.batcher = SampleBatcher()     # the driver's sample blocks -> RigSampleBatch messages
         self._last_status = None
         self._refused_at = -1e9            # wall time of the last refusal warning (throttled)
         self._status_key = None
@@ -292,24 +289,9 @@ class RigDriverNode(LifecycleNode):
             if 'max_batch_delay' in changed:
                 self.max_batch_delay = float(changed['max_batch_delay'])
             return SetParametersResult(successful=True)
-        lim_changes = {n.split('.', 1)[1]: float(v) for n, v in changed.items() if n.startswith('limits.')}
-        try:
-            limits = Limits(**dict(self.config.limits.to_dict(), **lim_changes)) if lim_changes else None
-        except LimitError as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        rest = float(changed.get('rest_position', self.config.rest_position))
-        lim = limits or self.config.limits
-        if not lim.displacement_min <= rest <= lim.displacement_max:
-            return SetParametersResult(successful=False, reason=f'rest_position {rest:g} m outside the '
-                                       'displacement limits')
-        for setting in RIG_SETTINGS:                     # choices (ranges: the parameter descriptors)
-            why = setting.name in changed and describe_violation(None, setting.choices, '', changed[setting.name])
-            if why:
-                return SetParametersResult(successful=False, reason=f'{setting.name}: {why}')
-        self.config.rest_position = rest
-        for name in ('stream_timeout', 'stream_loss_action'):
-            if name in changed:
-                setattr(self.config, name, changed[name])
+        why, limits = apply_live(self.config, changed)
+        if why:
+            return SetParametersResult(successful=False, reason=why)
         if 'batch_size' in changed:
             self.batch_size = int(changed['batch_size'])
         if 'max_batch_delay' in changed:
@@ -317,7 +299,6 @@ class RigDriverNode(LifecycleNode):
         if 'owner_timeout' in changed:
             self.owner_timeout = self.peers.silent_after = float(changed['owner_timeout'])
         if limits is not None:
-            self.config.limits = limits
             if self.rig is not None:
                 self.rig.driver.set_limits(limits)
                 self._log_events()
@@ -386,16 +367,9 @@ class RigDriverNode(LifecycleNode):
             block = driver.poll()
             if block is None:
                 break
-            if self._buffer and block.first_sequence != self._buffer[-1].first_sequence + len(self._buffer[-1]):
-                self._publish_batch()   # samples lost on the bus: the next message starts after the gap
-            if not self._buffer:
-                self._buffer_since = time.monotonic()
-            self._buffer.append(block)
-            self._buffered += len(block)
-            if self._buffered >= self.samples_per_batch:
-                self._publish_batch()
-        if self._buffered and time.monotonic() - self._buffer_since > self.max_batch_delay:
-            self._publish_batch()   # the stream paused (program end, abort ramp done)
+            for batch in self.batcher.add(block, self.samples_per_batch):
+                self._publish_batch(batch)
+        self._publish_batch(self.batcher.due(self.max_batch_delay))   # the stream paused: what waits goes now
         if driver is None:
             return
         self._log_events(driver)
@@ -405,15 +379,11 @@ class RigDriverNode(LifecycleNode):
             self._status_key = key
             self.publish_status()   # transitions are published at once, not at the next status tick
 
-    def _publish_batch(self) -> None:
-        blocks, self._buffer, self._buffered = self._buffer, [], 0
-        if not blocks:
-            return
-        first, last = blocks[0], blocks[-1]
-        cat = {k: np.concatenate([getattr(b, k) for b in blocks]) for k in ('displacement', 'force', 'setpoint')}
-        self.pub_samples.publish(conv.sample_batch_msg(
-            first.first_sequence, first.t0, first.sample_period, cat['displacement'], cat['force'], cat['setpoint'],
-            last.temperature, last.status_flags, sum(int(b.frames_lost) for b in blocks)))
+    def _publish_batch(self, b) -> None:
+        if b is not None:
+            self.pub_samples.publish(conv.sample_batch_msg(b.first_sequence, b.t0, b.sample_period, b.displacement,
+                                                           b.force, b.setpoint, b.temperature, b.status_flags,
+                                                           b.frames_lost))
 
     # -- status --------------------------------------------------------------------------------------------------
     def status_message(self) -> RigStatus:
@@ -426,7 +396,7 @@ class RigDriverNode(LifecycleNode):
             limits, rate = self.config.limits, self.config.sample_rate
         else:   # parameters that make no configuration (configure says why): what they ask for
             try:
-                limits = Limits(**{n.split('.', 1)[1]: float(self.get_parameter(n).value) for n in LIMIT_PARAMETERS})
+                limits = Limits(**{n.split('.', 1)[1]: float(self.get_parameter(n).value) for n in LIMIT_SETTINGS})
             except (LimitError, TypeError, ValueError):
                 limits = Limits()
             rate = self.get_parameter('sample_rate').value

@@ -19,12 +19,11 @@ that its batches continue the queue and fit the limits, and what ends it. poll()
 raises on bad frames.
 """
 import itertools
-import math
 import time
 
 import numpy as np
 
-from ...safety import abort_ramp_velocity, setpoint_violation
+from ...safety import setpoint_violation
 from .frame_io import FrameIO
 from .frames import SampleFrames
 from .protocol import (
@@ -81,6 +80,15 @@ class RigDriver:
     temperature = _read('supervisor', 'temperature', 'The specimen temperature last reported [degC].')
     limits = _read('supervisor', 'limits', 'The Limits in force (set_limits changes them).')
 
+    @property
+    def measured_load(self):
+        """Callable -> the bus's busy fraction of the last second, when the bus can tell (else None)."""
+        return self.io.measured_load
+
+    @measured_load.setter
+    def measured_load(self, load):
+        self.io.measured_load = load
+
     def __init__(self, bus, config, protocol: Protocol = None, clock=time.monotonic):
         self.bus, self.cfg = bus, config
         self.proto = protocol or Protocol()
@@ -88,8 +96,6 @@ class RigDriver:
         # the protocol's share of the configured bus at this rate (worst-case stuffing; RigConfig refused more
         # than its max_bus_load): what status and diagnostics report as bus load
         self.bus_load = config.bus_load().load
-        self.measured_load = None        # callable -> busy fraction of the last second, when the bus can tell
-        self._load_at, self._load = -math.inf, None
         self._clock = clock
         # the frames that carry samples (config.frame_profile) take a fast path; the rest go through cantools
         self.frames = SampleFrames(config.frame_profile, self.proto.db, self.fs)
@@ -146,12 +152,8 @@ class RigDriver:
         if why:
             raise StreamRefused(why)
         s = self._stream
-        if s is not None:
-            if s.grant.owner != owner:
-                raise StreamRefused(f'the rig is streaming for {s.grant.owner or "another client"} '
-                                    f'(stream {s.grant.stream_id})')
-            if not (s.held or s.ended):
-                raise StreamRefused(f'{owner} already has stream {s.grant.stream_id} open (end it first)')
+        if s is not None and s.why_not_reopen(owner):
+            raise StreamRefused(s.why_not_reopen(owner))
         # a ticking (holding) controller needs the first setpoint `lead` ahead; an idle one starts on arrival
         ticking = self.controller_state in ('running', 'holding')
         lead = max(0, min(int(lead_samples), self.MAX_LEAD_SAMPLES)) if ticking else 0
@@ -200,7 +202,7 @@ class RigDriver:
         s = self._stream
         if stream_id is None and s is None and not self.why_not_ready():
             s = self._local_stream(first_sequence)
-        why = self._refusal(s, first_sequence, stream_id, x.size)
+        why = self._refusal(s, first_sequence, stream_id)
         if why:
             self.refusal = why
             self.counters['setpoints_refused'] += int(x.size)
@@ -247,20 +249,12 @@ class RigDriver:
             self.io.jump_to = first_sequence
         return self._stream
 
-    def _refusal(self, s, first_sequence, stream_id, n) -> str:
+    def _refusal(self, s, first_sequence, stream_id) -> str:
         if self.faults or self.supervisor.aborting:
             return 'the rig is faulted or ramping to rest'
         if s is None:
             return 'no stream is open (rig_driver/open_stream first)'
-        if stream_id is not None and stream_id != s.grant.stream_id:
-            return (f'stream {stream_id} is not the open stream {s.grant.stream_id} of '
-                    f'{s.grant.owner or "a local client"}')
-        if s.held or s.ended:
-            return f'stream {s.grant.stream_id} is {"held" if s.held else "ended"} (open it again to resume)'
-        if first_sequence != s.queued_end:
-            return (f'batch starts at sample {first_sequence}, the stream continues at {s.queued_end} '
-                    '(discontinuous streams are refused)')
-        return ''
+        return s.refusal(first_sequence, stream_id)
 
     def stop_stream(self, stream_id: int, target: float, reason: str, hold: bool = False) -> str:
         """The owner stops now: flush and ramp to target [m] (clamped into the limits). hold: the owner keeps
@@ -271,7 +265,7 @@ class RigDriver:
             return f'stream {stream_id} is not open'
         if hold:
             s.held = True
-            self._command_ramp(CMD_ABORT, target, f'hold: {reason}')
+            self.supervisor.command_ramp(CMD_ABORT, target, f'hold: {reason}')
         else:
             self.abort(reason, target)
         return ''
@@ -280,39 +274,18 @@ class RigDriver:
         """Command the safe ramp: the controller flushes queued setpoints and ramps smoothly from where it is
         to target [m] (default rest_position, clamped into the limits). The stream is released.
         """
-        self._command_ramp(CMD_ABORT, target, f'abort: {reason}')
+        self.supervisor.command_ramp(CMD_ABORT, target, f'abort: {reason}')
         self._release_stream()
 
     def hold_here(self, reason: str):
         """Stop the motion where it can stop (braking within the limits) and hold there; the stream is
         released.
         """
-        self._command_ramp(CMD_HOLD, None, f'hold: {reason}')
+        self.supervisor.command_ramp(CMD_HOLD, None, f'hold: {reason}')
         self._release_stream()
 
-    def _command_ramp(self, code, target, text):
-        target = self.limits.clamp_position(self.cfg.rest_position if target is None else float(target))
-        lim = self.limits
-        # the travel speed, in whole mm/s as the frame carries it (velocity_max >= 2 mm/s: >= 1 mm/s)
-        ramp_v = max(0.001, math.floor(abort_ramp_velocity(lim) * 1000) / 1000)
-        # the command goes before any setpoint still waiting for room (the controller would flush them anyway)
-        self.io.drop_setpoints()
-        self.io.send_command(code, target, ramp_v)
-        sup = self.supervisor
-        # until the controller reports its ramp, status says ramping_down (not idle/fault while still moving)
-        sup.ramp_pending = self.controller_state in ('running', 'holding')
-        sup.host_stop = True
-        if not sup.aborting:
-            self._event('warn',
-                        f'{text}; ramp to {"a stop" if code == CMD_HOLD else f"{target * 1e3:.4f} mm"} from '
-                        f'{self.io.last_applied * 1e3:.4f} mm')
-        # an idle controller has nothing to ramp (it ignores the command): waiting for its ramp to end would
-        # block every later stream
-        sup.aborting = sup.aborting or self.controller_state in ('running', 'holding', 'ramping_down')
-
     def _release_stream(self):
-        if self._stream is not None:
-            self._stream = None
+        self._stream = None
 
     def reset(self) -> str:
         """Acknowledge and clear faults (driver and controller) so a new stream can open. '' on success, else
@@ -320,11 +293,9 @@ class RigDriver:
         reset that dropped a running stream left the controller playing its queue out and then standing loaded,
         held by nobody.
         """
-        if self.controller_state == 'ramping_down':
-            return 'the rig is still ramping to rest: reset when it is at rest'
-        if self.controller_state == 'running':      # ('holding' is a controller at rest on its last command)
-            return ('the rig is moving (running its queued setpoints): stop the program first (excitation/abort '
-                    'or rig_driver/abort); reset clears the faults of a rig at rest')
+        why = self.supervisor.why_not_reset()
+        if why:
+            return why
         s = self._stream
         if s is not None and not s.ended and not self.faults:    # a fault has already taken the rig from it
             owner = s.grant.owner or 'a local program'
@@ -350,11 +321,7 @@ class RigDriver:
             self.pump()
         self.io.receive_all()
         s = self._stream
-        expected = self.io.expected
-        # a held stream has nothing queued: the controller flushed it and stands at rest until the owner resumes
-        streaming = s is not None and not s.held and s.queued_end > s.grant.first_sequence and (
-            expected is None or expected < s.queued_end)
-        self.supervisor.watchdog(streaming)
+        self.supervisor.watchdog(s is not None and s.playing(self.io.expected))
         self._check_stream()
         return self.io.next_block()
 
@@ -369,29 +336,23 @@ class RigDriver:
     def _check_stream(self):
         """A stream that stops without its last batch is lost: ramp to rest (or hold, stream_loss_action)."""
         s = self._stream
-        if s is None or s.held or self.faults or self.supervisor.aborting:
-            if s is not None and s.ended and self.controller_sequence + 1 >= s.queued_end:
+        if s is None:
+            return
+        played = self.controller_sequence + 1
+        if s.ended or s.held or self.faults or self.supervisor.aborting:
+            if s.ended and played >= s.queued_end:
+                if not (s.held or self.faults or self.supervisor.aborting):
+                    self._event('info', f'stream {s.grant.stream_id} of {s.name} completed at sample {s.queued_end}')
                 self._release_stream()   # the owner's program has run to its end: the rig is free again
             return
-        if s.ended:
-            if self.controller_sequence + 1 >= s.queued_end:
-                self._event('info', f'stream {s.grant.stream_id} of {s.grant.owner or "a local client"} '
-                                    f'completed at sample {s.queued_end}')
-                self._release_stream()
-            return
-        why = ''
         silent = self._clock() - s.last_rx_wall
         if s.batches == 0:
             if silent > max(self.FIRST_BATCH_TIMEOUT, self.cfg.stream_timeout):
-                self._event('warn', f'stream {s.grant.stream_id} of {s.grant.owner or "a local client"} withdrawn: '
-                                    f'no batch within {silent:.3f} s of the grant (nothing was moved)')
+                self._event('warn', f'stream {s.grant.stream_id} of {s.name} withdrawn: no batch within '
+                                    f'{silent:.3f} s of the grant (nothing was moved)')
                 self._release_stream()
             return
-        if self.cfg.paced and silent > self.cfg.stream_timeout:
-            why = f'no setpoints from {s.grant.owner or "the stream owner"} for {silent:.3f} s'
-        elif s.queued_end > s.grant.first_sequence and self.controller_sequence + 1 >= s.queued_end \
-                and self.controller_state == 'holding':
-            why = f'the rig ran out of setpoints at sample {s.queued_end} before the end of the stream'
+        why = s.lost(silent, played, self.controller_state == 'holding', self.cfg)
         if why:
             self._stream_lost(why)
 
@@ -408,44 +369,25 @@ class RigDriver:
 
     def _stream_lost(self, why: str) -> None:
         self.supervisor.record_fault(FAULT_STREAM, f'setpoint stream lost: {why}')
-        if self.cfg.stream_loss_action == 'hold':
-            self.hold_here('setpoint stream lost')
-        else:
-            self.abort('setpoint stream lost')
+        (self.hold_here if self.cfg.stream_loss_action == 'hold' else self.abort)('setpoint stream lost')
 
     # ---- status
     @property
     def status(self) -> DriverStatus:
         """Snapshot of state, faults and counters."""
-        c = self.counters
-        s = self._stream
-        extra = {'heartbeats_received': c['heartbeats_received'], 'setpoints_refused': c['setpoints_refused'],
-                 'next_sequence': self.next_sequence, 'position': self.io.last_applied,
-                 'stream_owner': s.grant.owner if s else '', 'stream_id': s.grant.stream_id if s else 0,
-                 'stream_held': bool(s and s.held), 'last_event': self.last_event, 'bus_load': self.bus_load,
-                 'bus_load_measured': self._measured_bus_load(),
-                 'tx_queue_full': c['tx_queue_full'], 'tx_backlog': len(self.io.outbox)}
-        return DriverStatus(self.supervisor.state, self.faults | self.controller_faults, list(self.fault_messages),
-                            self.fs, c['samples_received'], c['frames_lost'], c['frames_late'], c['frames_malformed'],
-                            c['frames_unknown'], self.temperature, self.controller_state, self.controller_faults,
-                            self.controller_sequence, c['setpoints_sent'], self.limits, extra)
-
-    def _measured_bus_load(self):
-        """The bus's busy fraction over the last second, when the bus can tell (the simulated bus), read at most
-        every 0.1 s (status is read often).
-        """
-        if self.measured_load is None:
-            return None
-        now = self._clock()
-        if now - self._load_at > 0.1:
-            self._load_at, self._load = now, self.measured_load()
-        return self._load
+        c, s = self.counters, self._stream
+        return self.supervisor.snapshot({
+            'heartbeats_received': c['heartbeats_received'], 'setpoints_refused': c['setpoints_refused'],
+            'next_sequence': self.next_sequence, 'position': self.io.last_applied,
+            'stream_owner': s.grant.owner if s else '', 'stream_id': s.grant.stream_id if s else 0,
+            'stream_held': bool(s and s.held), 'last_event': self.last_event, 'bus_load': self.bus_load,
+            'bus_load_measured': self.io.measured_bus_load(),
+            'tx_queue_full': c['tx_queue_full'], 'tx_backlog': len(self.io.outbox)})
 
     @property
     def next_sequence(self) -> int:
         """The first sample index no setpoint or sample has used yet (where a new stream may start)."""
-        s = self._stream
-        io = self.io
+        s, io = self._stream, self.io
         return max(io.expected or 0, self.controller_sequence + 1, s.queued_end if s else 0, io.jump_to or 0,
                    io.sent_end)
 

@@ -61,6 +61,8 @@ class FrameIO:
         self.last_host_heartbeat = clock()   # clock time of the latest HostHeartbeat
         self._hb_every = heartbeat_every     # samples between the heartbeats that ride with a stream
         self._next_hb_seq = None
+        self.measured_load = None        # callable -> busy fraction of the last second, when the bus can tell
+        self._load_at, self._load = -math.inf, None
 
     # ---- host -> controller
     def send(self, msg):
@@ -129,6 +131,17 @@ class FrameIO:
             send(msg)
         self.sent_end = max(self.sent_end, first_sequence + len(values))
         self.counters['setpoints_sent'] += len(values)
+
+    def measured_bus_load(self):
+        """The bus's busy fraction over the last second, when the bus can tell (the simulated bus), read at most
+        every 0.1 s (status is read often).
+        """
+        if self.measured_load is None:
+            return None
+        now = self._clock()
+        if now - self._load_at > 0.1:
+            self._load_at, self._load = now, self.measured_load()
+        return self._load
 
     # ---- controller -> host
     def receive_all(self):

@@ -22,7 +22,9 @@ releases the stream: the supervisor never touches the stream itself.
 import collections
 import math
 
+from ...safety import abort_ramp_velocity
 from .protocol import (
+    CMD_HOLD,
     FAULT_BUS,
     FAULT_DISPLACEMENT_LIMIT,
     FAULT_FORCE_LIMIT,
@@ -35,6 +37,7 @@ from .protocol import (
     unwrap,
 )
 from .sensor_check import SensorCheck
+from .stream import DriverStatus
 
 
 class Supervisor:
@@ -85,6 +88,27 @@ class Supervisor:
         self.record_fault(bit, message)
         self._on_fault(message)
 
+    def command_ramp(self, code: int, target, text: str):
+        """Command the controller's ramp (CMD_ABORT to target [m], default rest_position, clamped into the
+        limits; CMD_HOLD: to a stop) at the travel speed the limits allow; `text` says why, for the log.
+        """
+        lim, io = self.limits, self.io
+        target = lim.clamp_position(self.cfg.rest_position if target is None else float(target))
+        # the travel speed, in whole mm/s as the frame carries it (velocity_max >= 2 mm/s: >= 1 mm/s)
+        ramp_v = max(0.001, math.floor(abort_ramp_velocity(lim) * 1000) / 1000)
+        # the command goes before any setpoint still waiting for room (the controller would flush them anyway)
+        io.drop_setpoints()
+        io.send_command(code, target, ramp_v)
+        # until the controller reports its ramp, status says ramping_down (not idle/fault while still moving)
+        self.ramp_pending = self.controller_state in ('running', 'holding')
+        self.host_stop = True
+        if not self.aborting:
+            self.event('warn', f'{text}; ramp to {"a stop" if code == CMD_HOLD else f"{target * 1e3:.4f} mm"} '
+                               f'from {io.last_applied * 1e3:.4f} mm')
+        # an idle controller has nothing to ramp (it ignores the command): waiting for its ramp to end would
+        # block every later stream
+        self.aborting = self.aborting or self.controller_state in ('running', 'holding', 'ramping_down')
+
     def clear(self):
         """Faults acknowledged (reset): the sensor history starts anew."""
         if self.faults or self.fault_messages:
@@ -107,6 +131,15 @@ class Supervisor:
             return f'controller fault {fault_names(self.controller_faults)} (reset to acknowledge)'
         return ''
 
+    def why_not_reset(self) -> str:
+        """'' when the controller is at rest (faults may be cleared), else why not."""
+        if self.controller_state == 'ramping_down':
+            return 'the rig is still ramping to rest: reset when it is at rest'
+        if self.controller_state == 'running':      # ('holding' is a controller at rest on its last command)
+            return ('the rig is moving (running its queued setpoints): stop the program first (excitation/abort '
+                    'or rig_driver/abort); reset clears the faults of a rig at rest')
+        return ''
+
     @property
     def state(self) -> str:
         """The rig's state as status reports it: ramping_down from the command on, fault, else the controller's."""
@@ -115,6 +148,14 @@ class Supervisor:
         if self.faults or self.controller_faults:
             return 'fault'
         return self.controller_state
+
+    def snapshot(self, extra: dict) -> DriverStatus:
+        """The status of the rig as the supervisor and the frame counts see it; extra: the driver's part."""
+        c = self.io.counters
+        return DriverStatus(self.state, self.faults | self.controller_faults, list(self.fault_messages), self.fs,
+                            c['samples_received'], c['frames_lost'], c['frames_late'], c['frames_malformed'],
+                            c['frames_unknown'], self.temperature, self.controller_state, self.controller_faults,
+                            self.controller_sequence, c['setpoints_sent'], self.limits, extra)
 
     # ---- controller frames (FrameIO listener)
     def on_frame(self, name: str, sig: dict) -> bool:
