@@ -164,7 +164,6 @@ OVERSIZE_MODULES = {
     'rig/can/canlog_reader.py': 598,
     'rig/sim/controller.py': 596,
     'fitting/identification.py': 561,
-    'nodes/rig_driver_node.py': 544,
     'fitting/modelfit.py': 531,
     'rig/config.py': 474,
     'excitation/detectors.py': 446,
