@@ -158,9 +158,9 @@ class RigDriver:
         ticking = self.controller_state in ('running', 'holding')
         lead = max(0, min(int(lead_samples), self.MAX_LEAD_SAMPLES)) if ticking else 0
         first = self.next_sequence + lead
-        if self.controller_state in ('idle', 'fault') and (s is None or s.queued_end <= self.next_sequence):
-            self.io.jump_to = first     # an idle controller starts at the first setpoint it gets
         io = self.io
+        if self.controller_state in ('idle', 'fault') and (s is None or s.queued_end <= self.next_sequence):
+            io.jump_to = first     # an idle controller starts at the first setpoint it gets
         v = (io.last_applied - io.prev_applied) * self.fs if self.controller_state == 'running' else 0.0
         grant = StreamGrant(next(self._stream_ids), owner, first, io.last_applied, v)
         io.announce_stream(first)
