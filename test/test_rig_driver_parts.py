@@ -100,3 +100,6 @@ def test_the_driver_reads_its_parts_state_and_counts_every_sample():
         assert st.setpoints_sent == 500 and st.samples_received == got >= 500 and st.frames_lost == 0
         at = drv.io.last_applied   # the last command the controller applied: the program's last setpoint
         assert st.faults == 0 and st.extra['position'] == at and abs(x[-1] - at) < 1e-6
+        taken = drv.take_events()        # the log's lines leave the queue: each is logged once
+        assert any('stream' in text and 'opened' in text for _, text in taken) and not drv.events
+        assert drv.take_events() == []

@@ -381,8 +381,7 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         if driver is None:
             return
         log = self.get_logger()
-        while driver.events:
-            level, text = driver.events.popleft()
+        for level, text in driver.take_events():
             # one call site per severity: rclpy refuses a call site whose severity changes
             if level == 'error':
                 log.error(text)

@@ -103,6 +103,7 @@ class RigDriver:
                           clock)
         self.supervisor = self.io.listener = Supervisor(config, self.io, self.abort, clock)
         self._event, self._fault = self.supervisor.event, self.supervisor.fault
+        self.take_events = self.supervisor.take_events   # () -> the (level, text) events for the caller's log
         self._stream = None              # GrantedStream of the owner, or None
         self._stream_ids = itertools.count(int(clock() * 1000) % 1_000_000 * 1000 + 1)
         self.refusal = ''                # why the latest batch was refused

@@ -77,6 +77,12 @@ class Supervisor:
         if headline:
             self.last_event = text
 
+    def take_events(self) -> list:
+        """The (level, text) events not yet taken, oldest first (for the caller's log); they leave the queue."""
+        taken = list(self.events)
+        self.events.clear()
+        return taken
+
     def record_fault(self, bit: int, message: str):
         """Record a fault (the caller commands what follows)."""
         self.faults |= bit
