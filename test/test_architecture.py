@@ -150,9 +150,7 @@ OVERSIZE_FUNCTIONS = {
     'rig/can/canlog_reader.py:_decode': 132,
 }
 OVERSIZE_MODULES = {
-    'rig/can/driver.py': 795,
     'rig/can/canlog_reader.py': 598,
-    'nodes/rig_driver_node.py': 544,
     'excitation/detectors.py': 445,
     'testing/processes.py': 427,
     'excitation/runner.py': 425,

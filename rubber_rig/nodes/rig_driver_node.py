@@ -19,14 +19,7 @@ rig on python-can's virtual bus, or any python-can interface/channel/bitrate); a
 accept setpoints; deactivate = safe ramp to rest, stop streaming; cleanup = close the bus. With ``autostart``
 the node configures and activates itself (what ``ros2 launch`` users expect from a simulated rig).
 
-A sample_rate the CAN bus cannot carry (at can.bitrate / can.data_bitrate with the frame profile, within
-can.max_load) does not end the process: configure fails with one error line naming sample_rate, the bus and its
-bitrates, the load the rate needs and the highest rate the bus carries, and the node stays up and unconfigured,
-its status saying so; ``ros2 param set`` a rate that fits (accepted while unconfigured) and configure again.
-What the bus carries is, like whether the bus is there at all, a question about the bus configure opens. Values
-wrong in themselves or contradicting each other (a range, limits, heartbeat_period >= watchdog_timeout, a fault
-list that does not parse) are refused at start: one FATAL line naming the parameter, exit status 2
-(rubber_rig.nodes.spin); set at run time while unconfigured, they make configure fail the same way.
+Parameters: rubber_rig/nodes/rig_driver_params.py (what a bad value or a rate the bus cannot carry does).
 
 Subscribes:  ~/setpoint_stream/<owner> (msg_defs/SetpointBatch): each owner's command channel; only the open
              stream's owner commands the rig (batches on other channels are refused and counted). The public
@@ -50,9 +43,7 @@ from __future__ import annotations
 import math
 import time
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray
-from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -62,78 +53,41 @@ from msg_defs.srv import OpenStream, StopStream
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.heartbeat import Peers, start_heartbeat
-from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles, declare
+from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles
 from rubber_rig.nodes.rclpy_compat import lifecycle_state
+from rubber_rig.nodes.rig_driver_params import (  # noqa: F401 - also imported from here
+    BATCH_PERIOD,
+    LIVE_PARAMETERS,
+    RIG_SETTINGS,
+    BusCapacityError,
+    RigDriverParameters,
+)
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.rig.can import FAULT_WATCHDOG
+from rubber_rig.rig.can.batcher import SampleBatcher
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.can.gate import MUTE_AFTER, MUTE_FOR, StreamGate
-from rubber_rig.rig.config import BusLoadError, ConfigError, RigConfig, configuration_text
+from rubber_rig.rig.config import RigConfig, configuration_text
 from rubber_rig.rig.interface import open_rig
-from rubber_rig.safety import LimitError, Limits
-from rubber_rig.settings import describe_violation, nest, setting_for, settings_of
 
-BATCH_PERIOD = 0.01   # [s] default length of a sample batch (batch_size 0)
 CLOSE_RAMP_WAIT = 5.0  # [s] close() waits at most this long for a moving rig's ramp to rest to end
-RIG_SETTINGS = settings_of(RigConfig)   # the core's configuration, described once (rubber_rig/rig/config.py)
-# parameters the running driver applies at once; every other one needs configure (refused while configured)
-LIMIT_PARAMETERS = tuple(s.name for s in RIG_SETTINGS if s.name.startswith('limits.'))
-LIVE_PARAMETERS = set(LIMIT_PARAMETERS) | {
-    'stream_timeout', 'stream_loss_action', 'rest_position', 'batch_size', 'max_batch_delay', 'status_period',
-    'diagnostics_period', 'autostart', 'owner_timeout'}
-# the simulated specimen: node parameters built into SimOptions.specimen (a model spec mapping)
-SPECIMEN_PARAMETERS = ('sim.specimen.parameter_set', 'sim.specimen.temperature',
-                       'sim.specimen.friction_reversal_threshold')
 MAX_CHANNELS = 16   # owners' command channels the driver listens to at once
 
 
-class BusCapacityError(ParameterError):
-    """sample_rate is more than the configured CAN bus carries (the node stays up, unconfigured)."""
-
-
-class RigDriverNode(LifecycleNode):
+class RigDriverNode(RigDriverParameters, LifecycleNode):
 
     def __init__(self, node_name: str = 'rig_driver', **kwargs):
         super().__init__(node_name, **kwargs)
-        self.autostart = declare(self, 'autostart', True, 'configure and activate at start')
-        for setting in RIG_SETTINGS:
-            declare(self, setting.name, setting.default, setting.description(), range=setting.range,
-                    choices=setting.choices)
-        self.batch_size = declare(self, 'batch_size', 0, 'samples per RigSampleBatch message (at least; whole bus '
-                                  'reads are never split, so the stamp is the bus time of the first sample); 0: '
-                                  f'{BATCH_PERIOD * 1e3:g} ms of samples, which keeps a prediction within 25 ms of '
-                                  'its sample at 1 kHz', range=(0, 10000))
-        self.max_batch_delay = declare(self, 'max_batch_delay', 0.1, 'a partial batch is published when its '
-                                       'first sample has waited this long (the stream paused or ended)',
-                                       range=(0.001, 10.0), units='s')
-        declare(self, 'poll_period', 0.002, 'how often the bus is read (a sample waits up to this long)',
-                range=(0.0005, 0.5), units='s')
-        declare(self, 'sim.specimen.parameter_set', '', 'simulated specimen: fractional_zener_berg parameter set '
-                '(empty: use sim.specimen.temperature)')
-        declare(self, 'sim.specimen.temperature', 20.0, 'simulated specimen: fractional_zener_berg parameters at this '
-                'temperature', range=(-40.0, 20.0), units='degC')
-        declare(self, 'sim.specimen.friction_reversal_threshold', 0.0, "simulated specimen: Berg reversal deadband "
-                "on its true displacement (0 = the paper's rule)", range=(0.0, 1e-4), units='m')
-        self.status_period = declare(self, 'status_period', 0.1, 'status publishing period', range=(0.01, 10.0),
-                                     units='s')
-        self.diagnostics_period = declare(self, 'diagnostics_period', 1.0, 'diagnostics period',
-                                          range=(0.1, 60.0), units='s')
-        self.owner_timeout = declare(self, 'owner_timeout', 1.0, "the stream owner's heartbeat silent this long "
-                                     'is stream loss, also while it holds the rig (an owner that never beat, '
-                                     'e.g. a script without one, is watched by stream_timeout alone)',
-                                     range=(0.3, 30.0), units='s')
+        self._declare_parameters()
         try:   # checked now: a bad value fails at start, naming the parameter (spin_node: one line, exit 2) ...
             self.config: RigConfig | None = self.rig_config()
         except BusCapacityError as exc:   # ... except a rate the bus cannot carry: configure fails, node stays up
             self.config = None
             if not self.autostart:
                 self.get_logger().error(f'{exc}; configure will fail until the parameter is changed')
-
         self.rig = None
         self.pub_samples = None
-        self._buffer: list = []
-        self._buffered = 0
-        self._buffer_since = 0.0
+        self.batcher = SampleBatcher()     # the driver's sample blocks -> RigSampleBatch messages
         self._last_status = None
         self._refused_at = -1e9            # wall time of the last refusal warning (throttled)
         self._status_key = None
@@ -166,32 +120,6 @@ class RigDriverNode(LifecycleNode):
         """'unconfigured', 'inactive', 'active' or 'finalized'."""
         return lifecycle_state(self)
 
-    # -- parameters -> core configuration ---------------------------------------------------------------
-    def rig_config(self) -> RigConfig:
-        """The core configuration from the parameters; ParameterError names the parameter a bad value is in."""
-        values = {}
-        for setting in RIG_SETTINGS:
-            try:
-                values[setting.path] = setting.value(self.get_parameter(setting.name).value)
-            except ValueError as exc:
-                raise ParameterError(self, setting.name, str(exc)) from None
-        p = {name: self.get_parameter(name).value for name in SPECIMEN_PARAMETERS}
-        specimen = ({'model': 'fractional_zener_berg', 'parameter_set': p['sim.specimen.parameter_set']}
-                    if p['sim.specimen.parameter_set'] else
-                    {'model': 'fractional_zener_berg', 'temperature': p['sim.specimen.temperature']})
-        specimen['friction_reversal_threshold'] = p['sim.specimen.friction_reversal_threshold']
-        values['sim.specimen'] = specimen
-        try:
-            return RigConfig.from_dict(nest(values))
-        except ConfigError as exc:   # names the field: the parameter is the setting it belongs to
-            setting = setting_for(RIG_SETTINGS, exc.field)
-            name = setting.name if setting else (
-                'sim.specimen.parameter_set' if exc.field.startswith('sim.specimen') else exc.field)
-            # the field's own message when the field is the parameter; a deeper field ('sim.faults[1].type') is named
-            why = exc.why if exc.field in (name, setting and setting.path) else str(exc)
-            raise (BusCapacityError if isinstance(exc, BusLoadError) else ParameterError)(self, name, why) from None
-
-    # -- lifecycle ----------------------------------------------------------------------------------------------
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
             self.config = self.rig_config()
@@ -211,11 +139,6 @@ class RigDriverNode(LifecycleNode):
         self.get_logger().info(f'rig open: backend {self.config.backend}, {self.config.sample_rate:g} Hz, '
                                f'{self.samples_per_batch} samples per batch')
         return TransitionCallbackReturn.SUCCESS
-
-    @property
-    def samples_per_batch(self) -> int:
-        """batch_size, or BATCH_PERIOD of samples at the configured rate when it is 0."""
-        return self.batch_size or max(1, round(BATCH_PERIOD * self.config.sample_rate))
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
         driver = self.rig.driver
@@ -276,55 +199,6 @@ class RigDriverNode(LifecycleNode):
             self.destroy_timer(self._poll_timer)
             self._poll_timer = None
 
-    # -- parameters at run time -------------------------------------------------------------------------------
-    def on_set_parameters(self, params) -> SetParametersResult:
-        """Limits and stream settings apply at once (tighter limits: the rig ramps into them if it must);
-        everything else needs configure, so it is refused while the rig is configured, with the reason.
-        """
-        changed = {p.name: p.value for p in params}
-        fixed = sorted(n for n in changed if n not in LIVE_PARAMETERS)
-        if fixed and self.rig is not None:
-            return SetParametersResult(successful=False, reason=f"{', '.join(fixed)}: applied at configure; the "
-                                       'rig is configured (deactivate and clean up first)')
-        if self.config is None:   # no configuration in force: configure checks all parameters together
-            if 'batch_size' in changed:
-                self.batch_size = int(changed['batch_size'])
-            if 'max_batch_delay' in changed:
-                self.max_batch_delay = float(changed['max_batch_delay'])
-            return SetParametersResult(successful=True)
-        lim_changes = {n.split('.', 1)[1]: float(v) for n, v in changed.items() if n.startswith('limits.')}
-        try:
-            limits = Limits(**dict(self.config.limits.to_dict(), **lim_changes)) if lim_changes else None
-        except LimitError as exc:
-            return SetParametersResult(successful=False, reason=str(exc))
-        rest = float(changed.get('rest_position', self.config.rest_position))
-        lim = limits or self.config.limits
-        if not lim.displacement_min <= rest <= lim.displacement_max:
-            return SetParametersResult(successful=False, reason=f'rest_position {rest:g} m outside the '
-                                       'displacement limits')
-        for setting in RIG_SETTINGS:                     # choices (ranges: the parameter descriptors)
-            why = setting.name in changed and describe_violation(None, setting.choices, '', changed[setting.name])
-            if why:
-                return SetParametersResult(successful=False, reason=f'{setting.name}: {why}')
-        self.config.rest_position = rest
-        for name in ('stream_timeout', 'stream_loss_action'):
-            if name in changed:
-                setattr(self.config, name, changed[name])
-        if 'batch_size' in changed:
-            self.batch_size = int(changed['batch_size'])
-        if 'max_batch_delay' in changed:
-            self.max_batch_delay = float(changed['max_batch_delay'])
-        if 'owner_timeout' in changed:
-            self.owner_timeout = self.peers.silent_after = float(changed['owner_timeout'])
-        if limits is not None:
-            self.config.limits = limits
-            if self.rig is not None:
-                self.rig.driver.set_limits(limits)
-                self._log_events()
-            self.publish_status()
-        return SetParametersResult(successful=True)
-
-    # -- data path ------------------------------------------------------------------------------------------------
     def find_channels(self) -> None:
         """Subscribe to every owner's command channel the graph shows (so a program's first batch finds us)."""
         prefix = topics.setpoint_stream_topic(self.get_fully_qualified_name(), '')
@@ -386,16 +260,9 @@ class RigDriverNode(LifecycleNode):
             block = driver.poll()
             if block is None:
                 break
-            if self._buffer and block.first_sequence != self._buffer[-1].first_sequence + len(self._buffer[-1]):
-                self._publish_batch()   # samples lost on the bus: the next message starts after the gap
-            if not self._buffer:
-                self._buffer_since = time.monotonic()
-            self._buffer.append(block)
-            self._buffered += len(block)
-            if self._buffered >= self.samples_per_batch:
-                self._publish_batch()
-        if self._buffered and time.monotonic() - self._buffer_since > self.max_batch_delay:
-            self._publish_batch()   # the stream paused (program end, abort ramp done)
+            for batch in self.batcher.add(block, self.samples_per_batch):
+                self._publish_batch(batch)
+        self._publish_batch(self.batcher.due(self.max_batch_delay))   # the stream paused: what waits goes now
         if driver is None:
             return
         self._log_events(driver)
@@ -405,31 +272,20 @@ class RigDriverNode(LifecycleNode):
             self._status_key = key
             self.publish_status()   # transitions are published at once, not at the next status tick
 
-    def _publish_batch(self) -> None:
-        blocks, self._buffer, self._buffered = self._buffer, [], 0
-        if not blocks:
-            return
-        first, last = blocks[0], blocks[-1]
-        cat = {k: np.concatenate([getattr(b, k) for b in blocks]) for k in ('displacement', 'force', 'setpoint')}
-        self.pub_samples.publish(conv.sample_batch_msg(
-            first.first_sequence, first.t0, first.sample_period, cat['displacement'], cat['force'], cat['setpoint'],
-            last.temperature, last.status_flags, sum(int(b.frames_lost) for b in blocks)))
+    def _publish_batch(self, b) -> None:
+        if b is not None:
+            self.pub_samples.publish(conv.sample_batch_msg(b.first_sequence, b.t0, b.sample_period, b.displacement,
+                                                           b.force, b.setpoint, b.temperature, b.status_flags,
+                                                           b.frames_lost))
 
     # -- status --------------------------------------------------------------------------------------------------
     def status_message(self) -> RigStatus:
         now = self.get_clock().now().nanoseconds * 1e-9
-        if self.rig is None:
-            snapshot = {'state': RigStatus.STATE_UNCONFIGURED}
-        else:
-            snapshot = self.rig.driver.status
+        snapshot = {'state': RigStatus.STATE_UNCONFIGURED} if self.rig is None else self.rig.driver.status
         if self.config is not None:
             limits, rate = self.config.limits, self.config.sample_rate
         else:   # parameters that make no configuration (configure says why): what they ask for
-            try:
-                limits = Limits(**{n.split('.', 1)[1]: float(self.get_parameter(n).value) for n in LIMIT_PARAMETERS})
-            except (LimitError, TypeError, ValueError):
-                limits = Limits()
-            rate = self.get_parameter('sample_rate').value
+            limits, rate = self.asked_limits(), self.get_parameter('sample_rate').value
         return conv.status_msg(snapshot, limits, rate, now)
 
     def publish_status(self) -> None:
@@ -525,8 +381,7 @@ class RigDriverNode(LifecycleNode):
         if driver is None:
             return
         log = self.get_logger()
-        while driver.events:
-            level, text = driver.events.popleft()
+        for level, text in driver.take_events():
             # one call site per severity: rclpy refuses a call site whose severity changes
             if level == 'error':
                 log.error(text)

@@ -93,8 +93,51 @@ class GrantedStream:
     grant: StreamGrant
     queued_end: int             # sequence after the last queued setpoint
     last_queued: float          # last queued setpoint [m] (the true continuation of the applied command)
-    last_velocity: float        # velocity at the end of the queue [m/s]
     last_rx_wall: float         # wall time of the latest batch
     ended: bool = False         # the owner sent its last batch: running dry is the end, not a loss
     batches: int = 0            # batches accepted (keep-alives included): 0 = granted, nothing sent yet
     held: bool = False          # stopped by a hold: the owner keeps the rig and re-opens to resume
+
+    @property
+    def name(self) -> str:
+        """The owner as a log line names it."""
+        return self.grant.owner or 'a local client'
+
+    def refusal(self, first_sequence: int, stream_id) -> str:
+        """'' when a batch of stream `stream_id` (None: a local caller's) from first_sequence continues this
+        stream, else why it is refused.
+        """
+        if stream_id is not None and stream_id != self.grant.stream_id:
+            return f'stream {stream_id} is not the open stream {self.grant.stream_id} of {self.name}'
+        if self.held or self.ended:
+            return f'stream {self.grant.stream_id} is {"held" if self.held else "ended"} (open it again to resume)'
+        if first_sequence != self.queued_end:
+            return (f'batch starts at sample {first_sequence}, the stream continues at {self.queued_end} '
+                    '(discontinuous streams are refused)')
+        return ''
+
+    def playing(self, expected) -> bool:
+        """Setpoints are queued that the rig has not played yet (expected: the next feedback sample, or None).
+        A held stream has nothing queued: the controller flushed it and stands at rest until the owner resumes.
+        """
+        return not self.held and self.queued_end > self.grant.first_sequence and (
+            expected is None or expected < self.queued_end)
+
+    def why_not_reopen(self, owner: str) -> str:
+        """'' when `owner` may open the stream again (resume its held or ended stream), else why not."""
+        if self.grant.owner != owner:
+            return f'the rig is streaming for {self.grant.owner or "another client"} (stream {self.grant.stream_id})'
+        if not (self.held or self.ended):
+            return f'{owner} already has stream {self.grant.stream_id} open (end it first)'
+        return ''
+
+    def lost(self, silent: float, played_end: int, holding: bool, cfg) -> str:
+        """'' while an open stream is alive, else why it is lost: paced, no batch for cfg.stream_timeout (silent
+        [s] since the last one); or the controller played all it had (played_end: after its last sample) and
+        holds before the owner's last batch.
+        """
+        if cfg.paced and silent > cfg.stream_timeout:
+            return f'no setpoints from {self.grant.owner or "the stream owner"} for {silent:.3f} s'
+        if self.queued_end > self.grant.first_sequence and played_end >= self.queued_end and holding:
+            return f'the rig ran out of setpoints at sample {self.queued_end} before the end of the stream'
+        return ''

@@ -1,0 +1,56 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The rig settings a running driver takes at once: the limits (limits.*), rest_position, stream_timeout and
+stream_loss_action. Every other RigConfig setting needs a new configuration (a new bus, a new rate).
+
+A change is checked as a whole before any of it applies: new limits must be consistent, rest_position must lie
+inside the displacement limits that will be in force, and a value must be one of its setting's choices (ranges
+are the parameter descriptors' to check).
+"""
+from ..safety import LimitError, Limits
+from ..settings import describe_violation, settings_of
+from .config import RigConfig
+
+RIG_SETTINGS = settings_of(RigConfig)
+LIMIT_SETTINGS = tuple(s.name for s in RIG_SETTINGS if s.name.startswith('limits.'))
+LIVE_SETTINGS = set(LIMIT_SETTINGS) | {'stream_timeout', 'stream_loss_action', 'rest_position'}
+
+
+def apply_live(config: RigConfig, changed: dict):
+    """Apply the live settings in `changed` (setting name -> value; other names are ignored) to `config`.
+
+    Returns (why, limits): why is '' when applied, else why nothing was; limits are the new Limits the driver is
+    to take at once (RigDriver.set_limits), or None when they did not change.
+    """
+    lim_changes = {n.split('.', 1)[1]: float(v) for n, v in changed.items() if n.startswith('limits.')}
+    try:
+        limits = Limits(**dict(config.limits.to_dict(), **lim_changes)) if lim_changes else None
+    except LimitError as exc:
+        return str(exc), None
+    rest = float(changed.get('rest_position', config.rest_position))
+    lim = limits or config.limits
+    if not lim.displacement_min <= rest <= lim.displacement_max:
+        return f'rest_position {rest:g} m outside the displacement limits', None
+    for setting in RIG_SETTINGS:                     # choices (ranges: the parameter descriptors)
+        why = setting.name in changed and describe_violation(None, setting.choices, '', changed[setting.name])
+        if why:
+            return f'{setting.name}: {why}', None
+    config.rest_position = rest
+    for name in ('stream_timeout', 'stream_loss_action'):
+        if name in changed:
+            setattr(config, name, changed[name])
+    if limits is not None:
+        config.limits = limits
+    return '', limits

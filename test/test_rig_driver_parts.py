@@ -1,0 +1,105 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The parts the driver and its node are built from, each on its own: the sample batcher (gaps, size, delay),
+the live settings (checked as a whole, applied only when all fit), the stream's own continuity verdicts, and the
+driver composed of FrameIO and Supervisor on a real simulated rig."""
+import numpy as np
+
+from rubber_rig.rig import open_rig
+from rubber_rig.rig.can.batcher import SampleBatcher
+from rubber_rig.rig.can.stream import GrantedStream, SampleBlock, StreamGrant
+from rubber_rig.rig.config import RigConfig
+from rubber_rig.rig.live import LIVE_SETTINGS, apply_live
+
+from support.rig import FAST
+
+
+def _block(first, n, lost=0, temperature=20.0):
+    x = np.arange(first, first + n) * 1e-6
+    return SampleBlock(first, first * 1e-3, 1e-3, x, 10 * x, x, temperature, 0, lost)
+
+
+def test_the_batcher_gathers_whole_blocks_splits_at_gaps_and_releases_what_waits():
+    now = [0.0]
+    batcher = SampleBatcher(clock=lambda: now[0])
+    assert batcher.add(_block(0, 4), 10) == [] and batcher.add(_block(4, 4), 10) == []
+    done = batcher.add(_block(8, 4, temperature=21.0), 10)          # 12 >= 10: whole blocks, never split
+    assert len(done) == 1 and done[0].first_sequence == 0 and len(done[0]) == 12
+    assert np.array_equal(done[0].displacement, np.arange(12) * 1e-6) and done[0].temperature == 21.0
+    assert batcher.add(_block(12, 3), 10) == []
+    done = batcher.add(_block(20, 2, lost=5), 10)                   # 15..19 lost: the batch before the gap goes
+    assert [(b.first_sequence, len(b), b.frames_lost) for b in done] == [(12, 3, 0)]
+    now[0] = 0.05
+    assert batcher.due(0.1) is None
+    now[0] = 0.2                                                    # waited 0.2 s > 0.1 s: due as it is
+    late = batcher.due(0.1)
+    assert (late.first_sequence, len(late), late.frames_lost, late.t0) == (20, 2, 5, 0.02)
+    assert batcher.due(0.1) is None and batcher.take() is None
+
+
+def test_live_settings_apply_as_a_whole_or_not_at_all():
+    cfg = RigConfig.from_dict({})
+    before = cfg.limits.to_dict()
+    why, limits = apply_live(cfg, {'limits.displacement_max': 0.004, 'rest_position': 0.005})
+    assert 'rest_position 0.005 m outside' in why and limits is None
+    assert cfg.limits.to_dict() == before and cfg.rest_position != 0.005          # nothing applied
+    why, limits = apply_live(cfg, {'stream_loss_action': 'drift'})
+    assert why.startswith('stream_loss_action: ') and cfg.stream_loss_action != 'drift'
+    why, limits = apply_live(cfg, {'limits.displacement_max': 0.004, 'rest_position': 0.001,
+                                   'stream_loss_action': 'hold', 'stream_timeout': 0.7})
+    assert why == '' and limits.displacement_max == 0.004 and cfg.limits is limits
+    assert (cfg.rest_position, cfg.stream_loss_action, cfg.stream_timeout) == (0.001, 'hold', 0.7)
+    assert 'limits.force_max' in LIVE_SETTINGS and 'sample_rate' not in LIVE_SETTINGS
+
+
+def test_a_granted_stream_judges_its_own_continuity():
+    s = GrantedStream(StreamGrant(7, '/owner', 100, 0.0, 0.0), 100, 0.0, 0.0)
+    assert s.refusal(100, 7) == '' and s.refusal(100, None) == ''
+    assert 'not the open stream 7 of /owner' in s.refusal(100, 8)
+    assert 'continues at 100' in s.refusal(101, 7)
+    assert not s.playing(None)                              # nothing queued yet
+    s.queued_end = 150
+    assert s.playing(None) and s.playing(149) and not s.playing(150)
+    assert s.why_not_reopen('/other').startswith('the rig is streaming for /owner')
+    assert 'already has stream 7 open' in s.why_not_reopen('/owner')
+    s.held = True
+    assert s.why_not_reopen('/owner') == '' and not s.playing(120) and 'is held' in s.refusal(150, 7)
+    cfg = RigConfig.from_dict({'paced': True, 'stream_timeout': 0.5})
+    s.held = False
+    assert s.lost(0.4, 120, False, cfg) == '' and 'for 0.600 s' in s.lost(0.6, 120, False, cfg)
+    assert 'ran out of setpoints at sample 150' in s.lost(0.1, 150, True, cfg)
+
+
+def test_the_driver_reads_its_parts_state_and_counts_every_sample():
+    with open_rig(FAST) as rig:
+        drv = rig.driver
+        assert rig.wait_ready(5.0)
+        assert drv.controller_state == drv.supervisor.controller_state == 'idle'
+        assert drv.counters is drv.io.counters and drv.events is drv.supervisor.events
+        x = 1e-4 * np.sin(np.linspace(0, 2 * np.pi, 500))
+        assert drv.queue_setpoints(drv.next_sequence, x)
+        got = 0
+        for _ in range(200000):
+            blk = drv.poll()
+            got += len(blk) if blk is not None else 0
+            if got >= 500:
+                break
+        st = drv.status
+        assert st.setpoints_sent == 500 and st.samples_received == got >= 500 and st.frames_lost == 0
+        at = drv.io.last_applied   # the last command the controller applied: the program's last setpoint
+        assert st.faults == 0 and st.extra['position'] == at and abs(x[-1] - at) < 1e-6
+        taken = drv.take_events()        # the log's lines leave the queue: each is logged once
+        assert any('stream' in text and 'opened' in text for _, text in taken) and not drv.events
+        assert drv.take_events() == []
