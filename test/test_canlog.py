@@ -36,7 +36,8 @@ from rubber_rig.excitation import Program
 from rubber_rig.rig import ConfigError, RigConfig, open_rig
 from rubber_rig.rig import interface as rig_interface
 from rubber_rig.rig.can.canlog import CanLogError, CanLogWarning
-from rubber_rig.rig.can.canlog_reader import MAX_SKIPPED_REPORTED, TextLogReader, decode_log
+from rubber_rig.rig.can.canlog_reader import decode_log
+from rubber_rig.rig.can.canlog_text import MAX_SKIPPED_REPORTED, TextLogReader
 from rubber_rig.session import run_program
 from rubber_rig.settings import settings_of
 

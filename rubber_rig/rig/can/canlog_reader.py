@@ -27,16 +27,15 @@ from __future__ import annotations
 import collections
 import errno
 import math
-import re
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import can
 import numpy as np
-from can.io.asc import ASC_MESSAGE_REGEX
 
 from .canlog import SUPPORTED_FORMATS, CanLogError, CanLogWarning, log_format
+from .canlog_text import TextLogReader, _asc_start, _integrity, frames_until_damage
 from .frames import PROFILES, SampleFrames
 from .protocol import DBC_PATH, STATES, STATUS_SEQ_MOD, MalformedFrame, Protocol, fault_names, unwrap
 from .timing import frame_bits
@@ -135,224 +134,6 @@ def _frame_bits(msg: can.Message) -> tuple[int, int]:
                       extended=msg.is_extended_id)
 
 
-_ASC_TRIGGER = re.compile(rb'begin\s+triggerblock\s+\w+\s+(?P<when>.+)', re.IGNORECASE)
-_ASC_MILLISECONDS = re.compile(r'(\d{1,2}:\d{2}:\d{2})\.(\d{1,3})(?!\d)')
-
-
-def _asc_start(path: Path) -> float:
-    """Absolute time [s since the epoch] of an ASC log's first trigger block, NaN if it has none.
-
-    ASC times are relative to it. It carries milliseconds, which python-can's ASCWriter writes without leading
-    zeros ('.40' for 40 ms) and its reader takes for a decimal fraction (0.40 s); CANoe writes three digits. Read
-    here as a count of milliseconds, right for both.
-    """
-    with open(path, 'rb') as f:
-        for _, line in zip(range(100), f, strict=False):
-            m = _ASC_TRIGGER.match(line.strip())
-            if m:
-                when = _ASC_MILLISECONDS.sub(lambda g: f'{g.group(1)}.{g.group(2).zfill(3)}',
-                                             m.group('when').decode('utf-8', 'replace').strip())
-                try:
-                    return can.ASCReader._datetime_to_timestamp(when)
-                except ValueError:
-                    return math.nan
-    return math.nan
-
-
-def _integrity(path: Path, fmt: str, reader, frames: int) -> list:
-    """Signs that a log was not closed or is cut short that its reader passes over silently."""
-    out = []
-    size = path.stat().st_size
-    if fmt == '.blf':
-        header_size, objects = getattr(reader, 'file_size', size), getattr(reader, 'object_count', frames)
-        if header_size != size or objects != frames:
-            out.append(f'{path}: BLF header says {objects} objects in {header_size} bytes, the file has {frames} '
-                       f'frames in {size} bytes: the log was not closed (writer killed) or is truncated')
-        return out
-    with open(path, 'rb') as f:
-        f.seek(max(0, size - 64))
-        tail = f.read()
-    if size and not tail.endswith(b'\n'):
-        out.append(f'{path}: the last line is incomplete: the log is truncated')
-    if fmt == '.asc' and b'end triggerblock' not in tail.lower():
-        out.append(f'{path}: no "End TriggerBlock": the log was not closed (writer killed) or is truncated')
-    return out
-
-
-# ---------------------------------------------------------------------------------------- text logs, line by line
-MAX_SKIPPED_REPORTED = 10   # skipped lines whose number and reason are kept (all of them are counted)
-_WARNED_SKIPPED = 3         # of those, named in the warning
-_FD_LENGTHS = frozenset((*range(9), 12, 16, 20, 24, 32, 48, 64))
-_CONTROL = re.compile(r'[\x00-\x08\x0b\x0c\x0e-\x1f\x7f]')   # never in a text log (tab and CR are)
-# candump -L (can-utils, python-can's CanutilsLogWriter): '(time) channel id#data', id of 3 (standard) or 8
-# (extended) hex digits, '##<flags>' before the data of a CAN FD frame, 'R[dlc]' for a remote frame, and
-# python-can's optional direction ' R' (received) / ' T' (sent)
-_CANDUMP_FRAME = re.compile(r'\(\d+(?:\.\d*)?\)\s+\S+\s+(?:[0-9A-Fa-f]{3}|[0-9A-Fa-f]{8})#(?:#[0-9A-Fa-f])?'
-                            r'(?:(?:[0-9A-Fa-f]{2})*|[Rr]\d*)(?:\s+[RrTt])?')
-# an ASC line laid out as a frame whatever its fields hold: 'CANFD' as its second or third word, or a 5-letter
-# word in its place before '<channel> Rx|Tx' (a damaged 'CANFD'), or a lower-case data type 'd' / 'r' with a 1-2
-# digit length after 3 to 5 words ('<time> <channel> <id> <dir> d <dlc> ...', one word more or less when a
-# damaged byte split or joined two). When python-can's pattern (ASC_MESSAGE_REGEX) does not match such a line,
-# python-can passes over it in silence: a frame whose time, channel, direction or CANFD mark is damaged would
-# vanish uncounted. CANoe's other lines are not laid out so ('Statistic: D 0 R 0 ...' has upper-case letters,
-# J1939TP lines have 'd' after 9 words, LIN lines 'Li <id> Rx').
-_ASC_FRAME_SHAPE = re.compile(r'(?:\S+\s+){1,2}CANFD\s|\S+\s+\S{5}\s+\d+\s+[RT]x\s'
-                              r'|(?:\S+\s+){3,5}[dr]\s+[0-9A-Fa-f]{1,2}(?:\s|$)')
-_ASC_HEADER = re.compile(r'(?:date|base|begin\s+triggerblock|end\s+triggerblock|(?:no\s+)?internal\s+events)\b',
-                         re.IGNORECASE)
-
-
-def _shown(line, limit: int = 60) -> str:
-    """A line (str, or bytes that are no text) as a warning shows it: repr, cut to `limit` characters."""
-    line = line.strip()
-    return repr(line[:limit]) + ('...' if len(line) > limit else '')
-
-
-def _frame_problem(msg: can.Message):
-    """Why a frame python-can read from a text line cannot be one (None if it can): fewer data bytes than its
-    length field says (a line cut short), more than 8 in a classic frame, no CAN FD length.
-    """
-    if msg.is_error_frame or msg.is_remote_frame:
-        return None
-    n = len(msg.data)
-    expected = msg.dlc if msg.is_fd else min(msg.dlc, 8)
-    if n < expected:
-        return f'{n} data bytes where its length field says {expected} (the line is cut short)'
-    if not msg.is_fd and n > 8:
-        return f'{n} data bytes in a classic CAN frame (at most 8)'
-    if msg.is_fd and n not in _FD_LENGTHS:
-        return f'{n} data bytes is no CAN FD frame length'
-    return None
-
-
-class _ASCLineParser(can.ASCReader):
-    """python-can's ASCReader reading its header once: iterated again after a line it could not parse, it goes on
-    with the next line instead of taking that line for the header (overrides its _extract_header).
-    """
-
-    _header_read = False
-
-    def _extract_header(self) -> None:
-        if not self._header_read:
-            self._header_read = True
-            super()._extract_header()
-
-
-class _Lines:
-    """The lines of a text log for a python-can reader (which iterates its `file`): each line is checked first
-    and an unreadable one is skipped and counted in the TextLogReader instead of reaching the parser.
-    """
-
-    def __init__(self, raw, owner: TextLogReader):
-        self.raw, self.owner = iter(raw), owner
-        self.text = ''   # the last line handed to the parser
-
-    def __iter__(self):
-        return self
-
-    def __next__(self) -> str:
-        owner = self.owner
-        for raw in self.raw:
-            owner.lines += 1
-            try:
-                text = raw.decode('utf-8')
-            except UnicodeDecodeError as exc:
-                owner.skip(f'not UTF-8 text (byte 0x{raw[exc.start]:02x} at column {exc.start + 1}): {_shown(raw)}')
-                continue
-            bad = _CONTROL.search(text)
-            if bad:
-                owner.skip(f'binary data (byte 0x{ord(bad.group()):02x} at column {bad.start() + 1}): '
-                           f'{_shown(text)}')
-                continue
-            line = text.strip()
-            if not line:
-                continue
-            why = owner.check(line)
-            if why:
-                owner.skip(f'{why}: {_shown(line)}')
-                continue
-            self.text = line
-            return text
-        raise StopIteration
-
-    def close(self):
-        """python-can closes its file at the end; the TextLogReader closes the real one."""
-
-
-class TextLogReader:
-    """The frames (can.Message) of a text CAN log - .asc (Vector ASC) or .log (candump -L) - resynchronised
-    after damage: the file is read line by line as bytes and python-can's own parser (can.ASCReader,
-    can.CanutilsLogReader) reads each good line, so a good log gives exactly what can.LogReader gives.
-
-    A line is skipped and counted, and the frames before and after it are kept, when it is:
-
-    - not UTF-8 text, or holds binary bytes (control characters other than tab and CR);
-    - .log: not a candump -L frame line '(time) channel id#data [R|T]' (a flipped byte, a cut line, garbage);
-    - .asc: laid out as a frame line ('<time> <channel> <id> <dir> d|r <dlc> <data>', '<time> CANFD ...') but
-      not one python-can recognises (damaged time, channel or direction: python-can would drop it silently);
-      other ASC lines (header, comments, statistics, events) are python-can's to read or pass over;
-    - a frame line python-can's parser raises on (a damaged identifier, length or data byte);
-    - a frame with fewer data bytes than its length field says, more than 8 in a classic frame, or a length no
-      CAN FD frame has (a line cut short).
-
-    Iterate once. Counts: lines (read), lines_skipped, frames; skipped: (line number, why) of the first
-    MAX_SKIPPED_REPORTED skipped lines; header_lines: ASC header/trigger block lines seen.
-    """
-
-    def __init__(self, path, fmt: str = None):
-        self.path = Path(str(path)).expanduser()
-        self.format = fmt or log_format(self.path)
-        if self.format not in ('.asc', '.log'):
-            raise CanLogError(f'{self.path}: {SUPPORTED_FORMATS.get(self.format, self.format)} is no text log')
-        self.lines = self.lines_skipped = self.frames = self.header_lines = 0
-        self.skipped = []
-
-    def skip(self, why: str):
-        """Count the line being read as skipped for the reason `why`."""
-        self.lines_skipped += 1
-        if len(self.skipped) < MAX_SKIPPED_REPORTED:
-            self.skipped.append((self.lines, why))
-
-    def check(self, line: str):
-        """Why the stripped, non-empty text line `line` is no line of the format (None if it may be one)."""
-        if self.format == '.log':
-            return None if _CANDUMP_FRAME.fullmatch(line) else 'not a candump -L frame line'
-        if _ASC_HEADER.match(line):
-            self.header_lines += 1
-        elif (not line.startswith('//') and _ASC_FRAME_SHAPE.match(line)
-              and not ASC_MESSAGE_REGEX.match(line)):
-            return 'a damaged ASC frame line (time, channel or direction unreadable)'
-        return None
-
-    def skipped_text(self, limit: int = _WARNED_SKIPPED) -> str:
-        """'line 29: why; line 40: why (and 3 more)' of the first `limit` skipped lines."""
-        text = '; '.join(f'line {n}: {why}' for n, why in self.skipped[:limit])
-        more = self.lines_skipped - min(limit, len(self.skipped))
-        return text + (f' (and {more} more)' if more else '')
-
-    def __iter__(self):
-        with open(self.path, 'rb') as f:
-            lines = _Lines(f, self)
-            parser = _ASCLineParser(lines) if self.format == '.asc' else can.CanutilsLogReader(lines)
-            while True:
-                try:
-                    for msg in parser:   # a fresh iteration after a line python-can raised on goes on after it
-                        problem = _frame_problem(msg)
-                        if problem:
-                            self.skip(f'{problem}: {_shown(lines.text)}')
-                            continue
-                        self.frames += 1
-                        yield msg
-                    return
-                except OSError:
-                    raise
-                except Exception as exc:   # noqa: BLE001 - python-can's parsers raise anything on a bad line
-                    self.skip(f'python-can cannot parse it ({type(exc).__name__}: {exc}): {_shown(lines.text)}')
-
-    def stop(self):
-        """As python-can's readers (the file is closed when the iteration ends)."""
-
-
 def decode_log(path, dbc=DBC_PATH) -> CanLog:
     """Read the raw CAN log `path` (.blf, .asc or candump .log) and decode it with the DBC `dbc` (a path, or a
     Protocol) into a CanLog. BLF is read with can.LogReader: a damaged or unclosed BLF decodes up to the damage.
@@ -426,22 +207,6 @@ def _text_damage(p: Path, reader: TextLogReader, out: CanLog):
                             f'{reader.skipped_text()}')
 
 
-def frames_until_damage(reader, damaged: list):
-    """The frames of a python-can log reader up to the first it cannot read (corrupt data: what precedes it is
-    good); why it stopped is appended to `damaged`, which stays empty when the log was read to its end.
-    """
-    it = iter(reader)
-    while True:
-        try:
-            msg = next(it)
-        except StopIteration:
-            return
-        except Exception as exc:   # noqa: BLE001 - python-can's readers raise anything on corrupt data
-            damaged.append(f'{type(exc).__name__}: {exc}')
-            return
-        yield msg
-
-
 class _Damaged(Exception):
     def __init__(self, reason):
         super().__init__(reason)
@@ -459,134 +224,163 @@ _ARRAYS = {
 
 
 def _decode(reader, proto: Protocol, out: CanLog, offset: float = 0.0):
-    by_id = proto.by_id
-    # a log does not say which frame profile the rig ran: each identifier says it (Setpoint serves two profiles)
-    by_sample_id = {}
-    for profile in PROFILES:
-        sf = SampleFrames(profile, proto.db)
-        for codec in sf.codecs.values():
-            by_sample_id.setdefault(codec.frame_id, sf)
-    last_fb = None   # (time, sequence) of the last sample of the previous feedback frame
-    cmd_names = {int(k): str(v) for k, v in proto.by_name['HostCommand'].get_signal_by_name('CMD_Code')
-                 .choices.items()}
-    idle_states = {i for i, s in enumerate(STATES) if s not in ('running', 'holding', 'ramping_down')}
-    frames, by_id_count, channels = collections.Counter(), collections.Counter(), {}
-    a = collections.defaultdict(list)   # the arrays of _ARRAYS, as lists; 'time' holds absolute timestamps
-    expected = last_status_seq = sp_ref = state = None
-    temperature, faults = math.nan, 0
+    """Decode every frame `reader` gives into `out` (timestamps shifted by `offset` [s]); what was decoded before
+    a damaged stretch of the file is the result even then (_Damaged is raised after it is stored).
+    """
+    decoder = _Decoder(proto, out)
     damaged = []
     try:
         for msg in frames_until_damage(reader, damaged):
-            t = float(msg.timestamp) + offset
-            if not out.frames_total:
-                out.start = t
-            out.end = t
-            rel = t - out.start
-            out.frames_total += 1
-            if msg.is_rx:
-                out.frames_rx += 1
-            else:
-                out.frames_tx += 1
-            channels[msg.channel] = None
-            nominal, data = _frame_bits(msg)
-            out.bits_nominal += nominal
-            out.bits_data += data
-            if msg.is_error_frame:
-                out.error_frames += 1
-                frames['error frame'] += 1
-                continue
-            by_id_count[msg.arbitration_id] += 1
-            sample_frames = None if msg.is_extended_id else by_sample_id.get(msg.arbitration_id)
-            if sample_frames is not None:
-                name = by_id[msg.arbitration_id].name
-                frames[name] += 1
-                try:
-                    if name in sample_frames.feedback_names:
-                        samples = sample_frames.decode_feedback(msg)
-                    else:
-                        seq, values = sample_frames.decode_setpoints(msg)
-                        samples = None
-                        sp_ref = unwrap(seq, sp_ref if sp_ref is not None else (expected or 0),
-                                        sample_frames.setpoint_modulus)
-                        for i, v in enumerate(values):
-                            a['setpoint_sequence'].append(sp_ref + i)
-                            a['setpoint_time'].append(rel)
-                            a['setpoint_displacement'].append(v)
-                except MalformedFrame:
-                    out.frames_malformed += 1
-                    continue
-                if samples is None:
-                    continue
-                seq, xs, fs, us = samples
-                ref = expected if expected is not None else max(last_status_seq or 0, 0)
-                s = unwrap(seq, ref, sample_frames.feedback_modulus)
-                # a packed frame's samples were taken before it was sent: spread them back over the sample period
-                # the frames' arrival times show
-                last = s + len(xs) - 1
-                period = (t - last_fb[0]) / (last - last_fb[1]) if last_fb and last > last_fb[1] else 0.0
-                last_fb = (t, last)
-                for i in range(len(xs)):
-                    if expected is not None and s + i < expected:
-                        out.frames_late += 1      # delayed or duplicated: its slot is already past (as the driver)
-                        continue
-                    if expected is not None and s + i > expected:
-                        gap = {'expected': expected, 'received': s + i, 'lost': s + i - expected, 'time': rel}
-                        if state in idle_states:
-                            out.jumps.append(gap)    # an idle controller started a new stream there: no loss
-                        else:
-                            out.gaps.append(gap)
-                            out.samples_lost += s + i - expected
-                    expected = s + i + 1
-                    a['sequence'].append(s + i)
-                    a['time'].append(t - (len(xs) - 1 - i) * period)
-                    a['displacement'].append(xs[i])
-                    a['force'].append(fs[i])
-                    a['setpoint'].append(us[i])
-                    a['temperature'].append(temperature)
-                    a['status'].append(faults)
-                continue
-            try:
-                decoded = proto.decode(msg)
-            except MalformedFrame:
-                out.frames_malformed += 1
-                m = by_id.get(msg.arbitration_id)
-                frames[m.name if m else f'0x{msg.arbitration_id:x}'] += 1
-                continue
-            if decoded is None:
-                out.frames_unknown += 1
-                frames[f'0x{msg.arbitration_id:x}'] += 1
-                continue
-            name, sig = decoded
-            frames[name] += 1
-            if name == 'ControllerStatus':
-                code, faults = int(sig['ST_State']), int(sig['ST_Faults'])
-                out.faults |= faults
-                last_status_seq = unwrap(int(sig['ST_LastSequence']), last_status_seq if last_status_seq is not None
-                                         else (expected or 0), STATUS_SEQ_MOD)
-                a['status_time'].append(rel)
-                a['status_state'].append(code)
-                a['status_faults'].append(faults)
-                a['status_last_sequence'].append(last_status_seq)
-                a['status_buffer_level'].append(int(sig['ST_BufferLevel']))
-                state = _state_change(out, state, code, rel)
-            elif name == 'ControllerHeartbeat':
-                code = int(sig['HB_State'])
-                a['heartbeat_time'].append(rel)
-                a['heartbeat_state'].append(code)
-                state = _state_change(out, state, code, rel)
-            elif name == 'Temperature':
-                temperature = float(sig['TEMP_Specimen'])
-            elif name == 'HostCommand':
-                code = int(sig['CMD_Code'])
-                out.commands.append((rel, cmd_names.get(code, str(code)), float(sig['CMD_Argument'])))
+            decoder.frame(msg, float(msg.timestamp) + offset)
         if damaged:
             raise _Damaged(damaged[0])
     finally:   # also after damage: what was decoded is the result
-        out.frames = dict(frames)
-        out.frames_by_id = dict(sorted(by_id_count.items()))
-        out.channels = [c for c in channels if c is not None]
+        decoder.finish()
+
+
+class _Decoder:
+    """The decoding state of one log: sequence unwrapping, the controller's state, the arrays being filled."""
+
+    def __init__(self, proto: Protocol, out: CanLog):
+        self.proto, self.out, self.by_id = proto, out, proto.by_id
+        # a log does not say which frame profile the rig ran: each identifier says it (Setpoint serves two profiles)
+        self.by_sample_id = {}
+        for profile in PROFILES:
+            sf = SampleFrames(profile, proto.db)
+            for codec in sf.codecs.values():
+                self.by_sample_id.setdefault(codec.frame_id, sf)
+        self.last_fb = None   # (time, sequence) of the last sample of the previous feedback frame
+        self.cmd_names = {int(k): str(v) for k, v in proto.by_name['HostCommand'].get_signal_by_name('CMD_Code')
+                          .choices.items()}
+        self.idle_states = {i for i, s in enumerate(STATES) if s not in ('running', 'holding', 'ramping_down')}
+        self.frames, self.by_id_count, self.channels = collections.Counter(), collections.Counter(), {}
+        self.a = collections.defaultdict(list)   # the arrays of _ARRAYS, as lists; 'time' holds absolute times
+        self.expected = self.last_status_seq = self.sp_ref = self.state = None
+        self.temperature, self.faults = math.nan, 0
+
+    def frame(self, msg, t: float) -> None:
+        """Count and decode one frame received at log time t [s]."""
+        out = self.out
+        if not out.frames_total:
+            out.start = t
+        out.end = t
+        out.frames_total += 1
+        if msg.is_rx:
+            out.frames_rx += 1
+        else:
+            out.frames_tx += 1
+        self.channels[msg.channel] = None
+        nominal, data = _frame_bits(msg)
+        out.bits_nominal += nominal
+        out.bits_data += data
+        if msg.is_error_frame:
+            out.error_frames += 1
+            self.frames['error frame'] += 1
+            return
+        self.by_id_count[msg.arbitration_id] += 1
+        sample_frames = None if msg.is_extended_id else self.by_sample_id.get(msg.arbitration_id)
+        if sample_frames is not None:
+            self._sample_frame(msg, sample_frames, t)
+        else:
+            self._other_frame(msg, t - out.start)
+
+    def _sample_frame(self, msg, sample_frames, t: float) -> None:
+        name = self.by_id[msg.arbitration_id].name
+        self.frames[name] += 1
+        rel = t - self.out.start
+        try:
+            if name not in sample_frames.feedback_names:
+                seq, values = sample_frames.decode_setpoints(msg)
+                self.sp_ref = unwrap(seq, self.sp_ref if self.sp_ref is not None else (self.expected or 0),
+                                     sample_frames.setpoint_modulus)
+                for i, v in enumerate(values):
+                    self.a['setpoint_sequence'].append(self.sp_ref + i)
+                    self.a['setpoint_time'].append(rel)
+                    self.a['setpoint_displacement'].append(v)
+                return
+            samples = sample_frames.decode_feedback(msg)
+        except MalformedFrame:
+            self.out.frames_malformed += 1
+            return
+        self._feedback(samples, sample_frames.feedback_modulus, t, rel)
+
+    def _feedback(self, samples, modulus: int, t: float, rel: float) -> None:
+        out, a = self.out, self.a
+        seq, xs, fs, us = samples
+        ref = self.expected if self.expected is not None else max(self.last_status_seq or 0, 0)
+        s = unwrap(seq, ref, modulus)
+        # a packed frame's samples were taken before it was sent: spread them back over the sample period
+        # the frames' arrival times show
+        last = s + len(xs) - 1
+        period = (t - self.last_fb[0]) / (last - self.last_fb[1]) if self.last_fb and last > self.last_fb[1] else 0.0
+        self.last_fb = (t, last)
+        for i in range(len(xs)):
+            expected = self.expected
+            if expected is not None and s + i < expected:
+                out.frames_late += 1      # delayed or duplicated: its slot is already past (as the driver)
+                continue
+            if expected is not None and s + i > expected:
+                gap = {'expected': expected, 'received': s + i, 'lost': s + i - expected, 'time': rel}
+                if self.state in self.idle_states:
+                    out.jumps.append(gap)    # an idle controller started a new stream there: no loss
+                else:
+                    out.gaps.append(gap)
+                    out.samples_lost += s + i - expected
+            self.expected = s + i + 1
+            a['sequence'].append(s + i)
+            a['time'].append(t - (len(xs) - 1 - i) * period)
+            a['displacement'].append(xs[i])
+            a['force'].append(fs[i])
+            a['setpoint'].append(us[i])
+            a['temperature'].append(self.temperature)
+            a['status'].append(self.faults)
+
+    def _other_frame(self, msg, rel: float) -> None:
+        out, a = self.out, self.a
+        try:
+            decoded = self.proto.decode(msg)
+        except MalformedFrame:
+            out.frames_malformed += 1
+            m = self.by_id.get(msg.arbitration_id)
+            self.frames[m.name if m else f'0x{msg.arbitration_id:x}'] += 1
+            return
+        if decoded is None:
+            out.frames_unknown += 1
+            self.frames[f'0x{msg.arbitration_id:x}'] += 1
+            return
+        name, sig = decoded
+        self.frames[name] += 1
+        if name == 'ControllerStatus':
+            code, self.faults = int(sig['ST_State']), int(sig['ST_Faults'])
+            out.faults |= self.faults
+            self.last_status_seq = unwrap(int(sig['ST_LastSequence']), self.last_status_seq
+                                          if self.last_status_seq is not None else (self.expected or 0),
+                                          STATUS_SEQ_MOD)
+            a['status_time'].append(rel)
+            a['status_state'].append(code)
+            a['status_faults'].append(self.faults)
+            a['status_last_sequence'].append(self.last_status_seq)
+            a['status_buffer_level'].append(int(sig['ST_BufferLevel']))
+            self.state = _state_change(out, self.state, code, rel)
+        elif name == 'ControllerHeartbeat':
+            code = int(sig['HB_State'])
+            a['heartbeat_time'].append(rel)
+            a['heartbeat_state'].append(code)
+            self.state = _state_change(out, self.state, code, rel)
+        elif name == 'Temperature':
+            self.temperature = float(sig['TEMP_Specimen'])
+        elif name == 'HostCommand':
+            code = int(sig['CMD_Code'])
+            out.commands.append((rel, self.cmd_names.get(code, str(code)), float(sig['CMD_Argument'])))
+
+    def finish(self) -> None:
+        """Store the counts and arrays in the CanLog (times relative to its start; time_ns absolute)."""
+        out = self.out
+        out.frames = dict(self.frames)
+        out.frames_by_id = dict(sorted(self.by_id_count.items()))
+        out.channels = [c for c in self.channels if c is not None]
         for key, dtype in _ARRAYS.items():
-            setattr(out, key, np.asarray(a[key], dtype=dtype))
+            setattr(out, key, np.asarray(self.a[key], dtype=dtype))
         t = out.time
         out.time_ns = np.round(t * 1e9).astype(np.int64)
         out.time = t - out.start if t.size else t

@@ -30,7 +30,7 @@ from pathlib import Path
 import can
 
 from ..can.canlog import CanLogError, log_format
-from ..can.canlog_reader import frames_until_damage
+from ..can.canlog_text import frames_until_damage
 from ..can.frames import PROFILES, SampleFrames
 from ..can.protocol import MalformedFrame, Protocol
 
