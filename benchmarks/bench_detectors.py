@@ -45,7 +45,8 @@ import numpy as np
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'))
 
 from rubber_rig.excitation import ProgramRunner  # noqa: E402
-from rubber_rig.excitation.detectors import DEFAULTS, Monitor, cycle_of, parse_detectors  # noqa: E402
+from rubber_rig.excitation.detector_specs import DEFAULTS, parse_detectors  # noqa: E402
+from rubber_rig.excitation.detectors import Monitor, cycle_of  # noqa: E402
 from rubber_rig.excitation.program import load_program, shipped_programs, with_overrides  # noqa: E402
 from rubber_rig.online import CyclePairer, ModelChoice, OnlinePredictor, cycle_properties  # noqa: E402
 from rubber_rig.rig.options import DamageSpec  # noqa: E402

@@ -22,17 +22,8 @@ import numpy as np
 import pytest
 
 from rubber_rig.excitation.blocks import ProgramError
-from rubber_rig.excitation.detectors import (
-    DEFAULTS,
-    Cycle,
-    DetectorError,
-    Monitor,
-    blind_for,
-    parse_detector,
-    parse_detectors,
-    strongest,
-    with_defaults,
-)
+from rubber_rig.excitation.detector_specs import DEFAULTS, DetectorError, parse_detector, parse_detectors, with_defaults
+from rubber_rig.excitation.detectors import Cycle, Monitor, blind_for, strongest
 from rubber_rig.excitation.program import read_program, with_overrides
 from rubber_rig.excitation.runner import ProgramRunner
 from rubber_rig.rig.options import ConfigError, DamageSpec

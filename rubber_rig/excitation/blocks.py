@@ -21,7 +21,7 @@ import numpy as np
 from rubber_rig.units import to_si
 
 from . import waveforms as wf
-from .detectors import DetectorError, parse_detectors
+from .detector_specs import DetectorError, parse_detectors
 from .waveform_types import ALIASES, TYPES, WAVEFORMS, WaveformType
 
 

@@ -40,7 +40,7 @@ from .blocks import (  # noqa: F401 - MIN_FREQUENCY, MAX_FREQUENCY_FRACTION are 
     ProgramError,
     parse_block,
 )
-from .detectors import DetectorError, parse_detectors
+from .detector_specs import DetectorError, parse_detectors
 from .yamltext import MAX_BYTES, YAMLLimitError, load_bounded
 
 PROGRAM_DIR = Path(__file__).with_name('programs')

@@ -21,7 +21,7 @@ import yaml
 from rclpy.node import Node
 
 from rubber_rig.excitation import read_program
-from rubber_rig.excitation.detectors import DEFAULTS, DetectorError, parse_detectors
+from rubber_rig.excitation.detector_specs import DEFAULTS, DetectorError, parse_detectors
 from rubber_rig.excitation.limits import element_force_model
 from rubber_rig.nodes.params import ParameterError, declare
 
