@@ -26,6 +26,7 @@ from ..safety import LimitError, Limits, SafeRamp, abort_ramp_velocity
 from .amplitude import BlockLoop
 from .compensation import CompensationMemory
 from .limits import check_program as precheck
+from .whereabouts import Whereabouts
 
 
 @dataclass
@@ -61,7 +62,7 @@ class BlockResult:
     message: str = ''
 
 
-class ProgramRunner:
+class ProgramRunner(Whereabouts):
     """Generates the setpoints [m] of `program` at `sample_rate` [Hz], chunk by chunk, from the sample index.
 
     Setpoint sequence numbers start at start_sequence; measurements fed back with the same numbering drive the
@@ -183,57 +184,6 @@ class ProgramRunner:
         if abs(position - target) > 1e-7:
             self._start_ramp(target)
             self.state = 'approaching'
-
-    def locate(self, sequence: int):
-        """(block index, phase [cycles since the block's start, tapers included; seconds for hold/ramp blocks
-        times its frequency = 0]) of the setpoint with this sequence number, or None outside program blocks.
-        """
-        if sequence is None:
-            return None
-        j = bisect.bisect_right(self._seg_starts, sequence) - 1
-        if j < 0:
-            return None
-        seq0, seq1, b, local0, _ = self._segments[j]
-        if not seq0 <= sequence < seq1:
-            return None
-        blk = self.program.blocks[b]
-        t = (local0 + sequence - seq0) / self.fs
-        return b, float(blk.phase(np.array(t))) if blk.oscillating else 0.0
-
-    def cycle_position(self, start: int, end: int):
-        """Where the measured cycle of samples start..end-1 lies: (block, full-amplitude cycle number counted
-        across holds, steady), or None when it is not inside one periodic block. Steady: inside the block's
-        full-amplitude part (tapers excluded; a quarter cycle of slack at its end for the actuator's lag).
-        """
-        a, z = self.locate(start), self.locate(end - 1)
-        if a is None or z is None or a[0] != z[0]:
-            return None
-        b = a[0]
-        blk = self.program.blocks[b]
-        if not blk.oscillating:
-            return None
-        full = blk.total_cycles - blk.taper_cycles
-        # the actuator lags: a measured cycle ends up to a quarter cycle after the full part, but never starts
-        # before the taper has ended (one that does carries taper, at a lower amplitude)
-        steady = a[1] >= blk.taper_cycles and z[1] <= full + 0.25
-        number = int(math.floor(z[1] - blk.taper_cycles + 0.25)) + self.cycles_before.get(b, 0)
-        return b, max(number, 0), steady
-
-    def cycles_done(self, sequence: int) -> tuple[int, int, int]:
-        """(block, its full-amplitude cycles done, the program's full-amplitude cycles done) at `sequence`
-        (counted across holds); block -1 before the first program sample.
-        """
-        located = self.locate(sequence)
-        if located is None:
-            return -1, 0, 0
-        b, phase = located
-        blk = self.program.blocks[b]
-        done = 0
-        if blk.periodic:
-            done = min(max(int(math.floor(phase - blk.taper_cycles)), 0), blk.cycles) + self.cycles_before.get(b, 0)
-        before = sum(blocks.cycles + self.cycles_before.get(i, 0) for i, blocks in enumerate(self.program.blocks[:b])
-                     if blocks.periodic)
-        return b, done, before + done
 
     def resume(self):
         """Continue after hold(): the held block restarts from its beginning (with its taper) once the hold

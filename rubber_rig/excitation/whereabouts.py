@@ -1,0 +1,77 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Where a sample is in the program: the block and phase of a setpoint's sequence number, the cycle a measured
+cycle belongs to, the cycles done at a sample (counted across holds). Mixed into ProgramRunner, whose setpoint
+generation records the segments these answers are read from (``_segments``, ``_seg_starts``).
+"""
+import bisect
+import math
+
+import numpy as np
+
+
+class Whereabouts:
+    """The questions about sequence numbers a running program answers (ProgramRunner holds the state)."""
+
+    def locate(self, sequence: int):
+        """(block index, phase [cycles since the block's start, tapers included; seconds for hold/ramp blocks
+        times its frequency = 0]) of the setpoint with this sequence number, or None outside program blocks.
+        """
+        if sequence is None:
+            return None
+        j = bisect.bisect_right(self._seg_starts, sequence) - 1
+        if j < 0:
+            return None
+        seq0, seq1, b, local0, _ = self._segments[j]
+        if not seq0 <= sequence < seq1:
+            return None
+        blk = self.program.blocks[b]
+        t = (local0 + sequence - seq0) / self.fs
+        return b, float(blk.phase(np.array(t))) if blk.oscillating else 0.0
+
+    def cycle_position(self, start: int, end: int):
+        """Where the measured cycle of samples start..end-1 lies: (block, full-amplitude cycle number counted
+        across holds, steady), or None when it is not inside one periodic block. Steady: inside the block's
+        full-amplitude part (tapers excluded; a quarter cycle of slack at its end for the actuator's lag).
+        """
+        a, z = self.locate(start), self.locate(end - 1)
+        if a is None or z is None or a[0] != z[0]:
+            return None
+        b = a[0]
+        blk = self.program.blocks[b]
+        if not blk.oscillating:
+            return None
+        full = blk.total_cycles - blk.taper_cycles
+        # the actuator lags: a measured cycle ends up to a quarter cycle after the full part, but never starts
+        # before the taper has ended (one that does carries taper, at a lower amplitude)
+        steady = a[1] >= blk.taper_cycles and z[1] <= full + 0.25
+        number = int(math.floor(z[1] - blk.taper_cycles + 0.25)) + self.cycles_before.get(b, 0)
+        return b, max(number, 0), steady
+
+    def cycles_done(self, sequence: int) -> tuple[int, int, int]:
+        """(block, its full-amplitude cycles done, the program's full-amplitude cycles done) at `sequence`
+        (counted across holds); block -1 before the first program sample.
+        """
+        located = self.locate(sequence)
+        if located is None:
+            return -1, 0, 0
+        b, phase = located
+        blk = self.program.blocks[b]
+        done = 0
+        if blk.periodic:
+            done = min(max(int(math.floor(phase - blk.taper_cycles)), 0), blk.cycles) + self.cycles_before.get(b, 0)
+        before = sum(blocks.cycles + self.cycles_before.get(i, 0) for i, blocks in enumerate(self.program.blocks[:b])
+                     if blocks.periodic)
+        return b, done, before + done
