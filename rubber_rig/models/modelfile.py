@@ -37,25 +37,10 @@ import yaml
 
 from rubber_rig.units import to_si
 
-from .catalogue import OPERATING_POINT_TYPES, build_operating_point_spring, element_type
+from .catalogue import build_operating_point_spring, element_type
+from .element_spec import RESULT_KEYS, ElementSpec, parse_element
 from .params import ParameterValueError, load_parameter_set, parameter_set_info
 from .yamlfile import read_yaml_file
-
-_RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma', 'budget', 'interval_method')
-
-
-@dataclass
-class ElementSpec:
-    """One element: its catalogue ``type``, parameter ``values`` (SI floats), ``fixed`` names, ``options``."""
-
-    type: str
-    values: dict
-    fixed: frozenset = frozenset()
-    options: dict = field(default_factory=dict)
-
-    @property
-    def fittable(self) -> bool:
-        return self.type not in OPERATING_POINT_TYPES
 
 
 @dataclass
@@ -205,7 +190,7 @@ class ModelSpec:
                 d['fixed'] = sorted(e.fixed)
             d.update(_plain(e.options))
             if results:
-                for key in _RESULT_KEYS:
+                for key in RESULT_KEYS:
                     got = {p: results[names[(i, p)]][key] for p in e.values
                            if (i, p) in names and key in results.get(names[(i, p)], {})}
                     if got:
@@ -233,84 +218,12 @@ def _plain(v):
     return v
 
 
-def _value(raw, spec, where):
-    if isinstance(raw, dict):
-        raw = raw.get('value')
-    try:
-        return to_si(raw, spec.dimension)
-    except ValueError as exc:
-        raise ValueError(f'{where}: {exc} [{spec.unit}]') from None
-
-
-def _element(entry, where) -> ElementSpec:
-    if not isinstance(entry, dict) or 'type' not in entry:
-        raise ValueError(f'{where}: expected a mapping with a "type", e.g. {{type: berg, x2: 1.4 mm, f_fmax: 4.6 kN}}')
-    entry = dict(entry)
-    kind = entry.pop('type')
-    for key in _RESULT_KEYS:
-        entry.pop(key, None)
-    fixed = entry.pop('fixed', [])
-    if isinstance(fixed, str):
-        fixed = [fixed]
-    if kind in OPERATING_POINT_TYPES:
-        return ElementSpec(kind, _operating_point_values(entry, where), frozenset())
-    t = element_type(kind)
-    values, options = {}, {}
-    for key, raw in entry.items():
-        if key in t.options:
-            options[key] = _option(key, raw, where)
-            continue
-        try:
-            spec = t.param(key)
-        except KeyError:
-            raise ValueError(f'{where}: unknown parameter {key!r} of {t.name}; its parameters: '
-                             f'{", ".join(p.name for p in t.params)}'
-                             + (f'; options: {", ".join(t.options)}' if t.options else '')) from None
-        values[key] = _value(raw, spec, f'{where}.{key}')
-        if isinstance(raw, dict) and raw.get('fixed'):
-            fixed = list(fixed) + [key]
-    missing = [p.name for p in t.params if not p.optional and p.name not in values]
-    if missing:
-        raise ValueError(f'{where}: {t.name} needs {", ".join(missing)}')
-    if not values:
-        raise ValueError(f'{where}: {t.name} needs at least one of {", ".join(p.name for p in t.params)}')
-    bad = sorted(set(fixed) - set(values))
-    if bad:
-        raise ValueError(f'{where}.fixed: {", ".join(bad)} is not a parameter of this element')
-    return ElementSpec(t.name, values, frozenset(fixed), options)
-
-
-def _option(key, raw, where):
-    if key in ('amplitude', 'center', 'reversal_threshold'):
-        try:
-            return to_si(raw, 'length')
-        except ValueError as exc:
-            raise ValueError(f'{where}.{key}: {exc}') from None
-    return raw
-
-
-def _operating_point_values(entry, where) -> dict:
-    out = {}
-    for key, raw in entry.items():
-        if key == 'k_odd':
-            if not isinstance(raw, (list, tuple)) or not raw:
-                raise ValueError(f'{where}.k_odd: expected a list of coefficients (numbers or tables, SI)')
-            out[key] = list(raw)
-        elif key in ('amplitude', 'reversal_threshold'):
-            out[key] = _option(key, raw, where)
-        elif key == 'frequency':
-            out[key] = to_si(raw, 'frequency')
-        else:
-            raise ValueError(f'{where}: unknown key {key!r} of operating_point_spring')
-    return out
-
-
 def parse_model(data, origin: str = 'model') -> ModelSpec:
     """A :class:`ModelSpec` from a model-file mapping; errors name ``origin`` and the entry."""
     if not isinstance(data, dict) or not isinstance(data.get('elements'), list) or not data['elements']:
         raise ValueError(f'{origin}: a model file needs "elements", a list of elements in parallel, e.g. '
                          '[{type: berg, x2: 1.4 mm, f_fmax: 4.6 kN}] (rubber-rig models lists the types)')
-    elements = [_element(e, f'{origin}: elements[{i}]') for i, e in enumerate(data['elements'])]
+    elements = [parse_element(e, f'{origin}: elements[{i}]') for i, e in enumerate(data['elements'])]
     meta = {k: v for k, v in data.items() if k not in ('elements', 'name', 'model')}
     if 'temperature' in meta:
         meta['temperature'] = to_si(meta['temperature'], 'temperature')
