@@ -53,7 +53,8 @@ from pathlib import Path
 import numpy as np
 
 from msg_defs.msg import RigStatus
-from rubber_rig.testing.processes import Operator, SuiteProcesses
+from rubber_rig.testing.operator import Operator
+from rubber_rig.testing.processes import SuiteProcesses
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / 'config' / 'rig_sim.yaml'

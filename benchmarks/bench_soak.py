@@ -51,7 +51,8 @@ from rubber_rig.nodes.heartbeat import Peers
 from rubber_rig.recording import load_recording
 from rubber_rig.recording.errors import RecordingError
 from rubber_rig.recording.recover import recover
-from rubber_rig.testing.processes import NODES, Operator, SuiteProcesses
+from rubber_rig.testing.operator import Operator
+from rubber_rig.testing.processes import NODES, SuiteProcesses
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / 'config' / 'rig_sim.yaml'

@@ -141,16 +141,13 @@ def test_the_readme_shows_the_layer_table_this_test_enforces():
     assert shown == ALLOWED
 
 
-# Size rules (issue 25): no function over MAX_FUNCTION_LINES in the core (not nodes/, cli/, testing/), no module over
-# MAX_MODULE_LINES. What exceeds them today is listed with its size: nothing may join the lists or grow, and an
-# entry that meets the rule must leave its list (so the lists only shrink).
+# Size rules: no function over MAX_FUNCTION_LINES in the core (not nodes/, cli/, testing/), no module over
+# MAX_MODULE_LINES anywhere in the package. Nothing exceeds them; a module that must (a data table) would be listed
+# in OVERSIZE_MODULES with its size and the reason beside it, and nothing may grow past what is listed.
 MAX_FUNCTION_LINES = 80
 MAX_MODULE_LINES = 400
-OVERSIZE_FUNCTIONS = {
-}
-OVERSIZE_MODULES = {
-    'testing/processes.py': 427,
-}
+OVERSIZE_FUNCTIONS: dict = {}      # 'path.py:function': lines
+OVERSIZE_MODULES: dict = {}        # 'path.py': lines  (why)
 
 
 def _sizes():

@@ -25,7 +25,8 @@ from pathlib import Path
 import pytest
 
 from rubber_rig import dds
-from rubber_rig.testing.processes import NODES, Operator, SuiteProcesses
+from rubber_rig.testing.operator import Operator
+from rubber_rig.testing.processes import NODES, SuiteProcesses
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / 'config' / 'rig_sim.yaml'

@@ -41,7 +41,8 @@ from rubber_rig.fitting.report import make_report
 from rubber_rig.recording import load_recording
 from rubber_rig.rig.options import DamageSpec
 from rubber_rig.rig.sim.damage import DamagedSpecimen, sample_at_cycle
-from rubber_rig.testing.processes import Operator, SuiteProcesses
+from rubber_rig.testing.operator import Operator
+from rubber_rig.testing.processes import SuiteProcesses
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
 

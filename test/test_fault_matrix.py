@@ -44,7 +44,8 @@ from rcl_interfaces.srv import SetParameters
 from msg_defs.msg import RecorderStatus, RigStatus
 from msg_defs.srv import LoadProgram
 from rubber_rig.recording import load_recording
-from rubber_rig.testing.processes import Operator, SuiteProcesses
+from rubber_rig.testing.operator import Operator
+from rubber_rig.testing.processes import SuiteProcesses
 
 from support.waiting import wait_for
 

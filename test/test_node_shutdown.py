@@ -36,7 +36,8 @@ from pathlib import Path
 import pytest
 
 from msg_defs.msg import RigStatus
-from rubber_rig.testing.processes import NODES, Operator, SuiteProcesses
+from rubber_rig.testing.operator import Operator
+from rubber_rig.testing.processes import NODES, SuiteProcesses
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -37,7 +37,8 @@ from msg_defs.msg import ModelParameters, RigStatus
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.spin import EXIT_BAD_PARAMETER
 from rubber_rig.rig.config import RigConfig
-from rubber_rig.testing.processes import Operator, SuiteProcesses
+from rubber_rig.testing.operator import Operator
+from rubber_rig.testing.processes import SuiteProcesses
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow]
 

@@ -271,7 +271,8 @@ def test_element_model_runs_a_model_file_and_refuses_a_bad_one_at_run_time(tmp_p
 
     from msg_defs.msg import ModelPrediction, RigSampleBatch
     from rubber_rig.models import build_model
-    from rubber_rig.testing.processes import Operator, SuiteProcesses
+    from rubber_rig.testing.operator import Operator
+    from rubber_rig.testing.processes import SuiteProcesses
 
     from support.suite import domain_id
     config = Path(__file__).resolve().parents[1] / 'config' / 'rig_sim.yaml'

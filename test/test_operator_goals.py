@@ -26,7 +26,7 @@ import textwrap
 import pytest
 
 from msg_defs.action import RunProgram
-from rubber_rig.testing.processes import Operator, new_goal_id
+from rubber_rig.testing.operator import Operator, new_goal_id
 
 pytestmark = [pytest.mark.ros, pytest.mark.timeout(120)]
 
