@@ -17,6 +17,8 @@
 Everything is generated from the sample index at a fixed rate, never from wall-clock time. Pure Python.
 """
 from .blocks import Block, ProgramError
+from .detector_specs import with_defaults
+from .detectors import strongest
 from .limits import check_program, element_force_model
 from .program import PROGRAM_DIR, Program, load_program, program_source, read_program, shipped_programs
 from .runner import BlockResult, ProgramRunner, Progress
@@ -24,4 +26,4 @@ from .waveform_types import TYPES, WAVEFORMS, WaveformType
 
 __all__ = ['Block', 'BlockResult', 'PROGRAM_DIR', 'Program', 'ProgramError', 'ProgramRunner', 'Progress', 'TYPES',
            'WAVEFORMS', 'WaveformType', 'check_program', 'element_force_model', 'load_program', 'program_source',
-           'read_program', 'shipped_programs']
+           'read_program', 'shipped_programs', 'strongest', 'with_defaults']

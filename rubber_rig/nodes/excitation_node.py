@@ -55,9 +55,7 @@ from std_srvs.srv import SetBool, Trigger
 from msg_defs.action import RunProgram
 from msg_defs.msg import CycleMetrics, DetectorEvent, RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import LoadProgram, OpenStream, StopStream
-from rubber_rig.excitation import Program, read_program
-from rubber_rig.excitation.detector_specs import with_defaults
-from rubber_rig.excitation.detectors import strongest
+from rubber_rig.excitation import Program, read_program, strongest, with_defaults
 from rubber_rig.nodes import awaitables, topics
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import excitation_readiness as readiness
