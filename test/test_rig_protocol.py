@@ -22,7 +22,7 @@ import pytest
 from rubber_rig.excitation import Program, ProgramError
 from rubber_rig.rig import ConfigError, RigConfig, SimOptions, open_rig
 from rubber_rig.rig.can.driver import RigDriver
-from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, Protocol, crc8, unwrap_sequence
+from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, Protocol, crc8, unwrap
 from rubber_rig.safety import LimitError
 from rubber_rig.session import run_program
 
@@ -115,9 +115,10 @@ def test_crc_and_length_catch_corruption():
 
 
 def test_sequence_unwrap():
-    assert unwrap_sequence(3, 65534) == 65539
-    assert unwrap_sequence(65533, 65538) == 65533
-    assert unwrap_sequence(10, 200000) == 196618          # 3 * 65536 + 10, nearest to the reference
+    assert unwrap(3, 65534, 1 << 16) == 65539
+    assert unwrap(65533, 65538, 1 << 16) == 65533
+    assert unwrap(10, 200000, 1 << 16) == 196618          # 3 * 65536 + 10, nearest to the reference
+    assert unwrap(5, (1 << 32) - 3, 1 << 32) == (1 << 32) + 5     # the packed frames' 32-bit sequence
 
 
 def test_driver_counts_unknown_and_malformed_frames_without_crashing():

@@ -87,13 +87,6 @@ def unwrap(seq: int, reference: int, modulus: int) -> int:
     return reference + delta
 
 
-def unwrap_sequence(seq16: int, reference: int) -> int:
-    """Full sample index for a 16-bit sequence number (Setpoint, Feedback, ControllerStatus), nearest to
-    `reference`.
-    """
-    return unwrap(seq16, reference, SEQ_MOD)
-
-
 class MalformedFrame(ValueError):
     """A frame with a known identifier whose length or CRC is wrong."""
 
