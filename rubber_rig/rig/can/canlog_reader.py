@@ -302,7 +302,8 @@ class _Decoder:
         except MalformedFrame:
             self.out.frames_malformed += 1
             return
-        self._feedback(samples, sample_frames.feedback_modulus, t, rel)
+        if samples is not None:          # None: the first frame of a classic pair waits for its partner
+            self._feedback(samples, sample_frames.feedback_modulus, t, rel)
 
     def _feedback(self, samples, modulus: int, t: float, rel: float) -> None:
         out, a = self.out, self.a
