@@ -129,7 +129,7 @@ WAVES = ['{name: b, waveform: sine, frequency: 7.3 Hz, amplitude: 1.3 mm, cycles
          '{name: b, waveform: triangle, frequency: 3.1 Hz, amplitude: 1.3 mm, cycles: 300, taper_cycles: 2}',
          '{name: b, waveform: square, frequency: 2.3 Hz, rate: 30 mm/s, amplitude: 1.3 mm, cycles: 300}',
          '{name: b, waveform: sweep_log, f_start: 1 Hz, f_end: 23 Hz, duration: 60 s, amplitude: 1.3 mm}',
-         '{name: b, waveform: ramp, target: 1.3 mm, duration: 60 s}']
+         '{name: b, waveform: ramp, target: 13 mm, duration: 6 s}']   # 2.2 mm/s: above the slowest velocity_max
 
 
 @pytest.mark.parametrize('block', WAVES)
@@ -149,18 +149,18 @@ def test_closed_form_bounds_agree_with_every_setpoint(block, tapers_exact, monke
     brake = v_peak / FS + v_peak ** 2 / (2 * decel)
 
     def limits(**kw):
-        return Limits(**{'deceleration_max': decel, 'velocity_max': 1.0, **kw})
-    v_lowest = described(Limits, 'velocity_max').range[0]   # a slower limit is not a rig's setting
-    if v_peak * 0.999 >= v_lowest:
-        with pytest.raises(LimitError, match="block 1 'b'.*velocity"):
-            check_program(limits(velocity_max=v_peak * 0.999), p, FS)
+        return Limits(**{'deceleration_max': decel, 'velocity_max': 1.0, 'displacement_min': -0.02,
+                         'displacement_max': 0.02, **kw})
+    assert v_peak * 0.999 >= described(Limits, 'velocity_max').range[0]   # a limit a rig can be given
+    with pytest.raises(LimitError, match="block 1 'b'.*velocity"):
+        check_program(limits(velocity_max=v_peak * 0.999), p, FS)
     with pytest.raises(LimitError, match="block 1 'b'.*displacement"):
         check_program(limits(displacement_min=-x_peak * 0.999, displacement_max=x_peak * 0.999), p, FS)
     with pytest.raises(LimitError, match="block 1 'b'.*stiffness_estimate"):
         check_program(limits(stiffness_estimate=1e7, force_max=1e7 * x_peak * 0.999), p, FS)
     margin = 1.005 if tapers_exact or 'ramp' in block else 1.05
     room = (x_peak + brake) * 1.001
-    check_program(limits(velocity_max=max(v_peak * margin, v_lowest), displacement_min=-room, displacement_max=room,
+    check_program(limits(velocity_max=v_peak * margin, displacement_min=-room, displacement_max=room,
                          stiffness_estimate=1e7, force_max=1e7 * room), p, FS)
 
 
