@@ -67,8 +67,20 @@ def server():
         assert proc.stdout.readline().strip() == 'ready'
         yield proc
     finally:
+        _stop(proc)
+
+
+def _stop(proc) -> str:
+    """Stop the server and return what it printed. This stand-in server exits on rclpy's own SIGTERM handler,
+    which now and then leaves its process waiting (about 1 in 100 runs here; rclpy's executor shutdown races, e.g.
+    ros2/rclpy#1724); what it printed is what the test judges, so a server that hangs is killed."""
+    if proc.poll() is None:
         proc.terminate()
-        proc.wait(10)
+        try:
+            return proc.communicate(timeout=10)[0] or ''
+        except subprocess.TimeoutExpired:
+            proc.kill()
+    return proc.communicate()[0] or ''
 
 
 def test_a_resent_goal_with_the_same_id_is_followed_not_run_twice(server):
@@ -93,6 +105,5 @@ def test_a_resent_goal_with_the_same_id_is_followed_not_run_twice(server):
         assert handle is not None and handle.accepted and op.result(handle, 10.0).message == 'done 2'
     finally:
         op.close()
-    server.terminate()
-    out, _ = server.communicate(timeout=10)
+    out = _stop(server)
     assert out.count('executing goal') == 2, out
