@@ -163,8 +163,10 @@ class StreamScenarios(ConformanceLink):
         for t, state, _, last, level in self._states_since(t0):
             if t > t1 or state != 'running':
                 continue
-            sent_end = max((f + n for ts, f, n in log if ts <= t), default=None)
-            sent_before = max((f + n for ts, f, n in log if ts <= t - BUFFER_IN_FLIGHT), default=None)
+            # counted at most: every frame whose send had begun by t; at least: every frame logged as sent
+            # BUFFER_IN_FLIGHT before t
+            sent_end = max((f + n for started, _, f, n in log if started <= t), default=None)
+            sent_before = max((f + n for _, logged, f, n in log if logged <= t - BUFFER_IN_FLIGHT), default=None)
             if sent_end is None or sent_before is None:
                 continue
             full_last = unwrap(last, sent_end, 1 << 16)

@@ -30,6 +30,7 @@ DEFECTS = {
     'feedback_jitter': (('CTRL-FB-2',), 'sends each feedback frame 0-8 ms late (random, in order)'),
     'wrong_fault_bit': (('CTRL-FAULT-1',), 'reports host silence with the controller fault bit instead of watchdog'),
     'slow_ramp': (('CTRL-RAMP-1',), 'ramps to rest at a fifth of the commanded ramp velocity'),
+    'buffer_in_frames': (('CTRL-ST-4',), 'reports ST_BufferLevel in setpoint frames queued instead of setpoints'),
 }
 
 

@@ -99,7 +99,7 @@ class ConformanceLink:
         self.samples = []           # Sample per feedback sample received
         self.status_log = []        # (t, state, faults, last sequence, buffer level) per ControllerStatus
         self.sent = {}              # sequence -> setpoint sent (valid frames only)
-        self.sent_log = []          # (t, first, count) per valid setpoint frame sent
+        self.sent_log = []          # (t send called, t logged, first, count) per valid setpoint frame sent
         self.sent_at = {}           # sequence -> time its setpoint was sent
         self.deviation = ''
         self.heartbeat = False
@@ -130,10 +130,13 @@ class ConformanceLink:
         for i, msg in enumerate(self.frames.encode_setpoints(first, values)):
             per = self.frames.setpoints_per_frame
             chunk = values[i * per:(i + 1) * per]
+            # the frame is on its way from before send() is called: a status received after that may count it,
+            # even while this thread still waits for the lock the receive thread holds
+            started = time.time()
             self._tx(msg)
             if record:
                 with self.lock:
-                    self.sent_log.append((time.time(), first + i * per, len(chunk)))
+                    self.sent_log.append((started, time.time(), first + i * per, len(chunk)))
                     now = time.time()
                     for k, v in enumerate(chunk):
                         self.sent[first + i * per + k] = v

@@ -23,42 +23,26 @@ import math
 import threading
 import time
 
-import can
 import numpy as np
 
 from ...safety import DECEL_MAX, RAMP_ACCEL, RAMP_VELOCITY, SafeRamp, stopping_positions
 from ..can.frames import SampleFrames
 from ..can.protocol import (
-    CMD_ABORT,
-    CMD_DISABLE,
-    CMD_HOLD,
-    CMD_IDENTIFY,
-    CMD_RESET,
     FAULT_CONTROLLER,
-    FAULT_DISPLACEMENT_LIMIT,
     FAULT_SENSOR,
-    FAULT_VELOCITY_LIMIT,
     FAULT_WATCHDOG,
-    STATE_CODE,
-    STATUS_SEQ_MOD,
-    MalformedFrame,
     Protocol,
     cycle_time,
-    unwrap,
 )
-from ..can.timing import frame_time
+from .constants import IDLE_PERIOD, STREAMING
 from .faults import FaultInjector
 from .plant import Actuator, DelayLine, Sensor
+from .receive import ControllerReceive
 from .specimen import build_specimen
-
-STREAMING = ('running', 'holding', 'ramping_down')
-DEVICE_CODE = 0x5352      # ControllerIdentity.CI_Device of the simulated controller ('SR')
-FIRMWARE = 1
-IDLE_PERIOD = 0.01        # [s] the idle controller's housekeeping tick (ControllerStatus period)
-LSB = 1e-7                # [m] displacement resolution of the setpoint frames
+from .transmit import ControllerTransmit
 
 
-class SimController:
+class SimController(ControllerReceive, ControllerTransmit):
     """Simulated rig on python-can `bus` (any interface) at sample_rate [Hz] with SimOptions `options`, speaking
     the frame profile `profile` (rubber_rig.rig.can.frames) for setpoints and samples.
     """
@@ -243,93 +227,6 @@ class SimController:
         # a stream that resumes further ahead is bridged by holding, as the paced controller does in real time
         return self.next_seq in self.buffer or min(self.buffer) > self.next_seq
 
-    # ---- receive
-    def _handle(self, msg):
-        if msg.arbitration_id in self._setpoint_ids and not msg.is_extended_id:
-            self._on_setpoints(msg)
-            return
-        try:
-            decoded = self.proto.decode(msg)
-        except MalformedFrame:   # CTRL-FRAME-2: counted, never applied
-            self.counters['frames_bad'] += 1
-            return
-        if decoded is None:      # CTRL-FRAME-3: unknown, extended, remote frames change nothing
-            return
-        name, sig = decoded
-        if name == 'HostStreamStart':
-            self.accept_from = int(sig['HS_FirstSequence'])
-        elif name == 'HostHeartbeat':
-            self.last_host_hb = self.ticks
-        elif name == 'HostLimits' and 'ignore_host_limits' not in self.defects:   # CTRL-LIM-1
-            lo, hi = float(sig['HL_DisplacementMin']), float(sig['HL_DisplacementMax'])
-            if lo < hi:
-                self.lower, self.upper = lo, hi
-                self.decel_max = float(sig['HL_Deceleration']) or DECEL_MAX
-        elif name == 'HostCommand':
-            code = int(sig['CMD_Code'])
-            if code in (CMD_ABORT, CMD_DISABLE):
-                self.abort(float(sig['CMD_Argument']), 0, float(sig['CMD_RampVelocity']) or None)
-            elif code == CMD_HOLD:
-                self.abort(None, 0, float(sig['CMD_RampVelocity']) or None)
-            elif code == CMD_IDENTIFY:
-                self._send_identity()   # CTRL-ID-1
-            elif code == CMD_RESET and self.state in ('fault', 'idle'):   # CTRL-FAULT-2; CTRL-RESET-1: not moving
-                self.fault_bits = 0
-                self.state = 'idle'
-                self._housekeeping(force=True)
-
-    def _on_setpoints(self, msg):
-        try:
-            seq, values = self.frames.decode_setpoints(msg)
-        except MalformedFrame:
-            self.counters['frames_bad'] += 1
-            return
-        if self.state in ('ramping_down', 'fault'):
-            return
-        if self.state == 'idle':   # CTRL-STREAM-1, CTRL-STREAM-2: only from HS_FirstSequence on
-            seq = unwrap(seq, self.accept_from if math.isfinite(self.accept_from) else self.next_seq,
-                         self.frames.setpoint_modulus)
-            if seq < self.accept_from:   # left over from an aborted stream, or no stream announced
-                self.counters['setpoints_stale'] += 1
-                return
-        else:
-            seq = unwrap(seq, self.next_seq, self.frames.setpoint_modulus)
-        if self.state == 'idle':
-            self.buffer.clear()
-            self.next_seq = seq
-            self.state = 'running'
-            self.last_host_hb = self.ticks
-            self._housekeeping(force=True)
-        late = max(0, min(len(values), self.next_seq - seq))
-        self.counters['setpoints_late'] += late
-        if self._refuse_setpoints(seq, late, values):
-            return
-        if len(self.buffer) < self.frames.setpoint_modulus // 2:
-            buffer = self.buffer
-            for i in range(late, len(values)):
-                buffer[seq + i] = values[i]
-
-    def _refuse_setpoints(self, seq: int, late: int, values) -> bool:
-        """CTRL-LIM-2 / CTRL-LIM-3: a setpoint outside the host's limits, or one that steps faster than the rated
-        velocity from the setpoint before it, is never applied: the controller faults and ramps to rest. True if
-        the batch was refused.
-        """
-        tol = LSB + 1e-12
-        step_max = (self.opt.actuator_velocity_max * 1.02) / self.fs + 2 * LSB
-        prev = self.buffer.get(seq + late - 1)
-        if prev is None and seq + late == self.next_seq:
-            prev = self.u
-        for i in range(late, len(values)):
-            value = values[i]
-            if not self.lower - tol <= value <= self.upper + tol:
-                self.abort(0.0, FAULT_DISPLACEMENT_LIMIT)
-                return True
-            if prev is not None and abs(value - prev) > step_max:
-                self.abort(0.0, FAULT_VELOCITY_LIMIT)
-                return True
-            prev = value
-        return False
-
     def abort(self, target: float = 0.0, fault_bits: int = 0, velocity_max: float = None):
         """Flush queued setpoints and ramp from the current command and velocity to target [m] (None: stop
         where the motion can stop, braking at the host's deceleration limit), at most velocity_max [m/s]
@@ -460,137 +357,3 @@ class SimController:
         if self._idle_since is not None:
             idle += int((time.monotonic() - self._idle_since) * self.fs)
         return (self.ticks + idle) / self.fs
-
-    def _queue_feedback(self, first: int, xm: list, fm: list, u: list):
-        """Samples first, first + 1, ... (measured displacement and force, applied command) for the feedback
-        frames; every frame that is full goes out now.
-        """
-        fx, ff, fu = self._fb
-        if not fx:
-            self._fb_first = first
-        fx.extend(xm)
-        ff.extend(fm)
-        fu.extend(u)
-        per = self.frames.feedback_per_frame
-        while len(self._fb[0]) >= per:
-            self._send_feedback(per)
-
-    def _send_feedback(self, count: int = None):
-        """Send the first `count` samples not yet sent (default: all; a packed frame may carry fewer than it
-        holds).
-        """
-        fx, ff, fu = self._fb
-        k = len(fx) if count is None else count
-        if k:
-            first = self._fb_first & 0xFFFF if 'sequence_16bit' in self.defects else self._fb_first
-            for m in self.frames.encode_feedback(first, fx[:k], ff[:k], fu[:k]):
-                self._transmit('Feedback', m)
-            self._fb = (fx[k:], ff[k:], fu[k:])
-            self._fb_first += k
-
-    def _housekeeping(self, force=False):
-        """Status, heartbeat and temperature at their DBC cycle times of rig time (or now if force)."""
-        code = STATE_CODE[self.state]
-        if force or self.ticks % self._st_every == 0:
-            self._send_status(code)
-        if force or self.ticks % self._hb_every == 0:
-            self._send_heartbeat(code)
-        if force or self.ticks % self._tc_every == 0:
-            self._send_temperature()
-        if self.ticks >= self._id_next_tick:
-            self._send_identity()
-            self._id_next_tick = self.ticks + self._id_every
-
-    def _send_status(self, code: int):
-        self._st = (self._st + 1) % 16
-        self._send('ControllerStatus', {'ST_State': code, 'ST_Counter': self._st, 'ST_Faults': self.fault_bits,
-                                        'ST_LastSequence': (self.next_seq - 1) % STATUS_SEQ_MOD,
-                                        'ST_BufferLevel': min(len(self.buffer), 65535)})
-
-    def _send_heartbeat(self, code: int):
-        self._hb = (self._hb + 1) % 256
-        self._send('ControllerHeartbeat', {'HB_Counter': self._hb, 'HB_State': code})
-
-    def _send_temperature(self):
-        self._tc = (self._tc + 1) % 256
-        temp = self.temperature + self.opt.temperature_noise * float(self.temp_rng.standard_normal())
-        self._send('Temperature', {'TEMP_Specimen': temp, 'TEMP_Counter': self._tc})
-
-    def _idle_housekeeping(self, now: float):
-        """Paced, not ticking: each periodic frame at its own period of wall-clock time (CTRL-HB-1, CTRL-ST-1)."""
-        due = self._idle_due
-        for name, period in self._periods.items():
-            at = due.get(name, now)
-            if now + 1e-4 < at:
-                continue
-            due[name] = max(at + period, now)
-            if name == 'ControllerIdentity':
-                self._send_identity()
-                self._id_next_tick = self.ticks + self._id_every
-            elif name == 'Temperature':
-                self._send_temperature()
-            elif name == 'ControllerStatus':
-                self._send_status(STATE_CODE[self.state])
-            else:
-                self._send_heartbeat(STATE_CODE[self.state])
-
-    def _send_identity(self):
-        """ControllerIdentity (CTRL-ID-1): protocol version, device, firmware, host timeout, rated velocity."""
-        self._send('ControllerIdentity', {'CI_Protocol': self.opt.protocol_version, 'CI_Device': DEVICE_CODE,
-                                          'CI_Firmware': FIRMWARE, 'CI_HostTimeout': min(self.opt.host_timeout, 2.55),
-                                          'CI_VelocityMax': min(self.opt.actuator_velocity_max, 6.5535)})
-
-    def _send(self, name, signals):
-        self._transmit(name, self.proto.encode(name, signals))
-
-    def _transmit(self, name, msg):
-        """Put msg on the bus through the fault injector (name: the frame's role, e.g. 'Feedback')."""
-        for delay, m in self.faults.transmit(name, msg, self.fault_time()):
-            if name == 'Feedback' and 'feedback_jitter' in self.defects:
-                # 0-8 ms late, never overtaking the frame before it
-                late = int(self.temp_rng.integers(0, int(0.008 * self.fs) + 1))
-                self._jitter_until = max(self._jitter_until, self.ticks + late)
-                delay = self._jitter_until - self.ticks
-            if delay:
-                self._held.append((self.ticks + delay, m))
-            else:
-                self._put(m)
-
-    def _flood(self, now: float):
-        """bus_flood faults: the other node sends its frames for the time since the last call (its own transmit
-        queue full is its problem: those frames are simply not sent).
-        """
-        active = [f for f in self.faults.faults if f.type == 'bus_flood' and f.active(self.fault_time())]
-        last, self._flood_at = self._flood_at, now
-        if not active or last is None:
-            self._flood_owed = 0.0
-            return
-        medium = self.flood_bus.medium
-        duration = frame_time(8, medium.bitrate)
-        for f in active:
-            self._flood_owed += f.load * (now - last) / duration
-            msg = can.Message(arbitration_id=f.frame_id, data=bytes(8), is_extended_id=False)
-            while self._flood_owed >= 1.0:
-                self._flood_owed -= 1.0
-                try:
-                    self.flood_bus.send(msg)
-                except can.CanOperationError:
-                    self._flood_owed = 0.0
-                    break
-
-    def _put(self, msg):
-        """Hand a frame to the bus; a full transmit queue (an overloaded bus) loses it, as a controller's
-        mailboxes would: counted, and the host sees the gap.
-        """
-        try:
-            self.bus.send(msg)
-        except can.CanOperationError:
-            self.counters['tx_dropped'] += 1
-
-    def _release_held(self):
-        if self._held:
-            due = [m for r, m in self._held if r <= self.ticks]
-            if due:
-                self._held = [(r, m) for r, m in self._held if r > self.ticks]
-                for m in due:
-                    self._put(m)

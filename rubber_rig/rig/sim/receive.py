@@ -1,0 +1,122 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""What the simulated controller does with each frame it receives: commands, host limits and heartbeats, and
+setpoints (accepted in order, or refused and counted as a real controller would).
+"""
+import math
+
+from ...safety import DECEL_MAX
+from ..can.protocol import (
+    CMD_ABORT,
+    CMD_DISABLE,
+    CMD_HOLD,
+    CMD_IDENTIFY,
+    CMD_RESET,
+    FAULT_DISPLACEMENT_LIMIT,
+    FAULT_VELOCITY_LIMIT,
+    MalformedFrame,
+    unwrap,
+)
+from .constants import LSB
+
+
+class ControllerReceive:
+    """The receive side of SimController (its state lives there)."""
+
+    def _handle(self, msg):
+        if msg.arbitration_id in self._setpoint_ids and not msg.is_extended_id:
+            self._on_setpoints(msg)
+            return
+        try:
+            decoded = self.proto.decode(msg)
+        except MalformedFrame:   # CTRL-FRAME-2: counted, never applied
+            self.counters['frames_bad'] += 1
+            return
+        if decoded is None:      # CTRL-FRAME-3: unknown, extended, remote frames change nothing
+            return
+        name, sig = decoded
+        if name == 'HostStreamStart':
+            self.accept_from = int(sig['HS_FirstSequence'])
+        elif name == 'HostHeartbeat':
+            self.last_host_hb = self.ticks
+        elif name == 'HostLimits' and 'ignore_host_limits' not in self.defects:   # CTRL-LIM-1
+            lo, hi = float(sig['HL_DisplacementMin']), float(sig['HL_DisplacementMax'])
+            if lo < hi:
+                self.lower, self.upper = lo, hi
+                self.decel_max = float(sig['HL_Deceleration']) or DECEL_MAX
+        elif name == 'HostCommand':
+            code = int(sig['CMD_Code'])
+            if code in (CMD_ABORT, CMD_DISABLE):
+                self.abort(float(sig['CMD_Argument']), 0, float(sig['CMD_RampVelocity']) or None)
+            elif code == CMD_HOLD:
+                self.abort(None, 0, float(sig['CMD_RampVelocity']) or None)
+            elif code == CMD_IDENTIFY:
+                self._send_identity()   # CTRL-ID-1
+            elif code == CMD_RESET and self.state in ('fault', 'idle'):   # CTRL-FAULT-2; CTRL-RESET-1: not moving
+                self.fault_bits = 0
+                self.state = 'idle'
+                self._housekeeping(force=True)
+
+    def _on_setpoints(self, msg):
+        try:
+            seq, values = self.frames.decode_setpoints(msg)
+        except MalformedFrame:
+            self.counters['frames_bad'] += 1
+            return
+        if self.state in ('ramping_down', 'fault'):
+            return
+        if self.state == 'idle':   # CTRL-STREAM-1, CTRL-STREAM-2: only from HS_FirstSequence on
+            seq = unwrap(seq, self.accept_from if math.isfinite(self.accept_from) else self.next_seq,
+                         self.frames.setpoint_modulus)
+            if seq < self.accept_from:   # left over from an aborted stream, or no stream announced
+                self.counters['setpoints_stale'] += 1
+                return
+        else:
+            seq = unwrap(seq, self.next_seq, self.frames.setpoint_modulus)
+        if self.state == 'idle':
+            self.buffer.clear()
+            self.next_seq = seq
+            self.state = 'running'
+            self.last_host_hb = self.ticks
+            self._housekeeping(force=True)
+        late = max(0, min(len(values), self.next_seq - seq))
+        self.counters['setpoints_late'] += late
+        if self._refuse_setpoints(seq, late, values):
+            return
+        if len(self.buffer) < self.frames.setpoint_modulus // 2:
+            buffer = self.buffer
+            for i in range(late, len(values)):
+                buffer[seq + i] = values[i]
+
+    def _refuse_setpoints(self, seq: int, late: int, values) -> bool:
+        """CTRL-LIM-2 / CTRL-LIM-3: a setpoint outside the host's limits, or one that steps faster than the rated
+        velocity from the setpoint before it, is never applied: the controller faults and ramps to rest. True if
+        the batch was refused.
+        """
+        tol = LSB + 1e-12
+        step_max = (self.opt.actuator_velocity_max * 1.02) / self.fs + 2 * LSB
+        prev = self.buffer.get(seq + late - 1)
+        if prev is None and seq + late == self.next_seq:
+            prev = self.u
+        for i in range(late, len(values)):
+            value = values[i]
+            if not self.lower - tol <= value <= self.upper + tol:
+                self.abort(0.0, FAULT_DISPLACEMENT_LIMIT)
+                return True
+            if prev is not None and abs(value - prev) > step_max:
+                self.abort(0.0, FAULT_VELOCITY_LIMIT)
+                return True
+            prev = value
+        return False
