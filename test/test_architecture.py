@@ -177,3 +177,28 @@ def test_functions_and_modules_stay_small():
             if sizes.get(name, 0) <= limit:
                 problems.append(f'{what} {name} now meets the {limit}-line rule: remove it from the list')
     assert not problems, '\n'.join(problems)
+
+
+def _imported_names(path: Path):
+    """(module, name, line) of every `from rubber_rig... import name` in `path`, at any depth."""
+    for node in ast.walk(ast.parse(path.read_text(encoding='utf-8'))):
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.split('.')[0] == 'rubber_rig':
+            for alias in node.names:
+                yield node.module, alias.name, node.lineno
+
+
+def test_benchmarks_and_scripts_import_names_that_exist():
+    """The benchmarks import from the package inside functions too, where nothing but a run would notice a name
+    that moved (bench_suite imported READY_STATES from the excitation node after it had moved)."""
+    import importlib
+    missing = []
+    for folder in ('benchmarks', 'scripts'):
+        for path in sorted((PACKAGE.parent / folder).glob('*.py')):
+            for module, name, line in _imported_names(path):
+                found = importlib.import_module(module)
+                if not hasattr(found, name):
+                    try:
+                        importlib.import_module(f'{module}.{name}')
+                    except ImportError:
+                        missing.append(f'{path.name}:{line}: {name} is not in {module}')
+    assert not missing, '\n'.join(missing)

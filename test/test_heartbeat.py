@@ -21,8 +21,10 @@ import pytest
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 
-from rubber_rig.nodes.heartbeat import PERIOD, SILENT, start_heartbeat
+from msg_defs.msg import Heartbeat
+from rubber_rig.nodes.heartbeat import PERIOD, SILENT, OwnerWatch, Peers, start_heartbeat
 from rubber_rig.nodes.monitor import SuiteMonitor
+from rubber_rig.rig.can.stream import StreamGrant
 
 from support.ros import ros_context
 
@@ -71,3 +73,40 @@ def test_a_node_whose_executor_stops_is_named_silent_within_a_second():
             ex.shutdown()
         beating.destroy_node()
         watcher.destroy_node()
+
+
+def test_a_restarted_owner_is_judged_from_its_grant_not_by_its_predecessors_last_beat():
+    """rig_driver's owner watch (owner_timeout 1 s here) on a clock the test moves: the excitation beat, was
+    killed, and its restart opens a stream 2.5 s later, before its own first beat has arrived. The stream is not
+    lost at once for its predecessor's silence; a new owner that never beats loses it after owner_timeout."""
+    clock = [100.0]
+    with ros_context(DOMAIN) as ctx:
+        node = Node('driver', namespace='/hb', context=ctx)
+        try:
+            peers = Peers(node, silent=1.0, clock=lambda: clock[0])
+            watch = OwnerWatch(peers)
+            peers.on_beat(Heartbeat(node='/hb/excitation', pid=1, count=7))
+            clock[0] += 2.5
+            grant = StreamGrant(stream_id=2, owner='/hb/excitation', first_sequence=5000, position=0.0, velocity=0.0)
+            assert peers.age('/hb/excitation') == pytest.approx(2.5)
+            assert watch.silent_for(grant) == pytest.approx(0.0)
+            clock[0] += 0.6
+            assert watch.silent_for(grant) == pytest.approx(0.6)      # counted from the grant
+            peers.on_beat(Heartbeat(node='/hb/excitation', pid=2, count=0))
+            assert peers.restarts == {'/hb/excitation': 1}
+            clock[0] += 0.3
+            assert watch.silent_for(grant) == pytest.approx(0.3)      # from its own last beat
+            clock[0] += 1.2                                           # the new owner stops beating
+            assert watch.silent_for(grant) == pytest.approx(1.5) and watch.silent_for(grant) > peers.silent_after
+            # a restarted owner that never beats: silent from the grant, lost after owner_timeout like any other
+            peers.on_beat(Heartbeat(node='/hb/excitation', pid=3, count=0))
+            clock[0] += 4.0
+            again = StreamGrant(stream_id=3, owner='/hb/excitation', first_sequence=9000, position=0.0, velocity=0.0)
+            assert watch.silent_for(again) == pytest.approx(0.0)
+            clock[0] += 1.1
+            assert watch.silent_for(again) == pytest.approx(1.1) and watch.silent_for(again) > peers.silent_after
+            # a client that never beats is never judged silent (it may not run a heartbeat at all)
+            client = StreamGrant(stream_id=4, owner='/hb/cli', first_sequence=0, position=0.0, velocity=0.0)
+            assert watch.silent_for(client) is None
+        finally:
+            node.destroy_node()

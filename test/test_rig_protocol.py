@@ -22,7 +22,7 @@ import pytest
 from rubber_rig.excitation import Program, ProgramError
 from rubber_rig.rig import ConfigError, RigConfig, SimOptions, open_rig
 from rubber_rig.rig.can.driver import RigDriver
-from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, Protocol, crc8, unwrap
+from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, Protocol, crc8, meet, unwrap
 from rubber_rig.safety import LimitError
 from rubber_rig.session import run_program
 
@@ -119,6 +119,15 @@ def test_sequence_unwrap():
     assert unwrap(65533, 65538, 1 << 16) == 65533
     assert unwrap(10, 200000, 1 << 16) == 196618          # 3 * 65536 + 10, nearest to the reference
     assert unwrap(5, (1 << 32) - 3, 1 << 32) == (1 << 32) + 5     # the packed frames' 32-bit sequence
+
+
+def test_meet_counts_late_and_lost_samples_of_a_run():
+    assert meet(None, 500, 10) == (0, 0)                # nothing due yet: the run starts the count
+    assert meet(100, 100, 10) == (0, 0)                 # in order
+    assert meet(100, 103, 10) == (0, 3)                 # 100..102 lost
+    assert meet(100, 95, 10) == (5, 0)                  # 95..99 already past, 100..104 used
+    assert meet(100, 80, 10) == (10, 0)                 # a duplicate of an old frame: all late
+    assert meet(100, 90, 10) == (10, 0)                 # ends just before the due sample
 
 
 def test_driver_counts_unknown_and_malformed_frames_without_crashing():

@@ -72,10 +72,16 @@ class Peers:
             self.restarts[msg.node] = self.restarts.get(msg.node, 0) + 1
         self.last[msg.node] = (self._clock(), msg)
 
-    def age(self, name: str) -> float | None:
-        """Seconds since `name` last beat (None: never heard)."""
+    def now(self) -> float:
+        """The time [s] on the clock beats are stamped with."""
+        return self._clock()
+
+    def age(self, name: str, since: float | None = None) -> float | None:
+        """Seconds since `name` last beat (None: never heard), or since `since` (a time of now()) if that is later."""
         seen = self.last.get(name)
-        return None if seen is None else self._clock() - seen[0]
+        if seen is None:
+            return None
+        return self._clock() - (seen[0] if since is None else max(seen[0], since))
 
     def silent(self, names=None) -> dict[str, float]:
         """{node: seconds silent} of the nodes (default: the expected ones and every node heard from) that beat
@@ -89,3 +95,20 @@ class Peers:
         """'' when every node beats, else 'silent: /ns/element_model (1.3 s), ...'."""
         quiet = self.silent(names)
         return ('silent: ' + ', '.join(f'{n} ({a:.1f} s)' for n, a in quiet.items())) if quiet else ''
+
+
+class OwnerWatch:
+    """How long a stream's owner has been silent (rig_driver's owner_timeout judges it): since its last beat, or
+    since the grant if that is later. An owner restarted after a kill opens its stream before its first beat has
+    arrived; its predecessor's last beat (the same node name) is not its own silence.
+    """
+
+    def __init__(self, peers: Peers):
+        self.peers = peers
+        self._grant, self._since = None, 0.0
+
+    def silent_for(self, grant) -> float | None:
+        """Seconds `grant.owner` has been silent (None: never heard, e.g. a client that does not beat)."""
+        if grant is not self._grant:          # first seen now: the grant is at most one status period old
+            self._grant, self._since = grant, self.peers.now()
+        return self.peers.age(grant.owner, since=self._since)

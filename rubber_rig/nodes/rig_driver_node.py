@@ -52,7 +52,7 @@ from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import OpenStream, StopStream
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.heartbeat import Peers, start_heartbeat
+from rubber_rig.nodes.heartbeat import OwnerWatch, Peers, start_heartbeat
 from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles
 from rubber_rig.nodes.rclpy_compat import lifecycle_state
 from rubber_rig.nodes.rig_driver_params import (  # noqa: F401 - also imported from here
@@ -107,7 +107,7 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self.create_timer(1.0, self.find_channels)
         self._poll_timer = None
         start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig is not None else 'unconfigured')
-        self.peers = Peers(self, silent=self.owner_timeout)
+        self.owner_watch = OwnerWatch(Peers(self, silent=self.owner_timeout))
         self.create_timer(self.status_period, self.publish_status)
         self.create_timer(self.diagnostics_period, self.publish_diagnostics)
         self.publish_status()
@@ -294,11 +294,11 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self.pub_status.publish(self._last_status)
 
     def watch_owner(self) -> None:
-        """A stream owner that beat and then went silent for owner_timeout loses its stream (fault, ramp)."""
+        """A stream owner that beat and then went silent for owner_timeout (OwnerWatch) loses its stream."""
         grant = self.rig.driver.stream if self.rig is not None and self._poll_timer is not None else None
         if grant is None or not grant.owner:
             return
-        age = self.peers.age(grant.owner)
+        age = self.owner_watch.silent_for(grant)
         if age is not None and age > self.owner_timeout and self.rig.driver.owner_lost(
                 f'{grant.owner} silent for {age:.2f} s (no heartbeat; alive but stuck, or gone)'):
             self._log_events()

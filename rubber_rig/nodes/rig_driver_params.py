@@ -146,7 +146,7 @@ class RigDriverParameters:
         if 'max_batch_delay' in changed:
             self.max_batch_delay = float(changed['max_batch_delay'])
         if 'owner_timeout' in changed:
-            self.owner_timeout = self.peers.silent_after = float(changed['owner_timeout'])
+            self.owner_timeout = self.owner_watch.peers.silent_after = float(changed['owner_timeout'])
         if limits is not None:
             if self.rig is not None:
                 self.rig.driver.set_limits(limits)

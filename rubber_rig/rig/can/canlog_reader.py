@@ -37,7 +37,7 @@ import numpy as np
 from .canlog import SUPPORTED_FORMATS, CanLogError, CanLogWarning, log_format
 from .canlog_text import TextLogReader, _asc_start, _integrity, frames_until_damage
 from .frames import PROFILES, SampleFrames
-from .protocol import DBC_PATH, STATES, STATUS_SEQ_MOD, MalformedFrame, Protocol, fault_names, unwrap
+from .protocol import DBC_PATH, STATES, STATUS_SEQ_MOD, MalformedFrame, Protocol, fault_names, meet, unwrap
 from .timing import frame_bits
 
 
@@ -315,19 +315,18 @@ class _Decoder:
         last = s + len(xs) - 1
         period = (t - self.last_fb[0]) / (last - self.last_fb[1]) if self.last_fb and last > self.last_fb[1] else 0.0
         self.last_fb = (t, last)
-        for i in range(len(xs)):
-            expected = self.expected
-            if expected is not None and s + i < expected:
-                out.frames_late += 1      # delayed or duplicated: its slot is already past (as the driver)
-                continue
-            if expected is not None and s + i > expected:
-                gap = {'expected': expected, 'received': s + i, 'lost': s + i - expected, 'time': rel}
-                if self.state in self.idle_states:
-                    out.jumps.append(gap)    # an idle controller started a new stream there: no loss
-                else:
-                    out.gaps.append(gap)
-                    out.samples_lost += s + i - expected
-            self.expected = s + i + 1
+        late, lost = meet(self.expected, s, len(xs))
+        out.frames_late += late           # delayed or duplicated: their slots are already past (as the driver)
+        if lost:
+            gap = {'expected': self.expected, 'received': s, 'lost': lost, 'time': rel}
+            if self.state in self.idle_states:
+                out.jumps.append(gap)     # an idle controller started a new stream there: no loss
+            else:
+                out.gaps.append(gap)
+                out.samples_lost += lost
+        if late < len(xs):
+            self.expected = last + 1
+        for i in range(late, len(xs)):
             a['sequence'].append(s + i)
             a['time'].append(t - (len(xs) - 1 - i) * period)
             a['displacement'].append(xs[i])

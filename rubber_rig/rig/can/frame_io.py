@@ -25,7 +25,7 @@ import math
 import can
 import numpy as np
 
-from .protocol import MalformedFrame, unwrap
+from .protocol import MalformedFrame, meet, unwrap
 from .stream import SampleBlock
 
 
@@ -189,17 +189,14 @@ class FrameIO:
                 self.expected = self.jump_to   # an idle rig started the new stream here: a jump, not a loss
                 self.listener.jumped(self.jump_to)
             self.jump_to = None
-        if self.expected is None:
-            self.expected = seq
-        if seq < self.expected:
-            skip = min(n, self.expected - seq)
-            self.counters['frames_late'] += skip    # delayed or duplicated: their slots are already past
-            self.listener.bad_frames(skip)
-            if skip == n:
+        late, lost = meet(seq if self.expected is None else self.expected, seq, n)
+        if late:
+            self.counters['frames_late'] += late    # delayed or duplicated: their slots are already past
+            self.listener.bad_frames(late)
+            if late == n:
                 return
-            seq, xs, fs, us, n = seq + skip, xs[skip:], fs[skip:], us[skip:], n - skip
-        if seq > self.expected:
-            lost = seq - self.expected
+            seq, xs, fs, us, n = seq + late, xs[late:], fs[late:], us[late:], n - late
+        if lost:
             self.count_lost(lost)
             self.listener.samples_lost(lost)
         if self._pend_first is None:

@@ -87,6 +87,17 @@ def unwrap(seq: int, reference: int, modulus: int) -> int:
     return reference + delta
 
 
+def meet(expected, first: int, n: int) -> tuple:
+    """How a run of n contiguous samples from sequence `first` meets `expected`, the sequence due next (None:
+    nothing due yet). Returns (late, lost): the first `late` of the run have slots already past (delayed or
+    duplicated: counted, never used) and `lost` samples were skipped before it (a gap). The one rule by which the
+    driver, the CAN-log reader and the simulated controller count late and lost samples.
+    """
+    if expected is None:
+        return 0, 0
+    return min(n, max(0, expected - first)), max(0, first - expected)
+
+
 class MalformedFrame(ValueError):
     """A frame with a known identifier whose length or CRC is wrong."""
 

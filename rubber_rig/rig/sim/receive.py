@@ -27,6 +27,7 @@ from ..can.protocol import (
     FAULT_DISPLACEMENT_LIMIT,
     FAULT_VELOCITY_LIMIT,
     MalformedFrame,
+    meet,
     unwrap,
 )
 from .constants import LSB
@@ -91,7 +92,7 @@ class ControllerReceive:
             self.state = 'running'
             self.last_host_hb = self.ticks
             self._housekeeping(force=True)
-        late = max(0, min(len(values), self.next_seq - seq))
+        late, _ = meet(self.next_seq, seq, len(values))   # a gap ahead is bridged by holding (CTRL-STREAM-3)
         self.counters['setpoints_late'] += late
         if self._refuse_setpoints(seq, late, values):
             return
