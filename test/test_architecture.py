@@ -21,6 +21,7 @@
 * No function-local imports in the core, except optional heavy ones (matplotlib, only needed for reports).
 """
 import ast
+import importlib
 from pathlib import Path
 
 import pytest
@@ -190,7 +191,6 @@ def _imported_names(path: Path):
 def test_benchmarks_and_scripts_import_names_that_exist():
     """The benchmarks import from the package inside functions too, where nothing but a run would notice a name
     that moved (bench_suite imported READY_STATES from the excitation node after it had moved)."""
-    import importlib
     missing = []
     for folder in ('benchmarks', 'scripts'):
         for path in sorted((PACKAGE.parent / folder).glob('*.py')):

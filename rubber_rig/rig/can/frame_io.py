@@ -189,7 +189,7 @@ class FrameIO:
                 self.expected = self.jump_to   # an idle rig started the new stream here: a jump, not a loss
                 self.listener.jumped(self.jump_to)
             self.jump_to = None
-        late, lost = meet(seq if self.expected is None else self.expected, seq, n)
+        late, lost = meet(self.expected, seq, n)
         if late:
             self.counters['frames_late'] += late    # delayed or duplicated: their slots are already past
             self.listener.bad_frames(late)
