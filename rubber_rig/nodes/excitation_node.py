@@ -102,9 +102,11 @@ class ExcitationNode(Node):
         self.create_service(Trigger, '~/abort', self.on_abort)
         self.create_service(SetBool, '~/hold', self.on_hold)
         self.create_service(LoadProgram, '~/load_program', self.on_load_program)
+        self.executing = ''             # the goal being executed ('' when none): later goals end "busy"
+        self.refused_busy = 0           # goals ended "busy" since start (logged at most once a second)
         self.action = ActionServer(self, RunProgram, 'run_program', execute_callback=self.execute,
                                    goal_callback=lambda _: GoalResponse.ACCEPT,
-                                   cancel_callback=lambda _: CancelResponse.ACCEPT)
+                                   cancel_callback=lambda _: CancelResponse.ACCEPT, **topics.ACTION_SERVICES_QOS)
         self.create_timer(self.stream_period, self.stream)
         start_heartbeat(self, lambda: self.state)
         self.health = ProgramHealth(self)   # events, silent peers, blind detectors: diagnostics and the result
@@ -309,6 +311,24 @@ class ExcitationNode(Node):
 
     # -- action -------------------------------------------------------------------------------------------------------
     async def execute(self, goal_handle) -> RunProgram.Result:
+        # Admission before any await: one goal at a time, every other one answered at once with the reason, so
+        # that neither a burst of goals nor a costly one (a huge text, a path to a device) reaches the running
+        # program's executor time. Checked synchronously, so two goals cannot both pass it.
+        if self.executing:
+            running = f"program '{self.session.runner.program.name}' of " if self.session is not None else ''
+            goal_handle.abort()
+            self.refused_busy += 1
+            self.get_logger().warning(f'goal refused: busy ({self.refused_busy} refused so far)',
+                                      throttle_duration_sec=1.0)
+            return RunProgram.Result(success=False, message=f'busy: {running}goal {self.executing} is running; '
+                                                            'one program at a time')
+        self.executing = bytes(goal_handle.goal_id.uuid).hex()[:8]
+        try:
+            return await self._execute(goal_handle)
+        finally:
+            self.executing = ''
+
+    async def _execute(self, goal_handle) -> RunProgram.Result:
         goal = goal_handle.request
         try:
             program, text = read_program(goal.program_path, goal.program_yaml)
