@@ -12,7 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Every request is answered, and none disturbs the running program (issue 35, item 4).
+"""Requests from other processes on the domain: every one is answered, none disturbs the running program, and
+none widens the rig's limits or weakens its supervision (issue 35, items 3 and 4).
 
 The four nodes run as separate processes (as a launch file starts them); a second process here plays many
 clients at once: 200 goals from 10 plain ``ActionClient`` nodes while a program runs, and goals that name
@@ -27,6 +28,9 @@ from pathlib import Path
 import pytest
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import Parameter as ParameterMsg
+from rcl_interfaces.msg import ParameterType, ParameterValue
+from rcl_interfaces.srv import SetParameters
 from rclpy.action import ActionClient
 from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
@@ -240,3 +244,35 @@ def test_a_killed_excitation_leaves_the_graph_and_the_first_goal_after_its_resta
         executor.shutdown()
         node.destroy_node()
         rclpy.try_shutdown(context=context)
+
+
+def set_driver_parameter(op, name: str, value: float):
+    """rig_driver/set_parameters from this process, as `ros2 param set` sends it: the result (ok, reason)."""
+    request = SetParameters.Request(parameters=[ParameterMsg(name=name, value=ParameterValue(
+        type=ParameterType.PARAMETER_DOUBLE, double_value=float(value)))])
+    response = op.call('rig_driver/set_parameters', SetParameters, request, timeout=10.0)
+    assert response is not None, 'rig_driver/set_parameters did not answer'
+    return response.results[0].successful, response.results[0].reason
+
+
+def test_a_stranger_cannot_widen_the_limits_or_weaken_supervision_and_the_program_completes(suite):
+    procs, op = suite
+    running = start_running(op)
+    # the attack of issue 35: +-50 mm, 1e7 N and a 30 s owner timeout while a program runs
+    for name, value in (('limits.displacement_max', 0.05), ('limits.displacement_min', -0.05),
+                        ('limits.force_max', 1e7), ('owner_timeout', 30.0), ('stream_timeout', 5.0),
+                        ('rest_position', 3e-3)):
+        ok, why = set_driver_parameter(op, name, value)
+        assert not ok and why.startswith(f'{name}: {value:g} is beyond the configured'), (name, why)
+    finish_running(procs, op, running)
+    assert op.status.limits.displacement_max == pytest.approx(ENVELOPE)
+    assert op.status.limits.force_max < 1e7
+    log = procs.log('rig_driver')
+    assert log.count('parameter change refused: ') >= 6, log[-2000:]
+    # anyone allowed to command may make them stricter, and relax them back to the configured values when idle
+    ok, why = set_driver_parameter(op, 'limits.displacement_max', 2e-3)
+    assert ok, why
+    assert op.wait_status(lambda s: s.limits.displacement_max == pytest.approx(2e-3), 5.0)
+    ok, why = set_driver_parameter(op, 'limits.displacement_max', ENVELOPE)
+    assert ok, why
+    assert op.wait_status(lambda s: s.limits.displacement_max == pytest.approx(ENVELOPE), 5.0)
