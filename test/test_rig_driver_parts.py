@@ -21,7 +21,7 @@ from rubber_rig.rig import open_rig
 from rubber_rig.rig.can.batcher import SampleBatcher
 from rubber_rig.rig.can.stream import GrantedStream, SampleBlock, StreamGrant
 from rubber_rig.rig.config import RigConfig
-from rubber_rig.rig.live import LIVE_SETTINGS, apply_live
+from rubber_rig.rig.live import LIVE_SETTINGS, apply_live, weakening
 
 from support.rig import FAST
 
@@ -103,3 +103,26 @@ def test_the_driver_reads_its_parts_state_and_counts_every_sample():
         taken = drv.take_events()        # the log's lines leave the queue: each is logged once
         assert any('stream' in text and 'opened' in text for _, text in taken) and not drv.events
         assert drv.take_events() == []
+
+
+def test_protective_settings_are_made_stricter_by_anyone_and_relaxed_only_to_the_configured_values():
+    configured = {'limits.displacement_max': 5e-3, 'limits.displacement_min': -5e-3, 'limits.force_max': 60e3,
+                  'stream_timeout': 0.3, 'owner_timeout': 1.0, 'rest_position': 0.0}
+    tightened = dict(configured, **{'limits.displacement_max': 1e-3, 'stream_timeout': 0.1})
+    # stricter: always, also under a running program
+    assert weakening({'limits.displacement_max': 1e-3, 'limits.displacement_min': -1e-3, 'owner_timeout': 0.5},
+                     configured, configured, stream_open=True) == ''
+    # relaxed back towards the configured values: only with no stream open
+    back = {'limits.displacement_max': 5e-3, 'stream_timeout': 0.3}
+    assert weakening(back, tightened, configured, stream_open=False) == ''
+    why = weakening(back, tightened, configured, stream_open=True)
+    assert why.startswith('limits.displacement_max: 0.005 would relax the 0.001 in force while a stream is open')
+    # beyond the configured values: never (the attack of issue 35: +-50 mm, 1e7 N, a 30 s owner timeout)
+    for name, value in (('limits.displacement_max', 0.05), ('limits.displacement_min', -0.05),
+                        ('limits.force_max', 1e7), ('owner_timeout', 30.0), ('stream_timeout', 5.0),
+                        ('rest_position', 3e-3)):
+        for stream_open in (False, True):
+            why = weakening({name: value}, configured, configured, stream_open)
+            assert why.startswith(f'{name}: {value:g} is beyond the configured') and 'restart rig_driver' in why
+    # settings that protect nothing are not judged here
+    assert weakening({'batch_size': 10, 'stream_loss_action': 'hold'}, configured, configured, True) == ''

@@ -194,6 +194,29 @@ def test_the_gate_admits_only_the_owners_channel_counts_the_rest_and_mutes_a_flo
         assert v.action == 'queued' and drv.status.setpoints_sent == 15
 
 
+def test_a_flood_on_the_owners_own_channel_never_mutes_the_owner():
+    """A process on the owner's command channel (the topic name is public) under another sender name: each of
+    its batches is refused and counted, but the channel is never muted - that would stop the owner's program
+    for the forger (issue 35: 201 refused batches muted the owner for 10 s)."""
+    clock = [0.0]
+    with open_rig(dict(FAST, limits=ISSUE_LIMITS)) as rig:
+        assert rig.wait_ready(5.0)
+        drv = rig.driver
+        gate = StreamGate(drv, clock=lambda: clock[0])
+        g = drv.open_stream('/rig1/excitation')
+        x = np.linspace(0.0, 0.01e-3, 10)
+        assert gate.offer('/rig1/excitation', '/rig1/excitation', g.first_sequence, x, g.stream_id).action == 'queued'
+        end = g.first_sequence + x.size
+        verdicts = {gate.offer('/rig1/excitation', '/forger', end, np.full(5, 3e-3), g.stream_id).action
+                    for _ in range(5 * MUTE_AFTER)}
+        assert verdicts == {'refused'} and not gate.muted('/rig1/excitation')
+        assert drv.counters.get('channels_muted', 0) == 0
+        assert drv.status.extra['setpoints_refused'] == 25 * MUTE_AFTER
+        assert drv.status.faults == 0
+        v = gate.offer('/rig1/excitation', '/rig1/excitation', end, np.full(5, 0.01e-3), g.stream_id)
+        assert v.action == 'queued' and drv.status.setpoints_sent == 15
+
+
 def test_stream_must_stop_inside_the_limits_at_deceleration_max():
     """A setpoint inside the range but too fast to stop before the limit is refused before it is sent."""
     with open_rig(dict(FAST, limits=dict(ISSUE_LIMITS, deceleration_max=20.0))) as rig:

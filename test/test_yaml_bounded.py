@@ -15,10 +15,13 @@
 """Programs from outside are read at a bounded cost: a YAML bomb, deep nesting and huge texts are refused
 before anything is built, naming the limit; anchors and aliases of ordinary size still work.
 """
+import os
+import threading
 import time
 
 import pytest
 
+from rubber_rig.excitation import yamltext
 from rubber_rig.excitation.blocks import ProgramError
 from rubber_rig.excitation.program import MAX_BLOCKS, Program, read_program
 from rubber_rig.excitation.yamltext import MAX_BYTES, YAMLLimitError, load_bounded
@@ -70,5 +73,59 @@ def test_a_binary_or_oversized_program_file_is_refused_before_it_is_read(tmp_pat
         read_program(str(binary))
     huge = tmp_path / 'huge.yaml'
     huge.write_text('blocks:\n' + BLOCK * 10_000)
-    with pytest.raises(ProgramError, match='bytes, more than'):
+    with pytest.raises(ProgramError, match='bytes, more than the'):
         read_program(str(huge))
+
+
+def _read_in_thread(path):
+    """read_program(path) in a daemon thread: (finished, exception). A FIFO that blocked would leave the thread
+    waiting forever, so the test bounds the wait instead of hanging the suite (the read itself never sleeps)."""
+    outcome = {}
+
+    def work():
+        try:
+            read_program(str(path))
+        except Exception as exc:  # noqa: BLE001 - the test inspects it
+            outcome['exc'] = exc
+    thread = threading.Thread(target=work, daemon=True)
+    thread.start()
+    thread.join(timeout=10.0)
+    return not thread.is_alive(), outcome.get('exc')
+
+
+@pytest.mark.parametrize('kind', ['dev_zero', 'fifo', 'directory', 'symlink_to_dev_zero'])
+def test_a_program_path_that_is_not_a_regular_file_is_refused_without_reading_it(tmp_path, kind):
+    if kind == 'dev_zero':
+        path = '/dev/zero'                     # endless: read_text() grew the excitation to 1.76 GB
+    elif kind == 'fifo':
+        path = tmp_path / 'prog.yaml'
+        os.mkfifo(path)                        # no writer: open() and read() would block for ever
+    elif kind == 'directory':
+        path = tmp_path / 'prog.yaml'
+        path.mkdir()
+    else:
+        path = tmp_path / 'prog.yaml'
+        path.symlink_to('/dev/zero')
+    finished, exc = _read_in_thread(path)
+    assert finished, f'reading {kind} did not return'
+    assert isinstance(exc, ProgramError)
+    assert 'only regular files are read' in str(exc) and str(path) in str(exc)
+    expected = {'dev_zero': 'character device', 'fifo': 'FIFO', 'directory': 'directory',
+                'symlink_to_dev_zero': 'character device'}[kind]
+    assert expected in str(exc)
+
+
+def test_a_file_that_grows_while_read_is_cut_at_the_limit(tmp_path, monkeypatch):
+    # The size is checked on the opened file, then at most max_bytes + 1 bytes are read whatever the size
+    # claimed: a file still being written (an fstat that says 10 bytes while it holds 6 kB) is cut at the limit.
+    path = tmp_path / 'grows.yaml'
+    path.write_text('blocks:\n' + BLOCK * 100)
+    real_fstat = os.fstat
+
+    class StillGrowing:
+        def __init__(self, st):
+            self.st_mode, self.st_size = st.st_mode, 10
+    monkeypatch.setattr(os, 'fstat', lambda fd: StillGrowing(real_fstat(fd)))
+    with pytest.raises(YAMLLimitError, match='grew past 200 bytes while read'):
+        yamltext.read_bounded_file(path, 'program x', max_bytes=200)
+    assert len(yamltext.read_bounded_file(path, 'program x', max_bytes=10_000)) == path.stat().st_size

@@ -41,7 +41,7 @@ from .blocks import (  # noqa: F401 - MIN_FREQUENCY, MAX_FREQUENCY_FRACTION are 
     parse_block,
 )
 from .detector_specs import DetectorError, parse_detectors
-from .yamltext import MAX_BYTES, YAMLLimitError, load_bounded
+from .yamltext import YAMLLimitError, load_bounded, read_bounded_file
 
 PROGRAM_DIR = Path(__file__).with_name('programs')
 # The shipped programs are named by what they test; recordings made before carry the names of the papers they
@@ -286,13 +286,10 @@ def program_source(path_or_name) -> tuple[str, str]:
     if not path.exists():
         raise FileNotFoundError(f'no program {str(path_or_name)!r} (shipped programs: '
                                 f'{", ".join(shipped_programs())})')
-    if path.is_file() and path.stat().st_size > MAX_BYTES:        # before reading it: a request stays cheap
-        raise ProgramError(f'program {str(path)!r}: {path.stat().st_size} bytes, more than the {MAX_BYTES} '
-                           'accepted')
     try:
-        return path.read_text(encoding='utf-8'), path.stem
-    except UnicodeDecodeError as exc:
-        raise ProgramError(f'program {str(path)!r}: not a text file ({exc.reason} at byte {exc.start})') from None
+        return read_bounded_file(path, f'program {str(path)!r}'), path.stem
+    except YAMLLimitError as exc:
+        raise ProgramError(str(exc)) from None
 
 
 def read_program(path: str = '', yaml_text: str = '') -> tuple[Program, str]:

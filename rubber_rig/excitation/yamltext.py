@@ -23,6 +23,9 @@ only then does it construct the document. Each limit names itself in the error.
 """
 from __future__ import annotations
 
+import os
+import stat
+
 import yaml
 
 MAX_BYTES = 512_000        # a program of 2000 blocks (the most accepted) is about 150 kB; parsed in < 0.5 s
@@ -33,6 +36,48 @@ _LOADER = getattr(yaml, 'CSafeLoader', yaml.SafeLoader)   # libyaml when PyYAML 
 
 class YAMLLimitError(ValueError):
     """A YAML text exceeds a limit of :func:`load_bounded` (the message names it)."""
+
+
+_FILE_KINDS = ((stat.S_ISDIR, 'a directory'), (stat.S_ISFIFO, 'a FIFO (named pipe)'),
+               (stat.S_ISCHR, 'a character device'), (stat.S_ISBLK, 'a block device'),
+               (stat.S_ISSOCK, 'a socket'))
+
+
+def read_bounded_file(path, what: str, max_bytes: int = MAX_BYTES) -> str:
+    """The UTF-8 text of the regular file `path`, read at a bounded cost.
+
+    A path from outside (a goal's ``program_path``) may name ``/dev/zero`` (endless), a FIFO (``open`` blocks
+    until a writer comes, ``read`` until it leaves) or a file that grows while it is read; ``Path.read_text``
+    would hang or grow without bound on each. Here the file is opened non-blocking (a FIFO's open returns at
+    once), checked to be a regular file on the opened descriptor (no race with a rename), and read for at most
+    `max_bytes` + 1 bytes whatever its size claims. Raises YAMLLimitError (a ValueError) naming `what` and the
+    cause: not a regular file, too long, or not UTF-8 text; OSError when it cannot be opened.
+    """
+    fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK | getattr(os, 'O_CLOEXEC', 0))
+    try:
+        mode = os.fstat(fd).st_mode
+        if not stat.S_ISREG(mode):
+            kind = next((name for test, name in _FILE_KINDS if test(mode)), 'not a regular file')
+            raise YAMLLimitError(f'{what}: {os.fspath(path)!r} is {kind}; only regular files are read')
+        claimed = os.fstat(fd).st_size
+        if claimed > max_bytes:             # refused before it is read: a request stays cheap
+            raise YAMLLimitError(f'{what}: {claimed} bytes, more than the {max_bytes} accepted')
+        chunks, size = [], 0
+        while size <= max_bytes:
+            chunk = os.read(fd, min(65536, max_bytes + 1 - size))
+            if not chunk:
+                break
+            chunks.append(chunk)
+            size += len(chunk)
+    finally:
+        os.close(fd)
+    if size > max_bytes:
+        raise YAMLLimitError(f'{what}: grew past {max_bytes} bytes while read, more than the {max_bytes} accepted')
+    data = b''.join(chunks)
+    try:
+        return data.decode('utf-8')
+    except UnicodeDecodeError as exc:
+        raise YAMLLimitError(f'{what}: not a text file ({exc.reason} at byte {exc.start})') from None
 
 
 def load_bounded(text: str, what: str = 'YAML text', max_bytes: int = MAX_BYTES, max_depth: int = MAX_DEPTH,

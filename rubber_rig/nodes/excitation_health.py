@@ -83,6 +83,8 @@ class ProgramHealth:
         values = {'state': node.state, 'program': node.session.runner.program.name if running else '',
                   'detector_events': len(self.events), 'last_event': last.message if last else '',
                   'detectors_blind': blind, 'recording_lost': lost, 'nodes_silent': silent}
+        values['goals_rejected_busy'] = node.refused_busy      # run_program goals rejected while one ran
+        values['last_goal_rejection'] = node.last_refusal
         reasons = [f'nodes silent: {silent}' if silent else '', f'detectors blind: {blind}' if blind else '', lost,
                    last.message if last is not None and last.action != 'record' else '']
         msg = DiagnosticArray()

@@ -98,7 +98,7 @@ class SuiteMonitor(Node):
         sub(String, topics.PROGRAM, self._on_program, topics.LATCHED_QOS)
         sub(RecorderStatus, topics.RECORDER_STATUS, self._on_recorder_status, topics.LATCHED_QOS)
         self.peers = Peers(self)          # the suite's heartbeats: peers.silent() names a node stuck or gone
-        self.action = ActionClient(self, RunProgram, 'run_program')
+        self.action = ActionClient(self, RunProgram, 'run_program', **topics.ACTION_SERVICES_QOS)
         self.recorder_control = self.create_client(RecorderControl, f'{recorder}/control')
         self.excitation_abort = self.create_client(Trigger, f'{excitation}/abort')
         self.excitation_hold = self.create_client(SetBool, f'{excitation}/hold')

@@ -33,7 +33,7 @@ from rcl_interfaces.msg import SetParametersResult
 
 from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.rig.config import BusLoadError, ConfigError, RigConfig
-from rubber_rig.rig.live import LIMIT_SETTINGS, LIVE_SETTINGS, RIG_SETTINGS, apply_live
+from rubber_rig.rig.live import LIMIT_SETTINGS, LIVE_SETTINGS, PROTECTIVE_SETTINGS, RIG_SETTINGS, apply_live, weakening
 from rubber_rig.safety import LimitError, Limits
 from rubber_rig.settings import nest, setting_for
 
@@ -84,6 +84,10 @@ class RigDriverParameters:
                                      'is stream loss, also while it holds the rig (an owner that never beat, '
                                      'e.g. a script without one, is watched by stream_timeout alone)',
                                      range=(0.3, 30.0), units='s')
+        # the authority on how far the rig may go: the values it was started with (its configuration file);
+        # run time may make them stricter, and relax them back only this far (rig.live.weakening)
+        self.configured_protection = {name: self.get_parameter(name).value for name in PROTECTIVE_SETTINGS}
+        self.refused_weakening = 0       # run-time parameter changes refused by that rule (diagnostics)
 
     # -- parameters -> core configuration ---------------------------------------------------------------
     def rig_config(self) -> RigConfig:
@@ -128,6 +132,13 @@ class RigDriverParameters:
         everything else needs configure, so it is refused while the rig is configured, with the reason.
         """
         changed = {p.name: p.value for p in params}
+        stream_open = self.rig is not None and bool(self.rig.driver.status.extra.get('stream_owner'))
+        current = {name: self.get_parameter(name).value for name in PROTECTIVE_SETTINGS}
+        why = weakening(changed, current, self.configured_protection, stream_open)
+        if why:
+            self.refused_weakening += 1
+            self.get_logger().warning(f'parameter change refused: {why}')
+            return SetParametersResult(successful=False, reason=why)
         fixed = sorted(n for n in changed if n not in LIVE_PARAMETERS)
         if fixed and self.rig is not None:
             return SetParametersResult(successful=False, reason=f"{', '.join(fixed)}: applied at configure; the "

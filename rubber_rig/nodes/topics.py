@@ -63,3 +63,10 @@ LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.TRANSIENT_LOCAL)
 HEARTBEAT_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=10,
                            reliability=ReliabilityPolicy.BEST_EFFORT, durability=DurabilityPolicy.VOLATILE)
+# The run_program action's goal, result and cancel services, on both ends. rclpy's default
+# (qos_profile_services_default, KEEP_LAST 10) keeps the newest 10 requests the server has not taken yet, and every
+# client reads every answer on the reply topic and keeps its own, also in a queue of 10: a burst of 200 goals from
+# 40 clients got 15 answers although the server answered each. A deep queue costs nothing until it fills.
+REQUEST_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000,
+                         reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+ACTION_SERVICES_QOS = {f'{kind}_service_qos_profile': REQUEST_QOS for kind in ('goal', 'result', 'cancel')}

@@ -54,3 +54,44 @@ def apply_live(config: RigConfig, changed: dict):
     if limits is not None:
         config.limits = limits
     return '', limits
+
+
+# Which way a setting weakens the rig's protection: a higher limit or a longer timeout lets more through, a lower
+# displacement_min too; rest_position is where every abort ends, so any other value than the configured one is
+# a change of what an abort does. (owner_timeout is rig_driver's own parameter, judged the same way.)
+HIGHER_IS_WEAKER = ('limits.displacement_max', 'limits.velocity_max', 'limits.force_max', 'limits.deceleration_max',
+                    'stream_timeout', 'owner_timeout')
+LOWER_IS_WEAKER = ('limits.displacement_min',)
+MOVED_IS_WEAKER = ('rest_position',)
+PROTECTIVE_SETTINGS = HIGHER_IS_WEAKER + LOWER_IS_WEAKER + MOVED_IS_WEAKER
+
+
+def _weaker(name: str, new: float, than: float) -> bool:
+    if name in HIGHER_IS_WEAKER:
+        return new > than
+    if name in LOWER_IS_WEAKER:
+        return new < than
+    return new != than
+
+
+def weakening(changed: dict, current: dict, configured: dict, stream_open: bool) -> str:
+    """'' when the run-time change `changed` (setting name -> value) may apply, else why it is refused.
+
+    Anyone on the DDS domain can call a node's set_parameters; the values a rig is started with (its
+    configuration file: `configured`) are the authority. At run time a protective setting (PROTECTIVE_SETTINGS:
+    the limits, stream_timeout, owner_timeout, rest_position) may be made stricter by anyone, at any time; it may
+    be relaxed back towards its configured value only while no stream is open (never under a running program);
+    beyond its configured value, never: that takes a new configuration file and a restart of rig_driver.
+    `current`: the values in force now.
+    """
+    for name in PROTECTIVE_SETTINGS:
+        if name not in changed or name not in configured:
+            continue
+        new, now, conf = float(changed[name]), float(current[name]), float(configured[name])
+        if _weaker(name, new, conf):
+            return (f'{name}: {new:g} is beyond the configured {conf:g} rig_driver was started with; a wider '
+                    'envelope or weaker supervision needs the configuration file (restart rig_driver with it)')
+        if stream_open and _weaker(name, new, now):
+            return (f'{name}: {new:g} would relax the {now:g} in force while a stream is open; relax it back '
+                    'towards the configured value when no program runs')
+    return ''

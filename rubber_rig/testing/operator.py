@@ -97,7 +97,7 @@ class Operator:
             'command': n.create_publisher(
                 SetpointBatch, topics.setpoint_stream_topic('rig_driver', n.get_fully_qualified_name()),
                 topics.STREAM_QOS)}
-        self.action = ActionClient(n, RunProgram, 'run_program')
+        self.action = ActionClient(n, RunProgram, 'run_program', **topics.ACTION_SERVICES_QOS)
         self._clients = {}
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._spin, name='operator', daemon=True)
@@ -225,7 +225,8 @@ class Operator:
         if action != 'run_program':
             client = self._clients.get(('action', action))
             if client is None:
-                client = self._clients[('action', action)] = ActionClient(self.node, RunProgram, action)
+                client = self._clients[('action', action)] = ActionClient(self.node, RunProgram, action,
+                                                                            **topics.ACTION_SERVICES_QOS)
         if not client.wait_for_server(timeout_sec=timeout):
             return None
         goal = RunProgram.Goal(program_yaml=program_yaml, program_path=program_path,

@@ -18,7 +18,8 @@
 The command channel a batch arrived on (not its stream id or sender name, which anyone can copy) says who sent
 it. A batch from the open stream's owner goes to RigDriver.queue_setpoints, which checks continuity and the
 envelope; a batch from anyone else is refused and counted (RigDriver.refuse). A channel that is not the owner's
-and sends more than MUTE_AFTER batches within a second is muted for MUTE_FOR seconds: each refused batch still
+and sends more than MUTE_AFTER batches within a second is muted for MUTE_FOR seconds (never the owner's own
+channel, whatever arrives on it: muting it would stop the owner's program for the forger): each refused batch still
 costs the executor a callback, and on a 2-core computer a flood of them (2000 in 0.3 s) delayed the owner's
 batches past stream_timeout. An owner streams at most ~100 batches/s (10 ms batches). The node only carries
 out the verdict (destroys a muted channel's subscription, logs); it never writes the driver's state.
@@ -62,7 +63,9 @@ class StreamGate:
             if now - window[0] > 1.0:
                 window[:] = [now, 0]
             window[1] += 1
-            if window[1] > MUTE_AFTER:
+            # never the owner's own channel: a forger that floods it under another sender name would otherwise
+            # mute the owner and kill its program (issue 35: 201 batches did); those batches are refused one by one
+            if window[1] > MUTE_AFTER and channel != grant.owner:
                 window[1] = 0
                 self._muted[channel] = now + MUTE_FOR
                 drv.count('channels_muted')
