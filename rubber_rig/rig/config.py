@@ -51,7 +51,8 @@ class RigConfig:
     rig as a separate process on that bus. sample_rate [Hz]; watchdog_timeout [s]: feedback/heartbeat silence
     that faults the rig; heartbeat_period [s]; bus_error_max: bad frames (lost, late, malformed) per second of
     samples that fault the bus; lost_burst_max [s]: longest run of lost samples tolerated. stream_timeout [s]:
-    a running program's setpoint stream that is silent this long (or runs dry before its last batch) is lost:
+    a running program's setpoint stream that is silent this long while less than this much of setpoints is
+    queued ahead of the rig (or that runs dry before its last batch) is lost:
     the rig ramps to rest_position [m] (stream_loss_action 'ramp') or stops and holds where it can
     ('hold'), with a stream fault either way. paced: the simulated
     rig runs in real time (True) or as fast as setpoints arrive (False) - identical waveform and physics.
@@ -97,8 +98,10 @@ class RigConfig:
                                       'time of HostHeartbeat)', units='s', range=(0.001, 5.0))
     bus_error_max: int = setting(20, 'bad frames per second of samples that fault the bus', range=(0, 100000))
     lost_burst_max: float = setting(0.02, 'longest run of lost samples tolerated', units='s', range=(1e-4, 10.0))
-    stream_timeout: float = setting(0.3, "a running program's setpoint stream silent this long is lost (the rig "
-                                    'ramps to rest, or holds: stream_loss_action)', units='s', range=(0.01, 10.0))
+    stream_timeout: float = setting(0.3, "a running program's setpoint stream silent this long, with less than this "
+                                    'much of setpoints queued ahead of the rig, is lost (the rig ramps to rest, or '
+                                    'holds: stream_loss_action); a stall of the owner that its queue covers is '
+                                    'not', units='s', range=(0.01, 10.0))
     stream_loss_action: str = setting('ramp', "what a lost stream does: 'ramp' to rest_position or 'hold' where the "
                                       'motion can stop (a stream fault either way)', choices=('ramp', 'hold'))
     rest_position: float = setting(0.0, 'where aborts and faults ramp to', units='m', range=(-1.0, 1.0))

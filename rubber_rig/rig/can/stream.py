@@ -133,11 +133,20 @@ class GrantedStream:
 
     def lost(self, silent: float, played_end: int, holding: bool, cfg) -> str:
         """'' while an open stream is alive, else why it is lost: paced, no batch for cfg.stream_timeout (silent
-        [s] since the last one); or the controller played all it had (played_end: after its last sample) and
-        holds before the owner's last batch.
+        [s] since the last one) while the rig has less than cfg.stream_timeout of setpoints left to play
+        (played_end: the sequence after the last sample it played, at cfg.sample_rate); or the controller played
+        all it had and holds before the owner's last batch.
+
+        Silence alone is not loss: an owner that streams lead_time ahead and stalls (a busy computer delays its
+        executor 0.3-0.8 s) has setpoints queued for the whole stall, and the rig plays them without noticing.
+        The stream is lost when the silence starts to eat the reserve a smooth stop needs, stream_timeout of
+        setpoints, so a dead owner is still caught before the rig runs dry (within lead_time - stream_timeout of
+        its last batch, or by the driver's owner watch on its heartbeat, whichever is first).
         """
-        if cfg.paced and silent > cfg.stream_timeout:
-            return f'no setpoints from {self.grant.owner or "the stream owner"} for {silent:.3f} s'
+        reserve = (self.queued_end - played_end) / cfg.sample_rate
+        if cfg.paced and silent > cfg.stream_timeout and reserve < cfg.stream_timeout:
+            return (f'no setpoints from {self.grant.owner or "the stream owner"} for {silent:.3f} s '
+                    f'({max(reserve, 0.0) * 1e3:.0f} ms of setpoints left)')
         if self.queued_end > self.grant.first_sequence and played_end >= self.queued_end and holding:
             return f'the rig ran out of setpoints at sample {self.queued_end} before the end of the stream'
         return ''
