@@ -15,20 +15,15 @@
 """ProgramSession, step by step as the excitation node drives it: a grant, the stream kept `lead` ahead of the
 measurement, a hold and a resume on a new grant with the cycles the block had not run, the end once measured.
 """
-import dataclasses
-
 import numpy as np
 import pytest
 
 from rubber_rig.excitation import Program
-from rubber_rig.rig.can.bus import open_bus, sim_channel_name
-from rubber_rig.rig.can.driver import RigDriver
-from rubber_rig.rig.can.protocol import Protocol
 from rubber_rig.rig.can.stream import StreamGrant
-from rubber_rig.rig.config import RigConfig
-from rubber_rig.rig.sim.controller import SimController
 from rubber_rig.safety import Limits
 from rubber_rig.session import ProgramSession
+
+from support.rig import FastRig
 
 FS = 1000.0
 LIFE = Program.from_yaml_text('name: life\nblocks:\n'
@@ -90,64 +85,6 @@ def test_a_resumed_block_runs_the_cycles_it_had_not_run_and_ends_once_measured()
 
 
 # ---- hold and resume on a rig: the cycle count is exact --------------------------------------------------------------
-class FastRig:
-    """The real RigDriver and simulated controller on a python-can virtual bus, unpaced (the controller runs the
-    setpoints as they are queued) and on simulated time: the driver's clock is the rig's sample count, so the
-    result does not depend on how busy the computer is.
-    """
-
-    def __init__(self):
-        self.cfg = RigConfig.from_dict({'paced': False})
-        proto, channel = Protocol(), sim_channel_name()
-        self._buses = open_bus(self.cfg, channel), open_bus(self.cfg, channel)
-        self.sim = SimController(self._buses[1], self.cfg.sample_rate, self.cfg.sim, False, proto)
-        self.drv = RigDriver(self._buses[0], self.cfg, proto, clock=lambda: self.now)
-        self.drv.pump = self.sim.pump
-        self.samples = {}                     # sequence -> (applied command [m], measured displacement [m])
-        self.got = []                         # SampleBlocks in arrival order, not yet handed to the session
-
-    @property
-    def now(self) -> float:
-        return max(self.sim.ticks, 0) / self.cfg.sample_rate
-
-    def poll(self) -> None:
-        for _ in range(10000):
-            blk = self.drv.poll()
-            if blk is None:
-                return
-            self.got.append(blk)
-            for i in range(len(blk)):
-                self.samples[blk.first_sequence + i] = (float(blk.setpoint[i]), float(blk.displacement[i]))
-
-    def wait_ready(self) -> None:
-        for _ in range(1000):
-            self.poll()
-            if self.drv.controller_state != 'unconfigured':
-                return
-        raise AssertionError('the simulated controller did not announce itself')
-
-    def feed(self, session, upto) -> None:
-        """Hand the session the measured samples below sequence `upto` (the rest wait: measurement latency)."""
-        keep = []
-        for blk in self.got:
-            n = min(len(blk), max(0, upto - blk.first_sequence))
-            if n == len(blk):
-                session.measured(blk.first_sequence, blk.displacement, blk.setpoint)
-            elif n:
-                session.measured(blk.first_sequence, blk.displacement[:n], blk.setpoint[:n])
-                keep.append(dataclasses.replace(blk, first_sequence=blk.first_sequence + n,
-                                                displacement=blk.displacement[n:], force=blk.force[n:],
-                                                setpoint=blk.setpoint[n:]))
-            else:
-                keep.append(blk)
-        self.got = keep
-
-    def close(self):
-        self.drv.close(ramp=False)
-        for bus in self._buses:
-            bus.shutdown()
-
-
 def run_until(rig, session, stop_at: int, lag: int) -> None:
     """Stream the program to the rig until the rig has run every setpoint before `stop_at`, the session
     measuring `lag` samples behind the rig (what the latency of the bus, the network and the executor does).
