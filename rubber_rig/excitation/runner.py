@@ -143,17 +143,15 @@ class ProgramRunner(Whereabouts):
         self.state = 'ramping_down'
 
     def hold(self):
-        """Pause: ramp smoothly to the current block's mean (or stay where a ramp/hold block is) and wait.
-
-        Also while approaching the program's start and after the last setpoint was generated (the rig may still
-        run the setpoints streamed ahead): resume_at() then continues from where the rig left the program.
+        """Pause: ramp smoothly to the current block's mean (or stay where a ramp/hold block is) and wait. Also
+        while approaching the start and after the last setpoint was generated (the rig may still run what was
+        streamed ahead): resume_at() continues from where the rig left the program.
         """
         if self.state not in ('running', 'approaching') and not (self.state == 'finished' and not self.aborted):
             return
         b = self.block_index
-        self._hold_block = b
+        self._hold_block, self.state, self._resume = b, 'holding', False
         self._start_ramp(self.hold_target)
-        self.state, self._resume = 'holding', False
 
     @property
     def hold_target(self) -> float:
@@ -161,29 +159,15 @@ class ProgramRunner(Whereabouts):
         blk = self.program.blocks[self.block_index]
         return blk.mean if blk.oscillating else self._x
 
-    def program_position(self, sequence: int):
-        """(block, samples of the block run) when the rig has run the setpoints before ``sequence`` (the sample
-        after the last one it ran on the program), or None when the setpoint before it is not a program sample
-        (an approach or hold ramp, nothing generated yet).
-        """
-        located = self._segment_of(int(sequence) - 1)
-        if located is None:
-            return None
-        (seq0, _, b, local0, _) = located
-        return b, local0 + int(sequence) - seq0
-
     def resume_at(self, sequence: int, position: float, measured_sequence: int = None):
         """Continue after hold() on a new stream at `sequence`, approached smoothly from `position` [m] (where the
         rig holds) if that is not where the block starts.
 
-        `measured_sequence`: the sample after the last one the rig ran on the program before the hold (the
-        session finds it in the measured applied command: where the rig's hold ramp began, not where the
-        measurement stood when the hold was asked for, which lags by the stream lead and the latency). The
-        block the rig was in resumes: a periodic block with the full cycles it had not finished there, counted
-        on in cycles_before (a durability block resumes, not restarts; the interrupted cycle runs again, with the
-        block's taper in and out); a block the rig had run to its end is not run again; any other block (hold,
-        ramp, sweep) restarts from its beginning. Without it (or when the rig had not reached the program) the
-        held block restarts with its taper.
+        `measured_sequence`: the sample after the last one the rig ran on the program before the hold (where its
+        hold ramp began, ProgramSession.left_at). The block the rig was in resumes: a periodic one with the full
+        cycles it had not finished, counted on in cycles_before (the interrupted cycle runs again, with the taper
+        in and out); a block run to its end is not run again; a hold, ramp or sweep block restarts. Without it
+        (or before the program's first sample) the held block restarts with its taper.
         """
         if self.state != 'holding':
             return

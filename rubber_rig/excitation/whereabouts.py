@@ -47,6 +47,17 @@ class Whereabouts:
         segment = self._segments[j]
         return segment if segment[0] <= sequence < segment[1] else None
 
+    def program_position(self, sequence: int):
+        """(block, samples of the block run) when the rig has run the setpoints before ``sequence`` (the sample
+        after the last one it ran on the program), or None when the setpoint before it is not a program sample
+        (an approach or hold ramp, nothing generated yet).
+        """
+        segment = self._segment_of(int(sequence) - 1)
+        if segment is None:
+            return None
+        seq0, _, b, local0, _ = segment
+        return b, local0 + int(sequence) - seq0
+
     def cycle_position(self, start: int, end: int):
         """Where the measured cycle of samples start..end-1 lies: (block, full-amplitude cycle number counted
         across holds, steady), or None when it is not inside one periodic block. Steady: inside the block's
