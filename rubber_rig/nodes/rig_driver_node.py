@@ -41,7 +41,6 @@ stream ownership and stream-loss detection, fault detection and the safe ramp ar
 from __future__ import annotations
 
 import math
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -88,7 +87,6 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self.pub_samples = None
         self.batcher = SampleBatcher()     # the driver's sample blocks -> RigSampleBatch messages
         self._last_status = None
-        self._refused_at = -1e9            # wall time of the last refusal warning (throttled)
         self._status_key = None
         self.pub_status = self.create_publisher(RigStatus, topics.STATUS, topics.LATCHED_QOS)
         # what a recording must know of this rig (the load cell's declared calibration for rubber-rig fit):
@@ -236,9 +234,9 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
                                   msg.stream_id, msg.end_of_stream)
         if verdict.action == 'mute':
             self.mute(channel)
-        elif verdict.action == 'refused' and time.monotonic() - self._refused_at > 1.0:
-            self._refused_at = time.monotonic()
-            self.get_logger().warning(f'setpoints from {msg.source or "an unnamed sender"} refused: {verdict.why}')
+        elif verdict.action == 'refused':
+            self.get_logger().warning(f'setpoints from {msg.source or "an unnamed sender"} refused: {verdict.why}',
+                                      throttle_duration_sec=1.0)
         self._log_events()
 
     def poll(self) -> None:
