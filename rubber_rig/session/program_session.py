@@ -220,8 +220,8 @@ class ProgramSession:
         self.left_at, self._left_known = self.held_at, False
 
     def resume(self, grant) -> None:
-        """Continue the held block on the stream of a new grant with the full cycles it had not run by the last
-        sample measured before the hold.
+        """Continue on the stream of a new grant from where the rig left the program (``left_at``): the block it
+        was in, with the full cycles that block had not finished (ProgramRunner.resume_at).
         """
         self._open(grant)
         self.runner.resume_at(grant.first_sequence, grant.position, measured_sequence=self.left_at)
