@@ -321,7 +321,7 @@ blocks:
     # the block would make about 78. The exact count at every hold phase is test_program_session's (simulated
     # time); here the hold lands wherever the executors put it, so the bound allows the interrupted cycle.
     why = (before, after, f'{missing} sequence numbers without a sample')
-    assert 20 < before < 32 and 53 - 0.05 < before + after < 54.5, why
+    assert 20 < before < 48 and 53 - 0.05 < before + after < 54.5, why   # the hold lands 0-2 s after 25 cycles
     # the excitation says how many full cycles it still owed: the resumed run is exactly those and its two tapers,
     # to a few samples (a taper's first and last steps are below the 0.1 um the count looks for; the hold ramp's
     # last ones may come after the operator saw the rig idle) - one cycle more or less would be 100 samples
