@@ -202,3 +202,44 @@ def test_benchmarks_and_scripts_import_names_that_exist():
                     except ImportError:
                         missing.append(f'{path.name}:{line}: {name} is not in {module}')
     assert not missing, '\n'.join(missing)
+
+
+# ---- no raw clock in nodes/ (issue 34) ------------------------------------------------------------------------
+# Every time-dependent decision takes `now` from an injected clock in the ROS-free core; a node is an adapter.
+# The raw clock calls still in nodes/ are counted here, one number for the whole layer, and it may only go down:
+# a new call fails this test, a removed one asks for the number to be lowered. The test's message lists where
+# they are. Target: 0.
+RAW_CLOCKS = {('time', 'monotonic'), ('time', 'time'), ('time', 'perf_counter'), ('time', 'monotonic_ns'),
+              ('time', 'time_ns'), ('time', 'perf_counter_ns')}
+RAW_CLOCK_CALLS_IN_NODES = 21
+
+
+def raw_clock_calls(tree: ast.Module) -> list:
+    """Line numbers of calls of a raw clock (time.monotonic(), time.time(), ... also imported by name)."""
+    by_name = {a.asname or a.name for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module == 'time'
+               for a in n.names if ('time', a.name) in RAW_CLOCKS}
+    lines = []
+    for n in ast.walk(tree):
+        if not isinstance(n, ast.Call):
+            continue
+        f = n.func
+        if (isinstance(f, ast.Attribute) and isinstance(f.value, ast.Name) and (f.value.id, f.attr) in RAW_CLOCKS) \
+                or (isinstance(f, ast.Name) and f.id in by_name):
+            lines.append(n.lineno)
+    return sorted(lines)
+
+
+def test_nodes_call_no_more_raw_clocks_than_counted():
+    found = {path.relative_to(PACKAGE).as_posix(): raw_clock_calls(tree) for path, layer, tree in MODULES
+             if layer == 'nodes'}
+    found = {path: lines for path, lines in found.items() if lines}
+    total = sum(len(lines) for lines in found.values())
+    where = '; '.join(f'{path}: {len(lines)} (lines {", ".join(map(str, lines))})' for path, lines in found.items())
+    assert total <= RAW_CLOCK_CALLS_IN_NODES, f'{total} raw clock calls in nodes/ (take now from the core): {where}'
+    assert total == RAW_CLOCK_CALLS_IN_NODES, f'only {total} raw clock calls left in nodes/: lower the count ({where})'
+
+
+def test_the_clock_scan_catches_every_spelling():
+    source = ('import time\nfrom time import monotonic as mono\nfrom time import sleep\n\n'
+              'def f(clock=time.monotonic):\n    return time.time(), mono(), time.perf_counter(), clock(), sleep(0)\n')
+    assert raw_clock_calls(ast.parse(source)) == [6, 6, 6]

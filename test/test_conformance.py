@@ -84,7 +84,12 @@ def _conformance_expecting(tmp_path, failing: set, *args):
     return proc, verdicts
 
 
+# system tier: 4-5 min of the conformance matrix, and CTRL-FB-2 (arrival jitter), CTRL-WD-1 (ramp within 0.5 s of
+# the last heartbeat) and the other TIMING requirements are judged on the wall-clock arrival of frames from a
+# process of its own - what they measure is real timing, which a busy computer changes (4.77 ms jitter > 2 ms
+# seen with a moderate extra load). The wiring is make test's: the test after this one.
 @pytest.mark.slow
+@pytest.mark.system
 @pytest.mark.timeout(600)
 def test_conformance_in_private_netns():
     """Host side: the matrix below runs in a private network namespace (skipped where none can be made)."""
@@ -94,6 +99,31 @@ def test_conformance_in_private_netns():
     if rc is None:
         pytest.skip(out)
     assert rc == 0 and ' passed' in out and 'failed' not in out, out
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_the_simulator_in_a_process_of_its_own_passes_conformance_over_a_real_bus():
+    """End-to-end tier (make test): `rubber-rig conformance --sim` against the simulator in a process of its own
+    over python-can's udp_multicast, in a private network namespace: every requirement not judged on this
+    host's timing passes (the wiring of bus, codec, driver and simulator across processes). The timing
+    requirements are the system tier's (test_conformance_in_private_netns).
+    """
+    if in_private_netns():
+        pytest.skip('already inside the namespace')
+    rc, out = rerun_in_private_netns(f'{HERE}::test_correct_simulator_passes_every_requirement_apart_from_timing',
+                                     timeout=240)
+    if rc is None:
+        pytest.skip(out)
+    assert rc == 0 and '1 passed' in out and 'failed' not in out, out
+
+
+@inside
+def test_correct_simulator_passes_every_requirement_apart_from_timing(tmp_path):
+    assert in_private_netns()
+    proc, online = _conformance(tmp_path, '--sim', '--power-up', '--envelope', '1mm')
+    assert set(online) == CTRL, proc.stdout[-3000:] + proc.stderr[-2000:]
+    assert {k for k, v in online.items() if v != 'pass'} <= TIMING, proc.stdout[-3000:]
 
 
 @inside

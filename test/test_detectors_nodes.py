@@ -24,6 +24,7 @@ cycles it had not run.
 import html
 import json
 import os
+import re
 import signal
 import time
 from pathlib import Path
@@ -45,6 +46,12 @@ from rubber_rig.testing.operator import Operator
 from rubber_rig.testing.processes import SuiteProcesses
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
+# Tiers: the hold/resume test is make test's end-to-end check of the hold path through the processes. The others
+# are the system tier's (make test-system): they run programs of 5-41 s on the paced rig, and whether a detector
+# trips within two cycles of the onset depends here on how late three executors deliver samples, cycle metrics
+# and the hold on a busy computer (2.11 cycles > 2.0 seen under load). Their logic - trip delays in cycles, no
+# false trip at 200 N of noise, the end-of-test criteria - is test_detectors.py's, on simulated time.
+system = pytest.mark.system
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'rig_sim.yaml'
 PROGRAMS = Path(__file__).resolve().parents[1] / 'rubber_rig' / 'excitation' / 'programs'
@@ -139,6 +146,7 @@ def delay_cycles(op, event_onset: int) -> float:
     return (departure[0] - event_onset) * F / FS
 
 
+@system
 def test_crack_is_held_by_the_residual_detector_within_two_cycles(suite):
     procs, op = suite
     result = damage_case(procs, op, [{'type': 'crack', 'cycle': ONSET, 'loss': 0.3, 'damping': 2000.0}], SINE)
@@ -170,6 +178,7 @@ def test_crack_is_held_by_the_residual_detector_within_two_cycles(suite):
     assert html.escape(result.events[0].message) in page
 
 
+@system
 def test_slip_is_held_by_the_force_drift_detector_within_two_cycles(suite):
     procs, op = suite
     program = SINE + "detectors: [{type: residual, action: record}]\n"     # residual trips too: only recorded
@@ -188,6 +197,7 @@ def test_slip_is_held_by_the_force_drift_detector_within_two_cycles(suite):
     assert 0 < delay <= 2.0
 
 
+@system
 def test_fatigue_ends_a_durability_block_at_the_stiffness_criterion(suite):
     procs, op = suite
     life, loss = 100.0, 0.4               # 0.4 % of the stiffness lost per cycle
@@ -231,6 +241,7 @@ blocks:
     assert min(measured) <= 2.0, measured
 
 
+@system
 def test_clean_program_with_default_detectors_trips_none_at_200_newton_noise(suite):
     procs, op = suite
     restart_rig(procs, op, {'force_noise': 200.0, 'damage': '[]'})
@@ -245,6 +256,7 @@ blocks:
     assert list(result.events) == [] and op.events == [], [e.message for e in result.events]
 
 
+@system
 @pytest.mark.parametrize('name', ('dynamic_stiffness_grid', 'quasi_static_then_sine', 'log_sweeps_1_50hz',
                                   'preload_sine_grid'))
 def test_shipped_program_trips_no_default_detector_at_200_newton_noise(suite, name):
@@ -261,9 +273,21 @@ def test_shipped_program_trips_no_default_detector_at_200_newton_noise(suite, na
     assert len(result.blocks) == len(load_program(name).blocks)
 
 
-@pytest.mark.xfail(strict=False, reason='known intermittent failure under investigation (closing note of 2026-11-26): '
-                   'in about half the runs in a fresh clone, main\'s code too, the resumed 50-cycle block shows '
-                   '~23 cycles of motion where ~27 are expected; it may run too few cycles after a hold')
+def motion_cycles(seq, u, split):
+    """Cycles [at F] of motion of the applied command u [m] at sequences seq, before and after sequence `split`,
+    and how many sequence numbers carry no sample (the resumed stream starts the grant's lead after the held
+    rig's last sample; under load DDS may drop a batch). Counted per sequence number, a missing sample counts as
+    moving when the command moved across the gap, so a lost batch does not shorten the count.
+    """
+    full = np.arange(seq[0], seq[-1] + 1)
+    moving_step = np.abs(np.diff(u)) > 1e-7
+    step_seq = seq[1:]
+    # a step between two received samples spanning a gap: its moving verdict holds for every sample of the gap
+    moving = moving_step[np.searchsorted(step_seq, full[1:], side='left').clip(max=step_seq.size - 1)]
+    cut = int(split - seq[0])
+    return moving[:cut].sum() / FS * F, moving[cut:].sum() / FS * F, int(full.size - seq.size)
+
+
 def test_held_durability_block_resumes_with_the_cycles_it_had_not_run(suite):
     procs, op = suite
     restart_rig(procs, op, {'damage': '[]'})
@@ -289,19 +313,29 @@ blocks:
     result = op.result(handle, 60.0)
     assert result is not None and result.success, result and result.message
     seq, u, _ = op.applied(start)
-    moving = np.abs(np.diff(u)) > 1e-7
-    before, after = moving[:held_at - start].sum() / FS * F, moving[held_at - start:].sum() / FS * F
-    # about 25 cycles were run before the hold (after a taper cycle): the resumed block runs the other ~25 with
-    # a taper in and out, 53 cycles in all (a block restarted from its beginning would make it about 78)
-    # a cycle count short by the samples the operator did not receive is not the rig's: say how many were missing
-    missing = int(seq[-1] - seq[0] + 1 - seq.size) if seq.size else 0
-    assert 20 < before < 30 and 51 < before + after < 56, (before, after, f'{missing} samples not received')
+    before, after, missing = motion_cycles(seq, u, held_at)
+    # the rig ran the taper cycle and some full cycles, was held where the hold reached it (its hold ramp began
+    # there: the excitation finds that sample in the applied command, not where its measurement stood), then ran
+    # the full cycles it still owed with a taper in and out: 1 + 50 + 2 taper cycles of motion, plus the part of
+    # the interrupted cycle (run again) and the hold ramp (under a cycle together); restarted from its beginning
+    # the block would make about 78. The exact count at every hold phase is test_program_session's (simulated
+    # time); here the hold lands wherever the executors put it, so the bound allows the interrupted cycle.
+    why = (before, after, f'{missing} sequence numbers without a sample')
+    assert 20 < before < 48 and 53 - 0.05 < before + after < 54.5, why   # the hold lands 0-2 s after 25 cycles
+    # the excitation says how many full cycles it still owed: the resumed run is exactly those and its two tapers,
+    # to a few samples (a taper's first and last steps are below the 0.1 um the count looks for; the hold ramp's
+    # last ones may come after the operator saw the rig idle) - one cycle more or less would be 100 samples
+    owed = re.search(r'(\d+) full cycles still owed of 50', procs.log('excitation'))
+    assert owed, procs.log('excitation')[-2000:]
+    assert abs(after - (int(owed.group(1)) + 2)) < 0.05, (owed.group(0), why)
+    assert int(owed.group(1)) + before - 1 < 51 + 1.0, (owed.group(0), why)   # ran: 1 + (50 - owed) + a part
     summary = result.blocks[0]
-    assert summary.completed
+    assert summary.completed and summary.cycles == 50, summary
     reset = op.trigger(f'{NS}/rig_driver/reset')            # at rest, nobody's: accepted
     assert reset is not None and reset.success, reset
 
 
+@system
 def test_costly_program_requests_are_refused_at_once_while_a_program_runs(suite):
     """A YAML bomb, 5000-deep nesting and a 2 MB program sent to excitation/load_program from a second process
     while a program runs: each refused within a second, naming the limit; the running program completes.
@@ -327,6 +361,7 @@ def test_costly_program_requests_are_refused_at_once_while_a_program_runs(suite)
     assert result is not None and result.success, result and result.message
 
 
+@system
 def test_detectors_without_cycle_metrics_say_they_are_blind(suite):
     """element_model stopped: the program runs (the model is not a safety peer), but its result and the
     excitation's diagnostics say that no cycle detector could trip.
@@ -344,6 +379,7 @@ def test_detectors_without_cycle_metrics_say_they_are_blind(suite):
         assert procs.wait_started('element_model'), procs.log('element_model')[-2000:]
 
 
+@system
 def test_a_program_whose_recorder_is_killed_says_its_recording_was_lost(suite):
     """Without require_recording the program runs on when its recorder dies, but its result, the log and the
     excitation's diagnostics say from where on the samples are not recorded.

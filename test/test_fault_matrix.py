@@ -54,6 +54,13 @@ from support.waiting import wait_for
 # scenario that goes wrong must fail on its own assertion, which says what did not happen, not on the timeout.
 # Measured here: 3-10 s per scenario, about 70 s for the module.
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
+# Tiers: make test runs the happy path and the two kill-and-restart scenarios (the wiring of goal, stream,
+# heartbeats, recording and restarts across processes). Every other scenario is the system tier's
+# (make test-system): each judges, on the wall clock of the paced rig, that the goal ends within about a second of
+# the event while five processes share two cores - a busy computer delays that and fails them, the product is
+# not at fault. Their logic (stream loss, owner watch, supervisor, gate, limits) is tested on simulated time in
+# test_rig_safety_core.py, test_heartbeat.py, test_rig_driver_parts.py and test_program_session.py.
+system = pytest.mark.system
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'rig_sim.yaml'
 NS = '/fm'
@@ -259,6 +266,7 @@ def test_happy_path_records_every_sample(suite):
     assert np.max(np.abs(offsets)) < 0.05, offsets
 
 
+@system
 def test_driver_abort_mid_goal_ends_goal_and_ramps_inside_limits(suite):
     procs, op, base = suite
     since = op.last_sequence + 1
@@ -277,6 +285,7 @@ def test_driver_abort_mid_goal_ends_goal_and_ramps_inside_limits(suite):
     next_program_completes(op, procs)
 
 
+@system
 @pytest.mark.parametrize('how', ['abort', 'cancel'])
 def test_excitation_abort_and_cancel_act_at_once(suite, how):
     procs, op, base = suite
@@ -298,6 +307,7 @@ def test_excitation_abort_and_cancel_act_at_once(suite, how):
     next_program_completes(op, procs)
 
 
+@system
 def test_hold_and_resume(suite):
     procs, op, base = suite
     since = op.last_sequence + 1
@@ -316,6 +326,7 @@ def test_hold_and_resume(suite):
     assert_applied_safe(op, since)
 
 
+@system
 def test_a_stopped_excitation_that_holds_the_rig_loses_its_stream_to_the_owner_watch(suite):
     """The excitation holds the rig (no setpoints flow) and then stops (SIGSTOP: alive, silent, as a node stuck
     in DDS would be): rig_driver sees its owner's heartbeat stop and treats it as stream loss within
@@ -347,6 +358,7 @@ def test_a_stopped_excitation_that_holds_the_rig_loses_its_stream_to_the_owner_w
     next_program_completes(op, procs)
 
 
+@system
 def test_a_stopped_element_model_is_named_within_a_second_and_in_the_result(suite):
     procs, op, base = suite
     handle = op.send_goal(SHORT.replace('cycles: 5', 'cycles: 15'))
@@ -369,6 +381,7 @@ def test_a_stopped_element_model_is_named_within_a_second_and_in_the_result(suit
     assert op.wait_for(lambda: f'{NS}/element_model beats again' in procs.log('excitation')[mark:], 3.0)
 
 
+@system
 def test_excitation_killed_mid_program_stream_loss_ramps_to_rest(suite):
     procs, op, base = suite
     since, t_wall = op.last_sequence + 1, time.time()
@@ -406,6 +419,7 @@ def test_rig_driver_killed_mid_program_ends_the_goal_and_a_restarted_driver_runs
     next_program_completes(op, procs)
 
 
+@system
 def test_second_excitation_cannot_take_the_rig(suite):
     """A second excitation (another station's, misconfigured to command this rig: its own namespace, the rig's
     topics and driver) gets its goal refused with the owner's name while a program runs."""
@@ -437,6 +451,7 @@ def test_second_excitation_cannot_take_the_rig(suite):
     next_program_completes(op, procs)
 
 
+@system
 def test_foreign_setpoints_are_refused(suite):
     procs, op, base = suite
     since = op.last_sequence + 1
@@ -469,6 +484,7 @@ def cpu_seconds(procs) -> dict:
     return out
 
 
+@system
 @pytest.mark.parametrize('topic', ['setpoints', 'command'])
 def test_a_flood_of_foreign_setpoints_is_not_fatal(suite, topic):
     """2000 foreign batches (stream id 0, 100 setpoints each, as fast as one process publishes them) while a
@@ -518,6 +534,7 @@ BAD_PROGRAMS = {
 }
 
 
+@system
 @pytest.mark.parametrize('name', sorted(BAD_PROGRAMS))
 def test_bad_programs_are_refused_with_a_reason_and_nothing_moves(suite, name):
     procs, op, base = suite
@@ -537,6 +554,7 @@ def test_bad_programs_are_refused_with_a_reason_and_nothing_moves(suite, name):
     assert procs.alive('excitation')
 
 
+@system
 def test_nan_batches_and_bad_parameters_do_not_take_nodes_down(suite):
     procs, op, base = suite
     from msg_defs.msg import RigSampleBatch
@@ -562,6 +580,7 @@ def test_nan_batches_and_bad_parameters_do_not_take_nodes_down(suite):
     next_program_completes(op, procs)
 
 
+@system
 def test_limits_tightened_at_run_time_apply_at_once(suite):
     procs, op, base = suite
     handle = start_fast_sine(op, 0.5)
@@ -587,6 +606,7 @@ def test_limits_tightened_at_run_time_apply_at_once(suite):
     next_program_completes(op, procs)
 
 
+@system
 def test_deactivate_activate_and_reset_then_next_program_runs(suite):
     procs, op, base = suite
     handle = start_fast_sine(op, 0.3)
@@ -628,6 +648,7 @@ def test_element_model_and_recorder_killed_and_restarted(suite):
     assert rec is not None and rec.tail_unaccounted, 'the killed recording must say its tail is unaccounted'
 
 
+@system
 def test_recorder_that_cannot_write_stops_programs_before_motion(suite):
     procs, op, base = suite
     blocker = base / 'not_a_directory'
@@ -665,6 +686,7 @@ SIM_FAULTS = {
 }
 
 
+@system
 @pytest.mark.parametrize('name', sorted(SIM_FAULTS))
 def test_simulated_rig_faults_end_safely(suite, name):
     procs, op, base = suite

@@ -120,3 +120,32 @@ def test_without_ros():
 '''
     assert unmarked_ros_tests(ast.parse(source)) == ['test_by_bench', 'test_by_fixture', 'test_by_helper']
     assert unmarked_ros_tests(ast.parse('import pytest\npytestmark = [pytest.mark.ros]\n' + source)) == []
+
+
+def _marks_system(expr: ast.AST, aliases: set) -> bool:
+    """``pytest.mark.system`` (or a module name bound to it) anywhere in a decorator or ``pytestmark``."""
+    return any((isinstance(n, ast.Attribute) and n.attr == 'system' and isinstance(n.value, ast.Attribute)
+                and n.value.attr == 'mark') or (isinstance(n, ast.Name) and n.id in aliases) for n in ast.walk(expr))
+
+
+def tier_counts(tree: ast.Module) -> tuple[int, int]:
+    """(test functions of make test, of make test-system) in a module, by the ``system`` marker."""
+    aliases = {t.id for n in tree.body if isinstance(n, ast.Assign) and _marks_system(n.value, set())
+               for t in n.targets if isinstance(t, ast.Name) and t.id != 'pytestmark'}
+    module_system = any(isinstance(n, ast.Assign) and any(isinstance(t, ast.Name) and t.id == 'pytestmark'
+                                                          for t in n.targets) and _marks_system(n.value, aliases)
+                        for n in tree.body)
+    tests = [n for n in tree.body if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef))
+             and n.name.startswith('test_')]
+    system = sum(1 for t in tests if module_system or any(_marks_system(d, aliases) for d in t.decorator_list))
+    return len(tests) - system, system
+
+
+def test_both_tiers_have_tests_so_neither_make_target_runs_none():
+    """make test (-m "not system") and make test-system (-m system) each select tests: pytest's exit status 5
+    (no tests collected) must never end either."""
+    counts = [tier_counts(ast.parse(p.read_text(encoding='utf-8'), str(p))) for p in TEST_DIR.glob('test_*.py')]
+    assert sum(c[0] for c in counts) > 100 and sum(c[1] for c in counts) > 0, counts
+    sample = ast.parse('import pytest\nsystem = pytest.mark.system\n\n@system\ndef test_a():\n    pass\n\n'
+                       '@pytest.mark.system\ndef test_b():\n    pass\n\ndef test_c():\n    pass\n')
+    assert tier_counts(sample) == (1, 2)

@@ -36,7 +36,17 @@ from mcap_ros2.decoder import DecoderFactory
 
 from rubber_rig.cli.main import main as cli
 from rubber_rig.recording import Recorder, RecordingError, RecordingWriter, load_recording, recover
-from rubber_rig.recording.gaps import BATCH, MAX_EVENTS, SAMPLE, LossLedger, sample_topic
+from rubber_rig.recording.gaps import (
+    BATCH,
+    MAX_EVENTS,
+    RESTART,
+    SAMPLE,
+    STRAY,
+    LossLedger,
+    StrayOrRestart,
+    sample_topic,
+    stray_or_restart,
+)
 from rubber_rig.recording.loss import recording_loss
 
 from support.recording import BATCH_T, RUN_TOTALS, N, batch, loss_run
@@ -343,3 +353,34 @@ def test_a_stale_or_foreign_batch_is_a_stray_not_a_restart_and_not_loss():
     g.observe('/a/samples', BATCH, {'first_sequence': 120, 'displacement': [0.0] * 20}, 21, 4)
     s = g.summary()
     assert (s['sequence_restarts'], s['sequence_strays'], g.samples_lost) == (1, 1, 100)
+
+
+# ---- the stray-or-restart rule: one implementation, the recorder's ledger and the element model follow it ---------
+@pytest.mark.parametrize('next_first, verdict', [
+    (120, RESTART),          # continues the batch that went back: a restarted driver numbering from 100
+    (500, STRAY),            # the stream goes on where it was: the batch was stale or foreign
+    (560, STRAY),            # ... after a gap of its own: still the old stream
+    (300, RESTART),          # neither: a new stream that lost a batch (below where the old one was)
+    (40, RESTART),           # went back again: what went back first was the new stream's first batch
+])
+def test_stray_or_restart_is_told_by_the_batch_after_the_one_that_went_back(next_first, verdict):
+    """A batch of 20 samples at sequence 100 while the stream expected 500; the next batch decides."""
+    assert stray_or_restart(100, 20, 500, next_first) == verdict
+    rule = StrayOrRestart()
+    assert rule.judge(next_first) is None                 # nothing went back: nothing to say
+    rule.went_back(100, 20, 500, payload='held batch')
+    assert rule.judge(next_first) == (verdict, 'held batch')
+    assert rule.judge(next_first) is None                 # judged once
+
+
+def test_a_stray_followed_by_a_gap_of_the_old_stream_is_a_stray_and_the_gap_counts():
+    """The stream goes on after the stray but 40 samples later than it was due: the stray is taken back and the
+    40 samples are the old stream's gap (publication sequence skipped: lost), not a restart."""
+    g = LossLedger()
+    for k in range(10):
+        g.observe('/a/samples', BATCH, {'first_sequence': 20 * k, 'displacement': [0.0] * 20}, k, k + 1)
+    g.observe('/a/samples', BATCH, {'first_sequence': 40, 'displacement': [0.0] * 20}, 10, 77)
+    g.observe('/a/samples', BATCH, {'first_sequence': 240, 'displacement': [0.0] * 20}, 11, 13)
+    s = g.summary()
+    assert (s['sequence_restarts'], s['sequence_strays'], s['sequence_gaps'], g.samples_lost) == (0, 1, 1, 40)
+    assert [e['kind'] for e in g.tracker.events] == ['stray', 'gap']

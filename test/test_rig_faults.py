@@ -163,6 +163,12 @@ def test_abort_ramp_respects_the_host_velocity_limit():
     assert np.max(v[ramp[1:]]) <= 0.005 + 1e-4
 
 
+# system tier: the flood, the controller's transmit queue and the driver's watchdog run on the wall clock of the
+# paced simulated bus, and "the ramp begins within 0.35 s" is judged on it. Under a load of 7 on two cores (issue
+# 34's session) one run failed the velocity bound - an applied step of 0.23 mm in one sample - and passed alone;
+# not yet explained (a stalled paced controller catching up, or a real defect), so it stays a test, in this tier.
+# The bus timing itself is test_simbus.py's, on a simulated clock.
+@pytest.mark.system
 def test_bus_overload_mid_run_faults_safely_and_counts_the_loss():
     """Paced, on the timed bus: from 0.6 s another node floods the bus with frames of higher priority than the
     rig's stream. The controller's frames queue, then its transmit queue overflows and samples are lost; the

@@ -114,6 +114,7 @@ class ProgramRunner(Whereabouts):
         self._seg_starts = []
         self._completed = set()
         self.cycles_before = {}                       # block index -> full cycles run before its latest resume
+        self.cycles_measured_before = {}              # block index -> steady cycles measured before it
         self.last_block_index = np.empty(0, dtype=np.int32)
 
     # ---- state
@@ -142,14 +143,15 @@ class ProgramRunner(Whereabouts):
         self.state = 'ramping_down'
 
     def hold(self):
-        """Pause: ramp smoothly to the current block's mean (or stay where a ramp/hold block is) and wait."""
-        if self.state != 'running':
+        """Pause: ramp smoothly to the current block's mean (or stay where a ramp/hold block is) and wait. Also
+        while approaching the start and after the last setpoint was generated (the rig may still run what was
+        streamed ahead): resume_at() continues from where the rig left the program.
+        """
+        if self.state not in ('running', 'approaching') and not (self.state == 'finished' and not self.aborted):
             return
         b = self.block_index
-        blk = self.program.blocks[b]
-        self._hold_block = b
-        self._start_ramp(blk.mean if blk.oscillating else self._x)
-        self.state, self._resume = 'holding', False
+        self._hold_block, self.state, self._resume = b, 'holding', False
+        self._start_ramp(self.hold_target)
 
     @property
     def hold_target(self) -> float:
@@ -159,28 +161,47 @@ class ProgramRunner(Whereabouts):
 
     def resume_at(self, sequence: int, position: float, measured_sequence: int = None):
         """Continue after hold() on a new stream at `sequence`, approached smoothly from `position` [m] (where the
-        rig holds) if that is not where the block starts. The held block restarts with its taper; given
-        `measured_sequence` (the sample after the last one measured before the hold), a periodic block runs only
-        the full cycles it had not finished then (a durability block resumes, not restarts), counted on in
-        cycles_before.
+        rig holds) if that is not where the block starts.
+
+        `measured_sequence`: the sample after the last one the rig ran on the program before the hold (where its
+        hold ramp began, ProgramSession.left_at). The block the rig was in resumes: a periodic one with the full
+        cycles it had not finished, counted on in cycles_before (the interrupted cycle runs again, with the taper
+        in and out); a block run to its end is not run again; a hold, ramp or sweep block restarts. Without it
+        (or before the program's first sample) the held block restarts with its taper.
         """
         if self.state != 'holding':
             return
-        b = self._hold_block
-        located = self.locate(measured_sequence) if measured_sequence is not None else None
+        b, run = self._hold_block, None
+        at = self.program_position(measured_sequence) if measured_sequence is not None else None
+        if at is not None:
+            b, run = at
         blk = self.program.blocks[b]
-        if located is not None and located[0] == b and blk.periodic:
-            done = min(max(int(math.floor(located[1] - blk.taper_cycles)), 0), blk.cycles - 1)
-            if done:
+        if run is not None and run >= int(self._starts[b + 1] - self._starts[b]):
+            self._completed.add(b)
+            b, run = b + 1, None                       # the rig ran this block to its end
+        elif run is not None and blk.periodic:
+            done = int(math.floor(float(blk.phase(np.array(run / self.fs))) - blk.taper_cycles + 1e-9))
+            done = min(max(done, 0), blk.cycles)
+            if done >= blk.cycles:
+                self._completed.add(b)                 # every full cycle ran: only the taper-out was cut short
+                b = b + 1
+            elif done:
                 self.program.blocks[b] = dataclasses.replace(blk, cycles=blk.cycles - done)
                 self.program._starts.clear()
                 self._starts = self.program.block_starts(self.fs)
                 self._total = int(self._starts[-1])
                 self.cycles_before[b] = self.cycles_before.get(b, 0) + done
-        target = self.hold_target
-        self._restart(b)
+        for later in range(b, len(self.program.blocks)):
+            self._completed.discard(later)             # generated before the hold, not run: they run again
         self.sequence = int(sequence)
         self._x = self._x_prev = float(position)
+        if b >= len(self.program.blocks):              # the rig had run the whole program
+            self._p, self.state, self._ramp, self._resume = self._total, 'finished', None, False
+            return
+        self._hold_block = b
+        self._p = int(self._starts[b])
+        target = self.hold_target
+        self._restart(b)
         if abs(position - target) > 1e-7:
             self._start_ramp(target)
             self.state = 'approaching'
@@ -291,7 +312,9 @@ class ProgramRunner(Whereabouts):
         blk = self.program.blocks[b]
         if blk.type.family == 'ramp':
             self._ramp_from[b] = self._x
-        self._loops.pop(b, None)
+        loop = self._loops.pop(b, None)
+        if loop is not None:
+            self.cycles_measured_before[b] = self.cycles_measured_before.get(b, 0) + len(loop.cycles)
         self._p = int(self._starts[b])
         self.state, self._ramp, self._resume = 'running', None, False
 
@@ -370,6 +393,8 @@ class ProgramRunner(Whereabouts):
             amp, mean = loop.achieved() if loop else (math.nan, math.nan)
             done = b in self._completed and not (self.aborted and self._starts[b + 1] > self._p)
             msg = '' if done else (f'aborted: {self.abort_reason}' if self.aborted else 'running')
+            # a resumed block runs the cycles it still owed: its summary counts the block's cycles, all of them
+            measured = self.cycles_measured_before.get(b, 0) + (len(loop.cycles) if loop else 0)
             out.append(BlockResult(b, blk.name, blk.waveform, blk.frequency, blk.amplitude, amp, blk.mean, mean,
-                                   blk.cycles, len(loop.cycles) if loop else 0, done, msg))
+                                   blk.cycles + self.cycles_before.get(b, 0), measured, done, msg))
         return out

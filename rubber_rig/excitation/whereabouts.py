@@ -29,17 +29,34 @@ class Whereabouts:
         """(block index, phase [cycles since the block's start, tapers included; seconds for hold/ramp blocks
         times its frequency = 0]) of the setpoint with this sequence number, or None outside program blocks.
         """
+        segment = self._segment_of(sequence)
+        if segment is None:
+            return None
+        seq0, _, b, local0, _ = segment
+        blk = self.program.blocks[b]
+        t = (local0 + sequence - seq0) / self.fs
+        return b, float(blk.phase(np.array(t))) if blk.oscillating else 0.0
+
+    def _segment_of(self, sequence: int):
+        """The generated segment [seq0, seq1, block, local0, loop] holding the setpoint `sequence`, or None."""
         if sequence is None:
             return None
         j = bisect.bisect_right(self._seg_starts, sequence) - 1
         if j < 0:
             return None
-        seq0, seq1, b, local0, _ = self._segments[j]
-        if not seq0 <= sequence < seq1:
+        segment = self._segments[j]
+        return segment if segment[0] <= sequence < segment[1] else None
+
+    def program_position(self, sequence: int):
+        """(block, samples of the block run) when the rig has run the setpoints before ``sequence`` (the sample
+        after the last one it ran on the program), or None when the setpoint before it is not a program sample
+        (an approach or hold ramp, nothing generated yet).
+        """
+        segment = self._segment_of(int(sequence) - 1)
+        if segment is None:
             return None
-        blk = self.program.blocks[b]
-        t = (local0 + sequence - seq0) / self.fs
-        return b, float(blk.phase(np.array(t))) if blk.oscillating else 0.0
+        seq0, _, b, local0, _ = segment
+        return b, local0 + int(sequence) - seq0
 
     def cycle_position(self, start: int, end: int):
         """Where the measured cycle of samples start..end-1 lies: (block, full-amplitude cycle number counted

@@ -85,6 +85,7 @@ from rubber_rig.online import (
     OnlinePredictor,
     batch_problem,
 )
+from rubber_rig.recording.gaps import RESTART, StrayOrRestart
 
 VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
 VALUE_UNITS = {'k0': 'N/m', 'k_inf': 'N/m', 'tau': 's', 'alpha': '-', 'x2': 'm', 'f_fmax': 'N'}
@@ -145,7 +146,7 @@ class ElementModelNode(Node):
         self.batches_dropped = 0         # sample batches refused (batch_problem)
         self.cycle_errors = 0            # cycles the metrics could not evaluate
         self.stray_batches = 0           # batches that went back and were not followed: stale or foreign
-        self._went_back = None           # a batch that went back, until the next one says restart or stray
+        self.went_back = StrayOrRestart()   # a batch that went back, until the next one says restart or stray
         self.pub_prediction = self.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
         self.pub_metrics = self.create_publisher(CycleMetrics, topics.CYCLE_METRICS, topics.EVENT_QOS)
         self.pub_params = self.create_publisher(ModelParameters, topics.MODEL_PARAMETERS, topics.LATCHED_QOS)
@@ -176,13 +177,12 @@ class ElementModelNode(Node):
             return
         if len(x) == 0:
             return
-        held, self._went_back = self._went_back, None
-        if self.predictor.goes_back(msg.first_sequence):
-            if held is None or msg.first_sequence != held.first_sequence + len(held.displacement):
-                # one batch going back is not yet a restart: a stale or foreign batch (another publisher, a copy
-                # replayed late) is followed by the stream it interrupted; a restarted driver's by its own next
-                self._went_back = msg
-                return
+        # one batch going back is not yet a restart: the next one says (rubber_rig.recording.gaps, the rule the
+        # recorder's loss ledger follows): a restarted driver's batch is followed by its own next, a stale or
+        # foreign one (another publisher, a copy replayed late) by the stream it interrupted
+        verdict = self.went_back.judge(msg.first_sequence)
+        if verdict is not None and verdict[0] == RESTART:
+            held = verdict[1]
             self.get_logger().info(f'sample sequence went back from {self.predictor.next_sequence} to '
                                    f'{held.first_sequence} (driver restarted?): model and cycle detection start '
                                    'afresh')
@@ -190,11 +190,15 @@ class ElementModelNode(Node):
             self._cycle_queue.clear()
             self.cycles = CyclePairer(self.cycles.hysteresis, self.cycles.min_amplitude)
             self.on_samples(held)
-        elif held is not None:
+        elif verdict is not None:
             self.stray_batches += 1
-            self.get_logger().warning(f'sample batch at sequence {held.first_sequence} ignored: it went back from '
-                                      f'{self.predictor.next_sequence} and the stream went on where it was (stale '
-                                      f'or foreign; {self.stray_batches} so far)', throttle_duration_sec=WARN_EVERY)
+            self.get_logger().warning(f'sample batch at sequence {verdict[1].first_sequence} ignored: it went back '
+                                      f'from {self.predictor.next_sequence} and the stream went on where it was '
+                                      f'(stale or foreign; {self.stray_batches} so far)',
+                                      throttle_duration_sec=WARN_EVERY)
+        if self.predictor.goes_back(msg.first_sequence):
+            self.went_back.went_back(msg.first_sequence, len(x), self.predictor.next_sequence, msg)
+            return
         bad = self.predictor.nonfinite_samples
         predicted, branches = self.predictor.process(msg.first_sequence, msg.sample_period, x, msg.temperature)
         bad_force = len(f) - int(np.count_nonzero(np.isfinite(f)))

@@ -146,7 +146,7 @@ class ExcitationNode(Node):
         if s is None:
             return
         try:
-            self.act(s.measured(msg.first_sequence, conv.as_array(msg.displacement)))
+            self.act(s.measured(msg.first_sequence, conv.as_array(msg.displacement), conv.as_array(msg.setpoint)))
         except Exception as exc:   # noqa: BLE001 - a bad batch must not take the node down
             self.abort_program(f'internal error on a sample batch: {exc!r}')
 
@@ -423,6 +423,7 @@ class ExcitationNode(Node):
             self._end('resume refused: ' + (grant.message if grant is not None else 'rig_driver did not answer'))
             return
         s.resume(grant)
+        self.get_logger().info(s.describe_resume())
 
     def on_load_program(self, request, response):
         return readiness.load_program(self, request, response)

@@ -41,7 +41,6 @@ stream ownership and stream-loss detection, fault detection and the safe ramp ar
 from __future__ import annotations
 
 import math
-import time
 
 from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -63,14 +62,13 @@ from rubber_rig.nodes.rig_driver_params import (  # noqa: F401 - also imported f
     RigDriverParameters,
 )
 from rubber_rig.nodes.spin import spin_node
-from rubber_rig.rig.can import FAULT_WATCHDOG
 from rubber_rig.rig.can.batcher import SampleBatcher
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.can.gate import MUTE_AFTER, MUTE_FOR, StreamGate
 from rubber_rig.rig.config import RigConfig, configuration_text
 from rubber_rig.rig.interface import open_rig
+from rubber_rig.rig.shutdown import ramp_to_rest
 
-CLOSE_RAMP_WAIT = 5.0  # [s] close() waits at most this long for a moving rig's ramp to rest to end
 MAX_CHANNELS = 16   # owners' command channels the driver listens to at once
 
 
@@ -89,7 +87,6 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self.pub_samples = None
         self.batcher = SampleBatcher()     # the driver's sample blocks -> RigSampleBatch messages
         self._last_status = None
-        self._refused_at = -1e9            # wall time of the last refusal warning (throttled)
         self._status_key = None
         self.pub_status = self.create_publisher(RigStatus, topics.STATUS, topics.LATCHED_QOS)
         # what a recording must know of this rig (the load cell's declared calibration for rubber-rig fit):
@@ -167,25 +164,16 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def close(self) -> None:
-        """Ramp to rest, then close the bus (also called by the in-process launcher at shutdown). The controller
-        is polled until it reports the ramp done (at most CLOSE_RAMP_WAIT s), unless it is silent (watchdog
-        fault): a controller that reports nothing would hold the exit for the whole wait (5 s measured), and it
-        ramps to rest on its own once the host heartbeat stops (host_timeout). An idle rig does not wait at all.
+        """Ramp to rest, then close the bus (also called by the in-process launcher at shutdown): the wait is
+        rubber_rig.rig.shutdown.ramp_to_rest's (at most RAMP_WAIT s; not for a silent controller; none when idle).
         """
         self._stop_polling()
         if self.rig is not None:
             rig, self.rig, self.gate = self.rig, None, None
             driver = rig.driver
-            if driver.controller_state in ('running', 'holding', 'ramping_down'):
-                driver.abort('rig_driver shutting down')
-                deadline = time.monotonic() + CLOSE_RAMP_WAIT
-                while driver.controller_state not in ('idle', 'fault') and not driver.faults & FAULT_WATCHDOG \
-                        and time.monotonic() < deadline:
-                    driver.poll()
-                    time.sleep(0.005)
-                if driver.faults & FAULT_WATCHDOG and driver.controller_state not in ('idle', 'fault'):
-                    self.get_logger().warning('controller silent (watchdog fault): not waiting for its ramp to rest; '
-                                              'it ramps to rest on its own once the host heartbeat stops')
+            outcome = ramp_to_rest(driver, 'rig_driver shutting down')
+            if outcome.message:
+                self.get_logger().warning(outcome.message)
             self._log_events(driver)
             self.get_logger().info(f'rig closed (controller {driver.controller_state}, at '
                                    f'{driver.status.extra["position"] * 1e3:.4f} mm)')
@@ -246,9 +234,9 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
                                   msg.stream_id, msg.end_of_stream)
         if verdict.action == 'mute':
             self.mute(channel)
-        elif verdict.action == 'refused' and time.monotonic() - self._refused_at > 1.0:
-            self._refused_at = time.monotonic()
-            self.get_logger().warning(f'setpoints from {msg.source or "an unnamed sender"} refused: {verdict.why}')
+        elif verdict.action == 'refused':
+            self.get_logger().warning(f'setpoints from {msg.source or "an unnamed sender"} refused: {verdict.why}',
+                                      throttle_duration_sec=1.0)
         self._log_events()
 
     def poll(self) -> None:

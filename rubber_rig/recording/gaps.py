@@ -40,9 +40,13 @@ at ``first_sequence + N``. A larger start is a *gap*; what the skipped samples w
 The publication sequence number is the one the file stores (32 bits) on a channel whose ``rubber_rig.sequence``
 is ``publication``; the recorder uses the same stored value, so writing and reading see the same numbers.
 
-A smaller start means the stream restarted (counted separately). When the restarted publisher's first message
-is not its first publication, the samples it numbered before that message were published before the recorder
-matched it: lost. (This rule holds for the sample stream only: a restarted rig driver numbers its samples from 0.)
+A smaller start means the stream may have restarted; the next message decides (:class:`StrayOrRestart`, the one
+rule the element model follows too): a restart if it continues the message that went back or does not go on
+where the stream was; a *stray* (stale or foreign: another publisher, a late copy) if the stream goes on where
+it was, perhaps after a gap, and then the stray is taken back out of the counts. A restart is counted separately.
+When the restarted publisher's first message is not its first publication, the samples it numbered before that
+message were published before the recorder matched it: lost. (This rule holds for the sample stream only: a
+restarted rig driver numbers its samples from 0.)
 """
 from dataclasses import dataclass, field
 
@@ -113,6 +117,46 @@ def stamp_ns_of(msg) -> int:
     return int(_get(stamp, 'sec') or 0) * 1_000_000_000 + int(_get(stamp, 'nanosec') or 0)
 
 
+RESTART, STRAY = 'restart', 'stray'
+
+
+def stray_or_restart(back_first: int, back_count: int, expected: int, next_first: int) -> str:
+    """What a message that went back was, told by the next one of its topic (sequence numbers of samples).
+
+    back_first, back_count: the message that went back (its first sequence and number of samples); expected: the
+    sequence its stream expected next when it came (> back_first); next_first: the first sequence of the message
+    after it. RESTART when the next one continues it (a restarted rig driver numbers from 0 again and goes on)
+    or goes neither on from it nor on where the stream was; STRAY when the stream goes on where it was (at
+    ``expected`` or after it: a gap of the old stream, not a new one) - the message was stale or foreign.
+    """
+    if next_first == back_first + back_count:
+        return RESTART
+    return STRAY if next_first >= expected else RESTART
+
+
+class StrayOrRestart:
+    """The one message of a stream that went back, held until the next message says what it was
+    (:func:`stray_or_restart`). ``payload``: whatever the caller must keep to act on the verdict.
+    """
+
+    def __init__(self):
+        self.pending = None               # (back_first, back_count, expected, payload) or None
+
+    def went_back(self, first: int, count: int, expected: int, payload=None) -> None:
+        """A message of ``count`` samples from ``first`` came while ``expected`` was due (first < expected)."""
+        self.pending = (int(first), int(count), int(expected), payload)
+
+    def judge(self, next_first: int):
+        """(verdict, payload) for the held message given the next one's first sequence, or None when none is
+        held; the held message is released either way.
+        """
+        if self.pending is None:
+            return None
+        first, count, expected, payload = self.pending
+        self.pending = None
+        return stray_or_restart(first, count, expected, next_first), payload
+
+
 @dataclass
 class GapTracker:
     """Per-topic continuity of sequence numbers across messages (and across split files)."""
@@ -129,14 +173,14 @@ class GapTracker:
     samples_seen: int = 0
     lost_by_topic: dict = field(default_factory=dict)
     strays: int = 0                   # messages that went back and were not followed (stale or foreign)
-    _went_back: dict = field(default_factory=dict)   # topic -> what a message that went back changed
+    _went_back: dict = field(default_factory=dict)   # topic -> StrayOrRestart holding what its message changed
 
-    def _undo_stray(self, topic: str) -> None:
+    def _undo_stray(self, topic: str, changed) -> None:
         """The message that went back was not followed by its own stream but by the one it interrupted: it was
         stale or foreign (another publisher, a late copy), not a restart. Its restart and any loss it implied
         are taken back, and the stream is judged as if it had not come.
         """
-        expected, prev_pub, event, lost, frames = self._went_back.pop(topic)
+        expected, prev_pub, event, lost, frames = changed
         self.restarts -= 1
         self.strays += 1
         if lost:
@@ -161,12 +205,9 @@ class GapTracker:
         it was recorded; ``stamp_ns``: its header stamp (the rig time of its first sample). Events carry both.
         """
         self.samples_seen += count
-        pending = self._went_back.get(topic)
-        if pending is not None:
-            if first == pending[0]:
-                self._undo_stray(topic)
-            else:
-                del self._went_back[topic]
+        verdict = self._went_back[topic].judge(first) if topic in self._went_back else None
+        if verdict is not None and verdict[0] == STRAY:
+            self._undo_stray(topic, verdict[1])
         expected = self.next_expected.get(topic)
         self.next_expected[topic] = first + count
         prev_pub = self.last_pubseq.get(topic)
@@ -212,7 +253,8 @@ class GapTracker:
                 self.gaps += 1
             event = {'topic': topic, 'kind': 'gap' if lost else 'restart', 'restart': True, 'expected': expected,
                      'received': first, 'lost': lost, 'frames_lost': frames_lost}
-            self._went_back[topic] = (expected, prev_pub, event, lost, frames_lost)
+            self._went_back.setdefault(topic, StrayOrRestart()).went_back(
+                first, count, expected, (expected, prev_pub, event, lost, frames_lost))
         event['log_time_ns'], event['stamp_ns'] = int(log_time_ns), int(stamp_ns)
         if len(self.events) < MAX_EVENTS:
             self.events.append(event)

@@ -18,7 +18,8 @@ The excitation node (setpoints as ROS messages, the grant from the driver's open
 :func:`.run.run_program` (an in-process RigDriver) both run a program through it, so the stream's rules are
 written once: the setpoints are generated from the sample index and kept ``lead`` samples ahead of the latest
 measured sample; a hold keeps the stream (the driver holds the rig) and a resume on a new grant continues the
-held block with the full cycles it had not run, counted from the last sample measured before the hold; the
+held block with the full cycles it had not run, counted from where the rig left the program (found in the applied
+command measured after the hold: the rig runs on through what was streamed ahead until the hold reaches it); the
 program has ended once its last setpoint was generated and measured. The session also carries the program's
 detectors (what they judge, since when they were blind). Time is the sample index: nothing here reads a clock.
 """
@@ -31,6 +32,10 @@ import numpy as np
 from ..excitation.detectors import Event, Monitor, blind_for, cycle_of
 from ..excitation.runner import ProgramRunner
 from ..excitation.streamer import SetpointChunk, SetpointStreamer
+
+#: applied command within this of the setpoint handed on [m]: the rig ran the program's sample (the feedback frames
+#: carry the command in 0.1 um steps; run_program's fault split uses the same bound)
+FOLLOW_TOLERANCE = 1.5e-7
 
 #: publish(first_sequence, displacement [m], block_index, end_of_stream): how a session hands setpoints on
 Publish = Callable[[int, object, int, bool], None]
@@ -49,6 +54,9 @@ class ProgramSession:
         self.end_sequence: Optional[int] = None   # sequence after the last setpoint of the finished runner
         self.held = False                 # the driver holds the stream; resume() opens it on a new grant
         self.held_at: Optional[int] = None   # sequence after the last sample measured before the hold
+        self.left_at: Optional[int] = None   # sequence after the last sample the rig ran on the program (held)
+        self._left_known = False          # left_at is where the applied command left the program (not a bound)
+        self._sent: list = []             # SetpointChunks handed on and not yet measured: (first, setpoints)
         self.elapsed_samples = 0          # program samples measured (rig time of the program, holds excluded)
         self.last_cycle_end = grant.first_sequence   # end of the latest judged cycle (detectors' blindness)
         self._open(grant)
@@ -94,14 +102,23 @@ class ProgramSession:
         """A batch of ``n`` samples from ``first_sequence`` lies wholly before this stream (not the program's)."""
         return first_sequence + n <= self.start_sequence
 
-    def measured(self, first_sequence: int, displacement) -> list[Event]:
+    def measured(self, first_sequence: int, displacement, setpoint=None) -> list[Event]:
         """A batch of measured samples [m] of this stream: to the amplitude control (not while held) and to the
         end-of-test triggers. Returns the detector events the batch trips.
+
+        setpoint: the command [m] the rig applied to each sample (RigSampleBatch.setpoint), shape (n,). While held
+        it tells where the rig left the program (its hold ramp's first sample, see ``left_at``); without it the
+        hold counts from the last sample measured before it.
         """
         n = len(displacement)
         self.next_sample = first_sequence + n
-        if not n or self.held:
+        if self.held:
+            if n and setpoint is not None and len(setpoint) == n:
+                self._follow(first_sequence, np.asarray(setpoint, dtype=float))
             return []
+        if not n:
+            return []
+        self._forget_sent(first_sequence + n)
         self.runner.feed_measurement(first_sequence, np.asarray(displacement, dtype=float))
         self.elapsed_samples += n
         if self.monitor is None:
@@ -119,14 +136,52 @@ class ProgramSession:
     @property
     def measured_to_end(self) -> bool:
         """Every setpoint of the finished program has been measured: the block summaries are complete."""
-        return self.end_sequence is not None and self.next_sample is not None and self.next_sample >= self.end_sequence
+        if self.end_sequence is None:
+            return False
+        if self.end_sequence <= self.start_sequence:
+            return True                    # resumed after the rig had run the whole program: nothing to measure
+        return self.next_sample is not None and self.next_sample >= self.end_sequence
 
     # -- the setpoints ------------------------------------------------------------------------------------------
     def due(self, measured: Optional[int] = None) -> Iterator[SetpointChunk]:
         """The chunks that bring the stream ``lead`` ahead of ``measured`` (default: measured_sequence); a
         generator, see SetpointStreamer.due.
         """
-        return self.streamer.due(self.measured_sequence if measured is None else measured)
+        for chunk in self.streamer.due(self.measured_sequence if measured is None else measured):
+            if chunk.displacement.size:
+                self._sent.append((chunk.first_sequence, chunk.displacement))
+            yield chunk
+
+    def _forget_sent(self, measured_to: int) -> None:
+        """Drop the chunks measured completely (below ``measured_to``): a hold looks only at what is ahead."""
+        keep = 0
+        while keep < len(self._sent) and self._sent[keep][0] + self._sent[keep][1].size <= measured_to:
+            keep += 1
+        if keep:
+            del self._sent[:keep]
+
+    def _sent_setpoint(self, sequence: int) -> Optional[float]:
+        for first, x in self._sent:
+            if first <= sequence < first + x.size:
+                return float(x[sequence - first])
+        return None
+
+    def _follow(self, first_sequence: int, applied: np.ndarray) -> None:
+        """Held: move ``left_at`` over the samples (contiguous with it) whose applied command is the setpoint this
+        session handed on, to the first one that is not (the hold ramp began there; the frames carry the
+        command to 0.1 um) or that was never sent. A gap in the measurement stops it (a lower bound: the cycles
+        it may miss are run again, never skipped).
+        """
+        if self._left_known or first_sequence > self.left_at:
+            self._left_known = self._left_known or first_sequence > self.left_at
+            return
+        for i in range(self.left_at - first_sequence, applied.size):
+            sent = self._sent_setpoint(first_sequence + i)
+            if sent is None or abs(applied[i] - sent) > FOLLOW_TOLERANCE:
+                self._left_known = True
+                return
+            self.left_at = first_sequence + i + 1
+            self.elapsed_samples += 1          # the rig ran this program sample after the hold was asked for
 
     def stream(self, publish: Publish) -> None:
         """Hand on what is due; the program's end once (an empty batch if its last setpoints went out before);
@@ -146,25 +201,49 @@ class ProgramSession:
 
     # -- hold and resume ---------------------------------------------------------------------------------------
     def why_not_hold(self) -> str:
-        """'' when the program can hold now, else why not."""
-        if self.held or self.runner.state != 'running':
-            return f'cannot hold: the program is {"held" if self.held else self.runner.state}'
+        """'' when the program can hold now, else why not: it runs, approaches its start, or its last setpoints
+        were generated but not yet all measured (the rig still runs what was streamed ahead).
+        """
+        r = self.runner
+        if self.held:
+            return 'cannot hold: the program is held'
+        if r.aborted or r.state not in ('running', 'approaching', 'finished'):
+            return f'cannot hold: the program is {r.state}'
+        if r.finished and self.measured_to_end:
+            return 'cannot hold: the program has ended'
         return ''
 
     def hold(self) -> None:
         """Hold at the block mean (runner.hold_target, what the driver is asked to hold the rig at)."""
         self.runner.hold()
-        self.held, self.held_at = True, self.next_sample
+        self.held, self.held_at = True, self.measured_sequence
+        self.left_at, self._left_known = self.held_at, False
 
     def resume(self, grant) -> None:
-        """Continue the held block on the stream of a new grant with the full cycles it had not run by the last
-        sample measured before the hold.
+        """Continue on the stream of a new grant from where the rig left the program (``left_at``): the block it
+        was in, with the full cycles that block had not finished (ProgramRunner.resume_at).
         """
         self._open(grant)
-        self.runner.resume_at(grant.first_sequence, grant.position, measured_sequence=self.held_at)
+        self.runner.resume_at(grant.first_sequence, grant.position, measured_sequence=self.left_at)
+        self._sent.clear()
+        # generated anew from the block the rig was in: the end is where the resumed runner finishes
+        self.end_sequence = grant.first_sequence if self.runner.finished else None
         self.last_cycle_end = grant.first_sequence     # the hold is not blindness
         if self.monitor is not None:
             self.monitor.rearm()
+
+    def describe_resume(self) -> str:
+        """One line for the log after resume(): where the rig had left the program and what runs now."""
+        r = self.runner
+        if r.finished:
+            return f'resumed after the rig had run the whole program (it left it at sample {self.left_at})'
+        b = r.block_index
+        blk = r.program.blocks[b]
+        done = r.cycles_before.get(b, 0)
+        owed = f', {blk.cycles} full cycles still owed of {blk.cycles + done}' if blk.periodic else ''
+        return (f"resumed block {b} '{blk.name}' on stream {self.stream_id} from sample {self.start_sequence}: the "
+                f'rig left the program at sample {self.left_at} ({self.left_at - self.held_at} samples after the '
+                f'last one measured when the hold was asked for){owed}')
 
     # -- detectors -------------------------------------------------------------------------------------------------
     def judge_cycle(self, start: int, end: int, amplitude: float, peak_amplitude: float, mean: float,

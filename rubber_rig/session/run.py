@@ -121,7 +121,7 @@ class ProgramRun:
         """The measured samples below sequence `upto` to the runner (a SampleBlock only once it is whole below)."""
         got, session = self.got, self.session
         while self.fed < len(got) and got[self.fed].first_sequence + len(got[self.fed]) <= upto:
-            session.measured(got[self.fed].first_sequence, got[self.fed].displacement)
+            session.measured(got[self.fed].first_sequence, got[self.fed].displacement, got[self.fed].setpoint)
             self.fed += 1
 
     def _between_chunks(self) -> None:
