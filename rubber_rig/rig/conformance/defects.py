@@ -31,6 +31,8 @@ DEFECTS = {
     'wrong_fault_bit': (('CTRL-FAULT-1',), 'reports host silence with the controller fault bit instead of watchdog'),
     'slow_ramp': (('CTRL-RAMP-1',), 'ramps to rest at a fifth of the commanded ramp velocity'),
     'buffer_in_frames': (('CTRL-ST-4',), 'reports ST_BufferLevel in setpoint frames queued instead of setpoints'),
+    'no_heartbeat': (('CTRL-HB-1', 'CTRL-HB-2'), 'never sends ControllerHeartbeat (status, identity and feedback '
+                     'as specified): a host must refuse to stream to it'),
 }
 
 

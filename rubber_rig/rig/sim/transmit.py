@@ -82,6 +82,8 @@ class ControllerTransmit:
         return len(self.buffer)
 
     def _send_heartbeat(self, code: int):
+        if 'no_heartbeat' in self.defects:     # a controller whose firmware never sends its heartbeat
+            return
         self._hb = (self._hb + 1) % 256
         self._send('ControllerHeartbeat', {'HB_Counter': self._hb, 'HB_State': code})
 
