@@ -23,6 +23,7 @@ import collections
 import math
 
 from ...safety import abort_ramp_velocity
+from .liveness import ControllerLiveness, silence_limits
 from .protocol import (
     CMD_HOLD,
     FAULT_BUS,
@@ -36,7 +37,6 @@ from .protocol import (
     fault_names,
     unwrap,
 )
-from .liveness import ControllerLiveness, silence_limits
 from .sensor_check import SensorCheck
 from .stream import DriverStatus
 
