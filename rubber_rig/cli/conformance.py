@@ -22,7 +22,8 @@ Offline, from a raw CAN log recorded on a rig (what a log can show: periods, cou
 timing, continuity, sequence width, the host's duties):
   rubber-rig conformance --log run.blf --rate 1000Hz
 Exit status: 0 every requirement checked passed, 1 a requirement failed, 2 usage error or refusal, 3 the run
-left the envelope and was aborted.
+left the envelope and was aborted, 4 (online) nothing failed but the run is incomplete: a requirement was not
+tested (e.g. CTRL-PWR-1 without --power-up). Offline, requirements a log does not show are listed, not failed.
 """
 import datetime
 import hashlib
@@ -43,7 +44,7 @@ from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.link import Aborted, Envelope
 from rubber_rig.rig.conformance.passive import check_offline
-from rubber_rig.rig.conformance.report import to_junit, to_markdown
+from rubber_rig.rig.conformance.report import NOT_TESTED, to_junit, to_markdown
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
 from rubber_rig.rig.conformance.trace import read_log
 from rubber_rig.settings import describe_violation, described
@@ -51,7 +52,7 @@ from rubber_rig.units import to_si
 
 from .main import CommandError
 
-EXIT_FAIL, EXIT_ABORTED = 1, 3
+EXIT_FAIL, EXIT_ABORTED, EXIT_INCOMPLETE = 1, 3, 4
 
 
 def add_arguments(parser):
@@ -223,7 +224,13 @@ def run(args) -> int:
              'host requirements (HOST-*) are checked offline on a log written by the driver']
     if conf.deviation:
         facts.append(f'ABORTED: {conf.deviation}')
+    untested = [r.id for r in results.ordered() if r.status == NOT_TESTED]
+    if untested and results.passed and not conf.deviation:
+        facts.append(f'INCOMPLETE: {len(untested)} requirements not tested ({", ".join(untested)}): this run does '
+                     'not show the controller conforms')
     _write(args, results, 'rubber_rig protocol conformance', facts, time.monotonic() - t0)
     if conf.deviation:
         return EXIT_ABORTED
-    return EXIT_FAIL if not results.passed else 0
+    if not results.passed:
+        return EXIT_FAIL
+    return EXIT_INCOMPLETE if untested else 0

@@ -39,16 +39,20 @@ from .link import (
     LSB,
     RAMP_VELOCITY,
     REST_TIMEOUT,
+    TOO_FAST_FACTOR,
     WAVE_FREQUENCY,
     Aborted,
     ConformanceLink,
+    judges,
 )
 from .report import FAIL, NOT_TESTED, PASS
+from .shape import ramp_shape
 
 
 class StreamScenarios(ConformanceLink):
     """The scenarios of normal operation and its commands."""
 
+    @judges('CTRL-PWR-1')
     def s_power_up(self):
         """Power-up (CTRL-PWR-1)."""
         self.power_up()
@@ -71,6 +75,7 @@ class StreamScenarios(ConformanceLink):
                          f'{len(faults)} status frames with faults, {len(ticking)} feedback frames',
                          '' if ok else 'at power-up the controller must identify itself, idle, at rest, unfaulted')
 
+    @judges()
     def s_listen(self):
         """Listen 1.5 s to the idle controller."""
         self._sleep(1.5)
@@ -78,13 +83,15 @@ class StreamScenarios(ConformanceLink):
             raise Aborted(f'the controller is {self.state}, not at rest: conformance starts from rest')
         self.to_rest()
 
+    @judges('CTRL-ID-1', 'CTRL-ID-3')
     def s_identify(self):
-        """IDENTIFY (CTRL-ID-1)."""
+        """IDENTIFY (CTRL-ID-1, CTRL-ID-3)."""
         t = time.time()
         self.command(CMD_IDENTIFY)
         got = self._wait(lambda: self.identity is not None and self.identity[0] >= t, 1.0)
         if not got:
             self.results.put('CTRL-ID-1', FAIL, 'no ControllerIdentity within 1 s of IDENTIFY', '')
+            self.results.put('CTRL-ID-3', FAIL, 'no ControllerIdentity', 'no rated velocity stated')
             return
         at, sig = self.identity
         latency = at - t
@@ -95,6 +102,19 @@ class StreamScenarios(ConformanceLink):
                          f'0x{int(sig["CI_Device"]):04x}, firmware {int(sig["CI_Firmware"])}, host timeout '
                          f'{float(sig["CI_HostTimeout"]):g} s, rated velocity {float(sig["CI_VelocityMax"]):g} m/s',
                          '' if ok else f'expected protocol {PROTOCOL_VERSION} within {IDENTIFY_TIMEOUT * 1e3:.0f} ms')
+        self._judge_rated_velocity(float(sig['CI_VelocityMax']))
+
+    def _judge_rated_velocity(self, stated: float):
+        """CTRL-ID-3: a rated velocity above 0 and at most the envelope's bound is taken as stated; any other is
+        flagged here, and CTRL-LIM-3 is tested at the envelope's value instead (s_too_fast).
+        """
+        bound = self.env.velocity_max
+        ok = 0.0 < stated <= bound
+        self.results.put('CTRL-ID-3', PASS if ok else FAIL,
+                         f'CI_VelocityMax {stated:g} m/s (plausible: above 0, at most {bound:g} m/s, the envelope '
+                         'bound)', '' if ok else f'an implausible rated velocity (0, wrong scale or byte order?): '
+                         f'CTRL-LIM-3 is tested at the envelope value '
+                         f'{self.env.test_velocity(self.fs, TOO_FAST_FACTOR):g} m/s instead')
 
     @property
     def host_timeout(self) -> float:
@@ -102,6 +122,7 @@ class StreamScenarios(ConformanceLink):
             return float(self.identity[1]['CI_HostTimeout'])
         return DEFAULT_HOST_TIMEOUT
 
+    @judges('CTRL-STREAM-1', 'CTRL-STREAM-3', 'CTRL-STREAM-4', 'CTRL-ST-4', 'CTRL-RAMP-1')
     def s_stream(self):
         """Stream, underrun, resume, underrun, ABORT (CTRL-STREAM-1/3/4, CTRL-ST-4, CTRL-RAMP-1)."""
         self.limits(self.env.lower, self.env.upper)
@@ -194,21 +215,21 @@ class StreamScenarios(ConformanceLink):
             self.results.put('CTRL-RAMP-1', FAIL, f'state {self.state} after {REST_TIMEOUT:g} s', 'no ramp to rest')
             return
         u = [p0] + [s.u for s in ramp]
-        steps = [abs(b - a) * self.fs for a, b in zip(u, u[1:], strict=False)]
         moving = [s for s, a, b in zip(ramp, u, u[1:], strict=False) if abs(b - a) > 0.5 * LSB]
         duration = (moving[-1].seq - ramp[0].seq + 1) / self.fs if moving else 0.0
         allowed = 1.5 * abs(target - p0) / RAMP_VELOCITY + 0.1
-        vmax = max(steps)
-        ok = (abs(u[-1] - target) <= 1e-6 and vmax <= RAMP_VELOCITY * 1.05 + 2 * LSB * self.fs
-              and duration <= allowed and not self.faults and self.state == 'idle')
+        shape = ramp_shape(u, self.fs, target, RAMP_VELOCITY)     # from holding: no inherited motion
+        ok = (abs(u[-1] - target) <= 1e-6 and shape.ok and duration <= allowed and not self.faults
+              and self.state == 'idle')
         self.results.put('CTRL-RAMP-1', PASS if ok else FAIL,
                          f'{p0 * 1e3:.4f} -> {u[-1] * 1e3:.4f} mm (target {target * 1e3:.4f}) in {duration:.3f} s '
-                         f'(at most {allowed:.3f} s), peak {vmax * 1e3:.2f} mm/s (commanded {RAMP_VELOCITY * 1e3:g}), '
+                         f'(at most {allowed:.3f} s) at {RAMP_VELOCITY * 1e3:g} mm/s commanded: {shape.describe()}, '
                          f'state {self.state}',
-                         '' if ok else 'the ramp must reach its target at the commanded velocity without a step and '
-                         'end idle')
+                         '' if ok else shape.why() or 'the ramp must reach its target at the commanded velocity '
+                         'without a step and end idle')
         self.to_rest()
 
+    @judges('CTRL-STREAM-2')
     def s_stale(self):
         """Setpoints of the old stream after the ramp, without HostStreamStart (CTRL-STREAM-2)."""
         t = time.time()
@@ -225,6 +246,7 @@ class StreamScenarios(ConformanceLink):
                          '' if ok else 'a controller at rest must take no setpoint before the next HostStreamStart')
         self.to_rest(self.position)
 
+    @judges('CTRL-RAMP-2')
     def s_hold(self):
         """HOLD while moving (CTRL-RAMP-2)."""
         a = 0.4 * self.env.half
@@ -255,12 +277,14 @@ class StreamScenarios(ConformanceLink):
         ok = done and still and max(acc, default=0) <= decel * 1.1 + 4 * LSB * self.fs ** 2 and not self.faults \
             and self.state == 'idle'
         self.results.put('CTRL-RAMP-2', PASS if ok else FAIL,
-                         f'from {peak_v * 1e3:.2f} mm/s to a stop at {u[-1] * 1e3:.4f} mm in {len(after)} samples, '
+                         f'from {peak_v * 1e3:.2f} mm/s to a stop at {(u[-1] if u else math.nan) * 1e3:.4f} mm in '
+                         f'{len(after)} samples, '
                          f'peak deceleration {max(acc, default=0):.1f} m/s^2 (HostLimits {decel:g}), '
                          f'state {self.state}',
                          '' if ok else 'HOLD must brake to a stop without a step and end idle without a fault')
         self.to_rest(self.position)
 
+    @judges('CTRL-RESET-1')
     def s_reset_moving(self):
         """RESET while running (CTRL-RESET-1)."""
         a = 0.4 * self.env.half

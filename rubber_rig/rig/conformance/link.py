@@ -47,18 +47,36 @@ DEFAULT_HOST_TIMEOUT = 0.5  # [s] assumed when the controller states none
 BUFFER_IN_FLIGHT = 0.05     # [s] setpoints sent this recently may not be counted in ST_BufferLevel yet
 BUFFER_OUTLIERS = 0.02      # share of status frames whose level may be off (a controller busy for a moment)
 REST_TIMEOUT = 15.0         # [s] longest wait for the controller to come to rest
+TOO_FAST_FACTOR = 1.5       # CTRL-LIM-3 steps at this multiple of the rated velocity in one sample
+LATCH_TIME = 3.0            # [s] a fault must stay latched this long without RESET (CTRL-FAULT-2)
+PLAUSIBLE_VELOCITY = 1.0    # [m/s] default bound of a plausible rated velocity (Envelope.velocity_max)
 
 
 class Aborted(RuntimeError):
     """The run left the operator's envelope (or could not continue safely): ABORT was commanded."""
 
 
+def judges(*requirement_ids):
+    """Decorator of a scenario: the requirements it judges. A scenario that fails on its own (an exception other
+    than Aborted, e.g. a controller that does not do what the scenario needs) fails those it had not judged yet,
+    with the reason (active.ConformanceRun.run), and the run goes on.
+    """
+    def mark(scenario):
+        scenario.requirements = tuple(requirement_ids)
+        return scenario
+    return mark
+
+
 @dataclass
 class Envelope:
-    """The displacement range [m] the operator allows the run to use: lower < 0 < upper."""
+    """The displacement range [m] the operator allows the run to use: lower < 0 < upper; velocity_max [m/s]: the
+    most a rated velocity stated by the controller may be to be taken as stated (CTRL-ID-3; above it the rating
+    is implausible and CTRL-LIM-3 is tested at the envelope's own value, test_velocity).
+    """
 
     lower: float
     upper: float
+    velocity_max: float = PLAUSIBLE_VELOCITY
 
     def __post_init__(self):
         if not (math.isfinite(self.lower) and math.isfinite(self.upper) and self.lower < 0.0 < self.upper):
@@ -68,6 +86,12 @@ class Envelope:
     @property
     def half(self) -> float:
         return min(-self.lower, self.upper)
+
+    def test_velocity(self, fs: float, step_factor: float) -> float:
+        """The rated velocity [m/s] CTRL-LIM-3 tests when the stated one is implausible: velocity_max, or less if
+        a step of step_factor x it in one sample at fs [Hz] would not fit in 80 % of the envelope from rest.
+        """
+        return min(self.velocity_max, 0.8 * self.half * fs / step_factor)
 
 
 @dataclass
@@ -102,6 +126,7 @@ class ConformanceLink:
         self.sent_log = []          # (t send called, t logged, first, count) per valid setpoint frame sent
         self.sent_at = {}           # sequence -> time its setpoint was sent
         self.deviation = ''
+        self.tracking_allowance = 0.0   # [m] tracking error tolerated beyond a third of the envelope (a test step)
         self.heartbeat = False
         self._fb_ref = 0
         self._hb_counter = 0
@@ -191,7 +216,7 @@ class ConformanceLink:
             why = f'applied command {u * 1e3:.4f} mm at sample {seq} outside the envelope'
         elif not self.env.lower - margin <= x <= self.env.upper + margin:
             why = f'measured displacement {x * 1e3:.4f} mm at sample {seq} outside the envelope'
-        elif abs(x - u) > self.env.half / 3:
+        elif abs(x - u) > self.env.half / 3 + self.tracking_allowance:
             why = f'tracking error {abs(x - u) * 1e3:.4f} mm at sample {seq}'
         if why:
             self.deviation = why

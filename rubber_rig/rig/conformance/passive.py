@@ -33,7 +33,8 @@ PERIOD_TOLERANCE = 0.10   # the median interval within +-10 % of the DBC cycle t
 GAP_FACTOR = 2.0          # 99 % of the intervals at most twice the cycle time (the host watchdog's margin)
 RATE_TOLERANCE = 0.005    # feedback sample rate within +-0.5 % of the configured rate
 JITTER_MAX = 2e-3         # [s] 99th minus 1st percentile of the feedback arrival delays
-RUN_BREAK = 0.05          # [s] feedback silent this long ends a run (the controller stopped ticking)
+RUN_BREAK = 0.05          # [s] a status this much older than the feedback tells nothing of it (CTRL-ST-3)
+STALL_MAX = 0.05          # [s] feedback silent this long while the controller ticks is a stall (CTRL-FB-2)
 STATUS_LEAD = 0.01        # [s] how far ST_LastSequence may be ahead of the feedback received
 STATE_TICKING = {STATES.index(s) for s in ('running', 'holding', 'ramping_down')}
 NARROW = 1 << 16          # the width a 32-bit sequence must not wrap at
@@ -45,10 +46,16 @@ TRANSITIONS = {('unconfigured', 'idle'), ('idle', 'running'), ('running', 'holdi
 
 @dataclass
 class FeedbackRun:
-    """Feedback frames of one stretch of ticking: arrival time and full sequence of each frame's newest sample."""
+    """Feedback frames of one stretch of ticking (from a status of a ticking state to one of a state that takes
+    no tick): arrival time, full sequence of each frame's newest sample and its sample count. Silence inside a
+    run never starts a new one: continuity is judged across stalls of any length, and the longest stall is kept.
+    """
 
     t: list = field(default_factory=list)
     last: list = field(default_factory=list)
+    count: list = field(default_factory=list)
+    longest_stall: float = 0.0
+    stall_at: int = 0       # sequence of the first sample after the longest stall
     next: int = 0
     offset: int = 0
     gaps: int = 0
@@ -60,7 +67,12 @@ class FeedbackRun:
 
 
 def feedback_runs(trace: Trace) -> list:
-    """The controller's feedback frames grouped into runs, sequences unwrapped and checked for continuity."""
+    """The controller's feedback frames grouped into runs, sequences unwrapped and checked for continuity.
+
+    A run ends only where a status frame reports a state that takes no tick (idle, fault, unconfigured): the next
+    stream may then start anywhere. A silence of any length while ticking stays inside the run, so samples lost
+    across it are counted (a run split at every pause would hide them).
+    """
     runs, cur, prev_raw = [], None, None
     for f in trace.frames:
         if f.host is False and f.name == 'ControllerStatus' and not f.malformed \
@@ -71,10 +83,13 @@ def feedback_runs(trace: Trace) -> list:
             continue
         raw, xs = int(f.samples[0]), f.samples[1]
         n, mod = len(xs), trace.modulus[f.name]
-        if cur is None or f.t - cur.t[-1] > RUN_BREAK:
+        if cur is None:
             cur = FeedbackRun(next=raw)
             runs.append(cur)
             prev_raw = raw
+        elif f.t - cur.t[-1] > cur.longest_stall:
+            cur.longest_stall = f.t - cur.t[-1]
+            cur.stall_at = -1          # set below, once the frame's sequence is unwrapped
         full_raw = unwrap(raw, prev_raw, mod)
         if raw < prev_raw % mod and full_raw > prev_raw:
             cur.field_wraps += 1
@@ -92,19 +107,46 @@ def feedback_runs(trace: Trace) -> list:
         if full // NARROW != (full + n - 1) // NARROW or (full % NARROW == 0 and cur.t and full == cur.next):
             cur.crossings += 1
         prev_raw = full_raw
+        if cur.stall_at == -1:
+            cur.stall_at = full
         cur.next = max(cur.next, full + n)
         cur.t.append(f.t)
         cur.last.append(full + n - 1)
+        cur.count.append(n)
     return runs
 
 
+ABSENT_PERIODS = 5        # a trace of the controller this many periods long must hold its periodic frames
+
+
+def controller_span(trace: Trace) -> float:
+    """Time [s] from the controller's first well-formed frame to its last (0 without one)."""
+    t = [f.t for f in trace.frames if f.host is False and not f.malformed]
+    return t[-1] - t[0] if t else 0.0
+
+
+def _absent(trace: Trace, name: str, count: int) -> str:
+    """Why `count` frames called `name` fail their requirement ('' when the trace is too short to say): a
+    controller heard for ABSENT_PERIODS of the frame's periods must have sent it (a silence is no pass).
+    """
+    span, period = controller_span(trace), cycle_time(name)
+    if span < ABSENT_PERIODS * period:
+        return ''
+    return (f'{count} {name} frames in {span:.3f} s of controller traffic (specified every '
+            f'{period * 1e3:.0f} ms)')
+
+
 def check_periodic(trace: Trace, results: Results):
-    """CTRL-HB-1, CTRL-ST-1, CTRL-TEMP-1, CTRL-ID-2: each periodic frame at its DBC cycle time."""
+    """CTRL-HB-1, CTRL-ST-1, CTRL-TEMP-1, CTRL-ID-2: each periodic frame at its DBC cycle time; absent from a
+    trace of the controller long enough to hold ABSENT_PERIODS of its periods, it fails.
+    """
     for name, rid in PERIODIC.items():
         period = cycle_time(name)
         t = np.array([f.t for f in trace.valid(name) if f.host is False])
         if t.size < 5:
-            results.put(rid, NOT_TESTED, f'{t.size} frames', f'fewer than 5 {name} frames in the trace')
+            absent = _absent(trace, name, t.size)
+            results.put(rid, FAIL if absent else NOT_TESTED, f'{t.size} frames',
+                        absent or f'fewer than 5 {name} frames in the trace')
             continue
         dt = np.diff(t)
         med, p99, longest = float(np.median(dt)), float(np.percentile(dt, 99)), float(dt.max())
@@ -126,7 +168,10 @@ def check_counters(trace: Trace, results: Results):
     for rid, frames, counter, modulus in (('CTRL-ST-2', status, 'ST_Counter', 16),
                                           ('CTRL-HB-2', hb, 'HB_Counter', 256)):
         if len(frames) < 2:
-            results.put(rid, NOT_TESTED, f'{len(frames)} frames', 'too few frames in the trace')
+            absent = _absent(trace, 'ControllerStatus' if rid == 'CTRL-ST-2' else 'ControllerHeartbeat',
+                             len(frames))
+            results.put(rid, FAIL if absent else NOT_TESTED, f'{len(frames)} frames',
+                        f'no counter to judge: {absent}' if absent else 'too few frames in the trace')
             continue
         c = np.array([int(f.signals[counter]) for f in frames])
         skips = int(np.count_nonzero((np.diff(c) - 1) % modulus))
@@ -206,11 +251,12 @@ def check_feedback(trace: Trace, results: Results, runs: list = None):
     for r in runs:
         if len(r.t) < 100 or r.t[-1] - r.t[0] < 0.5:
             continue
-        seq, t = np.asarray(r.last, dtype=float), np.asarray(r.t)
+        seq, t = _every_sample(r)
         slope, icpt = np.polyfit(seq - seq[0], t, 1)
         resid = t - (icpt + slope * (seq - seq[0]))
         rates.append(1.0 / slope)
         spreads.append(float(np.percentile(resid, 99) - np.percentile(resid, 1)))
+    stall = max(runs, key=lambda r: r.longest_stall)
     if not rates:
         for rid in ('CTRL-FB-1', 'CTRL-FB-2'):
             results.put(rid, NOT_TESTED, '', 'no feedback run of 0.5 s or more')
@@ -220,9 +266,25 @@ def check_feedback(trace: Trace, results: Results, runs: list = None):
     results.put('CTRL-FB-1', PASS if ok else FAIL, f'{len(rates)} runs, rate {min(rates):.2f}..{max(rates):.2f} Hz '
                 f'(configured {fs:g} Hz)', '' if ok else f'off by more than {RATE_TOLERANCE * 100:g} %')
     spread = max(spreads)
-    ok = spread <= JITTER_MAX
-    results.put('CTRL-FB-2', PASS if ok else FAIL, f'arrival jitter (99th - 1st percentile) {spread * 1e3:.2f} ms '
-                f'(worst of {len(spreads)} runs)', '' if ok else f'more than {JITTER_MAX * 1e3:g} ms')
+    stalled = stall.longest_stall > STALL_MAX
+    ok = spread <= JITTER_MAX and not stalled
+    why = [f'jitter more than {JITTER_MAX * 1e3:g} ms'] if spread > JITTER_MAX else []
+    if stalled:
+        why.append(f'feedback stalled {stall.longest_stall * 1e3:.1f} ms before sample {stall.stall_at} while '
+                   f'ticking (at most {STALL_MAX * 1e3:g} ms)')
+    results.put('CTRL-FB-2', PASS if ok else FAIL, f'arrival jitter of every sample (99th - 1st percentile) '
+                f'{spread * 1e3:.2f} ms (worst of {len(spreads)} runs), longest silence while ticking '
+                f'{stall.longest_stall * 1e3:.1f} ms', '; '.join(why))
+
+
+def _every_sample(run: FeedbackRun) -> tuple:
+    """(sequence, arrival time [s]) of every sample of a run: each sample of a frame that packs several arrives
+    with its frame, so a controller that gathers samples into late frames shows their latency.
+    """
+    count = np.asarray(run.count)
+    last = np.repeat(np.asarray(run.last, dtype=float), count)
+    back = np.concatenate([np.arange(n - 1, -1, -1) for n in run.count]) if len(count) else np.empty(0)
+    return last - back, np.repeat(np.asarray(run.t), count)
 
 
 def check_status_sequence(trace: Trace, results: Results):

@@ -43,6 +43,7 @@ REQUIREMENTS = (
     Requirement('CTRL-FRAME-3', 'unknown identifiers, extended and remote frames are ignored'),
     Requirement('CTRL-ID-1', 'IDENTIFY is answered within 100 ms with the DBC protocol version'),
     Requirement('CTRL-ID-2', 'ControllerIdentity every 1000 ms', True),
+    Requirement('CTRL-ID-3', 'the rated velocity stated is plausible: above 0, at most the envelope bound'),
     Requirement('CTRL-HB-1', 'ControllerHeartbeat every 50 ms', True),
     Requirement('CTRL-HB-2', 'heartbeat counter steps by one; HB_State is the current state', True),
     Requirement('CTRL-ST-1', 'ControllerStatus every 10 ms', True),

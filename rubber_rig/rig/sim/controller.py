@@ -90,6 +90,8 @@ class SimController(ControllerReceive, ControllerTransmit):
         self.buffer = {}                  # seq -> setpoint [m]
         self.u = self.u_prev = 0.0        # applied command [m]
         self.ramp = None
+        self._ramp_then = None            # defect fault_ramp_overshoot: the target after the ramp past it
+        self._fault_since = None          # defect fault_clears_after_500ms: when the fault state began (wall)
         self.last_host_hb = 0
         # the host's limits for the controller's own ramps (HostLimits frame); until then: no bounds
         self.lower, self.upper, self.decel_max = -math.inf, math.inf, DECEL_MAX
@@ -173,6 +175,8 @@ class SimController(ControllerReceive, ControllerTransmit):
                     deadline = None
                     if self._idle_since is None and self.ticks:
                         self._idle_since = now
+                    if 'fault_clears_after_500ms' in self.defects:
+                        self._clear_fault_by_itself(now)
                     if now >= next_idle_hk:
                         self._idle_housekeeping(now)
                         next_idle_hk = max(next_idle_hk + IDLE_PERIOD, now)
@@ -188,6 +192,16 @@ class SimController(ControllerReceive, ControllerTransmit):
                     msg = self.bus.recv(0)
                 self._catch_up()   # ticks only as far as setpoints are queued (or while ramping down)
                 self._send_feedback()
+
+    def _clear_fault_by_itself(self, now: float):
+        """Defect fault_clears_after_500ms: a fault that goes back to idle 0.5 s after it began, without RESET."""
+        if self.state != 'fault':
+            self._fault_since = None
+        elif self._fault_since is None:
+            self._fault_since = now
+        elif now - self._fault_since > 0.5:
+            self.fault_bits, self.state, self._fault_since = 0, 'idle', None
+            self._housekeeping(force=True)
 
     def pump(self):
         """Fast mode without a thread: handle every frame waiting on the bus and tick as far as the queued
@@ -242,7 +256,14 @@ class SimController(ControllerReceive, ControllerTransmit):
             velocity = min(velocity_max or RAMP_VELOCITY, RAMP_VELOCITY)
             if 'slow_ramp' in self.defects:
                 velocity /= 5.0
-            self.ramp = SafeRamp(self.u, v, target, self.fs,
+            x0, self._ramp_then = self.u, None
+            away = target - self.u
+            if fault_bits and abs(away) > 1e-6:      # the controller's own (fault, host silence) ramps
+                if 'fault_ramp_step' in self.defects:    # starts with a step of up to 0.25 mm
+                    x0, v = self.u + math.copysign(min(0.25e-3, abs(away)), away), 0.0
+                if 'fault_ramp_overshoot' in self.defects:   # passes its target by 0.2 mm, then comes back
+                    self._ramp_then, target = target, target + math.copysign(0.2e-3, away)
+            self.ramp = SafeRamp(x0, v, target, self.fs,
                                  velocity_max=velocity,
                                  accel_max=RAMP_ACCEL, decel_max=self.decel_max, lower=self.lower, upper=self.upper)
             self.state = 'ramping_down'
@@ -338,6 +359,11 @@ class SimController(ControllerReceive, ControllerTransmit):
                              [u])
         self.next_seq += 1
         self.ticks += 1
+        if self.state == 'ramping_down' and self.ramp.done and self._ramp_then is not None:
+            # defect fault_ramp_overshoot: back from past the target
+            self.ramp = SafeRamp(self.u, 0.0, self._ramp_then, self.fs, accel_max=RAMP_ACCEL,
+                                 decel_max=self.decel_max, lower=self.lower, upper=self.upper)
+            self._ramp_then = None
         if self.state == 'ramping_down' and self.ramp.done:
             self._send_feedback()
             self.accept_from = math.inf

@@ -55,7 +55,9 @@ class ControllerReceive:
         elif name == 'HostLimits' and 'ignore_host_limits' not in self.defects:   # CTRL-LIM-1
             lo, hi = float(sig['HL_DisplacementMin']), float(sig['HL_DisplacementMax'])
             if lo < hi:
-                self.lower, self.upper = lo, hi
+                # defect ignore_lower_limit: only the upper bound is kept (the downward direction never checked)
+                self.lower = -math.inf if 'ignore_lower_limit' in self.defects else lo
+                self.upper = hi
                 self.decel_max = float(sig['HL_Deceleration']) or DECEL_MAX
         elif name == 'HostCommand':
             code = int(sig['CMD_Code'])
@@ -116,7 +118,10 @@ class ControllerReceive:
             if not self.lower - tol <= value <= self.upper + tol:
                 self.abort(0.0, FAULT_DISPLACEMENT_LIMIT)
                 return True
-            if prev is not None and abs(value - prev) > step_max:
+            step = value - prev if prev is not None else 0.0
+            if 'velocity_check_upward_only' not in self.defects:
+                step = abs(step)
+            if step > step_max:
                 self.abort(0.0, FAULT_VELOCITY_LIMIT)
                 return True
             prev = value
