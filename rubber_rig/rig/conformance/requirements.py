@@ -73,5 +73,7 @@ REQUIREMENTS = (
     Requirement('HOST-LIM-1', 'HostLimits before the first setpoint', True),
     Requirement('HOST-STREAM-1', 'HostStreamStart before the first setpoint of every stream', True),
     Requirement('HOST-ID-1', 'IDENTIFY at start; no stream to a controller of another protocol version'),
+    Requirement('HOST-WD-1', 'no stream before heartbeat, status and identity are heard; silence of any of them '
+                'faults'),
 )
 BY_ID = {r.id: r for r in REQUIREMENTS}
