@@ -31,6 +31,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 
 import can
@@ -184,7 +185,11 @@ def run(args) -> int:
         print('rubber-rig conformance: not confirmed: nothing was sent', file=sys.stderr)
         return 2
     box = {}
-    sim_command = [sys.executable, '-m', 'rubber_rig.rig.sim', '--config-json', json.dumps(cfg.to_dict())]
+    # the simulator runs on this host: its missed deadlines are this host's lateness, not the controller's
+    timing_dir = tempfile.TemporaryDirectory(prefix='rubber_rig_conformance_') if args.sim else None
+    timing_files = [os.path.join(timing_dir.name, 'sim_late.txt')] if timing_dir else []
+    sim_command = [sys.executable, '-m', 'rubber_rig.rig.sim', '--config-json', json.dumps(cfg.to_dict()),
+                   *(['--timing-log', timing_files[0]] if timing_files else [])]
 
     def start_sim():
         box['process'] = subprocess.Popen(sim_command, stdout=subprocess.DEVNULL)
@@ -203,7 +208,8 @@ def run(args) -> int:
     t0 = time.monotonic()
     try:
         conf = ConformanceRun(bus, cfg.sample_rate, Envelope(args.lower, args.upper), cfg.frame_profile,
-                              log=lambda text: print(text, file=sys.stderr, flush=True), power_up=power_up)
+                              log=lambda text: print(text, file=sys.stderr, flush=True), power_up=power_up,
+                              host_timing_files=timing_files)
         results = conf.run()
         if args.can_log:
             conf.trace_to_log(args.can_log)
@@ -215,6 +221,8 @@ def run(args) -> int:
         if 'process' in box:
             box['process'].terminate()
             box['process'].wait(timeout=10)
+        if timing_dir is not None:
+            timing_dir.cleanup()
     ident = conf.identity[1] if conf.identity else None
     facts = [f'bus {cfg.backend} {cfg.channel or ""}, {cfg.frame_profile} frames, {cfg.sample_rate:g} Hz',
              f'envelope {args.lower * 1e3:g} .. {args.upper * 1e3:g} mm (stated by the operator)',
@@ -222,6 +230,12 @@ def run(args) -> int:
                                f"protocol {int(ident['CI_Protocol'])}" if ident else 'did not identify itself')
              + (f" (simulated, defects: {', '.join(args.defect) or 'none'})" if args.sim else ''),
              'host requirements (HOST-*) are checked offline on a log written by the driver']
+    late = [b - a for a, b in conf.host_timing.windows]
+    facts.append(f'host timing: this host ran late {len(late)} times by 10 ms or more'
+                 + (f', longest {max(late) * 1e3:.0f} ms' if late else '')
+                 + (' (its receive loop, its heartbeat and the simulator it ran)' if args.sim else
+                    ' (its receive loop and heartbeat)')
+                 + '; a timing requirement violated only then is not judged')
     if conf.deviation:
         facts.append(f'ABORTED: {conf.deviation}')
     untested = [r.id for r in results.ordered() if r.status == NOT_TESTED]

@@ -77,6 +77,7 @@ class ConformanceRun(StreamScenarios, FaultScenarios):
             time.sleep(0.1)
             self._stop.set()
             self._rx.join(timeout=2.0)
+        self.merge_host_timing()
         if not self.deviation:
             passive = check_offline(self.trace)
             for rid, r in passive.items():

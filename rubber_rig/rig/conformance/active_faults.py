@@ -33,6 +33,7 @@ from ..can.protocol import (
     fault_names,
     unwrap,
 )
+from .host_timing import late_between, not_judged
 from .link import (
     LATCH_TIME,
     LEAD,
@@ -311,6 +312,16 @@ class FaultScenarios(ConformanceLink):
         rest = self.position
         shape = self._own_ramp_shape(self._samples_since(t_silent), 0.0)
         ok = delay <= timeout + 0.1 and abs(rest) <= 1e-6 and self.state == 'fault' and bool(faults) and shape.ok
+        self.merge_host_timing()
+        late = late_between(self.trace.host_late, t_silent, t_ramp)
+        if delay > timeout + 0.1 and late and abs(rest) <= 1e-6 and shape.ok and bool(faults):
+            # late only where this host was late: the controller's watchdog cannot be judged by it
+            self.results.put('CTRL-WD-1', NOT_TESTED, f'ramp began {delay:.3f} s after the last HostHeartbeat '
+                             f'(stated host timeout {timeout:g} s), rest at {rest * 1e3:.4f} mm, faults '
+                             f'{fault_names(faults)}', not_judged(late, 'between the last heartbeat and the ramp'))
+            self._judge_fault_bits('host silence', faults, FAULT_WATCHDOG)
+            self.to_rest(0.0)
+            return
         self.results.put('CTRL-WD-1', PASS if ok else FAIL,
                          f'ramp began {delay:.3f} s after the last HostHeartbeat (stated host timeout {timeout:g} s), '
                          f'rest at {rest * 1e3:.4f} mm, state {self.state}, faults {fault_names(faults)}; ramp: '

@@ -35,6 +35,7 @@ from ..can.protocol import (
     cycle_time,
     unwrap,
 )
+from .host_timing import HostTiming
 from .report import Results
 from .trace import Trace
 
@@ -109,7 +110,7 @@ class ConformanceLink:
     """
 
     def __init__(self, bus: can.BusABC, sample_rate: float, envelope: Envelope, profile: str = 'packed',
-                 log=print, power_up=None):
+                 log=print, power_up=None, host_timing_files=()):
         self.bus, self.fs, self.env, self.log = bus, float(sample_rate), envelope, log
         # power_up: callable that switches the controller on (or asks the operator to) once the run listens;
         # None: the controller is already on and CTRL-PWR-1 is not tested
@@ -117,6 +118,11 @@ class ConformanceLink:
         self.proto = Protocol()
         self.frames = SampleFrames(profile, self.proto.db, self.fs)
         self.trace = Trace(self.fs)
+        # this host's own lateness (host_timing): the receive loop and the heartbeat sender record theirs; files
+        # of other processes of this host (the simulator with --sim) are merged in before a timing verdict
+        self.host_timing = HostTiming()
+        self.trace.host_late = self.host_timing.windows
+        self.host_timing_files = tuple(host_timing_files)
         self.results = Results()
         self.lock = threading.RLock()
         self.state, self.faults, self.identity = 'unconfigured', 0, None
@@ -173,12 +179,22 @@ class ConformanceLink:
 
     def _receive_loop(self):
         period = cycle_time('HostHeartbeat')
+        wait, back, beating = 0.005, None, False
         while not self._stop.is_set():
-            msg = self.bus.recv(0.005)
+            asked = time.time()
+            if back is not None:        # the loop comes round at once after a frame: a pause here is this host's
+                self.host_timing.due(back, asked)
+            msg = self.bus.recv(wait)
             now = time.monotonic()
+            back = time.time()
+            # back later than the wait asked for: this host did not run this loop (nor read the bus) meanwhile
+            self.host_timing.due(asked + wait, back)
             if self.heartbeat and now >= self._next_hb:
+                if beating:     # due since the last one: a send later than due is this host's lateness
+                    self.host_timing.due(time.time() - (now - self._next_hb), time.time())
                 self._heartbeat()
                 self._next_hb = max(self._next_hb + period, now)
+            beating = self.heartbeat
             if msg is None:
                 continue
             with self.lock:
@@ -221,6 +237,11 @@ class ConformanceLink:
         if why:
             self.deviation = why
             self.command(CMD_ABORT, 0.0)
+
+    def merge_host_timing(self):
+        """Read the lateness other processes of this host recorded (host_timing_files) into the windows."""
+        for path in self.host_timing_files:
+            self.host_timing.add_from_file(path)
 
     # ---- helpers
     def _check(self):

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..can.protocol import FAULT_NAMES, STATES, STATUS_SEQ_MOD, cycle_time, unwrap
+from .host_timing import MARGIN, late_between, not_judged
 from .report import FAIL, NOT_TESTED, PASS, Results
 from .trace import Trace
 
@@ -56,6 +57,8 @@ class FeedbackRun:
     count: list = field(default_factory=list)
     longest_stall: float = 0.0
     stall_at: int = 0       # sequence of the first sample after the longest stall
+    gap_times: list = field(default_factory=list)    # (t before, t after, samples lost) of every gap
+    stalls: list = field(default_factory=list)       # (t before, t after) of every silence above STALL_MAX
     next: int = 0
     offset: int = 0
     gaps: int = 0
@@ -87,9 +90,12 @@ def feedback_runs(trace: Trace) -> list:
             cur = FeedbackRun(next=raw)
             runs.append(cur)
             prev_raw = raw
-        elif f.t - cur.t[-1] > cur.longest_stall:
-            cur.longest_stall = f.t - cur.t[-1]
-            cur.stall_at = -1          # set below, once the frame's sequence is unwrapped
+        else:
+            if f.t - cur.t[-1] > STALL_MAX:
+                cur.stalls.append((cur.t[-1], f.t))
+            if f.t - cur.t[-1] > cur.longest_stall:
+                cur.longest_stall = f.t - cur.t[-1]
+                cur.stall_at = -1          # set below, once the frame's sequence is unwrapped
         full_raw = unwrap(raw, prev_raw, mod)
         if raw < prev_raw % mod and full_raw > prev_raw:
             cur.field_wraps += 1
@@ -102,6 +108,7 @@ def feedback_runs(trace: Trace) -> list:
         if full > cur.next:
             cur.gaps += 1
             cur.lost += full - cur.next
+            cur.gap_times.append((cur.t[-1] if cur.t else f.t, f.t, full - cur.next))
         elif full < cur.next:
             cur.repeats += 1
         if full // NARROW != (full + n - 1) // NARROW or (full % NARROW == 0 and cur.t and full == cur.next):
@@ -150,12 +157,29 @@ def check_periodic(trace: Trace, results: Results):
             continue
         dt = np.diff(t)
         med, p99, longest = float(np.median(dt)), float(np.percentile(dt, 99)), float(dt.max())
-        ok = abs(med - period) <= PERIOD_TOLERANCE * period and p99 <= GAP_FACTOR * period
-        why = '' if ok else (f'median interval {med * 1e3:.1f} ms, specified {period * 1e3:.0f} ms +-'
-                             f'{PERIOD_TOLERANCE * 100:.0f} %' if abs(med - period) > PERIOD_TOLERANCE * period
-                             else f'99 % of the intervals must be at most {GAP_FACTOR * period * 1e3:.0f} ms')
-        results.put(rid, PASS if ok else FAIL, f'{name}: median {med * 1e3:.1f} ms, 99th percentile '
-                    f'{p99 * 1e3:.1f} ms, longest {longest * 1e3:.1f} ms ({t.size} frames)', why)
+        why = _period_violation(dt, period)
+        measured = (f'{name}: median {med * 1e3:.1f} ms, 99th percentile {p99 * 1e3:.1f} ms, longest '
+                    f'{longest * 1e3:.1f} ms ({t.size} frames)')
+        if why and trace.host_late:
+            # the intervals that overlap a stretch in which this host was late cannot show the controller's period
+            late = np.array([late_between(trace.host_late, a, b) for a, b in zip(t, t[1:], strict=False)])
+            kept = dt[late == 0]
+            if kept.size >= 4 and not _period_violation(kept, period):
+                results.put(rid, NOT_TESTED, measured + f'; {int((late > 0).sum())} intervals where this host was '
+                            f'late left out: 99th percentile {np.percentile(kept, 99) * 1e3:.1f} ms',
+                            not_judged(float(late.max()), why))
+                continue
+        results.put(rid, FAIL if why else PASS, measured, why)
+
+
+def _period_violation(dt, period: float) -> str:
+    """'' when intervals dt [s] meet a period [s] (median within PERIOD_TOLERANCE, 99 % within GAP_FACTOR)."""
+    med, p99 = float(np.median(dt)), float(np.percentile(dt, 99))
+    if abs(med - period) > PERIOD_TOLERANCE * period:
+        return f'median interval {med * 1e3:.1f} ms, specified {period * 1e3:.0f} ms +-{PERIOD_TOLERANCE * 100:.0f} %'
+    if p99 > GAP_FACTOR * period:
+        return f'99 % of the intervals must be at most {GAP_FACTOR * period * 1e3:.0f} ms'
+    return ''
 
 
 def check_counters(trace: Trace, results: Results):
@@ -174,7 +198,11 @@ def check_counters(trace: Trace, results: Results):
                         f'no counter to judge: {absent}' if absent else 'too few frames in the trace')
             continue
         c = np.array([int(f.signals[counter]) for f in frames])
-        skips = int(np.count_nonzero((np.diff(c) - 1) % modulus))
+        skipped = np.flatnonzero((np.diff(c) - 1) % modulus)
+        skips = int(skipped.size)
+        # a frame missing where this host was late may be one it failed to read in time
+        host_skips = [late_between(trace.host_late, frames[i].t, frames[i + 1].t) for i in skipped]
+        host_skips = [x for x in host_skips if x]
         states = [int(f.signals['ST_State' if rid == 'CTRL-ST-2' else 'HB_State']) for f in frames]
         bad_state = sum(1 for s in states if s >= len(STATES))
         problems = []
@@ -197,6 +225,9 @@ def check_counters(trace: Trace, results: Results):
         measured = f'{len(frames)} frames, {skips} counter steps other than +1'
         if rid == 'CTRL-ST-2':
             measured += f', {len(changes)} kinds of state change, all in the state machine' if not illegal else ''
+        if skips and len(host_skips) == skips and len(problems) == 1:
+            results.put(rid, NOT_TESTED, measured, not_judged(max(host_skips), problems[0]))
+            continue
         results.put(rid, FAIL if problems else PASS, measured, '; '.join(problems))
 
 
@@ -234,9 +265,16 @@ def check_feedback(trace: Trace, results: Results, runs: list = None):
         return
     samples = sum(r.last[-1] - r.last[0] + 1 for r in runs)
     gaps, lost, repeats = (sum(getattr(r, k) for r in runs) for k in ('gaps', 'lost', 'repeats'))
-    results.put('CTRL-SEQ-1', FAIL if gaps or repeats else PASS,
-                f'{len(runs)} runs, {samples} samples, {gaps} gaps ({lost} samples), {repeats} repeats',
-                'feedback sequences must be contiguous' if gaps or repeats else '')
+    measured = f'{len(runs)} runs, {samples} samples, {gaps} gaps ({lost} samples), {repeats} repeats'
+    # a gap across a stretch in which this host was late may be frames this host failed to read in time
+    host_gaps = [(a, b, n) for r in runs for a, b, n in r.gap_times if late_between(trace.host_late, a, b)]
+    if gaps and not repeats and len(host_gaps) == gaps:
+        late = max(late_between(trace.host_late, a, b) for a, b, _ in host_gaps)
+        results.put('CTRL-SEQ-1', NOT_TESTED, measured, not_judged(late, f'every gap ({lost} samples) falls where '
+                                                                          'it was'))
+    else:
+        results.put('CTRL-SEQ-1', FAIL if gaps or repeats else PASS, measured,
+                    'feedback sequences must be contiguous' if gaps or repeats else '')
     narrow, crossings, wraps = (sum(getattr(r, k) for r in runs) for k in ('narrow_wraps', 'crossings', 'field_wraps'))
     measured = f'{crossings} crossings of a 2^16 boundary, {wraps} wraps of the sequence field'
     if narrow:
@@ -246,35 +284,73 @@ def check_feedback(trace: Trace, results: Results, runs: list = None):
         results.put('CTRL-SEQ-2', PASS, measured)
     else:
         results.put('CTRL-SEQ-2', NOT_TESTED, measured, 'the trace never crosses a 2^16 sequence boundary')
-    fs = trace.sample_rate
-    rates, spreads = [], []
+    long_runs = [r for r in runs if len(r.t) >= 100 and r.t[-1] - r.t[0] >= 0.5]
+    if not long_runs:
+        for rid in ('CTRL-FB-1', 'CTRL-FB-2'):
+            results.put(rid, NOT_TESTED, '', 'no feedback run of 0.5 s or more')
+        return
+    _judge_feedback_timing(trace, results, long_runs, runs)
+
+
+def _feedback_timing(runs: list, windows: list, fs: float) -> tuple:
+    """(rates [Hz], spreads [s], samples left out) of the runs, from every sample outside the host-late windows."""
+    rates, spreads, left_out = [], [], 0
     for r in runs:
-        if len(r.t) < 100 or r.t[-1] - r.t[0] < 0.5:
-            continue
         seq, t = _every_sample(r)
+        if windows:
+            keep = np.ones(t.size, dtype=bool)
+            for a, b in windows:
+                keep &= ~((t >= a - MARGIN) & (t <= b + MARGIN))
+            left_out += int(t.size - keep.sum())
+            seq, t = seq[keep], t[keep]
+        if t.size < 100:
+            continue
         slope, icpt = np.polyfit(seq - seq[0], t, 1)
         resid = t - (icpt + slope * (seq - seq[0]))
         rates.append(1.0 / slope)
         spreads.append(float(np.percentile(resid, 99) - np.percentile(resid, 1)))
-    stall = max(runs, key=lambda r: r.longest_stall)
-    if not rates:
-        for rid in ('CTRL-FB-1', 'CTRL-FB-2'):
-            results.put(rid, NOT_TESTED, '', 'no feedback run of 0.5 s or more')
-        return
-    worst = max(rates, key=lambda r: abs(r / fs - 1))
-    ok = abs(worst / fs - 1) <= RATE_TOLERANCE
-    results.put('CTRL-FB-1', PASS if ok else FAIL, f'{len(rates)} runs, rate {min(rates):.2f}..{max(rates):.2f} Hz '
-                f'(configured {fs:g} Hz)', '' if ok else f'off by more than {RATE_TOLERANCE * 100:g} %')
-    spread = max(spreads)
-    stalled = stall.longest_stall > STALL_MAX
-    ok = spread <= JITTER_MAX and not stalled
+    return rates, spreads, left_out
+
+
+def _judge_feedback_timing(trace: Trace, results: Results, long_runs: list, runs: list):
+    """CTRL-FB-1 and CTRL-FB-2; a verdict that fails only where this host was late is not judged."""
+    fs, windows = trace.sample_rate, trace.host_late
+    rates, spreads, _ = _feedback_timing(long_runs, [], fs)
+    stalls = [st for r in runs for st in r.stalls]
+    longest = max(runs, key=lambda r: r.longest_stall)
+    rate_bad = [r for r in rates if abs(r / fs - 1) > RATE_TOLERANCE]
+    spread = max(spreads, default=0.0)
+    own_stalls = [st for st in stalls if not late_between(windows, *st)]
+    late = max((late_between(windows, r.t[0], r.t[-1]) for r in runs), default=0.0)
+    kept_rates, kept_spreads, left_out = _feedback_timing(long_runs, windows, fs) if windows else (rates, spreads, 0)
+    rate_text = f'{len(rates)} runs, rate {min(rates):.2f}..{max(rates):.2f} Hz (configured {fs:g} Hz)'
+    if not rate_bad:
+        results.put('CTRL-FB-1', PASS, rate_text)
+    elif windows and all(abs(r / fs - 1) <= RATE_TOLERANCE for r in kept_rates):
+        # (no run left long enough once this host's late stretches are left out: nothing to judge either)
+        kept = (f'rate {min(kept_rates):.2f}..{max(kept_rates):.2f} Hz' if kept_rates else
+                'no run of 100 samples left')
+        results.put('CTRL-FB-1', NOT_TESTED, rate_text + f'; {left_out} samples where this host was late left out: '
+                    + kept, not_judged(late, 'within the runs'))
+    else:
+        results.put('CTRL-FB-1', FAIL, rate_text, f'off by more than {RATE_TOLERANCE * 100:g} %')
+    measured = (f'arrival jitter of every sample (99th - 1st percentile) {spread * 1e3:.2f} ms (worst of '
+                f'{len(spreads)} runs), longest silence while ticking {longest.longest_stall * 1e3:.1f} ms')
     why = [f'jitter more than {JITTER_MAX * 1e3:g} ms'] if spread > JITTER_MAX else []
-    if stalled:
-        why.append(f'feedback stalled {stall.longest_stall * 1e3:.1f} ms before sample {stall.stall_at} while '
+    if stalls:
+        why.append(f'feedback stalled {longest.longest_stall * 1e3:.1f} ms before sample {longest.stall_at} while '
                    f'ticking (at most {STALL_MAX * 1e3:g} ms)')
-    results.put('CTRL-FB-2', PASS if ok else FAIL, f'arrival jitter of every sample (99th - 1st percentile) '
-                f'{spread * 1e3:.2f} ms (worst of {len(spreads)} runs), longest silence while ticking '
-                f'{stall.longest_stall * 1e3:.1f} ms', '; '.join(why))
+    if not why:
+        results.put('CTRL-FB-2', PASS, measured)
+        return
+    kept_spread = max(kept_spreads, default=0.0)     # no run left once this host's late stretches are out
+    if windows and not own_stalls and kept_spread <= JITTER_MAX:
+        kept = f'jitter {kept_spread * 1e3:.2f} ms' if kept_spreads else 'no run of 100 samples left'
+        results.put('CTRL-FB-2', NOT_TESTED, measured + f'; {left_out} samples where this host was late left out: '
+                    f'{kept}, {len(stalls)} stalls all where it was late',
+                    not_judged(late, '; '.join(why)))
+        return
+    results.put('CTRL-FB-2', FAIL, measured, '; '.join(why))
 
 
 def _every_sample(run: FeedbackRun) -> tuple:

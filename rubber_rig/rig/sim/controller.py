@@ -41,6 +41,9 @@ from .receive import ControllerReceive
 from .specimen import build_specimen
 from .transmit import ControllerTransmit
 
+LATE_LOGGED = 0.002           # [s] a deadline missed by this much goes into the timing log (the feedback
+#                               jitter a controller may have is 2 ms: CTRL-FB-2)
+
 
 class SimController(ControllerReceive, ControllerTransmit):
     """Simulated rig on python-can `bus` (any interface) at sample_rate [Hz] with SimOptions `options`, speaking
@@ -111,6 +114,9 @@ class SimController(ControllerReceive, ControllerTransmit):
         self._id_next_tick = 0            # rig tick the next ControllerIdentity is due at while ticking
         self._jitter_until = 0            # feedback_jitter defect: release tick of the last held feedback frame
         self._stop = threading.Event()
+        # paced: a text file that gets a 'start end' line (wall-clock s) for every deadline this process missed by
+        # LATE_LOGGED or more - its host was late, which a real controller on its own CPU would not be
+        self.timing_log = None
         self._announced = False
         self._thread = None
         base = options.specimen.get('temperature', options.temperature)
@@ -134,7 +140,7 @@ class SimController(ControllerReceive, ControllerTransmit):
         self._id_next_tick = self.ticks + self._id_every
         next_idle_hk = time.monotonic()
         self._idle_due = {name: next_idle_hk + period for name, period in self._periods.items()}
-        deadline = None
+        deadline, idle_before = None, True
         while not self._stop.is_set():
             if self.paced:
                 now = time.monotonic()
@@ -161,6 +167,7 @@ class SimController(ControllerReceive, ControllerTransmit):
                         # this process was not scheduled for `due` ticks: neither was the host in it, so the host
                         # watchdog does not count that time (a real controller has its own CPU)
                         self.last_host_hb += due - 1
+                        self._log_late(now - deadline)
                     while now >= deadline and self.state in STREAMING:
                         done = self._tick_block(int((now - deadline) * self.fs) + 1) or self._tick()
                         deadline += done / self.fs
@@ -169,6 +176,7 @@ class SimController(ControllerReceive, ControllerTransmit):
                         self.counters['overruns'] += n - 1
                     timeout = max(0.0, min(deadline - time.monotonic(), 0.01)) if self.state in STREAMING \
                         else 0.0
+                    idle_before = False
                 else:
                     if deadline is not None:   # stopped ticking: back to wall-clock time
                         self._idle_due['ControllerIdentity'] = now + max(0, self._id_next_tick - self.ticks) / self.fs
@@ -178,9 +186,12 @@ class SimController(ControllerReceive, ControllerTransmit):
                     if 'fault_clears_after_500ms' in self.defects:
                         self._clear_fault_by_itself(now)
                     if now >= next_idle_hk:
+                        if idle_before:      # due while idle: a late wake-up is this host's lateness
+                            self._log_late(now - next_idle_hk)
                         self._idle_housekeeping(now)
                         next_idle_hk = max(next_idle_hk + IDLE_PERIOD, now)
                     timeout = min(IDLE_PERIOD, max(0.0, next_idle_hk - now))
+                    idle_before = True
                 msg = self.bus.recv(timeout)
                 while msg is not None:
                     self._handle(msg)
@@ -192,6 +203,12 @@ class SimController(ControllerReceive, ControllerTransmit):
                     msg = self.bus.recv(0)
                 self._catch_up()   # ticks only as far as setpoints are queued (or while ramping down)
                 self._send_feedback()
+
+    def _log_late(self, late: float):
+        """A deadline missed by `late` [s]: a line in timing_log when LATE_LOGGED or more."""
+        if self.timing_log is not None and late >= LATE_LOGGED:
+            t = time.time()
+            self.timing_log.write(f'{t - late:.6f} {t:.6f}\n')
 
     def _clear_fault_by_itself(self, now: float):
         """Defect fault_clears_after_500ms: a fault that goes back to idle 0.5 s after it began, without RESET."""
