@@ -27,6 +27,7 @@ from rubber_rig.rig.can.frames import SampleFrames
 from rubber_rig.rig.can.protocol import PROTOCOL_VERSION, STATE_CODE, Protocol
 from rubber_rig.rig.config import RigConfig
 from rubber_rig.rig.conformance.active import ConformanceRun
+from rubber_rig.rig.conformance.host_timing import HostTiming, late_between
 from rubber_rig.rig.conformance.link import Envelope, judges
 from rubber_rig.rig.conformance.passive import STALL_MAX, check_offline
 from rubber_rig.rig.conformance.report import FAIL, NOT_TESTED, PASS, Results
@@ -225,3 +226,59 @@ def test_a_scenario_that_fails_on_its_own_fails_its_requirements_and_the_run_goe
     assert results['CTRL-ID-1'].status == PASS and results['CTRL-ID-3'].status == PASS
     assert set(results) == {r.id for r in REQUIREMENTS if r.id.startswith('CTRL')}
     assert run.state == 'idle' and not run.faults       # at rest after the last scenario
+
+
+# ---- host timing: a violation only where this host was late is not judged ---------------------------------
+
+def test_a_stall_where_this_host_was_late_is_not_judged_and_elsewhere_fails():
+    """112 samples never received, on time before and after (what a host that did not read its socket for 112 ms
+    sees): where this host's own loop was late at that moment the feedback verdicts are 'not judged: this host
+    was late by X ms' (the run is incomplete), elsewhere they fail.
+    """
+    def stalled():
+        w = TraceWriter()
+        w.ticking(1000, 1000, 0.0)
+        w.periodic(1.0, 1.112, 'running', 2111)
+        w.ticking(2112, 1000, 1.112)
+        return w.done()
+    trace = stalled()
+    trace.host_late = [(1.001, 1.110)]          # this host did not run for 109 ms then
+    res = check_offline(trace)
+    for rid in ('CTRL-SEQ-1', 'CTRL-FB-2'):
+        assert res[rid].status == NOT_TESTED and 'not judged: this host was late by 109 ms' in res[rid].detail, \
+            (rid, res[rid])
+    assert res['CTRL-ST-1'].status == PASS
+    trace = stalled()
+    trace.host_late = [(0.3, 0.32)]             # late elsewhere: the controller's stall is its own
+    res = check_offline(trace)
+    assert res['CTRL-SEQ-1'].status == FAIL and res['CTRL-FB-2'].status == FAIL
+
+
+def test_a_period_violated_only_where_this_host_was_late_is_not_judged():
+    w = TraceWriter()
+    w.periodic(0.0, 1.0, 'idle')
+    w.periodic(1.3, 3.0, 'idle')               # 300 ms without any frame: status, heartbeat, temperature
+    trace = w.done()
+    res = check_offline(trace)
+    assert res['CTRL-ST-1'].status == FAIL
+    trace.host_late = [(1.0, 1.29)]
+    res = check_offline(trace)
+    assert res['CTRL-ST-1'].status == NOT_TESTED and 'not judged: this host was late by 290 ms' in \
+        res['CTRL-ST-1'].detail
+    assert 'intervals where this host was late left out' in res['CTRL-ST-1'].measured
+
+
+def test_host_timing_records_late_wakeups_and_merges_a_file_once(tmp_path):
+    timing = HostTiming()
+    timing.due(10.0, 10.005)                   # 5 ms: on time for this purpose
+    timing.due(11.0, 11.030)
+    assert timing.windows == [(11.0, 11.030)]
+    log = tmp_path / 'sim_late.txt'
+    log.write_text('12.0 12.003\n13.0 13.1\n14.0 14.')   # the last line is still being written
+    assert timing.add_from_file(log) == 2
+    assert timing.add_from_file(log) == 0       # nothing new
+    with log.open('a') as f:
+        f.write('05\n')
+    assert timing.add_from_file(log) == 1 and timing.windows[-1] == (14.0, 14.05)
+    assert late_between(timing.windows, 13.05, 13.2) == pytest.approx(0.1)
+    assert late_between(timing.windows, 15.0, 16.0) == 0.0

@@ -32,6 +32,8 @@ PERIODIC = {'ControllerHeartbeat': 'CTRL-HB-1', 'ControllerStatus': 'CTRL-ST-1',
             'ControllerIdentity': 'CTRL-ID-2'}
 PERIOD_TOLERANCE = 0.10   # the median interval within +-10 % of the DBC cycle time
 GAP_FACTOR = 2.0          # 99 % of the intervals at most twice the cycle time (the host watchdog's margin)
+HOST_SILENCE = 0.1        # [s] the driver's default watchdog_timeout: no periodic frame may be silent longer than
+#                           this (or GAP_FACTOR periods, if longer): a host would fault (rig/can/liveness.py)
 RATE_TOLERANCE = 0.005    # feedback sample rate within +-0.5 % of the configured rate
 JITTER_MAX = 2e-3         # [s] 99th minus 1st percentile of the feedback arrival delays
 RUN_BREAK = 0.05          # [s] a status this much older than the feedback tells nothing of it (CTRL-ST-3)
@@ -157,14 +159,14 @@ def check_periodic(trace: Trace, results: Results):
             continue
         dt = np.diff(t)
         med, p99, longest = float(np.median(dt)), float(np.percentile(dt, 99)), float(dt.max())
-        why = _period_violation(dt, period)
+        why = _period_violation(dt, period, name)
         measured = (f'{name}: median {med * 1e3:.1f} ms, 99th percentile {p99 * 1e3:.1f} ms, longest '
                     f'{longest * 1e3:.1f} ms ({t.size} frames)')
         if why and trace.host_late:
             # the intervals that overlap a stretch in which this host was late cannot show the controller's period
             late = np.array([late_between(trace.host_late, a, b) for a, b in zip(t, t[1:], strict=False)])
             kept = dt[late == 0]
-            if kept.size >= 4 and not _period_violation(kept, period):
+            if kept.size >= 4 and not _period_violation(kept, period, name):
                 results.put(rid, NOT_TESTED, measured + f'; {int((late > 0).sum())} intervals where this host was '
                             f'late left out: 99th percentile {np.percentile(kept, 99) * 1e3:.1f} ms',
                             not_judged(float(late.max()), why))
@@ -172,13 +174,19 @@ def check_periodic(trace: Trace, results: Results):
         results.put(rid, FAIL if why else PASS, measured, why)
 
 
-def _period_violation(dt, period: float) -> str:
-    """'' when intervals dt [s] meet a period [s] (median within PERIOD_TOLERANCE, 99 % within GAP_FACTOR)."""
-    med, p99 = float(np.median(dt)), float(np.percentile(dt, 99))
+def _period_violation(dt, period: float, name: str) -> str:
+    """'' when intervals dt [s] meet a period [s] (median within PERIOD_TOLERANCE, 99 % within GAP_FACTOR, none
+    longer than the silence a host faults at: HOST_SILENCE, or GAP_FACTOR periods if longer).
+    """
+    med, p99, longest = float(np.median(dt)), float(np.percentile(dt, 99)), float(np.max(dt))
+    silence = max(HOST_SILENCE, GAP_FACTOR * period)
     if abs(med - period) > PERIOD_TOLERANCE * period:
         return f'median interval {med * 1e3:.1f} ms, specified {period * 1e3:.0f} ms +-{PERIOD_TOLERANCE * 100:.0f} %'
     if p99 > GAP_FACTOR * period:
         return f'99 % of the intervals must be at most {GAP_FACTOR * period * 1e3:.0f} ms'
+    if longest > silence:
+        return (f'{name} silent for {longest * 1e3:.0f} ms: a host faults after {silence * 1e3:.0f} ms of its '
+                'silence')
     return ''
 
 

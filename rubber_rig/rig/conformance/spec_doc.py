@@ -146,6 +146,9 @@ _TOLERANCES = (
      '(CTRL-HB-1, CTRL-ST-1, CTRL-TEMP-1, CTRL-ID-2)'),
     ('GAP_FACTOR', 'x', '99 % of the intervals of a periodic frame at most this many cycle times (the host '
      "watchdog's margin; also HostHeartbeat, HOST-HB-1)"),
+    ('HOST_SILENCE', 'ms', 'no interval of a periodic frame may be longer than this (the driver\'s default '
+     'watchdog_timeout) or GAP_FACTOR cycle times if that is longer: a host faults at such a silence (CTRL-HB-1, '
+     'CTRL-ST-1, CTRL-TEMP-1, CTRL-ID-2)'),
     ('RATE_TOLERANCE', '%', 'feedback sample rate within +- this share of the configured rate over every run of '
      'feedback of 0.5 s or more (CTRL-FB-1)'),
     ('JITTER_MAX', 'ms', '99th minus 1st percentile of the arrival delay of every feedback sample (each sample of '
