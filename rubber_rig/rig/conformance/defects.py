@@ -44,7 +44,7 @@ DEFECTS = {
     'fault_clears_after_500ms': (('CTRL-FAULT-2',), 'leaves the fault state for idle by itself 0.5 s after the '
                                  'fault, without RESET'),
     'fault_ramp_step': (('CTRL-WD-1', 'CTRL-LIM-2'), 'starts its own ramps (faults, host silence) with a step of '
-                        'up to 0.25 mm'),
+                        'up to 0.1 mm (100 mm/s for one sample at 1 kHz)'),
     'fault_ramp_overshoot': (('CTRL-WD-1', 'CTRL-LIM-2'), 'its own ramps (faults, host silence) pass their target '
                              'by 0.2 mm, then come back'),
     'feedback_six_per_frame': (('CTRL-FB-2',), 'gathers 6 samples into each packed feedback frame at 1 kHz (5 ms '

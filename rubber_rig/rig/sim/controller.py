@@ -276,8 +276,8 @@ class SimController(ControllerReceive, ControllerTransmit):
             x0, self._ramp_then = self.u, None
             away = target - self.u
             if fault_bits and abs(away) > 1e-6:      # the controller's own (fault, host silence) ramps
-                if 'fault_ramp_step' in self.defects:    # starts with a step of up to 0.25 mm
-                    x0, v = self.u + math.copysign(min(0.25e-3, abs(away)), away), 0.0
+                if 'fault_ramp_step' in self.defects:    # starts with a step of up to 0.1 mm
+                    x0, v = self.u + math.copysign(min(0.1e-3, abs(away)), away), 0.0
                 if 'fault_ramp_overshoot' in self.defects:   # passes its target by 0.2 mm, then comes back
                     self._ramp_then, target = target, target + math.copysign(0.2e-3, away)
             self.ramp = SafeRamp(x0, v, target, self.fs,
