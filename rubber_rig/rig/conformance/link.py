@@ -40,7 +40,10 @@ from .report import Results
 from .trace import Trace
 
 LSB = 1e-7                  # [m] displacement resolution of the frames
-LEAD = 0.1                  # [s] setpoints streamed ahead of the controller (covers this host's pauses)
+LEAD = 0.3                  # [s] setpoints streamed ahead of the controller: covers pauses of this host (a
+#                             loaded 2-core host stalls the run for 100-300 ms; a stream that fell behind made the
+#                             controller hold, then step to where the wave had moved on, and tripped the
+#                             tracking watch)
 IDENTIFY_TIMEOUT = 0.1      # [s] CTRL-ID-1
 RAMP_VELOCITY = 0.002       # [m/s] commanded velocity of the ramps the run asks for
 WAVE_FREQUENCY = 2.0        # [Hz] of the motion the run streams
