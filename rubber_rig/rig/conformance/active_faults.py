@@ -35,6 +35,7 @@ from ..can.protocol import (
 )
 from .host_timing import late_between, not_judged
 from .link import (
+    APPROACH_VELOCITY,
     LATCH_TIME,
     LEAD,
     LSB,
@@ -95,6 +96,14 @@ class FaultScenarios(ConformanceLink):
                 self._tx(can.Message(arbitration_id=abort.arbitration_id, is_remote_frame=True, dlc=8,
                                      is_extended_id=False))
                 self._tx(can.Message(arbitration_id=0x7FE, data=bytes(8), is_extended_id=False))
+            elif k == int(0.9 * self.fs):
+                # HostLimits that would exclude the motion, with a wrong CRC: applied, it would fault the stream
+                phase['limits_crc'] = time.time()
+                bad = self.proto.encode('HostLimits', {'HL_DisplacementMin': -1e-5, 'HL_DisplacementMax': 1e-5,
+                                                       'HL_Deceleration': DECEL_MAX})
+                bad.data = bytearray(bad.data)
+                bad.data[-1] ^= 0xA5
+                self._tx(bad)
 
         base = self.smooth(p0, -a if p0 > 0 else a)
 
@@ -104,14 +113,15 @@ class FaultScenarios(ConformanceLink):
         end = self.stream(first, wave, 1.1)
         self._sleep(LEAD + 0.05)
         samples = [s for s in self._samples_since(phase.get('frame2', 0.0)) if s.seq < end]
-        for rid, since, until in (('CTRL-FRAME-2', 'frame2', 'frame3'), ('CTRL-FRAME-3', 'frame3', None)):
+        for rid, since, until in (('CTRL-FRAME-2', 'frame2', 'frame3'), ('CTRL-FRAME-3', 'frame3', 'limits_crc'),
+                                  ('CTRL-FRAME-2', 'limits_crc', None)):
             t0, t1 = phase.get(since, math.inf), phase.get(until, math.inf) if until else math.inf
             applied_wrong = [seq for seq, who in injected.items() if who == rid and any(
                 s.seq == seq and abs(s.u - self.sent[seq]) > 1.5 * LSB for s in samples)]
             stopped = [s for s in self._states_since(t0) if s[0] < t1 and s[1] != 'running'
                        and unwrap(s[3], end, 1 << 16) < end - 1]
             ok = not applied_wrong and not stopped and bool(samples)
-            self.results.put(rid, PASS if ok else FAIL, f'{len(applied_wrong)} injected setpoints applied, '
+            self.results.put(rid, PASS if ok else FAIL, f'{since}: {len(applied_wrong)} injected setpoints applied, '
                              f'{len(stopped)} status frames out of running',
                              '' if ok else 'such frames must change nothing')
         self.to_rest(self.position)
@@ -166,7 +176,10 @@ class FaultScenarios(ConformanceLink):
         p0 = self.position
         t = time.time()
         try:
-            self.stream(first, self.ramp_to(p0, target, RAMP_VELOCITY), abs(target - p0) / RAMP_VELOCITY + 0.1)
+            # slow enough that the controller is well on its way (LEAD x this short of the limit) when the first
+            # setpoint beyond the limit reaches it: its fault ramp then starts from motion, whose shape is judged
+            self.stream(first, self.ramp_to(p0, target, APPROACH_VELOCITY),
+                        abs(target - p0) / APPROACH_VELOCITY + 0.1)
         finally:
             self.heartbeat = True
         self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)

@@ -47,6 +47,10 @@ DEFECTS = {
                         'up to 0.1 mm (100 mm/s for one sample at 1 kHz)'),
     'fault_ramp_overshoot': (('CTRL-WD-1', 'CTRL-LIM-2'), 'its own ramps (faults, host silence) pass their target '
                              'by 0.2 mm, then come back'),
+    'identify_answered_once': (('CTRL-ID-1',), 'answers only the first IDENTIFY (the periodic identity goes on)'),
+    'host_limits_crc_unchecked': (('CTRL-FRAME-2',), 'applies a HostLimits frame whatever its CRC'),
+    'ignore_disable': (('CTRL-RAMP-1',), 'ignores DISABLE (ABORT works)'),
+    'reset_while_ramping': (('CTRL-RESET-1',), 'honours RESET while ramping down: stops the ramp where it is, idle'),
     'feedback_six_per_frame': (('CTRL-FB-2',), 'gathers 6 samples into each packed feedback frame at 1 kHz (5 ms '
                                'of latency for the first; only the last sample of a frame is on time)'),
 }

@@ -45,7 +45,9 @@ LEAD = 0.3                  # [s] setpoints streamed ahead of the controller: co
 #                             controller hold, then step to where the wave had moved on, and tripped the
 #                             tracking watch)
 IDENTIFY_TIMEOUT = 0.1      # [s] CTRL-ID-1
+IDENTIFY_REPEATS = 5        # CTRL-ID-1: IDENTIFY is asked this many times, each must be answered
 RAMP_VELOCITY = 0.002       # [m/s] commanded velocity of the ramps the run asks for
+APPROACH_VELOCITY = 0.0005  # [m/s] of the stream towards a limit (CTRL-LIM-2): LEAD of it is 0.15 mm
 WAVE_FREQUENCY = 2.0        # [Hz] of the motion the run streams
 DEFAULT_HOST_TIMEOUT = 0.5  # [s] assumed when the controller states none
 BUFFER_IN_FLIGHT = 0.05     # [s] setpoints sent this recently may not be counted in ST_BufferLevel yet

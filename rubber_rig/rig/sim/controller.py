@@ -94,6 +94,7 @@ class SimController(ControllerReceive, ControllerTransmit):
         self.u = self.u_prev = 0.0        # applied command [m]
         self.ramp = None
         self._ramp_then = None            # defect fault_ramp_overshoot: the target after the ramp past it
+        self._identified = False          # defect identify_answered_once: IDENTIFY was answered
         self._fault_since = None          # defect fault_clears_after_500ms: when the fault state began (wall)
         self.last_host_hb = 0
         # the host's limits for the controller's own ramps (HostLimits frame); until then: no bounds
