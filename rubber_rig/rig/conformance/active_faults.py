@@ -33,7 +33,7 @@ from ..can.protocol import (
     fault_names,
     unwrap,
 )
-from .host_timing import late_between, not_judged
+from .host_timing import explains, not_judged
 from .link import (
     APPROACH_VELOCITY,
     LATCH_TIME,
@@ -326,7 +326,7 @@ class FaultScenarios(ConformanceLink):
         shape = self._own_ramp_shape(self._samples_since(t_silent), 0.0)
         ok = delay <= timeout + 0.1 and abs(rest) <= 1e-6 and self.state == 'fault' and bool(faults) and shape.ok
         self.merge_host_timing()
-        late = late_between(self.trace.host_late, t_silent, t_ramp)
+        late = explains(self.trace.host_late, t_silent, t_ramp, delay - (timeout + 0.1))
         if delay > timeout + 0.1 and late and abs(rest) <= 1e-6 and shape.ok and bool(faults):
             # late only where this host was late: the controller's watchdog cannot be judged by it
             self.results.put('CTRL-WD-1', NOT_TESTED, f'ramp began {delay:.3f} s after the last HostHeartbeat '

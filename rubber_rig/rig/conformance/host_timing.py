@@ -82,6 +82,27 @@ def late_between(windows, t0: float, t1: float) -> float:
     return worst
 
 
+def late_total(windows, t0: float, t1: float) -> float:
+    """How long [s] this host was late around [t0, t1]: the total of the (merged) windows that overlap it widened
+    by MARGIN. A violation longer than this cannot be the host's alone.
+    """
+    spans = sorted((a, b) for a, b in windows if a - MARGIN <= t1 and b + MARGIN >= t0)
+    total, end = 0.0, -float('inf')
+    for a, b in spans:
+        if b > end:
+            total += b - max(a, end)
+            end = b
+    return total
+
+
+def explains(windows, t0: float, t1: float, excess: float) -> float:
+    """The host's lateness [s] within [t0, t1] when it is at least `excess` [s] (the part of a violation beyond
+    its bound), else 0: only then may the violation be the host's.
+    """
+    late = late_total(windows, t0, t1)
+    return late if late > 0 and late >= excess else 0.0
+
+
 def not_judged(late: float, what: str) -> str:
     """The reason of a timing verdict that cannot be given: this host was late by `late` [s]."""
     return f'not judged: this host was late by {late * 1e3:.0f} ms ({what})'

@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..can.protocol import FAULT_NAMES, STATES, STATUS_SEQ_MOD, cycle_time, unwrap
-from .host_timing import MARGIN, late_between, not_judged
+from .host_timing import MARGIN, explains, late_between, late_total, not_judged
 from .report import FAIL, NOT_TESTED, PASS, Results
 from .trace import Trace
 
@@ -163,12 +163,12 @@ def check_periodic(trace: Trace, results: Results):
         measured = (f'{name}: median {med * 1e3:.1f} ms, 99th percentile {p99 * 1e3:.1f} ms, longest '
                     f'{longest * 1e3:.1f} ms ({t.size} frames)')
         if why and trace.host_late:
-            # the intervals that overlap a stretch in which this host was late cannot show the controller's period
-            late = np.array([late_between(trace.host_late, a, b) for a, b in zip(t, t[1:], strict=False)])
-            kept = dt[late == 0]
-            if kept.size >= 4 and not _period_violation(kept, period, name):
-                results.put(rid, NOT_TESTED, measured + f'; {int((late > 0).sum())} intervals where this host was '
-                            f'late left out: 99th percentile {np.percentile(kept, 99) * 1e3:.1f} ms',
+            # each interval less the time this host was late around it: what the controller alone can be blamed for
+            late = np.array([late_total(trace.host_late, a, b) for a, b in zip(t, t[1:], strict=False)])
+            own = np.maximum(dt - late, 0.0)
+            if not _period_violation(own, period, name):
+                results.put(rid, NOT_TESTED, measured + f'; less this host\'s lateness around each interval: 99th '
+                            f'percentile {np.percentile(own, 99) * 1e3:.1f} ms, longest {own.max() * 1e3:.1f} ms',
                             not_judged(float(late.max()), why))
                 continue
         results.put(rid, FAIL if why else PASS, measured, why)
@@ -209,7 +209,8 @@ def check_counters(trace: Trace, results: Results):
         skipped = np.flatnonzero((np.diff(c) - 1) % modulus)
         skips = int(skipped.size)
         # a frame missing where this host was late may be one it failed to read in time
-        host_skips = [late_between(trace.host_late, frames[i].t, frames[i + 1].t) for i in skipped]
+        host_skips = [explains(trace.host_late, frames[i].t, frames[i + 1].t,
+                               0.5 * (frames[i + 1].t - frames[i].t)) for i in skipped]
         host_skips = [x for x in host_skips if x]
         states = [int(f.signals['ST_State' if rid == 'CTRL-ST-2' else 'HB_State']) for f in frames]
         bad_state = sum(1 for s in states if s >= len(STATES))
@@ -275,9 +276,9 @@ def check_feedback(trace: Trace, results: Results, runs: list = None):
     gaps, lost, repeats = (sum(getattr(r, k) for r in runs) for k in ('gaps', 'lost', 'repeats'))
     measured = f'{len(runs)} runs, {samples} samples, {gaps} gaps ({lost} samples), {repeats} repeats'
     # a gap across a stretch in which this host was late may be frames this host failed to read in time
-    host_gaps = [(a, b, n) for r in runs for a, b, n in r.gap_times if late_between(trace.host_late, a, b)]
+    host_gaps = [(a, b, n) for r in runs for a, b, n in r.gap_times if explains(trace.host_late, a, b, 0.5 * (b - a))]
     if gaps and not repeats and len(host_gaps) == gaps:
-        late = max(late_between(trace.host_late, a, b) for a, b, _ in host_gaps)
+        late = max(late_total(trace.host_late, a, b) for a, b, _ in host_gaps)
         results.put('CTRL-SEQ-1', NOT_TESTED, measured, not_judged(late, f'every gap ({lost} samples) falls where '
                                                                           'it was'))
     else:
@@ -328,7 +329,7 @@ def _judge_feedback_timing(trace: Trace, results: Results, long_runs: list, runs
     longest = max(runs, key=lambda r: r.longest_stall)
     rate_bad = [r for r in rates if abs(r / fs - 1) > RATE_TOLERANCE]
     spread = max(spreads, default=0.0)
-    own_stalls = [st for st in stalls if not late_between(windows, *st)]
+    own_stalls = [(a, b) for a, b in stalls if not explains(windows, a, b, (b - a) - STALL_MAX)]
     late = max((late_between(windows, r.t[0], r.t[-1]) for r in runs), default=0.0)
     kept_rates, kept_spreads, left_out = _feedback_timing(long_runs, windows, fs) if windows else (rates, spreads, 0)
     rate_text = f'{len(rates)} runs, rate {min(rates):.2f}..{max(rates):.2f} Hz (configured {fs:g} Hz)'
