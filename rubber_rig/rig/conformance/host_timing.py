@@ -31,6 +31,8 @@ from pathlib import Path
 
 LATE_MIN = 0.010     # [s] a wake-up this much later than due is recorded
 MARGIN = 0.005       # [s] a window is widened by this much on each side when a stretch of the trace is judged
+SIM_LATE_MIN = 0.002  # [s] the simulator on this host logs each deadline it missed by this much (the 2 ms a
+#                      controller's feedback may jitter, CTRL-FB-2): python -m rubber_rig.rig.sim --timing-log
 
 
 class HostTiming:

@@ -34,15 +34,13 @@ from ..can.protocol import (
     Protocol,
     cycle_time,
 )
+from ..conformance.host_timing import SIM_LATE_MIN
 from .constants import IDLE_PERIOD, STREAMING
 from .faults import FaultInjector
 from .plant import Actuator, DelayLine, Sensor
 from .receive import ControllerReceive
 from .specimen import build_specimen
 from .transmit import ControllerTransmit
-
-LATE_LOGGED = 0.002           # [s] a deadline missed by this much goes into the timing log (the feedback
-#                               jitter a controller may have is 2 ms: CTRL-FB-2)
 
 
 class SimController(ControllerReceive, ControllerTransmit):
@@ -116,7 +114,7 @@ class SimController(ControllerReceive, ControllerTransmit):
         self._jitter_until = 0            # feedback_jitter defect: release tick of the last held feedback frame
         self._stop = threading.Event()
         # paced: a text file that gets a 'start end' line (wall-clock s) for every deadline this process missed by
-        # LATE_LOGGED or more - its host was late, which a real controller on its own CPU would not be
+        # SIM_LATE_MIN or more - its host was late, which a real controller on its own CPU would not be
         self.timing_log = None
         self._announced = False
         self._thread = None
@@ -206,20 +204,10 @@ class SimController(ControllerReceive, ControllerTransmit):
                 self._send_feedback()
 
     def _log_late(self, late: float):
-        """A deadline missed by `late` [s]: a line in timing_log when LATE_LOGGED or more."""
-        if self.timing_log is not None and late >= LATE_LOGGED:
+        """A deadline missed by `late` [s]: a line in timing_log when SIM_LATE_MIN or more."""
+        if self.timing_log is not None and late >= SIM_LATE_MIN:
             t = time.time()
             self.timing_log.write(f'{t - late:.6f} {t:.6f}\n')
-
-    def _clear_fault_by_itself(self, now: float):
-        """Defect fault_clears_after_500ms: a fault that goes back to idle 0.5 s after it began, without RESET."""
-        if self.state != 'fault':
-            self._fault_since = None
-        elif self._fault_since is None:
-            self._fault_since = now
-        elif now - self._fault_since > 0.5:
-            self.fault_bits, self.state, self._fault_since = 0, 'idle', None
-            self._housekeeping(force=True)
 
     def pump(self):
         """Fast mode without a thread: handle every frame waiting on the bus and tick as far as the queued

@@ -79,6 +79,16 @@ class ControllerReceive:
                 self.state = 'idle'
                 self._housekeeping(force=True)
 
+    def _clear_fault_by_itself(self, now: float):
+        """Defect fault_clears_after_500ms: a fault that goes back to idle 0.5 s after it began, without RESET."""
+        if self.state != 'fault':
+            self._fault_since = None
+        elif self._fault_since is None:
+            self._fault_since = now
+        elif now - self._fault_since > 0.5:
+            self.fault_bits, self.state, self._fault_since = 0, 'idle', None
+            self._housekeeping(force=True)
+
     def _unchecked_host_limits(self, msg):
         """Defect host_limits_crc_unchecked: a HostLimits frame of the right length is decoded whatever its CRC;
         None for any other malformed frame (discarded, CTRL-FRAME-2).
