@@ -54,11 +54,16 @@ inside = pytest.mark.skipif(not os.environ.get('RUBBER_RIG_TEST_PRIVATE_NETNS'),
 
 
 def _junit(path) -> dict:
-    """requirement id -> 'pass' | 'fail' | 'not tested' from a JUnit report."""
+    """requirement id -> 'pass' | 'fail' | 'not tested' | 'host late' from a JUnit report ('host late': not
+    tested because this host was late, the report says by how much).
+    """
     out = {}
     for case in ET.parse(path).getroot().iter('testcase'):
+        skipped = case.find('skipped')
         out[case.get('name')] = ('fail' if case.find('failure') is not None else
-                                 'not tested' if case.find('skipped') is not None else 'pass')
+                                 'host late' if skipped is not None and 'this host was late' in
+                                 skipped.get('message', '') else
+                                 'not tested' if skipped is not None else 'pass')
     return out
 
 
@@ -72,7 +77,13 @@ def _conformance(tmp_path, *args):
 # requirements judged on the wall-clock timing of this host's processes: a shared CI host that stalls the
 # simulator's process for tens of ms can fail them; such a run is repeated once (a controller that really
 # breaks one fails it by a wide margin every time: 80 ms heartbeats, 0-8 ms jitter)
-TIMING = {'CTRL-HB-1', 'CTRL-ST-1', 'CTRL-TEMP-1', 'CTRL-ID-2', 'CTRL-FB-2', 'CTRL-ST-3', 'CTRL-ST-4'}
+TIMING = {'CTRL-HB-1', 'CTRL-ST-1', 'CTRL-TEMP-1', 'CTRL-ID-2', 'CTRL-FB-2', 'CTRL-ST-3', 'CTRL-ST-4',
+          # frames this host failed to read in time, or a host watchdog that ran late, where its own lateness
+          # measurement missed it (host_timing): judged on the second run
+          'CTRL-HB-2', 'CTRL-ST-2', 'CTRL-SEQ-1', 'CTRL-FB-1', 'CTRL-WD-1', 'CTRL-STREAM-4'}
+# a run on a loaded host is incomplete, never failed, for this host's delays: the timing requirements it could
+# not judge say 'not judged: this host was late by X ms' (exit status 4)
+INCOMPLETE = 4
 
 
 def _conformance_expecting(tmp_path, failing: set, *args):
@@ -132,9 +143,11 @@ def test_correct_simulator_passes_and_offline_agrees(tmp_path):
     log = tmp_path / 'run.blf'
     proc, online = _conformance_expecting(tmp_path, set(), '--sim', '--power-up', '--envelope', '1mm',
                                           '--can-log', str(log))
-    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-2000:]
     assert set(online) == CTRL
-    assert {k for k, v in online.items() if v != 'pass'} == set(), proc.stdout[-3000:]
+    # every requirement passes, or is not judged because this host was late (then the run is incomplete)
+    assert {k for k, v in online.items() if v not in ('pass', 'host late')} == set(), proc.stdout[-3000:]
+    late = {k for k, v in online.items() if v == 'host late'}
+    assert proc.returncode == (INCOMPLETE if late else 0), proc.stdout[-3000:] + proc.stderr[-2000:]
     # offline on the run's own log: the same verdicts on every requirement a log can show
     off = tmp_path / 'off'
     off.mkdir()
@@ -142,7 +155,8 @@ def test_correct_simulator_passes_and_offline_agrees(tmp_path):
     # the conformance run breaks host rules on purpose (stale setpoints, streams past a refusal): only the
     # controller's verdicts are compared
     assert proc.returncode in (0, 1), proc.stdout[-3000:]
-    assert {k: offline[k] for k in OFFLINE_CTRL} == {k: online[k] for k in OFFLINE_CTRL}
+    # (the offline mode knows nothing of this host's timing: what online was not judged for it is left out)
+    assert {k: offline[k] for k in OFFLINE_CTRL - late} == {k: online[k] for k in OFFLINE_CTRL - late}
 
 
 @inside
@@ -217,8 +231,13 @@ def test_offline_reads_a_damaged_log_up_to_the_damage(tmp_path, capsys):
     code = main(['conformance', '--log', str(path)])
     out = capsys.readouterr().out
     # the heartbeats before the damage are read and judged (20 at 50 ms), and the report says where it stopped
-    assert code == 0 and '20 frames' in out and 'unreadable after frame 20' in out
+    assert '20 frames' in out and 'unreadable after frame 20' in out
     assert 'median 50.0 ms' in out and '| CTRL-HB-2 |' in out
+    # a controller heard for 0.95 s must have sent status (10 ms) and temperature (100 ms): their absence fails,
+    # the identity (1 s) is not owed yet in so short a log
+    assert code == 1 and '0 ControllerStatus frames in 0.950 s of controller traffic' in out
+    assert '| CTRL-TEMP-1 | Temperature every 100 ms | **FAIL** |' in out
+    assert '| CTRL-ID-2 | ControllerIdentity every 1000 ms | not tested |' in out
     assert main(['conformance', '--log', str(tmp_path / 'x.txt')]) != 0
     assert 'unsupported suffix' in capsys.readouterr().err
 

@@ -22,7 +22,8 @@ Offline, from a raw CAN log recorded on a rig (what a log can show: periods, cou
 timing, continuity, sequence width, the host's duties):
   rubber-rig conformance --log run.blf --rate 1000Hz
 Exit status: 0 every requirement checked passed, 1 a requirement failed, 2 usage error or refusal, 3 the run
-left the envelope and was aborted.
+left the envelope and was aborted, 4 (online) nothing failed but the run is incomplete: a requirement was not
+tested (e.g. CTRL-PWR-1 without --power-up). Offline, requirements a log does not show are listed, not failed.
 """
 import datetime
 import hashlib
@@ -30,6 +31,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import time
 
 import can
@@ -41,9 +43,10 @@ from rubber_rig.rig.can.protocol import DBC_PATH, PROTOCOL_VERSION
 from rubber_rig.rig.config import ConfigError, RigConfig
 from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.defects import DEFECTS
+from rubber_rig.rig.conformance.host_timing import LATE_MIN, SIM_LATE_MIN
 from rubber_rig.rig.conformance.link import Aborted, Envelope
 from rubber_rig.rig.conformance.passive import check_offline
-from rubber_rig.rig.conformance.report import to_junit, to_markdown
+from rubber_rig.rig.conformance.report import NOT_TESTED, to_junit, to_markdown
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
 from rubber_rig.rig.conformance.trace import read_log
 from rubber_rig.settings import describe_violation, described
@@ -51,7 +54,7 @@ from rubber_rig.units import to_si
 
 from .main import CommandError
 
-EXIT_FAIL, EXIT_ABORTED = 1, 3
+EXIT_FAIL, EXIT_ABORTED, EXIT_INCOMPLETE = 1, 3, 4
 
 
 def add_arguments(parser):
@@ -183,7 +186,11 @@ def run(args) -> int:
         print('rubber-rig conformance: not confirmed: nothing was sent', file=sys.stderr)
         return 2
     box = {}
-    sim_command = [sys.executable, '-m', 'rubber_rig.rig.sim', '--config-json', json.dumps(cfg.to_dict())]
+    # the simulator runs on this host: its missed deadlines are this host's lateness, not the controller's
+    timing_dir = tempfile.TemporaryDirectory(prefix='rubber_rig_conformance_') if args.sim else None
+    timing_files = [os.path.join(timing_dir.name, 'sim_late.txt')] if timing_dir else []
+    sim_command = [sys.executable, '-m', 'rubber_rig.rig.sim', '--config-json', json.dumps(cfg.to_dict()),
+                   *(['--timing-log', timing_files[0]] if timing_files else [])]
 
     def start_sim():
         box['process'] = subprocess.Popen(sim_command, stdout=subprocess.DEVNULL)
@@ -202,7 +209,8 @@ def run(args) -> int:
     t0 = time.monotonic()
     try:
         conf = ConformanceRun(bus, cfg.sample_rate, Envelope(args.lower, args.upper), cfg.frame_profile,
-                              log=lambda text: print(text, file=sys.stderr, flush=True), power_up=power_up)
+                              log=lambda text: print(text, file=sys.stderr, flush=True), power_up=power_up,
+                              host_timing_files=timing_files)
         results = conf.run()
         if args.can_log:
             conf.trace_to_log(args.can_log)
@@ -214,6 +222,8 @@ def run(args) -> int:
         if 'process' in box:
             box['process'].terminate()
             box['process'].wait(timeout=10)
+        if timing_dir is not None:
+            timing_dir.cleanup()
     ident = conf.identity[1] if conf.identity else None
     facts = [f'bus {cfg.backend} {cfg.channel or ""}, {cfg.frame_profile} frames, {cfg.sample_rate:g} Hz',
              f'envelope {args.lower * 1e3:g} .. {args.upper * 1e3:g} mm (stated by the operator)',
@@ -221,9 +231,26 @@ def run(args) -> int:
                                f"protocol {int(ident['CI_Protocol'])}" if ident else 'did not identify itself')
              + (f" (simulated, defects: {', '.join(args.defect) or 'none'})" if args.sim else ''),
              'host requirements (HOST-*) are checked offline on a log written by the driver']
+    late = [b - a for a, b in conf.host_timing.windows]
+    facts.append(f'host timing: this host ran late {len(late)} times (the run\'s receive loop and heartbeat by '
+                 f'{LATE_MIN * 1e3:g} ms or more' + (f', the simulator it ran by {SIM_LATE_MIN * 1e3:g} ms or more'
+                                                   if args.sim else '') + ')'
+                 + (f', longest {max(late) * 1e3:.0f} ms, {sum(late):.3f} s in all' if late else '')
+                 + '; a timing requirement violated only by as much as this host was late is not judged')
     if conf.deviation:
         facts.append(f'ABORTED: {conf.deviation}')
+    untested = [r.id for r in results.ordered() if r.status == NOT_TESTED]
+    if untested and results.passed and not conf.deviation:
+        facts.append(f'INCOMPLETE: {len(untested)} requirements not tested ({", ".join(untested)}): this run does '
+                     'not show the controller conforms')
     _write(args, results, 'rubber_rig protocol conformance', facts, time.monotonic() - t0)
-    if conf.deviation:
+    return online_exit_status(results, bool(conf.deviation))
+
+
+def online_exit_status(results, aborted: bool) -> int:
+    """The exit status of an online run: aborted 3, a requirement failed 1, one not tested 4 (incomplete), 0."""
+    if aborted:
         return EXIT_ABORTED
-    return EXIT_FAIL if not results.passed else 0
+    if not results.passed:
+        return EXIT_FAIL
+    return EXIT_INCOMPLETE if results.count(NOT_TESTED) else 0

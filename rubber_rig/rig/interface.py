@@ -44,15 +44,15 @@ class Rig:
         self.medium = medium   # the simulated bus with timing (BusMedium), or None
 
     def wait_ready(self, timeout: float = 10.0) -> bool:
-        """Poll until the controller has announced itself (state no longer 'unconfigured') and, where the
-        configuration requires it, identified itself (ControllerIdentity); wall timeout [s].
+        """Poll until the controller has announced itself (state no longer 'unconfigured') and its heartbeat,
+        status and, where the configuration requires it, identity (ControllerIdentity) have each been heard
+        within their silence limits (Supervisor.why_not_heard); wall timeout [s].
         """
         deadline = time.monotonic() + timeout
         d = self.driver
         while time.monotonic() < deadline:
             d.poll()
-            if d.controller_state != 'unconfigured' and (d.controller_identity is not None
-                                                         or not d.cfg.require_identity):
+            if d.controller_state != 'unconfigured' and not d.supervisor.why_not_heard():
                 return True
             time.sleep(0.002)
         return False

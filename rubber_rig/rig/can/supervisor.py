@@ -23,6 +23,7 @@ import collections
 import math
 
 from ...safety import abort_ramp_velocity
+from .liveness import ControllerLiveness, silence_limits
 from .protocol import (
     CMD_HOLD,
     FAULT_BUS,
@@ -64,10 +65,12 @@ class Supervisor:
         self._sensor = SensorCheck(self.fs)
         self._bad = collections.deque()  # (sample position, count) of bad-frame events, 1 s window
         now = clock()
-        self.last_feedback = self._last_hb_wall = self._last_poll_wall = now   # clock times
-        self._hb_sample = None           # feedback position at the last controller heartbeat
+        self.last_feedback = self._last_poll_wall = now   # clock times
         # a silence judged by the wall clock [s]; not paced (as fast as possible) a host turn may take longer
         self.wd_wall = config.watchdog_timeout if config.paced else max(config.watchdog_timeout, 2.0)
+        # heartbeat, status and identity: each owed from the controller's first word on (liveness)
+        self.liveness = ControllerLiveness(silence_limits(config.watchdog_timeout, config.require_identity),
+                                           self.fs, config.paced)
         self._handlers = {'ControllerStatus': self._on_status, 'ControllerHeartbeat': self._on_heartbeat,
                           'Temperature': self._on_temperature, 'ControllerIdentity': self._on_identity}
 
@@ -121,6 +124,8 @@ class Supervisor:
             self.event('info', 'reset: cleared ' + ('; '.join(self.fault_messages[-3:]) or 'faults'))
         self.faults, self.fault_messages, self.aborting, self.ramp_pending = 0, [], False, False
         self._sensor.clear()
+        # the controller's silence is judged afresh from the reset (a controller still silent faults again)
+        self.liveness.rearm(self._clock(), self.io.expected)
 
     def why_not_ready(self) -> str:
         """'' when a stream can open now, else why not."""
@@ -128,7 +133,7 @@ class Supervisor:
             return 'rig fault: ' + '; '.join(self.fault_messages[-3:]) + ' (reset to acknowledge)'
         if self.controller_state == 'unconfigured':
             return 'the controller has not announced itself'
-        why = self.identity_mismatch()
+        why = self.why_not_heard() or self.identity_mismatch()
         if why:
             return why
         if self.aborting or self.controller_state == 'ramping_down':
@@ -136,6 +141,12 @@ class Supervisor:
         if self.controller_state == 'fault' or self.controller_faults:
             return f'controller fault {fault_names(self.controller_faults)} (reset to acknowledge)'
         return ''
+
+    def why_not_heard(self) -> str:
+        """'' when heartbeat, status and (require_identity) identity have each been received within their silence
+        limits (liveness.silence_limits), else which one was not.
+        """
+        return self.liveness.why_not_heard(self._clock(), self.io.expected)
 
     def why_not_reset(self) -> str:
         """'' when the controller is at rest (faults may be cleared), else why not."""
@@ -169,6 +180,7 @@ class Supervisor:
         handler = self._handlers.get(name)
         if handler is None:
             return False
+        self.liveness.heard(name, self._clock(), self.io.expected)
         handler(sig)
         return True
 
@@ -190,8 +202,6 @@ class Supervisor:
         code = int(sig['HB_State'])
         self._set_controller_state(STATES[code] if code < len(STATES) else 'fault')
         self.io.counters['heartbeats_received'] += 1
-        self._last_hb_wall = self._clock()
-        self._hb_sample = self.io.expected
 
     def _set_controller_state(self, state):
         old = self.controller_state
@@ -260,12 +270,12 @@ class Supervisor:
 
     def jumped(self, sequence: int):
         """An idle rig started a new stream at `sequence`: no sample passed, so no heartbeat silence either."""
-        if self._hb_sample is not None:
-            self._hb_sample = sequence
+        self.liveness.jumped(sequence)
 
     def measured(self, xs, fs, us):
         """Samples arrived (lists of displacement [m], force [N], applied command [m]): check them."""
         self.last_feedback = self._clock()
+        self.liveness.connected(self.last_feedback, self.io.expected)
         self._check_measurements(xs, fs)
         if self.controller_state in ('running', 'ramping_down') and not self.faults & FAULT_SENSOR:
             add = self._sensor.add
@@ -303,7 +313,7 @@ class Supervisor:
         late = now - self._last_poll_wall if now - self._last_poll_wall > 0.5 * self.wd_wall else 0.0
         if late:
             self.last_feedback += late
-            self._last_hb_wall += late
+            self.liveness.shift(late)
         self._last_poll_wall = now
         return late
 
@@ -328,12 +338,14 @@ class Supervisor:
             if lag > cfg.watchdog_timeout:
                 self.fault(FAULT_WATCHDOG, f'feedback {lag:.3f} s behind the controller (stalled or delayed)')
                 return
-        if not cfg.paced and self._hb_sample is not None and io.expected is not None:
-            # as fast as possible there is no wall time: silence is counted in samples. Paced, the wall clock
-            # judges it (below): on a busy bus the lowest-priority heartbeat may trail many samples legitimately
-            silent = (io.expected - self._hb_sample) / self.fs
-            if silent > cfg.watchdog_timeout:
-                self.fault(FAULT_WATCHDOG, f'controller heartbeat silent for {silent:.3f} s of samples')
-                return
-        if cfg.paced and io.counters['heartbeats_received'] and now - self._last_hb_wall > self.wd_wall:
-            self.fault(FAULT_WATCHDOG, f'controller heartbeat silent for {now - self._last_hb_wall:.3f} s')
+        # every periodic frame is owed from the controller's first word on, heard or not (liveness): paced by
+        # the clock, as fast as possible in samples of feedback (on a busy bus the lowest-priority heartbeat may
+        # trail many samples legitimately, so paced the clock judges it)
+        quiet = self.liveness.silent(now, io.expected)
+        if quiet is not None:
+            name, seconds, ever = quiet
+            what = {'ControllerHeartbeat': 'heartbeat', 'ControllerStatus': 'status',
+                    'ControllerIdentity': 'identity'}[name]
+            unit = 's' if cfg.paced else 's of samples'
+            self.fault(FAULT_WATCHDOG, f'controller {what} silent for {seconds:.3f} {unit}'
+                       + ('' if ever else f' (no {name} received since the controller was first heard)'))

@@ -25,6 +25,8 @@ ends the run (Aborted). Motion is slow (a few mm/s) and at most 80 % of the enve
 from __future__ import annotations
 
 import time
+import traceback
+from pathlib import Path
 
 import can
 
@@ -33,7 +35,7 @@ from .active_faults import FaultScenarios
 from .active_stream import StreamScenarios
 from .link import Aborted
 from .passive import check_offline
-from .report import Results
+from .report import FAIL, NOT_TESTED, Results
 from .requirements import REQUIREMENTS
 
 
@@ -42,17 +44,30 @@ class ConformanceRun(StreamScenarios, FaultScenarios):
     `profile`, inside `envelope`. run() returns the Results of every CTRL requirement.
     """
 
-    def run(self) -> Results:
-        """Every scenario in order; the offline-checkable requirements from the whole trace at the end."""
-        self._rx.start()
-        scenarios = ((self.s_power_up,) if self.power_up else ()) + (
+    def scenarios(self) -> tuple:
+        """The scenarios in the order they run (each a method marked with the requirements it judges)."""
+        return ((self.s_power_up,) if self.power_up else ()) + (
             self.s_listen, self.s_identify, self.s_stream, self.s_stale, self.s_hold, self.s_reset_moving,
             self.s_bad_frames, self.s_host_limits, self.s_out_of_limits, self.s_too_fast, self.s_host_silence,
             self.s_wrap)
+
+    def run(self) -> Results:
+        """Every scenario in order; the offline-checkable requirements from the whole trace at the end.
+
+        A scenario that fails on its own fails the requirements it had not judged, with the reason, and the run
+        goes on from rest; only Aborted (the envelope left, or a controller that will not come to rest) ends it.
+        """
+        self._rx.start()
         try:
-            for scenario in scenarios:
+            for scenario in self.scenarios():
                 self.log(f'conformance: {scenario.__doc__.splitlines()[0].rstrip(".")}')
-                scenario()
+                before = {rid: (r.status, r.measured) for rid, r in self.results.items()}
+                try:
+                    scenario()
+                except Aborted:
+                    raise
+                except Exception as exc:   # noqa: BLE001 - any failure of one scenario is that scenario's verdict
+                    self._scenario_failed(scenario, exc, before)
         except Aborted as exc:
             self.command(CMD_ABORT, 0.0)
             self.log(f'conformance: ABORTED: {exc}')
@@ -62,6 +77,7 @@ class ConformanceRun(StreamScenarios, FaultScenarios):
             time.sleep(0.1)
             self._stop.set()
             self._rx.join(timeout=2.0)
+        self.merge_host_timing()
         if not self.deviation:
             passive = check_offline(self.trace)
             for rid, r in passive.items():
@@ -70,6 +86,21 @@ class ConformanceRun(StreamScenarios, FaultScenarios):
         why = (f'run aborted: {self.deviation}' if self.deviation else
                'needs the controller switched on during the run (--power-up)')
         return self.results.complete({r.id for r in REQUIREMENTS if r.id.startswith('CTRL')}, why)
+
+    def _scenario_failed(self, scenario, exc: Exception, before: dict):
+        """`scenario` raised `exc`: each requirement it judges and had not judged yet fails with the reason (where
+        in the scenario, what was raised); then the controller is brought to rest for the next scenario.
+        """
+        where = traceback.extract_tb(exc.__traceback__)[-1]
+        reason = (f'scenario {scenario.__name__} could not complete: {type(exc).__name__}: {exc} (at '
+                  f'{Path(where.filename).name}:{where.lineno}); the controller did not do what the scenario '
+                  'needs to judge this')
+        self.log(f'conformance: {reason}')
+        for rid in scenario.requirements:
+            r = self.results.get(rid)
+            if r is None or (r.status, r.measured) == before.get(rid, (NOT_TESTED, '')):
+                self.results.put(rid, FAIL, '', reason)
+        self.to_rest(0.0)      # raises Aborted when the controller cannot be brought to rest
 
     def trace_to_log(self, path):
         """Write every frame of the run, with the times it was judged by, to the raw CAN log `path` (.blf, .asc,

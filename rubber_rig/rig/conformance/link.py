@@ -35,30 +35,54 @@ from ..can.protocol import (
     cycle_time,
     unwrap,
 )
+from .host_timing import HostTiming
 from .report import Results
 from .trace import Trace
 
 LSB = 1e-7                  # [m] displacement resolution of the frames
-LEAD = 0.1                  # [s] setpoints streamed ahead of the controller (covers this host's pauses)
+LEAD = 0.3                  # [s] setpoints streamed ahead of the controller: covers pauses of this host (a
+#                             loaded 2-core host stalls the run for 100-300 ms; a stream that fell behind made the
+#                             controller hold, then step to where the wave had moved on, and tripped the
+#                             tracking watch)
 IDENTIFY_TIMEOUT = 0.1      # [s] CTRL-ID-1
+IDENTIFY_REPEATS = 5        # CTRL-ID-1: IDENTIFY is asked this many times, each must be answered
 RAMP_VELOCITY = 0.002       # [m/s] commanded velocity of the ramps the run asks for
+APPROACH_VELOCITY = 0.0005  # [m/s] of the stream towards a limit (CTRL-LIM-2): LEAD of it is 0.15 mm
 WAVE_FREQUENCY = 2.0        # [Hz] of the motion the run streams
 DEFAULT_HOST_TIMEOUT = 0.5  # [s] assumed when the controller states none
 BUFFER_IN_FLIGHT = 0.05     # [s] setpoints sent this recently may not be counted in ST_BufferLevel yet
 BUFFER_OUTLIERS = 0.02      # share of status frames whose level may be off (a controller busy for a moment)
 REST_TIMEOUT = 15.0         # [s] longest wait for the controller to come to rest
+TOO_FAST_FACTOR = 1.5       # CTRL-LIM-3 steps at this multiple of the rated velocity in one sample
+LATCH_TIME = 3.0            # [s] a fault must stay latched this long without RESET (CTRL-FAULT-2)
+PLAUSIBLE_VELOCITY = 1.0    # [m/s] default bound of a plausible rated velocity (Envelope.velocity_max)
 
 
 class Aborted(RuntimeError):
     """The run left the operator's envelope (or could not continue safely): ABORT was commanded."""
 
 
+def judges(*requirement_ids):
+    """Decorator of a scenario: the requirements it judges. A scenario that fails on its own (an exception other
+    than Aborted, e.g. a controller that does not do what the scenario needs) fails those it had not judged yet,
+    with the reason (active.ConformanceRun.run), and the run goes on.
+    """
+    def mark(scenario):
+        scenario.requirements = tuple(requirement_ids)
+        return scenario
+    return mark
+
+
 @dataclass
 class Envelope:
-    """The displacement range [m] the operator allows the run to use: lower < 0 < upper."""
+    """The displacement range [m] the operator allows the run to use: lower < 0 < upper; velocity_max [m/s]: the
+    most a rated velocity stated by the controller may be to be taken as stated (CTRL-ID-3; above it the rating
+    is implausible and CTRL-LIM-3 is tested at the envelope's own value, test_velocity).
+    """
 
     lower: float
     upper: float
+    velocity_max: float = PLAUSIBLE_VELOCITY
 
     def __post_init__(self):
         if not (math.isfinite(self.lower) and math.isfinite(self.upper) and self.lower < 0.0 < self.upper):
@@ -68,6 +92,12 @@ class Envelope:
     @property
     def half(self) -> float:
         return min(-self.lower, self.upper)
+
+    def test_velocity(self, fs: float, step_factor: float) -> float:
+        """The rated velocity [m/s] CTRL-LIM-3 tests when the stated one is implausible: velocity_max, or less if
+        a step of step_factor x it in one sample at fs [Hz] would not fit in 80 % of the envelope from rest.
+        """
+        return min(self.velocity_max, 0.8 * self.half * fs / step_factor)
 
 
 @dataclass
@@ -85,7 +115,7 @@ class ConformanceLink:
     """
 
     def __init__(self, bus: can.BusABC, sample_rate: float, envelope: Envelope, profile: str = 'packed',
-                 log=print, power_up=None):
+                 log=print, power_up=None, host_timing_files=()):
         self.bus, self.fs, self.env, self.log = bus, float(sample_rate), envelope, log
         # power_up: callable that switches the controller on (or asks the operator to) once the run listens;
         # None: the controller is already on and CTRL-PWR-1 is not tested
@@ -93,6 +123,11 @@ class ConformanceLink:
         self.proto = Protocol()
         self.frames = SampleFrames(profile, self.proto.db, self.fs)
         self.trace = Trace(self.fs)
+        # this host's own lateness (host_timing): the receive loop and the heartbeat sender record theirs; files
+        # of other processes of this host (the simulator with --sim) are merged in before a timing verdict
+        self.host_timing = HostTiming()
+        self.trace.host_late = self.host_timing.windows
+        self.host_timing_files = tuple(host_timing_files)
         self.results = Results()
         self.lock = threading.RLock()
         self.state, self.faults, self.identity = 'unconfigured', 0, None
@@ -102,6 +137,7 @@ class ConformanceLink:
         self.sent_log = []          # (t send called, t logged, first, count) per valid setpoint frame sent
         self.sent_at = {}           # sequence -> time its setpoint was sent
         self.deviation = ''
+        self.tracking_allowance = 0.0   # [m] tracking error tolerated beyond a third of the envelope (a test step)
         self.heartbeat = False
         self._fb_ref = 0
         self._hb_counter = 0
@@ -148,12 +184,22 @@ class ConformanceLink:
 
     def _receive_loop(self):
         period = cycle_time('HostHeartbeat')
+        wait, back, beating = 0.005, None, False
         while not self._stop.is_set():
-            msg = self.bus.recv(0.005)
+            asked = time.time()
+            if back is not None:        # the loop comes round at once after a frame: a pause here is this host's
+                self.host_timing.due(back, asked)
+            msg = self.bus.recv(wait)
             now = time.monotonic()
+            back = time.time()
+            # back later than the wait asked for: this host did not run this loop (nor read the bus) meanwhile
+            self.host_timing.due(asked + wait, back)
             if self.heartbeat and now >= self._next_hb:
+                if beating:     # due since the last one: a send later than due is this host's lateness
+                    self.host_timing.due(time.time() - (now - self._next_hb), time.time())
                 self._heartbeat()
                 self._next_hb = max(self._next_hb + period, now)
+            beating = self.heartbeat
             if msg is None:
                 continue
             with self.lock:
@@ -191,11 +237,16 @@ class ConformanceLink:
             why = f'applied command {u * 1e3:.4f} mm at sample {seq} outside the envelope'
         elif not self.env.lower - margin <= x <= self.env.upper + margin:
             why = f'measured displacement {x * 1e3:.4f} mm at sample {seq} outside the envelope'
-        elif abs(x - u) > self.env.half / 3:
+        elif abs(x - u) > self.env.half / 3 + self.tracking_allowance:
             why = f'tracking error {abs(x - u) * 1e3:.4f} mm at sample {seq}'
         if why:
             self.deviation = why
             self.command(CMD_ABORT, 0.0)
+
+    def merge_host_timing(self):
+        """Read the lateness other processes of this host recorded (host_timing_files) into the windows."""
+        for path in self.host_timing_files:
+            self.host_timing.add_from_file(path)
 
     # ---- helpers
     def _check(self):

@@ -43,6 +43,7 @@ REQUIREMENTS = (
     Requirement('CTRL-FRAME-3', 'unknown identifiers, extended and remote frames are ignored'),
     Requirement('CTRL-ID-1', 'IDENTIFY is answered within 100 ms with the DBC protocol version'),
     Requirement('CTRL-ID-2', 'ControllerIdentity every 1000 ms', True),
+    Requirement('CTRL-ID-3', 'the rated velocity stated is plausible: above 0, at most the envelope bound'),
     Requirement('CTRL-HB-1', 'ControllerHeartbeat every 50 ms', True),
     Requirement('CTRL-HB-2', 'heartbeat counter steps by one; HB_State is the current state', True),
     Requirement('CTRL-ST-1', 'ControllerStatus every 10 ms', True),
@@ -72,5 +73,7 @@ REQUIREMENTS = (
     Requirement('HOST-LIM-1', 'HostLimits before the first setpoint', True),
     Requirement('HOST-STREAM-1', 'HostStreamStart before the first setpoint of every stream', True),
     Requirement('HOST-ID-1', 'IDENTIFY at start; no stream to a controller of another protocol version'),
+    Requirement('HOST-WD-1', 'no stream before heartbeat, status and identity are heard; silence of any of them '
+                'faults'),
 )
 BY_ID = {r.id: r for r in REQUIREMENTS}

@@ -146,14 +146,19 @@ _TOLERANCES = (
      '(CTRL-HB-1, CTRL-ST-1, CTRL-TEMP-1, CTRL-ID-2)'),
     ('GAP_FACTOR', 'x', '99 % of the intervals of a periodic frame at most this many cycle times (the host '
      "watchdog's margin; also HostHeartbeat, HOST-HB-1)"),
+    ('HOST_SILENCE', 'ms', 'no interval of a periodic frame may be longer than this (the driver\'s default '
+     'watchdog_timeout) or GAP_FACTOR cycle times if that is longer: a host faults at such a silence (CTRL-HB-1, '
+     'CTRL-ST-1, CTRL-TEMP-1, CTRL-ID-2)'),
     ('RATE_TOLERANCE', '%', 'feedback sample rate within +- this share of the configured rate over every run of '
      'feedback of 0.5 s or more (CTRL-FB-1)'),
-    ('JITTER_MAX', 'ms', '99th minus 1st percentile of the feedback arrival delay after a linear fit of arrival '
-     'time against sequence (CTRL-FB-2)'),
-    ('STATUS_LEAD', 'ms', 'how far ST_LastSequence may be ahead of the last feedback sample received, in samples '
-     'at the sample rate, plus 6 (one packed feedback frame); it may be at most 6 behind (CTRL-ST-3)'),
-    ('RUN_BREAK', 'ms', 'feedback silent this long ends a run: the next frame starts a new one (CTRL-SEQ-1, '
-     'CTRL-SEQ-2, CTRL-FB-1, CTRL-FB-2, CTRL-ST-3)'),
+    ('JITTER_MAX', 'ms', '99th minus 1st percentile of the arrival delay of every feedback sample (each sample of '
+     'a packed frame arrives with its frame) after a linear fit of arrival time against sequence (CTRL-FB-2)'),
+    ('STATUS_LEAD', 'ms', 'how far ST_LastSequence may be ahead of the last feedback sample received, in samples at '
+     'the sample rate, plus 6 (one packed feedback frame); it may be at most 6 behind (CTRL-ST-3)'),
+    ('RUN_BREAK', 'ms', 'a status frame this much later than the last feedback is not compared with it (CTRL-ST-3); '
+     'runs of feedback end only at a status of a state that takes no tick, never at a silence, so continuity '
+     '(CTRL-SEQ-1) is judged across stalls of any length'),
+    ('STALL_MAX', 'ms', 'the longest silence between two feedback frames while the controller ticks (CTRL-FB-2)'),
 )
 
 

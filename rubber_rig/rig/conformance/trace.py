@@ -59,6 +59,9 @@ class Trace:
     sample_rate: float
     frames: list = field(default_factory=list)
     warnings: list = field(default_factory=list)
+    # (start, end) [s] windows in which the host recording the trace was late (conformance.host_timing; live
+    # runs only): a timing violation inside one cannot be blamed on the controller
+    host_late: list = field(default_factory=list)
     source: str = 'live'
 
     def __post_init__(self):

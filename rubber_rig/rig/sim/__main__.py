@@ -16,6 +16,7 @@
 
     python -m rubber_rig.rig.sim --config rig.json      (RigConfig as JSON; backend e.g. udp_multicast)
     python -m rubber_rig.rig.sim --config-json '{"backend": "udp_multicast", "paced": false}'
+    ... --timing-log late.txt      (paced: every deadline missed by 10 ms or more, 'start end' wall-clock s)
 Stops on SIGTERM/SIGINT.
 """
 import argparse
@@ -32,6 +33,9 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(prog='python -m rubber_rig.rig.sim', description=__doc__.splitlines()[0])
     parser.add_argument('--config', help='RigConfig JSON file')
     parser.add_argument('--config-json', help='RigConfig as a JSON string')
+    parser.add_argument('--timing-log', help="append this process's missed deadlines (paced) to this file, one "
+                        "'start end' line each (wall-clock s): the host was late, not the controller it simulates "
+                        '(rubber-rig conformance --sim reads it)')
     args = parser.parse_args(argv)
     try:
         data = json.loads(args.config_json) if args.config_json else (
@@ -45,6 +49,8 @@ def main(argv=None) -> int:
         return 2
     bus = open_bus(cfg)
     sim = SimController(bus, cfg.sample_rate, cfg.sim, cfg.paced, profile=cfg.frame_profile)
+    if args.timing_log:
+        sim.timing_log = open(args.timing_log, 'a', encoding='utf-8', buffering=1)   # noqa: SIM115 - whole run
     signal.signal(signal.SIGTERM, lambda *_: sim._stop.set())
     signal.signal(signal.SIGINT, lambda *_: sim._stop.set())
     print('rubber_rig.rig.sim: serving', cfg.backend, cfg.channel or '', flush=True)
@@ -52,6 +58,8 @@ def main(argv=None) -> int:
         sim.run_forever()
     finally:
         bus.shutdown()
+        if sim.timing_log is not None:
+            sim.timing_log.close()
     return 0
 
 

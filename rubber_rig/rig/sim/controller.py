@@ -34,6 +34,7 @@ from ..can.protocol import (
     Protocol,
     cycle_time,
 )
+from ..conformance.host_timing import SIM_LATE_MIN
 from .constants import IDLE_PERIOD, STREAMING
 from .faults import FaultInjector
 from .plant import Actuator, DelayLine, Sensor
@@ -90,6 +91,9 @@ class SimController(ControllerReceive, ControllerTransmit):
         self.buffer = {}                  # seq -> setpoint [m]
         self.u = self.u_prev = 0.0        # applied command [m]
         self.ramp = None
+        self._ramp_then = None            # defect fault_ramp_overshoot: the target after the ramp past it
+        self._identified = False          # defect identify_answered_once: IDENTIFY was answered
+        self._fault_since = None          # defect fault_clears_after_500ms: when the fault state began (wall)
         self.last_host_hb = 0
         # the host's limits for the controller's own ramps (HostLimits frame); until then: no bounds
         self.lower, self.upper, self.decel_max = -math.inf, math.inf, DECEL_MAX
@@ -109,6 +113,9 @@ class SimController(ControllerReceive, ControllerTransmit):
         self._id_next_tick = 0            # rig tick the next ControllerIdentity is due at while ticking
         self._jitter_until = 0            # feedback_jitter defect: release tick of the last held feedback frame
         self._stop = threading.Event()
+        # paced: a text file that gets a 'start end' line (wall-clock s) for every deadline this process missed by
+        # SIM_LATE_MIN or more - its host was late, which a real controller on its own CPU would not be
+        self.timing_log = None
         self._announced = False
         self._thread = None
         base = options.specimen.get('temperature', options.temperature)
@@ -132,7 +139,7 @@ class SimController(ControllerReceive, ControllerTransmit):
         self._id_next_tick = self.ticks + self._id_every
         next_idle_hk = time.monotonic()
         self._idle_due = {name: next_idle_hk + period for name, period in self._periods.items()}
-        deadline = None
+        deadline, idle_before = None, True
         while not self._stop.is_set():
             if self.paced:
                 now = time.monotonic()
@@ -159,6 +166,7 @@ class SimController(ControllerReceive, ControllerTransmit):
                         # this process was not scheduled for `due` ticks: neither was the host in it, so the host
                         # watchdog does not count that time (a real controller has its own CPU)
                         self.last_host_hb += due - 1
+                        self._log_late(now - deadline)
                     while now >= deadline and self.state in STREAMING:
                         done = self._tick_block(int((now - deadline) * self.fs) + 1) or self._tick()
                         deadline += done / self.fs
@@ -167,16 +175,22 @@ class SimController(ControllerReceive, ControllerTransmit):
                         self.counters['overruns'] += n - 1
                     timeout = max(0.0, min(deadline - time.monotonic(), 0.01)) if self.state in STREAMING \
                         else 0.0
+                    idle_before = False
                 else:
                     if deadline is not None:   # stopped ticking: back to wall-clock time
                         self._idle_due['ControllerIdentity'] = now + max(0, self._id_next_tick - self.ticks) / self.fs
                     deadline = None
                     if self._idle_since is None and self.ticks:
                         self._idle_since = now
+                    if 'fault_clears_after_500ms' in self.defects:
+                        self._clear_fault_by_itself(now)
                     if now >= next_idle_hk:
+                        if idle_before:      # due while idle: a late wake-up is this host's lateness
+                            self._log_late(now - next_idle_hk)
                         self._idle_housekeeping(now)
                         next_idle_hk = max(next_idle_hk + IDLE_PERIOD, now)
                     timeout = min(IDLE_PERIOD, max(0.0, next_idle_hk - now))
+                    idle_before = True
                 msg = self.bus.recv(timeout)
                 while msg is not None:
                     self._handle(msg)
@@ -188,6 +202,12 @@ class SimController(ControllerReceive, ControllerTransmit):
                     msg = self.bus.recv(0)
                 self._catch_up()   # ticks only as far as setpoints are queued (or while ramping down)
                 self._send_feedback()
+
+    def _log_late(self, late: float):
+        """A deadline missed by `late` [s]: a line in timing_log when SIM_LATE_MIN or more."""
+        if self.timing_log is not None and late >= SIM_LATE_MIN:
+            t = time.time()
+            self.timing_log.write(f'{t - late:.6f} {t:.6f}\n')
 
     def pump(self):
         """Fast mode without a thread: handle every frame waiting on the bus and tick as far as the queued
@@ -242,7 +262,14 @@ class SimController(ControllerReceive, ControllerTransmit):
             velocity = min(velocity_max or RAMP_VELOCITY, RAMP_VELOCITY)
             if 'slow_ramp' in self.defects:
                 velocity /= 5.0
-            self.ramp = SafeRamp(self.u, v, target, self.fs,
+            x0, self._ramp_then = self.u, None
+            away = target - self.u
+            if fault_bits and abs(away) > 1e-6:      # the controller's own (fault, host silence) ramps
+                if 'fault_ramp_step' in self.defects:    # starts with a step of up to 0.1 mm
+                    x0, v = self.u + math.copysign(min(0.1e-3, abs(away)), away), 0.0
+                if 'fault_ramp_overshoot' in self.defects:   # passes its target by 0.2 mm, then comes back
+                    self._ramp_then, target = target, target + math.copysign(0.2e-3, away)
+            self.ramp = SafeRamp(x0, v, target, self.fs,
                                  velocity_max=velocity,
                                  accel_max=RAMP_ACCEL, decel_max=self.decel_max, lower=self.lower, upper=self.upper)
             self.state = 'ramping_down'
@@ -338,6 +365,11 @@ class SimController(ControllerReceive, ControllerTransmit):
                              [u])
         self.next_seq += 1
         self.ticks += 1
+        if self.state == 'ramping_down' and self.ramp.done and self._ramp_then is not None:
+            # defect fault_ramp_overshoot: back from past the target
+            self.ramp = SafeRamp(self.u, 0.0, self._ramp_then, self.fs, accel_max=RAMP_ACCEL,
+                                 decel_max=self.decel_max, lower=self.lower, upper=self.upper)
+            self._ramp_then = None
         if self.state == 'ramping_down' and self.ramp.done:
             self._send_feedback()
             self.accept_from = math.inf

@@ -44,7 +44,9 @@ class ControllerReceive:
             decoded = self.proto.decode(msg)
         except MalformedFrame:   # CTRL-FRAME-2: counted, never applied
             self.counters['frames_bad'] += 1
-            return
+            decoded = self._unchecked_host_limits(msg)
+            if decoded is None:
+                return
         if decoded is None:      # CTRL-FRAME-3: unknown, extended, remote frames change nothing
             return
         name, sig = decoded
@@ -55,20 +57,47 @@ class ControllerReceive:
         elif name == 'HostLimits' and 'ignore_host_limits' not in self.defects:   # CTRL-LIM-1
             lo, hi = float(sig['HL_DisplacementMin']), float(sig['HL_DisplacementMax'])
             if lo < hi:
-                self.lower, self.upper = lo, hi
+                # defect ignore_lower_limit: only the upper bound is kept (the downward direction never checked)
+                self.lower = -math.inf if 'ignore_lower_limit' in self.defects else lo
+                self.upper = hi
                 self.decel_max = float(sig['HL_Deceleration']) or DECEL_MAX
         elif name == 'HostCommand':
             code = int(sig['CMD_Code'])
-            if code in (CMD_ABORT, CMD_DISABLE):
+            if code == CMD_DISABLE and 'ignore_disable' in self.defects:
+                pass
+            elif code in (CMD_ABORT, CMD_DISABLE):
                 self.abort(float(sig['CMD_Argument']), 0, float(sig['CMD_RampVelocity']) or None)
             elif code == CMD_HOLD:
                 self.abort(None, 0, float(sig['CMD_RampVelocity']) or None)
             elif code == CMD_IDENTIFY:
-                self._send_identity()   # CTRL-ID-1
-            elif code == CMD_RESET and self.state in ('fault', 'idle'):   # CTRL-FAULT-2; CTRL-RESET-1: not moving
+                if 'identify_answered_once' not in self.defects or not self._identified:
+                    self._send_identity()   # CTRL-ID-1
+                self._identified = True
+            elif code == CMD_RESET and (self.state in ('fault', 'idle') or (   # CTRL-FAULT-2; CTRL-RESET-1
+                    'reset_while_ramping' in self.defects and self.state == 'ramping_down')):
                 self.fault_bits = 0
                 self.state = 'idle'
                 self._housekeeping(force=True)
+
+    def _clear_fault_by_itself(self, now: float):
+        """Defect fault_clears_after_500ms: a fault that goes back to idle 0.5 s after it began, without RESET."""
+        if self.state != 'fault':
+            self._fault_since = None
+        elif self._fault_since is None:
+            self._fault_since = now
+        elif now - self._fault_since > 0.5:
+            self.fault_bits, self.state, self._fault_since = 0, 'idle', None
+            self._housekeeping(force=True)
+
+    def _unchecked_host_limits(self, msg):
+        """Defect host_limits_crc_unchecked: a HostLimits frame of the right length is decoded whatever its CRC;
+        None for any other malformed frame (discarded, CTRL-FRAME-2).
+        """
+        m = self.proto.by_name['HostLimits']
+        if 'host_limits_crc_unchecked' not in self.defects or msg.arbitration_id != m.frame_id \
+                or len(msg.data) != m.length:
+            return None
+        return 'HostLimits', m.decode(bytes(msg.data), decode_choices=False, scaling=True)
 
     def _on_setpoints(self, msg):
         try:
@@ -116,7 +145,10 @@ class ControllerReceive:
             if not self.lower - tol <= value <= self.upper + tol:
                 self.abort(0.0, FAULT_DISPLACEMENT_LIMIT)
                 return True
-            if prev is not None and abs(value - prev) > step_max:
+            step = value - prev if prev is not None else 0.0
+            if 'velocity_check_upward_only' not in self.defects:
+                step = abs(step)
+            if step > step_max:
                 self.abort(0.0, FAULT_VELOCITY_LIMIT)
                 return True
             prev = value

@@ -40,6 +40,8 @@ class ControllerTransmit:
         ff.extend(fm)
         fu.extend(u)
         per = self.frames.feedback_per_frame
+        if 'feedback_six_per_frame' in self.defects:   # gathers 6 samples (5 ms of latency) into each frame
+            per = self.frames.feedback_slots
         while len(self._fb[0]) >= per:
             self._send_feedback(per)
 
@@ -82,6 +84,8 @@ class ControllerTransmit:
         return len(self.buffer)
 
     def _send_heartbeat(self, code: int):
+        if 'no_heartbeat' in self.defects:     # a controller whose firmware never sends its heartbeat
+            return
         self._hb = (self._hb + 1) % 256
         self._send('ControllerHeartbeat', {'HB_Counter': self._hb, 'HB_State': code})
 
@@ -110,9 +114,13 @@ class ControllerTransmit:
 
     def _send_identity(self):
         """ControllerIdentity (CTRL-ID-1): protocol version, device, firmware, host timeout, rated velocity."""
+        rated = min(self.opt.actuator_velocity_max, 6.5535)
+        if 'rated_velocity_byte_swapped' in self.defects:    # the 16-bit field sent in the wrong byte order
+            raw = round(rated / 1e-4)
+            rated = (((raw & 0xFF) << 8) | (raw >> 8)) * 1e-4
         self._send('ControllerIdentity', {'CI_Protocol': self.opt.protocol_version, 'CI_Device': DEVICE_CODE,
                                           'CI_Firmware': FIRMWARE, 'CI_HostTimeout': min(self.opt.host_timeout, 2.55),
-                                          'CI_VelocityMax': min(self.opt.actuator_velocity_max, 6.5535)})
+                                          'CI_VelocityMax': rated})
 
     def _send(self, name, signals):
         self._transmit(name, self.proto.encode(name, signals))

@@ -1,0 +1,110 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""This host's own lateness during a conformance run, so that a timing verdict never blames the controller for
+the host (docs/protocol.md, "Host timing").
+
+The run measures itself: its receive loop, which should come round every few ms, and its heartbeat sender, whose
+frames are due every 50 ms, record each time they ran later than due by more than LATE_MIN. A stretch of the bus
+trace that overlaps such a window (widened by MARGIN) cannot show who was late: the host that did not read the
+bus, or the controller. A timing requirement whose only violations fall in such stretches is *not judged*,
+"this host was late by X ms", never failed; one violated elsewhere still fails. With the simulator on this host
+(`--sim`) the simulator's own missed deadlines are this host's lateness too and are merged in (`add_from_file`).
+
+All times are wall-clock seconds (time.time()), the time base of the trace.
+"""
+from __future__ import annotations
+
+import threading
+from pathlib import Path
+
+LATE_MIN = 0.010     # [s] a wake-up this much later than due is recorded
+MARGIN = 0.005       # [s] a window is widened by this much on each side when a stretch of the trace is judged
+SIM_LATE_MIN = 0.002  # [s] the simulator on this host logs each deadline it missed by this much (the 2 ms a
+#                      controller's feedback may jitter, CTRL-FB-2): python -m rubber_rig.rig.sim --timing-log
+
+
+class HostTiming:
+    """Windows (start, end) [s] during which this host ran late; thread-safe to record."""
+
+    def __init__(self):
+        self.windows = []
+        self._lock = threading.Lock()
+        self._read = {}          # path -> bytes of it already merged
+
+    def due(self, t_due: float, t_now: float) -> None:
+        """Something due at t_due ran at t_now: a window when it was LATE_MIN or more late."""
+        if t_now - t_due >= LATE_MIN:
+            with self._lock:
+                self.windows.append((float(t_due), float(t_now)))
+
+    def add_from_file(self, path) -> int:
+        """Merge the windows written one per line as 'start end' (the simulator's missed deadlines, at its own
+        threshold: it misses the feedback timing by less than LATE_MIN) since the last call for this path; returns
+        how many. A missing file adds nothing; a line still being written waits.
+        """
+        p = Path(path)
+        if not p.is_file():
+            return 0
+        offset = self._read.get(str(p), 0)
+        with p.open('rb') as f:
+            f.seek(offset)
+            data = f.read()
+        complete = data[:data.rfind(b'\n') + 1]
+        self._read[str(p)] = offset + len(complete)
+        added = 0
+        for line in complete.decode('utf-8', errors='replace').splitlines():
+            parts = line.split()
+            try:
+                t0, t1 = float(parts[0]), float(parts[1])
+            except (IndexError, ValueError):
+                continue
+            with self._lock:          # the writer chose its own threshold
+                self.windows.append((t0, t1))
+            added += 1
+        return added
+
+def late_between(windows, t0: float, t1: float) -> float:
+    """The longest lateness [s] of a window (start, end) that overlaps [t0, t1] widened by MARGIN, 0 if none."""
+    worst = 0.0
+    for a, b in windows:
+        if a - MARGIN <= t1 and b + MARGIN >= t0:
+            worst = max(worst, b - a)
+    return worst
+
+
+def late_total(windows, t0: float, t1: float) -> float:
+    """How long [s] this host was late around [t0, t1]: the total of the (merged) windows that overlap it widened
+    by MARGIN. A violation longer than this cannot be the host's alone.
+    """
+    spans = sorted((a, b) for a, b in windows if a - MARGIN <= t1 and b + MARGIN >= t0)
+    total, end = 0.0, -float('inf')
+    for a, b in spans:
+        if b > end:
+            total += b - max(a, end)
+            end = b
+    return total
+
+
+def explains(windows, t0: float, t1: float, excess: float) -> float:
+    """The host's lateness [s] within [t0, t1] when it is at least `excess` [s] (the part of a violation beyond
+    its bound), else 0: only then may the violation be the host's.
+    """
+    late = late_total(windows, t0, t1)
+    return late if late > 0 and late >= excess else 0.0
+
+
+def not_judged(late: float, what: str) -> str:
+    """The reason of a timing verdict that cannot be given: this host was late by `late` [s]."""
+    return f'not judged: this host was late by {late * 1e3:.0f} ms ({what})'
