@@ -145,11 +145,11 @@ def test_a_complete_recording_is_confirmed_by_word_from_the_recorder_after_the_e
     o = started()
     o.observe(report(10.5), 500)
     assert o.verdict(11.0, 1000, ended=10.9) is None                   # nothing since the end yet: wait
-    assert o.verdict(11.1, 1000, ended=10.9, heard=11.05) == 'recording: complete in /rec/r/r_0.mcap'
+    assert o.verdict(11.1, 1000, ended=10.9, heard=11.05) == 'recording complete in /rec/r/r_0.mcap'
     o = started()
     o.observe(report(10.5, lost=0), 500)
     o.latest = report(11.2, lost=12)
-    assert o.verdict(11.2, 1000, ended=10.9) == ('recording: complete in /rec/r/r_0.mcap (12 samples lost in '
+    assert o.verdict(11.2, 1000, ended=10.9) == ('recording complete in /rec/r/r_0.mcap (12 samples lost in '
                                                  'transport or writing, counted by the recorder and in the file)')
 
 
@@ -159,7 +159,7 @@ def test_a_split_is_the_same_recording_not_a_lost_one():
     assert o.observe(report(10.5, path='/rec/r/r_1.mcap'), 500) == ''
     assert o.observe(report(11.0, path='/rec/r/r_2.mcap'), 1000) == ''
     o.latest = report(12.1, path='/rec/r/r_2.mcap')
-    assert o.verdict(12.1, 2000, ended=12.0) == 'recording: complete in /rec/r (parts r_0.mcap..r_2.mcap)'
+    assert o.verdict(12.1, 2000, ended=12.0) == 'recording complete in /rec/r (parts r_0.mcap..r_2.mcap)'
     o = started()
     assert 'another recording, /rec/s/s_0.mcap' in o.observe(report(10.5, path='/rec/s/s_0.mcap'), 500)
 
@@ -173,7 +173,7 @@ def test_a_recorder_that_cannot_write_is_in_the_result_whatever_ended_the_progra
     o = started()
     o.observe(report(14.5, 'error', error=error), 4500)
     words = o.verdict(20.0, 9000, ended=19.9)
-    assert words.startswith(f'recording: LOST from about sample 4500 ({cause}): the recorder failed: {error}')
+    assert words.startswith(f'recording lost from about sample 4500: {cause}: the recorder failed: {error}')
     assert cause_of(error) == cause
 
 
@@ -184,20 +184,20 @@ def test_a_recorder_killed_just_before_the_end_is_not_confirmed():
     assert o.check(11.0, 1000) == ''                # 0.6 s: not yet gone by recorder_timeout
     assert o.verdict(11.2, 1000, ended=11.0, heard=10.45) is None
     words = o.verdict(11.8, 1000, ended=11.0, heard=10.45)
-    assert words.startswith('recording: NOT CONFIRMED to the end (recorder gone?): no word from the recorder for '
+    assert words.startswith('recording not confirmed to the end (recorder gone?): no word from the recorder for '
                             '0.8 s after the program ended (its last status 1.4 s ago)')
     assert 'may end before sample 1000' in words
 
 
 def test_a_recorder_gone_mid_program_and_no_recording_at_all():
     o = started()
-    assert o.check(12.5, 2000) == ('recording LOST from about sample 2000 (recorder gone): no recorder status for '
+    assert o.check(12.5, 2000) == ('recording lost from about sample 2000: recorder gone: no recorder status for '
                                    '2.7 s (the recorder is gone); the samples after it are not in /rec/r/r_0.mcap')
-    assert o.verdict(13.0, 3000, ended=12.9).startswith('recording: LOST from about sample 2000 (recorder gone)')
+    assert o.verdict(13.0, 3000, ended=12.9).startswith('recording lost from about sample 2000: recorder gone')
     none = RecordingOutcome(2.0, '/r4/samples')
     none.start(None, 10.0)
-    assert none.verdict(11.0, 100, ended=10.9) == ('recording: NONE: no recorder was recording /r4/samples when '
-                                                   'the program started')
+    assert none.verdict(11.0, 100, ended=10.9) == ('no recording: no recorder was recording /r4/samples when the '
+                                                   'program started')
 
 
 def test_a_stall_of_this_node_does_not_make_the_recorder_gone():
@@ -207,4 +207,4 @@ def test_a_stall_of_this_node_does_not_make_the_recorder_gone():
     # the resume it is 0.1 s
     assert o.check(13.6, 500, since=13.5) == '' and not o.lost
     o.latest = report(13.7)
-    assert o.verdict(13.8, 600, ended=13.65, since=13.5) == 'recording: complete in /rec/r/r_0.mcap'
+    assert o.verdict(13.8, 600, ended=13.65, since=13.5) == 'recording complete in /rec/r/r_0.mcap'

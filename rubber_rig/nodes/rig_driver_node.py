@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -108,6 +108,7 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self._poll_timer = None
         start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig is not None else 'unconfigured')
         self.owner_watch = OwnerWatch(Peers(self, silent=self.owner_timeout))
+        self.silent_owner = ''          # a stream owner that lost its stream to its silence, until it beats again
         self.create_timer(self.status_period, self.publish_status)
         self.create_timer(self.diagnostics_period, self.publish_diagnostics)
         self.publish_status()
@@ -301,15 +302,37 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         age = self.owner_watch.silent_for(grant)
         if age is not None and age > self.owner_timeout and self.rig.driver.owner_lost(
                 f'{grant.owner} silent for {age:.2f} s (no heartbeat; alive but stuck, or gone)'):
+            self.silent_owner = grant.owner      # named in /diagnostics until it beats again
             self._log_events()
+
+    def owner_diagnostics(self) -> dict:
+        """/diagnostics lines of a stream owner that lost its stream to its silence: its name and how long it has
+        been silent (from its own heartbeats), or that it beats again.
+        """
+        owner = self.silent_owner
+        if not owner:
+            return {}
+        age = self.owner_watch.peers.age(owner)
+        if age is not None and age <= self.owner_timeout:
+            self.silent_owner = ''
+            return {'silent_stream_owner': '', 'last_silent_stream_owner': f'{owner} (beats again)'}
+        return {'silent_stream_owner': owner,
+                'silent_stream_owner_for_s': f'{age:.2f}' if age is not None else 'unknown'}
 
     def publish_diagnostics(self) -> None:
         status = self._last_status or self.status_message()
         backend = self.config.backend if self.config is not None else self.get_parameter('backend').value
         channel = self.config.channel if self.config is not None else self.get_parameter('can.channel').value
         hw = f'{backend}:{channel or self.get_fully_qualified_name()}'
-        self.pub_diag.publish(conv.diagnostics_msg(status, hw, self.bus_diagnostics(),
-                                                   name=self.get_fully_qualified_name()))
+        owner = self.owner_diagnostics()
+        msg = conv.diagnostics_msg(status, hw, {**self.bus_diagnostics(), **owner},
+                                   name=self.get_fully_qualified_name())
+        if owner.get('silent_stream_owner'):   # said first, where an operator looks: who froze, for how long
+            d = msg.status[0]
+            d.message = (f"stream owner {owner['silent_stream_owner']} silent for "
+                         f"{owner['silent_stream_owner_for_s']} s; {d.message}")
+            d.level = max(d.level, DiagnosticStatus.WARN)
+        self.pub_diag.publish(msg)
 
     def bus_diagnostics(self) -> dict:
         """The bus's lines of /diagnostics: the load the protocol needs at this rate (worst-case stuffing), the

@@ -91,7 +91,7 @@ class RecordingOutcome:
 
     def _lose(self, sample: int, cause: str, why: str) -> None:
         self.lost_from, self.cause = sample, cause
-        self.lost = (f'recording LOST from about sample {sample} ({cause}): {why}; the samples after it are not in '
+        self.lost = (f'recording lost from about sample {sample}: {cause}: {why}; the samples after it are not in '
                      f'{self.where()}')
 
     def where(self) -> str:
@@ -144,25 +144,25 @@ class RecordingOutcome:
         before the end that records it.
         """
         if not self.recorded_by:
-            return ('recording: NONE: no recorder was recording ' + (self.topic or 'the samples')
+            return ('no recording: no recorder was recording ' + (self.topic or 'the samples')
                     + ' when the program started')
         if self.lost:
-            return self.lost.replace('recording LOST', 'recording: LOST', 1)
+            return self.lost
         last = self.latest
         if last is not None and self._records_it(last) and (
                 last.received > ended or (heard is not None and heard > ended and last.received >= ended - wait)):
             lost = last.samples_lost - self.lost_at_start
-            return (f'recording: complete in {self.where()}' + (
+            return (f'recording complete in {self.where()}' + (
                 f' ({lost} samples lost in transport or writing, counted by the recorder and in the file)'
                 if lost > 0 else ''))
         if last is not None and last.received > ended and last.state == 'error':
             self._lose(end_sample, cause_of(last.error), f'the recorder failed at the end: {last.error}')
-            return self.lost.replace('recording LOST', 'recording: LOST', 1)
+            return self.lost
         waited = now - max(ended, since)
         if waited > wait:
             age = now - max(last.received if last is not None else -math.inf, since)
             self.cause = 'recorder gone'
-            return (f'recording: NOT CONFIRMED to the end (recorder gone?): no word from the recorder for '
+            return (f'recording not confirmed to the end (recorder gone?): no word from the recorder for '
                     f'{waited:.1f} s after the program ended (its last status {age:.1f} s ago); {self.where()} may '
                     f'end before sample {end_sample}')
         return None
