@@ -33,6 +33,7 @@ import pytest
 
 from rubber_rig.cli.main import main as cli_main
 from rubber_rig.excitation import Program
+from rubber_rig.recording import Recorder
 from rubber_rig.rig import ConfigError, RigConfig, open_rig
 from rubber_rig.rig import interface as rig_interface
 from rubber_rig.rig.can.canlog import CanLogError, CanLogWarning
@@ -742,3 +743,48 @@ def test_cli_reports_time_anomalies_and_truncation(tmp_path, capsys):
     assert cli_main(['canlog', str(cut), '--json']) == 0
     info = json.loads(capsys.readouterr().out)
     assert info['truncated'] and info['lines_skipped'] == 1 and info['frames_total'] == 49
+
+
+# ---- the log against the recording of the same run ------------------------------------------------------------
+
+def _record_samples(path, log, keep):
+    """The samples of `log` as the driver publishes them (RigSampleBatch of 20, stamped with the log's time), the
+    batches for which keep(k) is True, recorded to an MCAP file by the Recorder."""
+    rec = Recorder(path.parent)
+    rec.start(path)
+    n = len(log)
+    for k, a in enumerate(range(0, n - n % 20, 20)):
+        if not keep(k):
+            continue
+        t_ns = int(log.time_ns[a])
+        msg = {'header': {'stamp': {'sec': t_ns // 10**9, 'nanosec': t_ns % 10**9}},
+               'first_sequence': int(log.sequence[a]), 'sample_period': 1e-3,
+               'displacement': log.displacement[a:a + 20], 'force': log.force[a:a + 20],
+               'setpoint': log.setpoint[a:a + 20], 'temperature': 20.0, 'status_flags': 0, 'frames_lost': 0}
+        assert rec.write('/rig/samples', 'msg_defs/msg/RigSampleBatch', msg, t_ns)
+    rec.stop()
+
+
+def test_the_log_is_compared_with_the_recording_of_the_run(logged_runs, tmp_path, capsys):
+    _, path, _, _ = logged_runs['.log']
+    log = decode_clean(path)
+    _record_samples(tmp_path / 'rec', log, keep=lambda k: k != 5)      # the recorder lost batch 5 (20 samples)
+    assert cli_main(['canlog', str(path), '--recording', str(tmp_path / 'rec'), '--json']) == 0
+    c = json.loads(capsys.readouterr().out)['recording_comparison']
+    whole = len(log) - len(log) % 20
+    assert c['samples_both'] == whole - 20 and c['only_in_recording'] == 0
+    assert c['only_in_log'] == len(log) - whole + 20 and c['first_only_in_log'] == int(log.sequence[100])
+    # (the recording spreads a batch over its sample period from the first sample's stamp; the unpaced run's frames
+    # came in bursts: milliseconds apart)
+    assert c['values_agree'] and abs(c['time_offset_median']) < 0.05 and c['time_ok']
+    # the same log with one line's time moved back 100 s: the comparison names the log's anomaly
+    bad = tmp_path / 'back.log'
+    lines = path.read_text().splitlines()
+    k = next(i for i, line in enumerate(lines) if i > 300 and ' 180#' in line)
+    stamp = lines[k][1:lines[k].index(')')]
+    lines[k] = lines[k].replace(f'({stamp})', f'({float(stamp) - 100.0:.6f})')
+    bad.write_text('\n'.join(lines) + '\n')
+    assert cli_main(['canlog', str(bad), '--recording', str(tmp_path / 'rec')]) == 0
+    out = capsys.readouterr().out
+    assert f"WARNING:    the log's time goes backwards 1 times and jumps 0 times (frame {k + 1} (line {k + 1})" in out
+    assert 'not the rig\'s clock' in out

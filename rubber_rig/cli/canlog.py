@@ -26,7 +26,9 @@ lines_skipped) and the first ones by number with the reason. A log with no reada
 A log cut short (ends inside a line or record) is reported as truncated ('truncated:', JSON truncated). A frame
 stamped before the frame preceding it, or a hole of more than 10 s without frames, is a time anomaly of the log
 ('time:', JSON time_backwards / time_jumps / time_anomalies with frame and line numbers); the frames are kept
-in file order with their stamps as written, and a warning says so.
+in file order with their stamps as written, and a warning says so. --recording DIR compares the log with the
+MCAP recording of the same run: samples in both (values to the DBC resolution), only in one of them, the offset of
+the recording's stamps from the log's time (with the log's time anomalies named, never taken for the rig's clock).
 """
 import csv
 import datetime
@@ -35,10 +37,14 @@ import math
 import sys
 import warnings
 
+from rubber_rig.recording import RecordingError, load_recording
 from rubber_rig.rig.can.canlog import SUPPORTED_FORMATS
+from rubber_rig.rig.can.canlog_compare import compare_with_recording, comparison_lines
 from rubber_rig.rig.can.canlog_reader import decode_log
 from rubber_rig.rig.can.protocol import Protocol
 from rubber_rig.rig.config import RigConfig
+
+from .main import CommandError
 
 _DEFAULTS = RigConfig()
 CSV_COLUMNS = (('sequence', 'sequence'), ('time_s', 'time'), ('time_ns', 'time_ns'),
@@ -50,6 +56,7 @@ def add_arguments(parser):
     parser.add_argument('log', help='raw CAN log: .blf (Vector BLF), .asc (Vector ASC) or .log (candump -L)')
     parser.add_argument('--json', action='store_true', help='machine-readable summary')
     parser.add_argument('-o', '--output', help='write the decoded samples as CSV to this file')
+    parser.add_argument('--recording', help='compare with the MCAP recording (file or directory) of the same run')
     parser.add_argument('--bitrate', type=float, default=float(_DEFAULTS.bitrate),
                         help='arbitration bit rate for the bus load estimate [bit/s] (default %(default)g)')
     parser.add_argument('--data-bitrate', type=float, default=float(_DEFAULTS.data_bitrate),
@@ -166,12 +173,23 @@ def run(args) -> int:
     if args.output:
         _write_csv(log, args.output)
         info['csv'] = args.output
+    comparison = None
+    if args.recording:
+        try:
+            rec = load_recording(args.recording, allow_truncated=True)
+        except RecordingError as exc:
+            raise CommandError(str(exc)) from None
+        comparison = info['recording_comparison'] = compare_with_recording(log, rec)
     if args.json:
         print(json.dumps(info, indent=2, default=str))
     else:
         _print(info, log)
         if args.output:
             print(f'csv:        {args.output} ({len(log)} samples)')
+        if comparison is not None:
+            print(f'recording:  {args.recording}')
+            for line in comparison_lines(comparison):
+                print(line)
     if not log.complete:
         n = log.lines_skipped
         what = (f'skipped {n} unreadable line{"" if n == 1 else "s"}, decoded the frames before and after them'
