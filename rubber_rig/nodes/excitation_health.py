@@ -29,6 +29,8 @@ from rubber_rig.nodes import topics
 from rubber_rig.nodes.heartbeat import PERIOD, SILENT
 from rubber_rig.session.observed import BeatLog, ProgramWitness
 
+STALL_SHOWN = 10.0   # [s] /diagnostics says this node stalled for this long after the stall
+
 
 class ProgramHealth:
     """The events, silences and detector blindness of the running (or last) program of the excitation ``node``
@@ -101,11 +103,18 @@ class ProgramHealth:
             if not self.blind:
                 node.get_logger().warning(f'detectors blind: {blind}')
             self.blind = blind
+        # a stall of this node's own executor in the last STALL_SHOWN seconds: said, so that an operator does not
+        # look for the cause in the nodes it did not hear meanwhile
+        stalls = node.stall.stalls
+        stalled = (f'this node stalled for {stalls[-1][1] - stalls[-1][0]:.1f} s (its callbacks did not run)'
+                   if stalls and time.monotonic() - stalls[-1][1] < STALL_SHOWN else '')
+        if stalled:
+            level = DiagnosticStatus.WARN
         values = {'state': node.state, 'program': node.session.runner.program.name if running else '',
                   'detector_events': len(self.events), 'last_event': last.message if last else '',
-                  'detectors_blind': blind, 'recording_lost': lost, 'nodes_silent': silent}
-        reasons = [f'nodes silent: {silent}' if silent else '', f'detectors blind: {blind}' if blind else '', lost,
-                   last.message if last is not None and last.action != 'record' else '']
+                  'detectors_blind': blind, 'recording_lost': lost, 'nodes_silent': silent, 'stalled': stalled}
+        reasons = [stalled, f'nodes silent: {silent}' if silent else '', f'detectors blind: {blind}' if blind else '',
+                   lost, last.message if last is not None and last.action != 'record' else '']
         msg = DiagnosticArray()
         msg.header.stamp = node.get_clock().now().to_msg()
         msg.status.append(DiagnosticStatus(
