@@ -121,8 +121,10 @@ class PartsReport:
         if self.after_last:
             out.append(f'  {self.after_last}')
         unknown = ' plus an unknown number' if self.samples_unknown else ''
-        out.append(f'  {self.samples_missing} samples{unknown} of the recording are in missing parts (a sequence gap '
-                   'where a part is missing counts these same samples)')
+        inside = any(indices[0] < m['index'] < indices[-1] for m in self.missing)
+        out.append(f'  {self.samples_missing} samples{unknown} of the recording are in missing parts'
+                   + (' (the sequence gap where a part is missing between two others counts the same samples)'
+                      if inside else ''))
         return out
 
 

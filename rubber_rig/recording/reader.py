@@ -208,8 +208,12 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
     _join(rec, predictions, setpoints)
     _metadata_from_topics(rec)
     if not isinstance(path, (list, tuple)):
-        rec.parts = survey(path)
-        rec.complete &= rec.parts.complete
+        try:
+            rec.parts = survey(path)
+        except (OSError, RecordingError) as exc:   # the data is read; only the part records could not be
+            rec.other_metadata['parts_error'] = {'error': str(exc)}
+        else:
+            rec.complete &= rec.parts.complete
     return rec
 
 
