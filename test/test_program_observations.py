@@ -13,13 +13,13 @@
 # limitations under the License.
 
 """What a program's result says, decided in the ROS-free core on simulated time: who stalled and who merely looked
-silent (session.observed), and what happened to the recording (session.recording_outcome). The wiring into the
+silent (session.observed), and what happened to the recording (recording.outcome). The wiring into the
 excitation node is tested with the nodes as separate processes in test_nodes_blame.py.
 """
 import pytest
 
+from rubber_rig.recording.outcome import RecorderReport, RecordingOutcome, cause_of
 from rubber_rig.session.observed import BeatLog, ProgramWitness, StallWatch
-from rubber_rig.session.recording_outcome import RecorderReport, RecordingOutcome, cause_of
 
 SILENT, PERIOD = 0.75, 0.25
 PEERS = ('/r4/rig_driver', '/r4/recorder', '/r4/element_model')

@@ -24,10 +24,10 @@ from rclpy.node import Node
 
 from msg_defs.action import RunProgram
 from msg_defs.msg import DetectorEvent, Heartbeat
+from rubber_rig.nodes import awaitables, topics
 from rubber_rig.nodes import conversions as conv
-from rubber_rig.nodes import topics
 from rubber_rig.nodes.heartbeat import PERIOD, SILENT
-from rubber_rig.session.observed import BeatLog, ProgramWitness
+from rubber_rig.session.observed import BeatLog, ProgramWitness, StallWatch
 
 STALL_SHOWN = 10.0   # [s] /diagnostics says this node stalled for this long after the stall
 
@@ -44,6 +44,7 @@ class ProgramHealth:
         # the suite's other nodes, their silences measured from their own heartbeats (observed.BeatLog); a stall of
         # this node (node.stall) is not theirs
         self.me = node.get_fully_qualified_name()
+        self.stall = StallWatch(SILENT)   # the node's own executor: a stall of its own is no silence of the others
         self.beats = BeatLog(SILENT, PERIOD)
         node.create_subscription(Heartbeat, topics.HEARTBEAT, self.on_beat, topics.HEARTBEAT_QOS)
         self.witness = ProgramWitness(self.me, 0.0)
@@ -59,7 +60,7 @@ class ProgramHealth:
 
     def on_beat(self, msg: Heartbeat) -> None:
         now = time.monotonic()
-        self.node.stall.tick(now)
+        self.stall.tick(now)
         if msg.node != self.me:
             self.beats.beat(msg.node, msg.pid, msg.count, conv.to_seconds(msg.header.stamp), now)
 
@@ -79,7 +80,7 @@ class ProgramHealth:
             message += f' ({recording})'
         elif self.node.recording.lost:
             message += f' ({self.node.recording.lost})'
-        for words in self.witness.words(self.beats, self.node.stall, time.monotonic()):
+        for words in self.witness.words(self.beats, self.stall, time.monotonic()):
             message += f' ({words})'
         return message
 
@@ -129,14 +130,14 @@ class ProgramHealth:
         elsewhere (status_timeout).
         """
         now = time.monotonic()
-        if stall := self.node.stall.tick(now):
+        if stall := self.stall.tick(now):
             self.node.get_logger().error(
                 f'{self.me} (this node) stalled for {stall[1] - stall[0]:.1f} s: its callbacks did not run; what it '
                 'did not hear then is no silence of the others')
         if self.node.session is not None:
-            quiet = self.witness.watch(self.beats, self.node.stall, now)
+            quiet = self.witness.watch(self.beats, self.stall, now)
         else:
-            quiet = self.beats.quiet(now, self.node.stall)
+            quiet = self.beats.quiet(now, self.stall)
         log = self.node.get_logger()
         for name, age in quiet.items():
             if name not in self.silent_now:
@@ -178,6 +179,22 @@ class ProgramHealth:
                                    achieved_amplitude=p.achieved_amplitude, progress=p.fraction,
                                    events=len(self.events),
                                    last_event=self.events[-1] if self.events else DetectorEvent())
+
+    async def result_when_recorded(self, session, success: bool, ended: bool, outcome, done) -> None:
+        """The result of the program of ``session`` that just ended, once the recording's words are known
+        (RecordingWatch.verdict waits at most RESULT_WAIT for the recorder): kept in node.result, logged, and set on
+        the goal's future ``done`` (None for a program started without a goal).
+        """
+        node = self.node
+        end_wall, end_sample = time.monotonic(), session.next_sample
+        words = node.recording.verdict(outcome, end_sample, end_wall, self.beats)
+        while words is None:
+            await awaitables.sleep(node, 0.02)
+            words = node.recording.verdict(outcome, end_sample, end_wall, self.beats)
+        node.result = result = self.result(session.runner, success, ended, words)
+        node.get_logger().info(f'program ended: {result.message}')
+        if done is not None and not done.done():
+            done.set_result(result)
 
     def result(self, runner, success: bool, ended: bool, recording: str = '') -> RunProgram.Result:
         """The goal's result for the program of ``runner``: a success only if asked for and it was not aborted

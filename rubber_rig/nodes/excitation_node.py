@@ -62,9 +62,8 @@ from rubber_rig.nodes import excitation_readiness as readiness
 from rubber_rig.nodes.excitation_health import ProgramHealth
 from rubber_rig.nodes.excitation_params import declare_excitation_parameters
 from rubber_rig.nodes.excitation_recording import RecordingWatch
-from rubber_rig.nodes.heartbeat import SILENT, start_heartbeat
+from rubber_rig.nodes.heartbeat import start_heartbeat
 from rubber_rig.nodes.spin import spin_node
-from rubber_rig.session.observed import StallWatch
 from rubber_rig.session.program_session import ProgramSession
 
 
@@ -73,8 +72,6 @@ class ExcitationNode(Node):
     def __init__(self, node_name: str = 'excitation', **kwargs):
         super().__init__(node_name, **kwargs)
         declare_excitation_parameters(self)   # the parameters become attributes (lead_time, batch_size, ...)
-        # this node's own executor: a gap between its callbacks is a stall of its own, not a silence of the others
-        self.stall = StallWatch(SILENT)
         self.status, self.status_wall = None, 0.0   # the latest rig status, received at status_wall (monotonic)
         self.driver_wall = 0.0          # the latest status or sample batch: the driver is alive
         self.recording = RecordingWatch(self, self.require_recording, self.recorder_timeout)
@@ -121,7 +118,6 @@ class ExcitationNode(Node):
     # -- inputs -----------------------------------------------------------------------------------------------
     def on_status(self, msg: RigStatus) -> None:
         self.status, self.status_wall = msg, time.monotonic()
-        self.stall.tick(self.status_wall)
         self.driver_wall = self.status_wall
         s = self.session
         if s is None or not s.stream_id or self.opening:
@@ -133,7 +129,6 @@ class ExcitationNode(Node):
             self._end(f'the rig stopped the program: {msg.last_event or msg.state_name}')
 
     def on_recorder_status(self, msg: RecorderStatus) -> None:
-        self.stall.tick(time.monotonic())
         why = self.recording.on_status(msg, self.session)
         if why:
             self.abort_program(why)
@@ -142,7 +137,6 @@ class ExcitationNode(Node):
         # samples prove the driver alive as well as its status does: one late status message (DDS can hold a
         # topic back for a second when a subscriber process dies) must not stop a running program
         self.driver_wall = time.monotonic()
-        self.stall.tick(self.driver_wall)
         s = self.session
         if s is not None and s.before_stream(msg.first_sequence, len(msg.displacement)):
             return                       # from before this program's stream
@@ -155,7 +149,6 @@ class ExcitationNode(Node):
             self.abort_program(f'internal error on a sample batch: {exc!r}')
 
     def on_cycle_metrics(self, msg: CycleMetrics) -> None:
-        self.stall.tick(time.monotonic())
         if self.session is None:
             return
         try:
@@ -231,7 +224,7 @@ class ExcitationNode(Node):
 
     # -- streaming (timer) ------------------------------------------------------------------------------------------
     def stream(self) -> None:
-        self.stall.tick(time.monotonic())
+        self.health.stall.tick(time.monotonic())
         try:
             self._stream()
         except Exception as exc:   # noqa: BLE001 - no callback may take the node down
@@ -296,28 +289,10 @@ class ExcitationNode(Node):
         self._finish(success=success, ended=True)
 
     def _finish(self, success: bool, ended: bool = False) -> None:
-        """The program ended: the stream is free now; its result waits (at most excitation_recording.RESULT_WAIT)
-        for word from the recorder, so that it can say what happened to the recording.
-        """
-        s = self.session
-        if s is None:
-            return
-        self.session = None
-        outcome = self.recording.end_program()
-        done = self._done
-        self.executor.create_task(self._result_when_recorded(s, success, ended, outcome, done))
-
-    async def _result_when_recorded(self, s, success, ended, outcome, done) -> None:
-        end_wall, end_sample = time.monotonic(), s.next_sample
-        words = self.recording.verdict(outcome, end_sample, end_wall, self.health.beats)
-        while words is None:
-            await awaitables.sleep(self, 0.02)
-            words = self.recording.verdict(outcome, end_sample, end_wall, self.health.beats)
-        result = self.health.result(s.runner, success, ended, words)
-        self.result = result
-        self.get_logger().info(f'program ended: {result.message}')
-        if done is not None and not done.done():
-            done.set_result(result)
+        """The stream is free now; the result waits for word from the recorder (at most RESULT_WAIT)."""
+        if (s := self.session) is not None:
+            self.session, outcome = None, self.recording.end_program()
+            self.executor.create_task(self.health.result_when_recorded(s, success, ended, outcome, self._done))
 
     def _stop_stream(self, action: int, reason: str, target: float = 0.0) -> None:
         if self.session is None or not self.session.stream_id:
@@ -347,12 +322,10 @@ class ExcitationNode(Node):
             self.get_logger().warning(f'goal refused: {why}')
             goal_handle.abort()
             return RunProgram.Result(success=False, message=why)
-        done = Future()
-        self.goal_handle, self._done = goal_handle, done
-        program_session = self.session
+        self.goal_handle, self._done = goal_handle, (done := Future())
 
         def check_cancel():
-            if goal_handle.is_cancel_requested and self.session is not None and self.session is program_session:
+            if goal_handle.is_cancel_requested and self.session is not None and self.goal_handle is goal_handle:
                 self.abort_program('goal cancelled')
         cancel_timer = self.create_timer(0.01, check_cancel)
         try:

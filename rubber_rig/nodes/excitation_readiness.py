@@ -101,7 +101,7 @@ def why_stop(node: Node) -> str:
     # their full timeout to be heard again before they are called silent
     if node.require_recording and node.recording.age > node.recorder_timeout:
         return f'recording lost: no recorder status for {node.recording.age:.1f} s (the recorder is gone)'
-    silent = node.stall.since(node.driver_wall, time.monotonic())
+    silent = node.health.stall.since(node.driver_wall, time.monotonic())
     if silent > node.status_timeout:
         return (f'{node.rig_driver} silent for {silent:.1f} s (no status, no samples): the rig controller ramps '
                 'to rest on its own host watchdog')

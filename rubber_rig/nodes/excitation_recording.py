@@ -14,7 +14,7 @@
 
 """What the excitation node knows of the recorder: whether this namespace's samples are being recorded (a
 program with require_recording starts only then) and what happened to the recording a program started in (the
-ROS-free session.recording_outcome decides: complete, lost from sample N and why, not recorded; a split into the
+ROS-free recording.outcome decides: complete, lost from sample N and why, not recorded; a split into the
 next part is the same recording).
 
 The recorder publishes its status (recorder_status, latched) every 0.5 s; a status older than ``timeout`` [s]
@@ -29,7 +29,7 @@ from rclpy.node import Node
 
 from msg_defs.msg import RecorderStatus
 from rubber_rig.nodes import topics
-from rubber_rig.session.recording_outcome import RecorderReport, RecordingOutcome
+from rubber_rig.recording.outcome import RecorderReport, RecordingOutcome
 
 STATES = {RecorderStatus.STATE_IDLE: 'idle', RecorderStatus.STATE_RECORDING: 'recording',
           RecorderStatus.STATE_ERROR: 'error'}
@@ -58,7 +58,7 @@ class RecordingWatch:
     @property
     def age(self) -> float:
         """Seconds since the latest recorder status, counting only time this node ran (StallWatch)."""
-        return self.node.stall.since(self.wall, time.monotonic())
+        return self.node.health.stall.since(self.wall, time.monotonic())
 
     @property
     def recorded_by(self) -> str:
@@ -105,7 +105,7 @@ class RecordingWatch:
     def start_program(self) -> None:
         """A program starts: a new outcome, from the recording it starts in."""
         self.outcome = RecordingOutcome(self.timeout, self.samples_topic)
-        self.outcome.start(self.report(), time.monotonic(), self.node.stall.resumed_at)
+        self.outcome.start(self.report(), time.monotonic(), self.node.health.stall.resumed_at)
 
     def path(self) -> str:
         """The file the recorder reports recording this namespace's samples into ('' if none, or stale)."""
@@ -120,7 +120,7 @@ class RecordingWatch:
         the diagnostics and the goal's result (without require_recording the program runs on; with it, the node
         stops it). The silence counts only while this node ran: a stall of its own is not the recorder's.
         """
-        if self.outcome.check(time.monotonic(), next_sample, self.node.stall.resumed_at):
+        if self.outcome.check(time.monotonic(), next_sample, self.node.health.stall.resumed_at):
             self.node.get_logger().error(self.outcome.lost)
 
     def end_program(self) -> RecordingOutcome:
@@ -135,7 +135,7 @@ class RecordingWatch:
         """
         now = time.monotonic()
         beat = beats.last.get(self.recorder_node) if self.recorder_node else None
-        words = outcome.verdict(now, end_sample, ended, self.node.stall.resumed_at,
+        words = outcome.verdict(now, end_sample, ended, self.node.health.stall.resumed_at,
                                 heard=beat.received if beat is not None else None, wait=RESULT_WAIT)
         if words is not None and outcome in self.ended:
             self.ended.remove(outcome)

@@ -43,7 +43,7 @@ from __future__ import annotations
 import math
 import time
 
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -52,7 +52,7 @@ from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import OpenStream, StopStream
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.heartbeat import SILENT, OwnerWatch, Peers, start_heartbeat
+from rubber_rig.nodes.heartbeat import OwnerWatch, Peers, start_heartbeat
 from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles
 from rubber_rig.nodes.rclpy_compat import lifecycle_state
 from rubber_rig.nodes.rig_driver_params import (  # noqa: F401 - also imported from here
@@ -108,9 +108,6 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self._poll_timer = None
         start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig is not None else 'unconfigured')
         self.owner_watch = OwnerWatch(Peers(self, silent=self.owner_timeout))
-        self.silent_owner = ''          # the latest stream owner while it is silent (named in /diagnostics)
-        self.last_owner = ''            # the latest stream owner
-        self._diagnostics_key = None    # what the latest /diagnostics said (state, faults, silent owner)
         self.create_timer(self.status_period, self.publish_status)
         self.create_timer(self.diagnostics_period, self.publish_diagnostics)
         self.publish_status()
@@ -295,58 +292,25 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self.watch_owner()
         self._last_status = self.status_message()
         self.pub_status.publish(self._last_status)
-        # a fault, or a stream owner gone silent, reaches /diagnostics at once, not at the next diagnostics_period
-        key = (self._last_status.state, self._last_status.faults, self.silent_owner, self.owner_is_silent())
-        if key != self._diagnostics_key:
-            self._diagnostics_key = key
-            self.publish_diagnostics()
-
-    def owner_is_silent(self) -> bool:
-        owner = self.silent_owner or self.last_owner
-        age = self.owner_watch.peers.age(owner) if owner else None
-        return age is not None and age > min(self.owner_timeout, SILENT)
+        self.owner_watch.silence.update(self._last_status, self.publish_diagnostics)   # news: /diagnostics at once
 
     def watch_owner(self) -> None:
         """A stream owner that beat and then went silent for owner_timeout (OwnerWatch) loses its stream."""
         grant = self.rig.driver.stream if self.rig is not None and self._poll_timer is not None else None
         if grant is None or not grant.owner:
             return
-        self.last_owner = grant.owner
         age = self.owner_watch.silent_for(grant)
         if age is not None and age > self.owner_timeout and self.rig.driver.owner_lost(
                 f'{grant.owner} silent for {age:.2f} s (no heartbeat; alive but stuck, or gone)'):
             self._log_events()
-
-    def owner_diagnostics(self) -> dict:
-        """/diagnostics lines of the latest stream owner when it is silent (no heartbeat for owner_timeout, whatever
-        ended its stream: the owner watch or the stream timeout): its name and for how long, until it beats again.
-        """
-        owner = self.silent_owner or self.last_owner
-        age = self.owner_watch.peers.age(owner) if owner else None
-        if age is None:
-            return {}
-        if age > min(self.owner_timeout, SILENT):     # three beats missed (heartbeat.SILENT), at most owner_timeout
-            self.silent_owner = owner
-            return {'silent_stream_owner': owner, 'silent_stream_owner_for_s': f'{age:.2f}'}
-        if self.silent_owner:
-            self.silent_owner = ''
-            return {'silent_stream_owner': '', 'last_silent_stream_owner': f'{owner} (beats again)'}
-        return {}
 
     def publish_diagnostics(self) -> None:
         status = self._last_status or self.status_message()
         backend = self.config.backend if self.config is not None else self.get_parameter('backend').value
         channel = self.config.channel if self.config is not None else self.get_parameter('can.channel').value
         hw = f'{backend}:{channel or self.get_fully_qualified_name()}'
-        owner = self.owner_diagnostics()
-        msg = conv.diagnostics_msg(status, hw, {**self.bus_diagnostics(), **owner},
-                                   name=self.get_fully_qualified_name())
-        if owner.get('silent_stream_owner'):   # said first, where an operator looks: who froze, for how long
-            d = msg.status[0]
-            d.message = (f"stream owner {owner['silent_stream_owner']} silent for "
-                         f"{owner['silent_stream_owner_for_s']} s (no heartbeat); {d.message}")
-            d.level = max(d.level, DiagnosticStatus.WARN)
-        self.pub_diag.publish(msg)
+        self.pub_diag.publish(self.owner_watch.silence.annotate(conv.diagnostics_msg(
+            status, hw, self.bus_diagnostics(), name=self.get_fully_qualified_name())))
 
     def bus_diagnostics(self) -> dict:
         """The bus's lines of /diagnostics: the load the protocol needs at this rate (worst-case stuffing), the

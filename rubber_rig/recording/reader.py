@@ -208,13 +208,18 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
     _join(rec, predictions, setpoints)
     _metadata_from_topics(rec)
     if not isinstance(path, (list, tuple)):
-        try:
-            rec.parts = survey(path)
-        except (OSError, RecordingError) as exc:   # the data is read; only the part records could not be
-            rec.other_metadata['parts_error'] = {'error': str(exc)}
-        else:
-            rec.complete &= rec.parts.complete
+        _survey_parts(rec, path)
     return rec
+
+
+def _survey_parts(rec: Recording, path) -> None:
+    """The parts of the recording ``path`` belongs to (parts.survey): a missing part makes it incomplete."""
+    try:
+        rec.parts = survey(path)
+    except (OSError, RecordingError) as exc:   # the data is read; only the part records could not be
+        rec.other_metadata['parts_error'] = {'error': str(exc)}
+    else:
+        rec.complete &= rec.parts.complete
 
 
 def _pick(types: dict, msg_type: str, preferred: str):

@@ -35,7 +35,7 @@ import can
 import numpy as np
 
 from .canlog import SUPPORTED_FORMATS, CanLogError, CanLogWarning, log_format
-from .canlog_text import TextLogReader, _asc_start, _integrity, frames_until_damage
+from .canlog_text import TextLogReader, _asc_start, _integrity, frames_until_damage, text_damage
 from .canlog_time import TimeCheck
 from .frames import PROFILES, SampleFrames
 from .protocol import DBC_PATH, STATES, STATUS_SEQ_MOD, MalformedFrame, Protocol, fault_names, meet, unwrap
@@ -193,7 +193,7 @@ def decode_log(path, dbc=DBC_PATH) -> CanLog:
         except Exception:   # noqa: BLE001
             pass
     if isinstance(reader, TextLogReader):
-        _text_damage(p, reader, out)
+        text_damage(p, reader, out)
     more = _integrity(p, fmt, reader, out.frames_total)
     if more:
         out.complete = False
@@ -202,25 +202,6 @@ def decode_log(path, dbc=DBC_PATH) -> CanLog:
     for text in out.warnings:
         warnings.warn(text, CanLogWarning, stacklevel=2)
     return out
-
-
-def _text_damage(p: Path, reader: TextLogReader, out: CanLog):
-    """The skipped lines of a text log into `out`; CanLogError if nothing in the file could be read."""
-    out.lines_skipped, out.skipped_lines = reader.lines_skipped, list(reader.skipped)
-    name = SUPPORTED_FORMATS[out.format]
-    if not out.frames_total:
-        if reader.lines_skipped:
-            raise CanLogError(f'{p}: not a readable {name} log: no frame could be read, {reader.lines_skipped} of '
-                              f'its {reader.lines} lines are unreadable: {reader.skipped_text()}')
-        if out.format == '.asc' and not reader.header_lines and p.stat().st_size:
-            raise CanLogError(f'{p}: not a readable {name} log: none of its {reader.lines} lines is an ASC header '
-                              'or frame line')
-    if reader.lines_skipped:
-        out.complete = False
-        s = '' if reader.lines_skipped == 1 else 's'
-        out.warnings.append(f'{p}: skipped {reader.lines_skipped} unreadable line{s} of {reader.lines} '
-                            f'(the {out.frames_total} frames before and after them are decoded): '
-                            f'{reader.skipped_text()}')
 
 
 class _Damaged(Exception):

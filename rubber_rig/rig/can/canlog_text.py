@@ -269,3 +269,22 @@ def frames_until_damage(reader, damaged: list):
             damaged.append(f'{type(exc).__name__}: {exc}')
             return
         yield msg
+
+
+def text_damage(p: Path, reader: TextLogReader, out) -> None:
+    """The skipped lines of a text log into the CanLog `out`; CanLogError if nothing in the file could be read."""
+    out.lines_skipped, out.skipped_lines = reader.lines_skipped, list(reader.skipped)
+    name = SUPPORTED_FORMATS[out.format]
+    if not out.frames_total:
+        if reader.lines_skipped:
+            raise CanLogError(f'{p}: not a readable {name} log: no frame could be read, {reader.lines_skipped} of '
+                              f'its {reader.lines} lines are unreadable: {reader.skipped_text()}')
+        if out.format == '.asc' and not reader.header_lines and p.stat().st_size:
+            raise CanLogError(f'{p}: not a readable {name} log: none of its {reader.lines} lines is an ASC header '
+                              'or frame line')
+    if reader.lines_skipped:
+        out.complete = False
+        s = '' if reader.lines_skipped == 1 else 's'
+        out.warnings.append(f'{p}: skipped {reader.lines_skipped} unreadable line{s} of {reader.lines} '
+                            f'(the {out.frames_total} frames before and after them are decoded): '
+                            f'{reader.skipped_text()}')

@@ -37,7 +37,7 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from rubber_rig.recording.parts import same_recording
+from .parts import same_recording
 
 # words in a recorder's error that name the cause (the writer's messages: writer._guard)
 _CAUSES = (('disk full', 'disk full'), ('file too large', 'file too large'), ('quota', 'disk quota exceeded'),
