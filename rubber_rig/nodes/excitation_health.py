@@ -42,7 +42,7 @@ class ProgramHealth:
         self.events: list[DetectorEvent] = []   # detector events of the running (or last) program
         self.blind = ''                  # why the detectors were blind during the running program
         # the suite's other nodes, their silences measured from their own heartbeats (observed.BeatLog); a stall of
-        # this node (node.stall) is not theirs
+        # this node (self.stall) is not theirs
         self.me = node.get_fully_qualified_name()
         self.stall = StallWatch(SILENT)   # the node's own executor: a stall of its own is no silence of the others
         self.beats = BeatLog(SILENT, PERIOD)
@@ -106,7 +106,7 @@ class ProgramHealth:
             self.blind = blind
         # a stall of this node's own executor in the last STALL_SHOWN seconds: said, so that an operator does not
         # look for the cause in the nodes it did not hear meanwhile
-        stalls = node.stall.stalls
+        stalls = self.stall.stalls
         stalled = (f'this node stalled for {stalls[-1][1] - stalls[-1][0]:.1f} s (its callbacks did not run)'
                    if stalls and time.monotonic() - stalls[-1][1] < STALL_SHOWN else '')
         if stalled:
