@@ -142,8 +142,7 @@ def _offline(args) -> int:
         trace = read_log(args.log, args.rate_hz)
     except (CanLogError, OSError) as exc:
         raise CommandError(str(exc)) from None
-    results = check_log(trace).complete({r.id for r in REQUIREMENTS if r.offline},
-                                            'not shown by this log')
+    results = check_log(trace).complete({r.id for r in REQUIREMENTS if r.offline}, 'not shown by this log')
     facts = [f'log {args.log}: {len(trace.frames)} frames over {trace.end - trace.start:.3f} s, judged at '
              f'{args.rate_hz:g} Hz', f'rig protocol version {PROTOCOL_VERSION}; offline: only what a log can show']
     facts.append(trace.log_verdict())   # the log's own faults, apart from the controller's verdicts

@@ -103,8 +103,8 @@ class PartsReport:
         if not self.present:
             return []
         indices = [p.index for p in self.present]
-        head = (f'recording {self.recording or "?"}' + (f' (id {self.recording_id[:12]})' if self.recording_id
-                                                         else ''))
+        ident = f' (id {self.recording_id[:12]})' if self.recording_id else ''
+        head = f'recording {self.recording or "?"}{ident}'
         if self.complete:
             ending = 'the last one closed as the end of the recording' if self.known else \
                 'no part records (recorded by an older version): only the file numbering was checked'
@@ -262,8 +262,8 @@ def assess(parts: list, listed: dict = None) -> PartsReport:
         if p.index > start:      # parts start..p.index-1 are missing
             # their samples: what this part says came before it, less what the parts before it hold
             held = None
-            if p.samples_before is not None and (previous is None or None not in (previous.samples_before,
-                                                                                   previous.samples)):
+            known_before = previous is None or None not in (previous.samples_before, previous.samples)
+            if p.samples_before is not None and known_before:
                 held = p.samples_before - (0 if previous is None else previous.samples_before + previous.samples)
             first_seq = None if previous is None or previous.last_sample is None else previous.last_sample + 1
             run = list(range(start, p.index))
