@@ -25,6 +25,7 @@ The decisions themselves are tested on simulated time in test_program_observatio
 """
 import os
 import signal
+import subprocess
 import time
 from pathlib import Path
 
@@ -184,6 +185,50 @@ def test_a_recorder_killed_mid_program_is_in_the_result(suite):
             lost_from = int(message.split('recording lost from about sample ')[1].split(':')[0])
             assert killed_at <= lost_from <= killed_at + 3.0 * FS, (killed_at, lost_from)
     finally:
+        procs.start('recorder')
+        assert procs.wait_started('recorder'), procs.log('recorder')[-2000:]
+    assert recording(op)
+
+
+def test_a_recorder_whose_disk_fills_up_is_in_the_result(suite, tmp_path):
+    """The issue: on a 600 kB tmpfs the recorder logged 'disk full' 4.5 s in, and the program's result did not
+    mention the recording. The recorder runs in a private mount namespace on a small tmpfs (as in
+    test_recorder_failures); the program runs on (require_recording false) and its result says from which sample on
+    the recording was lost, and why."""
+    from test_recorder_failures import IN_PRIVATE_MOUNT, private_mounts_available  # noqa: PLC0415
+    why = private_mounts_available()
+    if why:
+        pytest.skip(why)
+    procs, op, base, _ = suite
+    ready_again(op, procs)
+    mnt, visible = tmp_path / 'small_disk', tmp_path / 'copy'
+    mnt.mkdir()
+    visible.mkdir()
+    procs.stop('recorder')
+    command = procs.command('recorder', {'output_dir': str(mnt), 'compression': 'none', 'chunk_size': 16,
+                                         'split_duration': 0.0})
+    script = IN_PRIVATE_MOUNT.format(setup=f'mount -t tmpfs -o size=600k tmpfs {mnt}', mnt=mnt, visible=visible)
+    log = open(base / 'logs' / 'recorder_small_disk.log', 'wb')
+    proc = subprocess.Popen(['unshare', '-m', '--propagation', 'private', 'sh', '-c', script, 'sh', *command],
+                            env=procs.env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
+    try:
+        assert op.wait_for(lambda: op.recorder is not None and op.recorder.path.startswith(str(mnt))
+                           and op.recorder.state == RecorderStatus.STATE_RECORDING
+                           and f'{NS}/samples' in op.recorder.topics, 30.0), op.recorder
+        result = op.run(PROGRAM.replace('cycles: 20', 'cycles: 60'), timeout=60.0)     # 12 s
+        assert result is not None, 'no result'
+        print(f'result: {result.message}')
+        assert op.recorder.state == RecorderStatus.STATE_ERROR and 'disk full' in op.recorder.error, op.recorder
+        message = result.message
+        assert 'recording lost from about sample' in message and ': disk full: the recorder failed:' in message, \
+            message
+    finally:
+        proc.send_signal(signal.SIGTERM)
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+        log.close()
         procs.start('recorder')
         assert procs.wait_started('recorder'), procs.log('recorder')[-2000:]
     assert recording(op)
