@@ -200,35 +200,38 @@ def test_a_recorder_whose_disk_fills_up_is_in_the_result(suite, tmp_path):
     if why:
         pytest.skip(why)
     procs, op, base, _ = suite
-    ready_again(op, procs)
-    mnt, visible = tmp_path / 'small_disk', tmp_path / 'copy'
-    mnt.mkdir()
-    visible.mkdir()
-    procs.stop('recorder')
-    command = procs.command('recorder', {'output_dir': str(mnt), 'compression': 'none', 'chunk_size': 16,
-                                         'split_duration': 0.0})
-    script = IN_PRIVATE_MOUNT.format(setup=f'mount -t tmpfs -o size=600k tmpfs {mnt}', mnt=mnt, visible=visible)
-    log = open(base / 'logs' / 'recorder_small_disk.log', 'wb')
-    proc = subprocess.Popen(['unshare', '-m', '--propagation', 'private', 'sh', '-c', script, 'sh', *command],
-                            env=procs.env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
-    try:
-        assert op.wait_for(lambda: op.recorder is not None and op.recorder.path.startswith(str(mnt))
-                           and op.recorder.state == RecorderStatus.STATE_RECORDING
-                           and f'{NS}/samples' in op.recorder.topics, 30.0), op.recorder
-        result = op.run(PROGRAM.replace('cycles: 20', 'cycles: 60'), timeout=60.0)     # 12 s
-        assert result is not None, 'no result'
-        print(f'result: {result.message}')
-        assert op.recorder.state == RecorderStatus.STATE_ERROR and 'disk full' in op.recorder.error, op.recorder
-        message = result.message
-        assert 'recording lost from about sample' in message and ': disk full: the recorder failed:' in message, \
-            message
-    finally:
-        proc.send_signal(signal.SIGTERM)
+    for attempt in range(2):   # once more only if this loaded host ended the program before the disk filled up
+        ready_again(op, procs)
+        mnt, visible = tmp_path / f'small_disk{attempt}', tmp_path / f'copy{attempt}'
+        mnt.mkdir()
+        visible.mkdir()
+        procs.stop('recorder')
+        command = procs.command('recorder', {'output_dir': str(mnt), 'compression': 'none', 'chunk_size': 16,
+                                             'split_duration': 0.0})
+        script = IN_PRIVATE_MOUNT.format(setup=f'mount -t tmpfs -o size=600k tmpfs {mnt}', mnt=mnt, visible=visible)
+        log = open(base / 'logs' / f'recorder_small_disk{attempt}.log', 'wb')
+        proc = subprocess.Popen(['unshare', '-m', '--propagation', 'private', 'sh', '-c', script, 'sh', *command],
+                                env=procs.env, stdout=log, stderr=subprocess.STDOUT, start_new_session=True)
         try:
-            proc.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-        log.close()
-        procs.start('recorder')
-        assert procs.wait_started('recorder'), procs.log('recorder')[-2000:]
-    assert recording(op)
+            assert op.wait_for(lambda where=str(mnt): op.recorder is not None and op.recorder.path.startswith(where)
+                               and op.recorder.state == RecorderStatus.STATE_RECORDING
+                               and f'{NS}/samples' in op.recorder.topics, 30.0), op.recorder
+            result = op.run(PROGRAM.replace('cycles: 20', 'cycles: 60'), timeout=60.0)     # 12 s
+            assert result is not None, 'no result'
+            print(f'result: {result.message}')
+            filled = op.recorder.state == RecorderStatus.STATE_ERROR and 'disk full' in op.recorder.error
+        finally:
+            proc.send_signal(signal.SIGTERM)
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+            log.close()
+            procs.start('recorder')
+            assert procs.wait_started('recorder'), procs.log('recorder')[-2000:]
+        assert recording(op)
+        if filled or result.success:
+            break
+    assert filled, (op.recorder, result.message)
+    message = result.message
+    assert 'recording lost from about sample' in message and ': disk full: the recorder failed:' in message, message

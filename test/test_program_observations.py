@@ -208,3 +208,17 @@ def test_a_stall_of_this_node_does_not_make_the_recorder_gone():
     assert o.check(13.6, 500, since=13.5) == '' and not o.lost
     o.latest = report(13.7)
     assert o.verdict(13.8, 600, ended=13.65, since=13.5) == 'recording complete in /rec/r/r_0.mcap'
+
+
+def test_a_recorder_replaced_before_the_first_sample_is_where_the_program_is_recorded():
+    """The program started on the last status of a recorder that had just been replaced; the new recorder's status
+    came before the program's first sample: nothing was lost, the program is recorded in the new recording."""
+    o = started()                                   # on the old recorder's status: /rec/r/r_0.mcap
+    new = '/rec/s/s_0.mcap'
+    assert o.observe(report(10.1, path=new), 1000, measured=False) == ''
+    assert o.observe(report(10.6, path=new), 1400) == ''
+    o.latest = report(11.2, path=new)
+    assert o.verdict(11.2, 2000, ended=11.0) == 'recording complete in /rec/s/s_0.mcap'
+    # once samples were measured, another recording is a loss, from the next sample on
+    assert 'recording lost from about sample 1400: switched' in o.observe(report(11.3, path='/rec/t/t_0.mcap'), 1400)
+

@@ -186,7 +186,7 @@ class ProgramHealth:
         the goal's future ``done`` (None for a program started without a goal).
         """
         node = self.node
-        end_wall, end_sample = time.monotonic(), session.next_sample
+        end_wall, end_sample = time.monotonic(), session.measured_sequence
         words = node.recording.verdict(outcome, end_sample, end_wall, self.beats)
         while words is None:
             await awaitables.sleep(node, 0.02)

@@ -96,7 +96,7 @@ def why_stop(node: Node) -> str:
         return ''
     if not s.stream_id:
         return ''
-    node.recording.check(s.next_sample)
+    node.recording.check(s.measured_sequence)
     # ages count only the time this node ran (StallWatch): after a stall of its own, the driver and the recorder get
     # their full timeout to be heard again before they are called silent
     if node.require_recording and node.recording.age > node.recorder_timeout:

@@ -84,10 +84,11 @@ class RecordingWatch:
             outcome.latest = report
         if session is None:
             return ''
+        measured = session.next_sample is not None
         if self.require and self.failed:
-            self.outcome.observe(report, session.next_sample)
+            self.outcome.observe(report, session.measured_sequence, measured)
             return f'recording failed: {msg.error or "recorder error"}'
-        if self.outcome.observe(report, session.next_sample):
+        if self.outcome.observe(report, session.measured_sequence, measured):
             self.node.get_logger().error(self.outcome.lost)
         return ''
 

@@ -99,11 +99,18 @@ class RecordingOutcome:
             return f'{Path(self.parts[0]).parent} (parts {Path(self.parts[0]).name}..{Path(self.parts[-1]).name})'
         return self.recorded_by
 
-    def observe(self, report: RecorderReport, next_sample: int) -> str:
-        """A recorder status while the program runs (``next_sample``: the next sample it expects). Returns the loss
-        text if this status revealed it ('' otherwise).
+    def observe(self, report: RecorderReport, next_sample: int, measured: bool = True) -> str:
+        """A recorder status while the program runs (``next_sample``: the next sample it expects; ``measured``:
+        False before its first sample was measured). Returns the loss text if this status revealed it ('' otherwise).
         """
         self.latest = report
+        if not measured and report.state == 'recording' and report.records_samples and report.path:
+            # nothing of the program was measured yet: it is recorded where the recorder records now (the status it
+            # started with may have been a replaced recorder's last)
+            if not self.recorded_by:
+                self.lost_at_start = report.samples_lost
+            self.recorded_by, self.parts = report.path, [report.path]
+            return ''
         if not self.recorded_by or self.lost:
             return ''
         if report.state == 'error':
