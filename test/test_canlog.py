@@ -33,11 +33,13 @@ import pytest
 
 from rubber_rig.cli.main import main as cli_main
 from rubber_rig.excitation import Program
+from rubber_rig.recording import Recorder
 from rubber_rig.rig import ConfigError, RigConfig, open_rig
 from rubber_rig.rig import interface as rig_interface
 from rubber_rig.rig.can.canlog import CanLogError, CanLogWarning
 from rubber_rig.rig.can.canlog_reader import decode_log
 from rubber_rig.rig.can.canlog_text import MAX_SKIPPED_REPORTED, TextLogReader
+from rubber_rig.rig.can.canlog_time import TimeCheck
 from rubber_rig.session import run_program
 from rubber_rig.settings import settings_of
 
@@ -654,3 +656,135 @@ def test_rig_driver_node_reports_the_bus_profile_and_its_measured_load(ros_conte
     finally:
         node.close()
         node.destroy_node()
+
+
+# ---- the log's time: steps backwards and jumps are counted and named, the frames kept in file order -------------
+
+def _frames_with_times(path, times):
+    """One classic frame per time (0x123, its index in bytes 0-1) through python-can's writer of the suffix."""
+    with can.Logger(str(path)) as w:
+        for k, t in enumerate(times):
+            w.on_message_received(can.Message(timestamp=t, arbitration_id=0x123, is_extended_id=False,
+                                              data=k.to_bytes(2, 'big'), channel='can0' if path.suffix == '.log'
+                                              else 0))
+
+
+@pytest.mark.parametrize('suffix', TEXT_FORMATS)
+def test_time_going_backwards_is_counted_named_and_kept_in_file_order(tmp_path, suffix):
+    """The issue's case: one line's timestamp moved back 100 s gave 0 skipped lines, no warning and a -100 s step
+    in `time`. Now the step is counted, named by frame and line in a CanLogWarning, and the frames stay in file
+    order with their stamps as written (nothing dropped, nothing reordered). (ASC times count from the start of
+    the log: there the line is moved back 0.1 s, to before its predecessor.)"""
+    times = [1_767_000_000.0 + 0.01 * k for k in range(50)]
+    path = tmp_path / f'back{suffix}'
+    _frames_with_times(path, times)
+    text = path.read_text()
+    old, new, back = (('(1767000000.200000)', '(1766999900.200000)', 100.0) if suffix == '.log'
+                      else (' 0.200000 ', ' 0.100000 ', 0.1))
+    assert text.count(old) == 1
+    path.write_text(text.replace(old, new))
+    with pytest.warns(CanLogWarning, match=r'goes backwards 1 time .*frame 21 \(line \d+\): time goes back'):
+        log = decode_log(path)
+    assert log.frames_total == 50 and log.lines_skipped == 0 and not log.truncated
+    assert (log.time_backwards, log.time_jumps, log.time_ok) == (1, 0, False)
+    a = log.time_anomalies[0]
+    assert (a.kind, a.frame) == ('backwards', 21) and a.step == pytest.approx(0.01 - back, abs=2e-3)
+    data = '#0014' if suffix == '.log' else ' 00 14'           # frame 21 holds its index 20 (0x14)
+    assert a.line == next(i for i, line in enumerate(path.read_text().splitlines(), 1) if data in line)
+    ids = [int.from_bytes(bytes(m.data), 'big') for m in TextLogReader(path)]
+    assert ids == list(range(50))                     # file order
+
+
+@pytest.mark.parametrize('suffix', FORMATS)
+def test_a_jump_in_time_is_counted_and_a_clean_log_has_none(tmp_path, suffix):
+    """A hole of 30 s with no frame (a paused logger, a clock stepped forward) is a jump; 10 ms steps are not."""
+    times = [1_767_000_000.0 + 0.01 * k + (30.0 if k >= 30 else 0.0) for k in range(50)]
+    path = tmp_path / f'jump{suffix}'
+    _frames_with_times(path, times)
+    with pytest.warns(CanLogWarning, match=r'jumps forward 1 time by more than 10 s: frame 31'):
+        log = decode_log(path)
+    assert (log.time_backwards, log.time_jumps) == (0, 1)
+    assert log.time_anomalies[0].step == pytest.approx(30.01, abs=2e-3)
+    clean = tmp_path / f'clean{suffix}'
+    _frames_with_times(clean, times[:30])
+    log = decode_clean(clean)
+    assert log.time_ok and log.time_anomalies == []
+
+
+def test_the_time_check_counts_every_anomaly_and_names_the_first():
+    check = TimeCheck(jump=1.0)
+    for k, t in enumerate([0.0, 0.1, 0.05, 0.2, 5.0, 5.1, 4.0, 4.1, 20.0]):
+        check.observe(t, k + 1, line=k + 3)
+    assert (check.backwards, check.jumps) == (2, 2)
+    assert [(a.kind, a.frame, a.line) for a in check.anomalies] == [
+        ('backwards', 3, 5), ('jump', 5, 7), ('backwards', 7, 9), ('jump', 9, 11)]
+    assert check.largest_back == pytest.approx(1.1)
+    assert check.breaks == [3, 5, 7, 9]
+    check.observe(1.0, 10)                  # back, and the way forward again after it: both cut the series
+    check.observe(21.0, 11)
+    assert check.breaks[-2:] == [10, 11] and (check.backwards, check.jumps) == (3, 2)
+
+
+def test_cli_reports_time_anomalies_and_truncation(tmp_path, capsys):
+    path = tmp_path / 'back.log'
+    _frames_with_times(path, [1_767_000_000.0 + 0.01 * k for k in range(50)])
+    path.write_text(path.read_text().replace('(1767000000.200000)', '(1766999900.200000)'))
+    assert cli_main(['canlog', str(path)]) == 0
+    captured = capsys.readouterr()
+    assert 'time:       NOT MONOTONIC: 1 steps backwards, 0 jumps forward' in captured.out
+    assert 'frame 21 (line 21): time goes back 99.99 s' in captured.out, captured.out
+    assert 'goes backwards 1 times' in captured.err
+    assert cli_main(['canlog', str(path), '--json']) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info['time_backwards'] == 1 and info['time_anomalies'][0]['frame'] == 21 and not info['truncated']
+    cut = tmp_path / 'cut.log'
+    text = path.read_text()
+    cut.write_text(text[:text.rindex('#') + 3])      # the file ends inside its last frame line
+    assert cli_main(['canlog', str(cut), '--json']) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info['truncated'] and info['lines_skipped'] == 1 and info['frames_total'] == 49
+
+
+# ---- the log against the recording of the same run ------------------------------------------------------------
+
+def _record_samples(path, log, keep):
+    """The samples of `log` as the driver publishes them (RigSampleBatch of 20, stamped with the log's time), the
+    batches for which keep(k) is True, recorded to an MCAP file by the Recorder."""
+    rec = Recorder(path.parent)
+    rec.start(path)
+    n = len(log)
+    for k, a in enumerate(range(0, n - n % 20, 20)):
+        if not keep(k):
+            continue
+        t_ns = int(log.time_ns[a])
+        msg = {'header': {'stamp': {'sec': t_ns // 10**9, 'nanosec': t_ns % 10**9}},
+               'first_sequence': int(log.sequence[a]), 'sample_period': 1e-3,
+               'displacement': log.displacement[a:a + 20], 'force': log.force[a:a + 20],
+               'setpoint': log.setpoint[a:a + 20], 'temperature': 20.0, 'status_flags': 0, 'frames_lost': 0}
+        assert rec.write('/rig/samples', 'msg_defs/msg/RigSampleBatch', msg, t_ns)
+    rec.stop()
+
+
+def test_the_log_is_compared_with_the_recording_of_the_run(logged_runs, tmp_path, capsys):
+    _, path, _, _ = logged_runs['.log']
+    log = decode_clean(path)
+    _record_samples(tmp_path / 'rec', log, keep=lambda k: k != 5)      # the recorder lost batch 5 (20 samples)
+    assert cli_main(['canlog', str(path), '--recording', str(tmp_path / 'rec'), '--json']) == 0
+    c = json.loads(capsys.readouterr().out)['recording_comparison']
+    whole = len(log) - len(log) % 20
+    assert c['samples_both'] == whole - 20 and c['only_in_recording'] == 0
+    assert c['only_in_log'] == len(log) - whole + 20 and c['first_only_in_log'] == int(log.sequence[100])
+    # (the recording spreads a batch over its sample period from the first sample's stamp; the unpaced run's frames
+    # came in bursts: milliseconds apart)
+    assert c['values_agree'] and abs(c['time_offset_median']) < 0.05 and c['time_ok']
+    # the same log with one line's time moved back 100 s: the comparison names the log's anomaly
+    bad = tmp_path / 'back.log'
+    lines = path.read_text().splitlines()
+    k = next(i for i, line in enumerate(lines) if i > 300 and ' 180#' in line)
+    stamp = lines[k][1:lines[k].index(')')]
+    lines[k] = lines[k].replace(f'({stamp})', f'({float(stamp) - 100.0:.6f})')
+    bad.write_text('\n'.join(lines) + '\n')
+    assert cli_main(['canlog', str(bad), '--recording', str(tmp_path / 'rec')]) == 0
+    out = capsys.readouterr().out
+    assert f"WARNING:    the log's time goes backwards 1 times and jumps 0 times (frame {k + 1} (line {k + 1})" in out
+    assert 'not the rig\'s clock' in out

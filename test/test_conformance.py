@@ -39,6 +39,7 @@ from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.link import Envelope
 from rubber_rig.rig.conformance.report import Results, to_junit
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
+from rubber_rig.rig.conformance.trace import read_log
 from rubber_rig.rig.sim.controller import SimController
 from rubber_rig.session import run_program
 
@@ -218,28 +219,89 @@ def test_an_unconfirmed_run_sends_nothing(monkeypatch, capsys):
     listener.shutdown()
 
 
-def test_offline_reads_a_damaged_log_up_to_the_damage(tmp_path, capsys):
+# A heartbeat-only log: its controller owes status (10 ms) and temperature (100 ms) frames it never sent, so those
+# requirements fail on any such log (the controller's fault, issue 36); the damage tests below check that the
+# log's own damage adds no failure to them.
+ABSENT_FRAMES_FAIL = {'CTRL-ST-1', 'CTRL-ST-2', 'CTRL-TEMP-1'}
+
+
+def _failed(out: str) -> set:
+    """The requirement ids a conformance report marks **FAIL**."""
+    return {line.split('|')[1].strip() for line in out.splitlines() if '| **FAIL** |' in line}
+
+
+def _heartbeat_log(path, n=40):
+    """n controller heartbeats 50 ms apart, written by python-can; returns the file's lines."""
     proto = Protocol()
-    path = tmp_path / 'a.log'
     with can.Logger(str(path)) as log:
-        for k in range(40):
+        for k in range(n):
             msg = proto.encode('ControllerHeartbeat', {'HB_Counter': k + 1, 'HB_State': 1})
             msg.timestamp, msg.channel = 1000.0 + 0.05 * k, 'can0'
             log.on_message_received(msg)
-    lines = path.read_text().splitlines()
+    return path.read_text().splitlines()
+
+
+def test_offline_reads_past_a_damaged_line(tmp_path, capsys):
+    """A garbage line costs that line: the heartbeats before and after it are read and judged (each stretch on its
+    own), the skipped line is named in the log's verdict, and no controller requirement fails for it."""
+    path = tmp_path / 'a.log'
+    lines = _heartbeat_log(path)
     path.write_text('\n'.join(lines[:20] + ['garbage line ###'] + lines[20:]) + '\n')
     code = main(['conformance', '--log', str(path)])
     out = capsys.readouterr().out
-    # the heartbeats before the damage are read and judged (20 at 50 ms), and the report says where it stopped
-    assert '20 frames' in out and 'unreadable after frame 20' in out
+    # the damaged line is skipped and named; the heartbeats on both sides of it are read and judged (40 at 50 ms)
+    assert '40 frames' in out and 'line 21: not a candump -L frame line' in out
+    assert 'log verdict: DAMAGED LOG: 1 unreadable line skipped' in out
     assert 'median 50.0 ms' in out and '| CTRL-HB-2 |' in out
-    # a controller heard for 0.95 s must have sent status (10 ms) and temperature (100 ms): their absence fails,
-    # the identity (1 s) is not owed yet in so short a log
-    assert code == 1 and '0 ControllerStatus frames in 0.950 s of controller traffic' in out
-    assert '| CTRL-TEMP-1 | Temperature every 100 ms | **FAIL** |' in out
+    # a controller heard for 0.95 s on each side must have sent status (10 ms) and temperature (100 ms): their
+    # absence fails (the controller's fault, not the log's); the identity (1 s) is not owed in so short a log
+    assert code == 1 and _failed(out) == ABSENT_FRAMES_FAIL, out
+    assert '0 ControllerStatus frames in 0.950 s of controller traffic' in out   # judged stretch by stretch
     assert '| CTRL-ID-2 | ControllerIdentity every 1000 ms | not tested |' in out
     assert main(['conformance', '--log', str(tmp_path / 'x.txt')]) != 0
     assert 'unsupported suffix' in capsys.readouterr().err
+
+
+def test_offline_names_time_going_backwards_as_the_logs_fault(tmp_path, capsys):
+    """One line's time moved back 100 s (the issue's case): before, the heartbeat period failed the controller
+    (99th percentile 62 s). Now the log's verdict names the frame and line, the frames stay in file order, and
+    the controller's heartbeat is judged within the stretches on either side of it: it passes."""
+    path = tmp_path / 'back.log'
+    lines = _heartbeat_log(path)
+    lines[20] = lines[20].replace('(1001.', '(901.')
+    path.write_text('\n'.join(lines) + '\n')
+    trace = read_log(path, 1000.0)
+    assert [round(f.t, 3) for f in trace.frames[19:22]] == [1000.95, 901.0, 1001.05]   # file order, as stamped
+    assert (trace.time_backwards, trace.time_jumps, trace.lines_skipped, trace.truncated) == (1, 0, 0, False)
+    assert (trace.time_anomalies[0].frame, trace.time_anomalies[0].line) == (21, 21)
+    assert trace.time_anomalies[0].step == pytest.approx(-99.95)
+    code = main(['conformance', '--log', str(path)])
+    out = capsys.readouterr().out
+    assert code == 1 and _failed(out) == ABSENT_FRAMES_FAIL, out
+    assert 'log verdict: DAMAGED LOG: time goes backwards 1 time' in out and 'frame 21 (line 21)' in out
+    assert 'median 50.0 ms, 99th percentile 50.0 ms' in out
+
+
+@pytest.mark.parametrize('keep', [4, 9])
+def test_offline_reports_a_log_cut_mid_line_as_truncated_never_as_the_controller(tmp_path, capsys, keep):
+    """The file ends inside its last frame line (a copy that stopped, a full disk). Cut `keep` characters into the
+    data ('#' and 3 hex digits: unreadable; '#' and 8: four whole bytes, which candump -L would take for a
+    shorter frame, a malformed heartbeat the controller would be blamed for): the log is truncated, its last line
+    is counted as skipped, and no controller requirement fails for it (only the frames the log's controller never
+    sent do: ABSENT_FRAMES_FAIL)."""
+    path = tmp_path / 'cut.log'
+    lines = _heartbeat_log(path)
+    text = '\n'.join(lines)
+    cut = text[:text.rindex('#') + keep]
+    path.write_text(cut)
+    trace = read_log(path, 1000.0)
+    assert trace.truncated and trace.lines_skipped == 1 and len(trace.frames) == 39
+    code = main(['conformance', '--log', str(path)])
+    out = capsys.readouterr().out
+    assert code == 1 and _failed(out) == ABSENT_FRAMES_FAIL, out
+    why = 'not a candump -L frame line' if keep == 4 else 'the file ends inside this line'
+    assert 'log verdict: DAMAGED LOG: TRUNCATED' in out and f'line 40: {why}' in out
+    assert '0 of 39 controller frames malformed' in out
 
 
 def test_a_sample_outside_the_envelope_aborts_the_run():

@@ -23,6 +23,12 @@ The log is what rig_driver writes with the parameter can_log (or any capture of 
 In a damaged .asc or .log an unreadable line (not text, not a frame line, a frame cut short) is skipped and
 the frames before and after it are decoded: the summary gives the count of skipped lines ('bad lines:', JSON
 lines_skipped) and the first ones by number with the reason. A log with no readable frame is refused (exit 2).
+A log cut short (ends inside a line or record) is reported as truncated ('truncated:', JSON truncated). A frame
+stamped before the frame preceding it, or a hole of more than 10 s without frames, is a time anomaly of the log
+('time:', JSON time_backwards / time_jumps / time_anomalies with frame and line numbers); the frames are kept
+in file order with their stamps as written, and a warning says so. --recording DIR compares the log with the
+MCAP recording of the same run: samples in both (values to the DBC resolution), only in one of them, the offset of
+the recording's stamps from the log's time (with the log's time anomalies named, never taken for the rig's clock).
 """
 import csv
 import datetime
@@ -31,10 +37,14 @@ import math
 import sys
 import warnings
 
+from rubber_rig.recording import RecordingError, load_recording
 from rubber_rig.rig.can.canlog import SUPPORTED_FORMATS
+from rubber_rig.rig.can.canlog_compare import compare_with_recording, comparison_lines
 from rubber_rig.rig.can.canlog_reader import decode_log
 from rubber_rig.rig.can.protocol import Protocol
 from rubber_rig.rig.config import RigConfig
+
+from .main import CommandError
 
 _DEFAULTS = RigConfig()
 CSV_COLUMNS = (('sequence', 'sequence'), ('time_s', 'time'), ('time_ns', 'time_ns'),
@@ -46,6 +56,7 @@ def add_arguments(parser):
     parser.add_argument('log', help='raw CAN log: .blf (Vector BLF), .asc (Vector ASC) or .log (candump -L)')
     parser.add_argument('--json', action='store_true', help='machine-readable summary')
     parser.add_argument('-o', '--output', help='write the decoded samples as CSV to this file')
+    parser.add_argument('--recording', help='compare with the MCAP recording (file or directory) of the same run')
     parser.add_argument('--bitrate', type=float, default=float(_DEFAULTS.bitrate),
                         help='arbitration bit rate for the bus load estimate [bit/s] (default %(default)g)')
     parser.add_argument('--data-bitrate', type=float, default=float(_DEFAULTS.data_bitrate),
@@ -79,7 +90,9 @@ def summary(log, bitrate: float, data_bitrate: float) -> dict:
         'frames_by_id': {f'0x{k:03x}': v for k, v in log.frames_by_id.items()},
         'frames_malformed': log.frames_malformed, 'frames_unknown': log.frames_unknown,
         'error_frames': log.error_frames, 'frames_late': log.frames_late,
-        'lines_skipped': log.lines_skipped,
+        'lines_skipped': log.lines_skipped, 'truncated': log.truncated,
+        'time_ok': log.time_ok, 'time_backwards': log.time_backwards, 'time_jumps': log.time_jumps,
+        'time_anomalies': [a.as_dict() for a in log.time_anomalies],
         'skipped_lines': [{'line': n, 'why': why} for n, why in log.skipped_lines],
         'samples': len(log), 'sequence': _range(log.sequence),
         'setpoints': int(log.setpoint_sequence.size), 'setpoint_sequence': _range(log.setpoint_sequence),
@@ -127,6 +140,12 @@ def _print(info, log):
         print(f'  at {gap["time"]:.3f} s: expected {gap["expected"]}, got {gap["received"]} ({gap["lost"]} lost)')
     print(f'bad frames: {log.frames_malformed} malformed (length/CRC), {log.frames_unknown} unknown identifier, '
           f'{log.error_frames} error frames, {log.frames_late} late or duplicated')
+    anomalies = f'{log.time_backwards} steps backwards, {log.time_jumps} jumps forward'
+    print(f'time:       {"monotonic" if log.time_ok else "NOT MONOTONIC: " + anomalies} (frames kept in file order)')
+    for a in log.time_anomalies:
+        print(f'  {a.text()}')
+    if log.truncated:
+        print('truncated:  yes: the file ends inside a line or record (cut short, or its writer never closed it)')
     if log.format != '.blf':   # text logs are read line by line; an unreadable line is skipped
         print(f'bad lines:  {log.lines_skipped} unreadable lines skipped (the frames around them are decoded)')
         for n, why in log.skipped_lines:
@@ -154,15 +173,31 @@ def run(args) -> int:
     if args.output:
         _write_csv(log, args.output)
         info['csv'] = args.output
+    comparison = None
+    if args.recording:
+        try:
+            rec = load_recording(args.recording, allow_truncated=True)
+        except RecordingError as exc:
+            raise CommandError(str(exc)) from None
+        comparison = info['recording_comparison'] = compare_with_recording(log, rec)
     if args.json:
         print(json.dumps(info, indent=2, default=str))
     else:
         _print(info, log)
         if args.output:
             print(f'csv:        {args.output} ({len(log)} samples)')
+        if comparison is not None:
+            print(f'recording:  {args.recording}')
+            for line in comparison_lines(comparison):
+                print(line)
     if not log.complete:
         n = log.lines_skipped
         what = (f'skipped {n} unreadable line{"" if n == 1 else "s"}, decoded the frames before and after them'
                 if n else 'decoded what precedes the damage')
+        if log.truncated:
+            what += '; the log is truncated (cut short or never closed)'
         print(f'rubber-rig canlog: warning: {args.log} is incomplete: {what} (see the warnings)', file=sys.stderr)
+    if not log.time_ok:
+        print(f'rubber-rig canlog: warning: the time of {args.log} goes backwards {log.time_backwards} times and '
+              f'jumps forward {log.time_jumps} times (see the warnings)', file=sys.stderr)
     return 0

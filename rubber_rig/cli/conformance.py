@@ -45,7 +45,7 @@ from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.host_timing import LATE_MIN, SIM_LATE_MIN
 from rubber_rig.rig.conformance.link import Aborted, Envelope
-from rubber_rig.rig.conformance.passive import check_offline
+from rubber_rig.rig.conformance.log_segments import check_log
 from rubber_rig.rig.conformance.report import NOT_TESTED, to_junit, to_markdown
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
 from rubber_rig.rig.conformance.trace import read_log
@@ -145,10 +145,10 @@ def _offline(args) -> int:
         trace = read_log(args.log, args.rate_hz)
     except (CanLogError, OSError) as exc:
         raise CommandError(str(exc)) from None
-    results = check_offline(trace).complete({r.id for r in REQUIREMENTS if r.offline},
-                                            'not shown by this log')
+    results = check_log(trace).complete({r.id for r in REQUIREMENTS if r.offline}, 'not shown by this log')
     facts = [f'log {args.log}: {len(trace.frames)} frames over {trace.end - trace.start:.3f} s, judged at '
              f'{args.rate_hz:g} Hz', f'rig protocol version {PROTOCOL_VERSION}; offline: only what a log can show']
+    facts.append(trace.log_verdict())   # the log's own faults, apart from the controller's verdicts
     facts += [f'warning: {w}' for w in trace.warnings]
     _write(args, results, 'rubber_rig protocol conformance (offline)', facts, time.monotonic() - t0)
     return EXIT_FAIL if not results.passed else 0

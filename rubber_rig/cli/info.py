@@ -48,14 +48,18 @@ def run(args) -> int:
         'sequence_gaps': rec.sequence_gaps, 'samples_lost': rec.samples_lost, 'loss': rec.loss, 'gaps': rec.gaps[:20],
         'tail_unaccounted': bool(getattr(rec, 'unclosed', None)), 'unclosed': getattr(rec, 'unclosed', []),
         'metadata': rec.metadata, 'closing': rec.closing, 'other_metadata': rec.other_metadata,
+        'parts': rec.parts.as_dict() if rec.parts is not None else None,
     }
     if args.json:
         print(json.dumps(info, indent=2, default=str))
         return 0
     print(f'files:      {", ".join(rec.files)}')
-    if not rec.complete:
+    if rec.unclosed:
         print('WARNING:    truncated (writer killed?): showing what is readable; '
               'run `rubber-rig recover FILE`')
+    if rec.parts is not None and not rec.parts.complete:
+        print(f'WARNING:    parts of this recording are MISSING ({rec.parts.samples_missing} samples'
+              f'{" and more" if rec.parts.samples_unknown else ""}): see parts below')
     print(f'duration:   {rec.duration:.3f} s')
     print(f'messages:   {sum(v["count"] for v in rec.topics.values())}')
     print('topics:')
@@ -73,7 +77,10 @@ def run(args) -> int:
           + (f' [{rec.loss["sample_topic"]}]' if rec.loss.get('sample_topic') else ''))
     if getattr(rec, 'unclosed', None):    # never a bare '0 lost' for a file whose tail is unaccounted
         for line in rec.loss_text().splitlines():
-            print(f'loss:       {line.strip()}')
+            if rec.parts is None or line not in rec.parts.lines():
+                print(f'loss:       {line.strip()}')
+    for line in (rec.parts.lines() if rec.parts is not None else []):   # as `recover` prints them
+        print(f'parts:      {line}')
     for gap in rec.gaps[:20]:
         print(f'  expected {gap["expected"]}, got {gap["received"]} ({gap["lost"]} lost)')
     if rec.metadata:
@@ -81,7 +88,8 @@ def run(args) -> int:
         for key, value in rec.metadata.items():
             print(f'  {key}: {_short(value, args.full)}')
     for i, closing in enumerate(rec.closing):
-        print(f'closing report of file {i}: written {closing.get("messages_written")}, '
+        part = closing.get('part_index', i)
+        print(f'closing report of part {part}: written {closing.get("messages_written")}, '
               f'dropped {closing.get("messages_dropped")} {closing.get("dropped_by_reason") or ""}, '
               f'gaps {closing.get("sequence_gaps")} ({closing.get("samples_lost")} samples lost)')
     for name, values in rec.other_metadata.items():

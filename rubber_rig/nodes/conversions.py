@@ -183,7 +183,10 @@ def diagnostics_msg(status: RigStatus, hardware_id: str, extra: Mapping[str, Any
     d.hardware_id = hardware_id
     if status.state == RigStatus.STATE_FAULT or status.faults:
         d.level = DiagnosticStatus.ERROR
-        d.message = 'fault: ' + ', '.join(fault_names(status.faults) or ['unknown'])
+        # the fault's own words (who went silent, which limit, ...) where an operator looks: rqt_robot_monitor and
+        # Foxglove show the message; the names alone ('stream') do not say what to do
+        d.message = 'fault: ' + ', '.join(fault_names(status.faults) or ['unknown']) + (
+            ': ' + '; '.join(status.fault_messages[-3:]) if status.fault_messages else '')
     elif status.frames_lost or status.frames_malformed:
         d.level = DiagnosticStatus.WARN
         d.message = f'{status.state_name}; {status.frames_lost} frames lost, {status.frames_malformed} malformed'
@@ -198,7 +201,8 @@ def diagnostics_msg(status: RigStatus, hardware_id: str, extra: Mapping[str, Any
               'frames_late': status.frames_late, 'frames_malformed': status.frames_malformed,
               'frames_unknown': status.frames_unknown, 'temperature': status.temperature,
               'stream_owner': status.stream_owner, 'setpoints_refused': status.setpoints_refused,
-              'position_m': status.position, 'last_event': status.last_event}
+              'position_m': status.position, 'last_event': status.last_event,
+              'fault_messages': '; '.join(status.fault_messages)}
     values.update(extra or {})
     d.values = [KeyValue(key=str(k), value=str(v)) for k, v in values.items()]
     arr = DiagnosticArray()

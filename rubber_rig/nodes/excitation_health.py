@@ -17,14 +17,19 @@ nodes that went silent (heartbeats) and whether the detectors were blind, in /di
 """
 from __future__ import annotations
 
+import time
+
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 
 from msg_defs.action import RunProgram
-from msg_defs.msg import DetectorEvent
+from msg_defs.msg import DetectorEvent, Heartbeat
+from rubber_rig.nodes import awaitables, topics
 from rubber_rig.nodes import conversions as conv
-from rubber_rig.nodes import topics
-from rubber_rig.nodes.heartbeat import Peers
+from rubber_rig.nodes.heartbeat import PERIOD, SILENT
+from rubber_rig.session.observed import BeatLog, ProgramWitness, StallWatch
+
+STALL_SHOWN = 10.0   # [s] /diagnostics says this node stalled for this long after the stall
 
 
 class ProgramHealth:
@@ -36,28 +41,47 @@ class ProgramHealth:
         self.node = node
         self.events: list[DetectorEvent] = []   # detector events of the running (or last) program
         self.blind = ''                  # why the detectors were blind during the running program
-        self.peers = Peers(node)         # the suite's other nodes: silent ones are named in diagnostics
-        self.silent_seen: dict[str, float] = {}   # node -> longest silence seen during the running program [s]
+        # the suite's other nodes, their silences measured from their own heartbeats (observed.BeatLog); a stall of
+        # this node (self.stall) is not theirs
+        self.me = node.get_fully_qualified_name()
+        self.stall = StallWatch(SILENT)   # the node's own executor: a stall of its own is no silence of the others
+        self.beats = BeatLog(SILENT, PERIOD)
+        node.create_subscription(Heartbeat, topics.HEARTBEAT, self.on_beat, topics.HEARTBEAT_QOS)
+        self.witness = ProgramWitness(self.me, 0.0)
         self.silent_now: dict[str, float] = {}
-        self.silent_before: set[str] = set()
         self.pub_diagnostics = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         node.create_timer(1.0, self.publish_diagnostics)
         node.create_timer(0.1, self.watch_peers)
 
+    @property
+    def silent_seen(self) -> dict[str, float]:
+        """Node -> longest silence [s] seen during the running (or last) program."""
+        return self.witness.silent_seen
+
+    def on_beat(self, msg: Heartbeat) -> None:
+        now = time.monotonic()
+        self.stall.tick(now)
+        if msg.node != self.me:
+            self.beats.beat(msg.node, msg.pid, msg.count, conv.to_seconds(msg.header.stamp), now)
+
     def start_program(self) -> None:
         self.blind, self.events = '', []
         # silences that began before the program (a node restarted just before it) are not the program's
-        self.silent_seen, self.silent_before = {}, set(self.silent_now)
+        self.witness = ProgramWitness(self.me, time.monotonic(), silent_before=set(self.silent_now))
 
-    def annotate(self, message: str) -> str:
-        """The goal's result message with what went wrong besides: blind detectors, a lost recording, silences."""
+    def annotate(self, message: str, recording: str = '') -> str:
+        """The goal's result message with what else happened: blind detectors, the recording (``recording``: its
+        words, RecordingWatch.verdict), this node's own stalls and the peers that beat on through them, silences
+        of the others measured from their own heartbeats.
+        """
         if self.blind:
             message += f' (detectors were blind: {self.blind})'
-        if self.node.recording.lost:
+        if recording:
+            message += f' ({recording})'
+        elif self.node.recording.lost:
             message += f' ({self.node.recording.lost})'
-        if self.silent_seen:
-            message += ' (silent during the program: ' + ', '.join(
-                f'{n} up to {a:.1f} s' for n, a in sorted(self.silent_seen.items())) + ')'
+        for words in self.witness.words(self.beats, self.stall, time.monotonic()):
+            message += f' ({words})'
         return message
 
     def publish_diagnostics(self) -> None:
@@ -80,13 +104,18 @@ class ProgramHealth:
             if not self.blind:
                 node.get_logger().warning(f'detectors blind: {blind}')
             self.blind = blind
+        # a stall of this node's own executor in the last STALL_SHOWN seconds: said, so that an operator does not
+        # look for the cause in the nodes it did not hear meanwhile
+        stalls = self.stall.stalls
+        stalled = (f'this node stalled for {stalls[-1][1] - stalls[-1][0]:.1f} s (its callbacks did not run)'
+                   if stalls and time.monotonic() - stalls[-1][1] < STALL_SHOWN else '')
+        if stalled:
+            level = DiagnosticStatus.WARN
         values = {'state': node.state, 'program': node.session.runner.program.name if running else '',
                   'detector_events': len(self.events), 'last_event': last.message if last else '',
-                  'detectors_blind': blind, 'recording_lost': lost, 'nodes_silent': silent}
-        values['goals_rejected_busy'] = node.refused_busy      # run_program goals rejected while one ran
-        values['last_goal_rejection'] = node.last_refusal
-        reasons = [f'nodes silent: {silent}' if silent else '', f'detectors blind: {blind}' if blind else '', lost,
-                   last.message if last is not None and last.action != 'record' else '']
+                  'detectors_blind': blind, 'recording_lost': lost, 'nodes_silent': silent, 'stalled': stalled}
+        reasons = [stalled, f'nodes silent: {silent}' if silent else '', f'detectors blind: {blind}' if blind else '',
+                   lost, last.message if last is not None and last.action != 'record' else '']
         msg = DiagnosticArray()
         msg.header.stamp = node.get_clock().now().to_msg()
         msg.status.append(DiagnosticStatus(
@@ -100,16 +129,21 @@ class ProgramHealth:
         while a program runs, remember it for the goal's result. The rig driver's silence ends the program
         elsewhere (status_timeout).
         """
-        quiet = self.peers.silent()
+        now = time.monotonic()
+        if stall := self.stall.tick(now):
+            self.node.get_logger().error(
+                f'{self.me} (this node) stalled for {stall[1] - stall[0]:.1f} s: its callbacks did not run; what it '
+                'did not hear then is no silence of the others')
+        if self.node.session is not None:
+            quiet = self.witness.watch(self.beats, self.stall, now)
+        else:
+            quiet = self.beats.quiet(now, self.stall)
         log = self.node.get_logger()
         for name, age in quiet.items():
             if name not in self.silent_now:
                 log.error(f'{name} is silent: no heartbeat for {age:.1f} s (stuck or gone)')
-            if self.node.session is not None and name not in self.silent_before:
-                self.silent_seen[name] = max(age, self.silent_seen.get(name, 0.0))
         for name in set(self.silent_now) - set(quiet):
             log.info(f'{name} beats again')
-            self.silent_before.discard(name)
         changed = set(quiet) != set(self.silent_now)
         self.silent_now = quiet
         if changed:
@@ -146,11 +180,29 @@ class ProgramHealth:
                                    events=len(self.events),
                                    last_event=self.events[-1] if self.events else DetectorEvent())
 
-    def result(self, runner, success: bool, ended: bool) -> RunProgram.Result:
+    async def result_when_recorded(self, session, success: bool, ended: bool, outcome, done) -> None:
+        """The result of the program of ``session`` that just ended, once the recording's words are known
+        (RecordingWatch.verdict waits at most RESULT_WAIT for the recorder): kept in node.result, logged, and set on
+        the goal's future ``done`` (None for a program started without a goal).
+        """
+        node = self.node
+        end_wall, end_sample = time.monotonic(), session.measured_sequence
+        words = node.recording.verdict(outcome, end_sample, end_wall, self.beats)
+        while words is None:
+            await awaitables.sleep(node, 0.02)
+            words = node.recording.verdict(outcome, end_sample, end_wall, self.beats)
+        node.result = result = self.result(session.runner, success, ended, words)
+        node.get_logger().info(f'program ended: {result.message}')
+        if done is not None and not done.done():
+            done.set_result(result)
+
+    def result(self, runner, success: bool, ended: bool, recording: str = '') -> RunProgram.Result:
         """The goal's result for the program of ``runner``: a success only if asked for and it was not aborted
-        (or it ``ended`` by an end-of-test trigger), with the block summaries, the events and what went wrong.
+        (or it ``ended`` by an end-of-test trigger), with the block summaries, the events and what else happened
+        (the recording's words ``recording`` among them).
         """
         return RunProgram.Result(success=success and (ended or not runner.aborted),
-                                 message=self.annotate(runner.abort_reason if runner.aborted else 'completed'),
+                                 message=self.annotate(runner.abort_reason if runner.aborted else 'completed',
+                                                       recording),
                                  blocks=[conv.block_summary_msg(s) for s in runner.block_summaries],
                                  events=list(self.events))

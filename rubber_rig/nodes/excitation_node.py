@@ -226,6 +226,7 @@ class ExcitationNode(Node):
 
     # -- streaming (timer) ------------------------------------------------------------------------------------------
     def stream(self) -> None:
+        self.health.stall.tick(time.monotonic())
         try:
             self._stream()
         except Exception as exc:   # noqa: BLE001 - no callback may take the node down
@@ -290,13 +291,10 @@ class ExcitationNode(Node):
         self._finish(success=success, ended=True)
 
     def _finish(self, success: bool, ended: bool = False) -> None:
-        if self.session is None:
-            return
-        result = self.health.result(self.session.runner, success, ended)
-        self.result, self.session = result, None
-        self.get_logger().info(f'program ended: {result.message}')
-        if self._done is not None and not self._done.done():
-            self._done.set_result(result)
+        """The stream is free now; the result waits for word from the recorder (at most RESULT_WAIT)."""
+        if (s := self.session) is not None:
+            self.session, outcome = None, self.recording.end_program()
+            self.executor.create_task(self.health.result_when_recorded(s, success, ended, outcome, self._done))
 
     def _stop_stream(self, action: int, reason: str, target: float = 0.0) -> None:
         if self.session is None or not self.session.stream_id:
@@ -361,17 +359,18 @@ class ExcitationNode(Node):
             self.get_logger().warning(f'goal refused: {why}')
             goal_handle.abort()
             return RunProgram.Result(success=False, message=why)
-        self.goal_handle, self._done = goal_handle, Future()
+        self.goal_handle, self._done = goal_handle, (done := Future())
 
         def check_cancel():
-            if goal_handle.is_cancel_requested and self.session is not None:
+            if goal_handle.is_cancel_requested and self.session is not None and self.goal_handle is goal_handle:
                 self.abort_program('goal cancelled')
         cancel_timer = self.create_timer(0.01, check_cancel)
         try:
-            result = await self._done
+            result = await done
         finally:
             self.destroy_timer(cancel_timer)
-            self.goal_handle, self._done = None, None
+            if self._done is done:     # a next goal may have started while this result waited for the recorder
+                self.goal_handle, self._done = None, None
         if goal_handle.is_cancel_requested:
             goal_handle.canceled()
         elif result.success:

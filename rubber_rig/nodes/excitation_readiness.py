@@ -96,10 +96,12 @@ def why_stop(node: Node) -> str:
         return ''
     if not s.stream_id:
         return ''
-    node.recording.check(s.next_sample)
+    node.recording.check(s.measured_sequence)
+    # ages count only the time this node ran (StallWatch): after a stall of its own, the driver and the recorder get
+    # their full timeout to be heard again before they are called silent
     if node.require_recording and node.recording.age > node.recorder_timeout:
         return f'recording lost: no recorder status for {node.recording.age:.1f} s (the recorder is gone)'
-    silent = time.monotonic() - node.driver_wall
+    silent = node.health.stall.since(node.driver_wall, time.monotonic())
     if silent > node.status_timeout:
         return (f'{node.rig_driver} silent for {silent:.1f} s (no status, no samples): the rig controller ramps '
                 'to rest on its own host watchdog')

@@ -13,7 +13,9 @@
 # limitations under the License.
 
 """What the excitation node knows of the recorder: whether this namespace's samples are being recorded (a
-program with require_recording starts only then) and whether the recording a program started in was lost.
+program with require_recording starts only then) and what happened to the recording a program started in (the
+ROS-free recording.outcome decides: complete, lost from sample N and why, not recorded; a split into the
+next part is the same recording).
 
 The recorder publishes its status (recorder_status, latched) every 0.5 s; a status older than ``timeout`` [s]
 means the recorder is gone. A restarted recorder or rig_driver is a new publisher on its topic: a status from
@@ -27,17 +29,25 @@ from rclpy.node import Node
 
 from msg_defs.msg import RecorderStatus
 from rubber_rig.nodes import topics
+from rubber_rig.recording.outcome import RecorderReport, RecordingOutcome
+
+STATES = {RecorderStatus.STATE_IDLE: 'idle', RecorderStatus.STATE_RECORDING: 'recording',
+          RecorderStatus.STATE_ERROR: 'error'}
+RESULT_WAIT = 0.75     # [s] a program's result waits at most this long after its end for word from the recorder
 
 
 class RecordingWatch:
-    """The latest recorder status for ``node`` and what it means for the program that runs."""
+    """The latest recorder status for ``node`` and what it means for the program that runs (its RecordingOutcome:
+    complete, lost from sample N and why, not recorded; a split is the same recording).
+    """
 
     def __init__(self, node: Node, require: bool, timeout: float):
         self.node, self.require, self.timeout = node, require, timeout
         self.status: RecorderStatus | None = None
         self.wall = 0.0                  # time.monotonic() of the latest status
-        self.recorded_by = ''            # the file the running program started being recorded in ('' if none)
-        self.lost = ''                   # why the running program's recording was lost ('' if it was not)
+        self.outcome = RecordingOutcome(timeout)   # of the running (or last) program
+        self.ended: list[RecordingOutcome] = []    # of programs that ended and whose result waits for the recorder
+        self.recorder_node = ''          # fully qualified name of the recorder publishing the status (heartbeats)
         # endpoint gids of the publishers of a topic and when they last changed (a node restarted)
         self._publisher_sets: dict[str, tuple[frozenset, float]] = {}
 
@@ -47,26 +57,56 @@ class RecordingWatch:
 
     @property
     def age(self) -> float:
-        """Seconds since the latest recorder status."""
-        return time.monotonic() - self.wall
+        """Seconds since the latest recorder status, counting only time this node ran (StallWatch)."""
+        return self.node.health.stall.since(self.wall, time.monotonic())
+
+    @property
+    def recorded_by(self) -> str:
+        return self.outcome.recorded_by
+
+    @property
+    def lost(self) -> str:
+        return self.outcome.lost
+
+    def report(self) -> RecorderReport | None:
+        r = self.status
+        if r is None:
+            return None
+        return RecorderReport(self.wall, STATES.get(r.state, r.state_name), r.path, r.error,
+                              self.samples_topic in r.topics, int(r.samples_lost))
 
     def on_status(self, msg: RecorderStatus, session) -> str:
         """A recorder status while ``session`` (a ProgramSession, or None) runs: why it must stop, or ''."""
         self.status, self.wall = msg, time.monotonic()
+        self._name_recorder()
+        report = self.report()
+        for outcome in self.ended:
+            outcome.latest = report
         if session is None:
             return ''
+        measured = session.next_sample is not None
         if self.require and self.failed:
+            self.outcome.observe(report, session.measured_sequence, measured)
             return f'recording failed: {msg.error or "recorder error"}'
-        self.check(session.next_sample)
+        if self.outcome.observe(report, session.measured_sequence, measured):
+            self.node.get_logger().error(self.outcome.lost)
         return ''
+
+    def _name_recorder(self) -> None:
+        ns = self.node.get_namespace().rstrip('/')
+        infos = self.node.get_publishers_info_by_topic(f'{ns}/{topics.RECORDER_STATUS}')
+        if infos:
+            i = infos[0]
+            self.recorder_node = f'{i.node_namespace.rstrip("/")}/{i.node_name}'
 
     @property
     def failed(self) -> bool:
         return self.status is not None and self.status.state == RecorderStatus.STATE_ERROR
 
     def start_program(self) -> None:
-        """A program starts: remember the recording it starts in."""
-        self.recorded_by, self.lost = self.path(), ''
+        """A program starts: a new outcome, from the recording it starts in."""
+        self.outcome = RecordingOutcome(self.timeout, self.samples_topic)
+        self.outcome.start(self.report(), time.monotonic(), self.node.health.stall.resumed_at)
 
     def path(self) -> str:
         """The file the recorder reports recording this namespace's samples into ('' if none, or stale)."""
@@ -77,22 +117,30 @@ class RecordingWatch:
         return r.path or '(unnamed file)'
 
     def check(self, next_sample) -> None:
-        """A program that started while being recorded and whose recording stopped says so, once: in the log,
-        the diagnostics and the goal's result (without require_recording the program runs on; with it, the
-        node stops it).
+        """A program that started while being recorded and whose recorder went silent says so, once: in the log,
+        the diagnostics and the goal's result (without require_recording the program runs on; with it, the node
+        stops it). The silence counts only while this node ran: a stall of its own is not the recorder's.
         """
-        if not self.recorded_by or self.lost:
-            return
-        now = self.path()
-        if now == self.recorded_by:
-            return
-        r = self.status
-        why = (f'no recorder status for {self.age:.1f} s (the recorder is gone)' if self.age > self.timeout
-               else f'the recorder is {r.state_name}' + (f': {r.error}' if r.error else '') if not now
-               else f'the recorder switched to {now}')
-        self.lost = (f'recording lost from about sample {next_sample}: {why}; the samples after it are not in '
-                     f'{self.recorded_by}')
-        self.node.get_logger().error(self.lost)
+        if self.outcome.check(time.monotonic(), next_sample, self.node.health.stall.resumed_at):
+            self.node.get_logger().error(self.outcome.lost)
+
+    def end_program(self) -> RecordingOutcome:
+        """The running program ended: its outcome waits for word from the recorder (verdict)."""
+        outcome = self.outcome
+        self.ended.append(outcome)
+        return outcome
+
+    def verdict(self, outcome: RecordingOutcome, end_sample: int, ended: float, beats) -> str | None:
+        """The result's words on `outcome`'s recording (None: wait). The recorder's heartbeat after the end with its
+        latest status recording the same files confirms it (a status comes every 0.5 s, a heartbeat every 0.25 s).
+        """
+        now = time.monotonic()
+        beat = beats.last.get(self.recorder_node) if self.recorder_node else None
+        words = outcome.verdict(now, end_sample, ended, self.node.health.stall.resumed_at,
+                                heard=beat.received if beat is not None else None, wait=RESULT_WAIT)
+        if words is not None and outcome in self.ended:
+            self.ended.remove(outcome)
+        return words
 
     def fresh(self, since: float) -> bool:
         """The recorder status (with require_recording) is ready to judge a goal that arrived at ``since``

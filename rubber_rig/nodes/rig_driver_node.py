@@ -280,6 +280,7 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self.watch_owner()
         self._last_status = self.status_message()
         self.pub_status.publish(self._last_status)
+        self.owner_watch.silence.update(self._last_status, self.publish_diagnostics)   # news: /diagnostics at once
 
     def watch_owner(self) -> None:
         """A stream owner that beat and then went silent for owner_timeout (OwnerWatch) loses its stream."""
@@ -296,8 +297,8 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         backend = self.config.backend if self.config is not None else self.get_parameter('backend').value
         channel = self.config.channel if self.config is not None else self.get_parameter('can.channel').value
         hw = f'{backend}:{channel or self.get_fully_qualified_name()}'
-        self.pub_diag.publish(conv.diagnostics_msg(status, hw, self.bus_diagnostics(),
-                                                   name=self.get_fully_qualified_name()))
+        self.pub_diag.publish(self.owner_watch.silence.annotate(conv.diagnostics_msg(
+            status, hw, self.bus_diagnostics(), name=self.get_fully_qualified_name())))
 
     def bus_diagnostics(self) -> dict:
         """The bus's lines of /diagnostics: the load the protocol needs at this rate (worst-case stuffing), the

@@ -30,7 +30,8 @@ Reading::
     r.sequence, r.block_index, r.metadata, r.gaps, r.samples_lost, r.messages[topic]
 
 Crashes: :func:`recover` (``rubber-rig recover FILE``) rebuilds a file whose writer was killed.
-Modules: msgdefs (ros2msg schema texts), qos (rosbag2 QoS YAML), gaps (the loss ledger: sequence-gap accounting),
+Modules: parts (the parts of a split recording), outcome (what happened to a program's recording, for its result),
+msgdefs (ros2msg schema texts), qos (rosbag2 QoS YAML), gaps (the loss ledger: sequence-gap accounting),
 writer (the file), channels (schemas, channels, CDR encoding), gapcheck (gap check while writing),
 metadata (record names, value codec), plain (messages as plain values), rawfile (unbuffered file),
 session (Recorder), reader, mcapio (checked file access), cdr (numpy CDR decoder), recover,

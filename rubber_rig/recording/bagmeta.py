@@ -32,8 +32,10 @@ VERSION = 9
 METADATA_FILE = 'metadata.yaml'
 
 
-def make_bag_info(files, topics) -> dict:
-    """files: [{'path', 'start_ns', 'end_ns', 'count'}]; topics: [{'name', 'type', 'qos', 'hash', 'count'}]."""
+def make_bag_info(files, topics, custom_data: dict = None) -> dict:
+    """files: [{'path', 'start_ns', 'end_ns', 'count'}]; topics: [{'name', 'type', 'qos', 'hash', 'count'}];
+    custom_data: rosbag2's map of strings (ours: the parts of a split recording, see parts.PARTS_KEY).
+    """
     starts = [f['start_ns'] for f in files if f['count']]
     ends = [f['end_ns'] for f in files if f['count']]
     start = min(starts) if starts else 0
@@ -55,7 +57,7 @@ def make_bag_info(files, topics) -> dict:
                    'starting_time': {'nanoseconds_since_epoch': f['start_ns'] if f['count'] else 0},
                    'duration': {'nanoseconds': (f['end_ns'] - f['start_ns']) if f['count'] else 0},
                    'message_count': f['count']} for f in files],
-        'custom_data': None,
+        'custom_data': {str(k): str(v) for k, v in custom_data.items()} if custom_data else None,
         'ros_distro': 'jazzy',
     }
 
@@ -83,13 +85,27 @@ def file_summary(path: Path):
     return entry, topics
 
 
-def write_bag_metadata(directory, files=None, summaries: dict = None) -> Path:
+def read_custom_data(directory) -> dict:
+    """The custom_data of ``directory/metadata.yaml`` ({} if there is none, or it cannot be read)."""
+    try:
+        info = yaml.safe_load((Path(directory) / METADATA_FILE).read_text(encoding='utf-8'))
+        data = info['rosbag2_bagfile_information'].get('custom_data') or {}
+    except (OSError, ValueError, KeyError, TypeError, AttributeError, yaml.YAMLError):
+        return {}
+    return {str(k): str(v) for k, v in data.items()} if isinstance(data, dict) else {}
+
+
+def write_bag_metadata(directory, files=None, summaries: dict = None, custom_data: dict = None) -> Path:
     """Write ``directory/metadata.yaml`` for its complete .mcap files (in split order).
 
     ``summaries``: {Path: file_summary(path)} of closed files read before; a complete file not in it
     is read and added (the Recorder keeps one, so each split reads only the file just closed).
+    ``custom_data``: rosbag2's custom_data (the recorder's list of parts); None keeps what the file had (a
+    rewrite by ``recover`` must not forget the parts of the recording, missing ones included).
     """
     directory = Path(directory)
+    if custom_data is None:
+        custom_data = read_custom_data(directory)
     files = recording_files(directory) if files is None else [Path(f) for f in files]
     entries, topics = [], {}
     for f in files:
@@ -112,6 +128,7 @@ def write_bag_metadata(directory, files=None, summaries: dict = None) -> Path:
                 topics[name] = dict(t)
     target = directory / METADATA_FILE
     tmp = target.with_suffix('.yaml.tmp')
-    tmp.write_text(dump({'rosbag2_bagfile_information': make_bag_info(entries, list(topics.values()))}))
+    tmp.write_text(dump({'rosbag2_bagfile_information': make_bag_info(entries, list(topics.values()),
+                                                                      custom_data)}))
     tmp.replace(target)
     return target

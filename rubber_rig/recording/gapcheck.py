@@ -35,6 +35,7 @@ class GapCheck:
         self.samples_written = 0           # samples of sample-stream messages (RigSampleBatch, ...) written
         self.samples_flushed = 0           # ... of them in complete chunks handed to the OS
         self.samples_lost_unwritten = 0    # samples of the chunk a write error lost
+        self._spans = {}                   # sample topic -> [samples, first sequence, last sequence] in this file
 
     def observe(self, topic, msg_type, schema, data, decoded, log_time_ns, publication_sequence=None) -> bool:
         """Check one written message (``decoded``, or its CDR ``data`` under ``schema``); False if its bytes
@@ -52,7 +53,19 @@ class GapCheck:
         span = sequence_span(msg_type, decoded)
         if span is not None:
             self.samples_written += span[1]
+            if span[1]:
+                held = self._spans.setdefault(topic, [0, span[0], span[0]])
+                held[0] += span[1]
+                held[2] = span[0] + span[1] - 1
         return True
+
+    def part(self) -> dict:
+        """What this file holds of the recording's sample stream (the ledger's topic): ``part_samples`` (its
+        samples), ``first_sample`` and ``last_sample`` (sequence numbers of the first and last, in file order;
+        None if it holds none): the part's place in a split recording (see parts).
+        """
+        samples, first, last = self._spans.get(self.gaps.topic, (0, None, None))
+        return {'part_samples': samples, 'first_sample': first, 'last_sample': last}
 
     def flushed(self) -> None:
         """Every sample written so far is in a complete chunk on disk."""

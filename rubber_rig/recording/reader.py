@@ -29,6 +29,8 @@ Topics are found by message type, not by name, so namespaces do not matter:
   from the data itself in file order (so it is known for foreign recordings too): bus loss the driver reported
   (``frames_lost``) and messages missed in transport (the stored DDS publication sequence skipped); a
   sequence jump with nothing published in between (between two programs) is not a loss (``jumps``).
+- ``parts``: the parts of a split recording (parts.survey, from the directory or any one part): which are
+  missing and how many samples they held; a recording with a missing part is not ``complete``.
 - a file that was not closed (recorder killed, write error) is read up to its last complete chunk when
   ``allow_truncated``; ``unclosed`` says where its intact data ends, and ``tail_unaccounted`` that an
   unknown number of samples after that point is missing (``loss_text()`` says it in words).
@@ -49,6 +51,7 @@ from .metadata import (
     bookkeeping_records,
     decode_metadata,
 )
+from .parts import PartsReport, survey
 
 PREDICTION = 'msg_defs/msg/ModelPrediction'
 SETPOINTS = 'msg_defs/msg/SetpointBatch'
@@ -70,6 +73,7 @@ class Recording:
     jumps: list = field(default_factory=list)       # sequence jumps that are not loss (between programs)
     complete: bool = True
     unclosed: list = field(default_factory=list)    # per unclosed file: where its intact data ends
+    parts: PartsReport = None                       # the parts of the recording (parts.survey; None for a list)
     start_ns: int = 0
     end_ns: int = 0
     sample_period: float = float('nan')
@@ -124,6 +128,8 @@ class Recording:
                              f'unaccounted for')
         else:
             lines.append(known)
+        if self.parts is not None and not self.parts.complete:
+            lines += self.parts.lines()
         return '\n'.join(lines)
 
 
@@ -201,7 +207,19 @@ def load_recording(path, *, allow_truncated: bool = False) -> Recording:
     rec.jumps = [e for e in ledger.events if e['kind'] == 'jump']
     _join(rec, predictions, setpoints)
     _metadata_from_topics(rec)
+    if not isinstance(path, (list, tuple)):
+        _survey_parts(rec, path)
     return rec
+
+
+def _survey_parts(rec: Recording, path) -> None:
+    """The parts of the recording ``path`` belongs to (parts.survey): a missing part makes it incomplete."""
+    try:
+        rec.parts = survey(path)
+    except (OSError, RecordingError) as exc:   # the data is read; only the part records could not be
+        rec.other_metadata['parts_error'] = {'error': str(exc)}
+    else:
+        rec.complete &= rec.parts.complete
 
 
 def _pick(types: dict, msg_type: str, preferred: str):

@@ -25,10 +25,18 @@
 - ``start`` creates the directory and the first file and writes its header before it returns, so a
   recording that started is known writable; a directory that cannot be created or written raises
   RecordingWriteError naming the path (and keeps it in ``error``).
+- The files of a split recording name their parts (parts.py): each file's ``rubber_rig`` record carries the
+  recording's id (``recording_id``, one per start), its ``part_index``, the samples written to the parts before it
+  (``samples_before``) and the last sample of the part before (``previous_last_sample``); its close record adds
+  what it holds (``part_samples``, ``first_sample``, ``last_sample``) and whether the recording continued in a next
+  part (``next_part``) or ended with it (``final_part``). ``metadata.yaml`` lists every part in its custom_data.
+  From these, ``rubber-rig info`` and ``recover`` tell a missing part, and how many samples it held.
 - Snapshot: with ``snapshot_duration_s`` > 0 the last N seconds (log time) are kept in memory, and
   ``snapshot()`` writes them to their own file, recording or not (like rosbag2's snapshot mode).
 """
+import json
 import time
+import uuid
 from collections import deque
 from datetime import datetime, timezone
 from pathlib import Path
@@ -40,6 +48,7 @@ from .errors import RecordingError, RecordingWriteError
 from .gaps import LossLedger, sequence_span
 from .mcapio import Decoders
 from .msgdefs import full_definition, normalize_type
+from .parts import PARTS_KEY, RECORDING_ID_KEY
 from .writer import RecordingWriter
 
 
@@ -88,6 +97,10 @@ class Recorder:
         self.dropped = 0
         self._base = None
         self._index = 0
+        self.recording_id = ''               # one per start(): every part of the recording carries it
+        self.parts = []                      # per closed part: index, file, samples, first/last sample, closed
+        self._samples_before = 0             # samples of the sample stream in the parts closed so far
+        self._previous_last = None           # sequence of the last sample of the part before
 
     # -- state -------------------------------------------------------------------------------
     @property
@@ -146,6 +159,8 @@ class Recorder:
                                              f'{exc.strerror}', exc.errno)
             raise self.error from None
         self._base, self._index = base, 0
+        self.recording_id, self.parts = uuid.uuid4().hex, []
+        self._samples_before, self._previous_last = 0, None
         self.gaps = LossLedger()
         self.files, self.reports, self._summaries = [], [], {}
         self.error, self.not_recorded_after_error = None, 0
@@ -161,25 +176,39 @@ class Recorder:
     def _open(self):
         path = (self._base / f'{self._base.name}_{self._index}.mcap').absolute()
         self._index += 1
-        metadata = dict(self.metadata, recording=self._base.name, file_index=str(self._index - 1))
+        metadata = dict(self.metadata, recording=self._base.name, file_index=str(self._index - 1),
+                        recording_id=self.recording_id, part_index=self._index - 1,
+                        samples_before=self._samples_before, previous_last_sample=self._previous_last)
         self.writer = RecordingWriter(path, metadata, compression=self.compression,
                                       chunk_size=self.chunk_size, flush_interval_s=self.flush_interval_s,
                                       gaps=self.gaps, bookkeeping_topic=self.bookkeeping_topic)
         self.files.append(path)
 
-    def _close_writer(self):
+    def _close_writer(self, continues: bool = False):
+        """Close the current file; ``continues``: the recording goes on in the next part (a split)."""
         w, self.writer = self.writer, None
         if w is None:
             return
+        part = w.part()
+        index = self._index - 1
+        next_part = f'{self._base.name}_{self._index}.mcap' if continues else ''
+        extra = dict(part, recording_id=self.recording_id, part_index=index, next_part=next_part,
+                     final_part=not continues)
         try:
-            self.reports.append(w.close())
+            self.reports.append(w.close(extra))
         except RecordingWriteError as exc:
             self.error = self.error or exc
+        self.parts.append(dict(part, index=index, file=w.path.name, closed=w.failure is None,
+                               samples_before=self._samples_before, next_part=next_part))
+        self._samples_before += part['part_samples']
+        if part['last_sample'] is not None:
+            self._previous_last = part['last_sample']
         self.messages_written += w.messages_written
         self.dropped += sum(w.dropped.values())
         self.samples_unwritten += w.samples_lost_unwritten
-        try:                                 # the bag so far, for rosbag2 / rosbags readers
-            write_bag_metadata(self._base, self.files, self._summaries)
+        try:                                 # the bag so far, for rosbag2 / rosbags readers, with every part
+            write_bag_metadata(self._base, self.files, self._summaries,
+                               {RECORDING_ID_KEY: self.recording_id, PARTS_KEY: json.dumps(self.parts)})
         except (OSError, RecordingError) as exc:   # the MCAP files are complete; only the index is missing
             self.warnings.append(f'metadata.yaml of {self._base} not written: {exc}')
 
@@ -192,7 +221,7 @@ class Recorder:
         """Close the current file and continue in the next one."""
         if not self.recording:
             raise RecordingError('not recording: nothing to split')
-        self._close_writer()
+        self._close_writer(continues=True)
         if self.error is None:
             self._open()
         return self.current_file

@@ -229,6 +229,10 @@ class RecordingWriter:
         if fsync:
             self._guard(self._file.fsync)
 
+    def part(self) -> dict:
+        """Samples of the sample stream in this file and the first and last sample's sequence (GapCheck.part)."""
+        return self._gap_check.part()
+
     def loss_report(self) -> dict:
         return {
             'messages_written': self.messages_written,

@@ -35,7 +35,8 @@ import can
 import numpy as np
 
 from .canlog import SUPPORTED_FORMATS, CanLogError, CanLogWarning, log_format
-from .canlog_text import TextLogReader, _asc_start, _integrity, frames_until_damage
+from .canlog_text import TextLogReader, _asc_start, _integrity, frames_until_damage, text_damage
+from .canlog_time import TimeCheck
 from .frames import PROFILES, SampleFrames
 from .protocol import DBC_PATH, STATES, STATUS_SEQ_MOD, MalformedFrame, Protocol, fault_names, meet, unwrap
 from .timing import frame_bits
@@ -59,7 +60,12 @@ class CanLog:
     damage; in a text log (.asc, .log) an unreadable line is skipped and the frames before and after it are
     decoded: lines_skipped counts the skipped lines, skipped_lines holds (line number, why) of the first
     MAX_SKIPPED_REPORTED. A skipped Feedback line shows as a sequence gap (its samples are missing from the data
-    as if lost on the bus; the warning names the line).
+    as if lost on the bus; the warning names the line). truncated: the file ends inside a line or record (cut
+    short: a copy that stopped, a full disk, a writer killed mid-line), named in its own warning.
+    Time (canlog_time.TimeCheck): a frame stamped before the one preceding it in the file (time_backwards) or more
+    than canlog_time.JUMP_S after the latest before it (time_jumps) is an anomaly of the log; the frames stay in
+    file order with their stamps as written (``time`` then steps back there) and time_anomalies names the first
+    ones (frame number, line of a text log, step), with a warning. time_ok is False when there is any.
     """
 
     path: str
@@ -80,6 +86,10 @@ class CanLog:
     frames_late: int = 0
     lines_skipped: int = 0
     skipped_lines: list = field(default_factory=list)   # (line number, why) of the first MAX_SKIPPED_REPORTED
+    truncated: bool = False               # the file ends inside a line or record (cut short)
+    time_backwards: int = 0               # frames stamped before the frame preceding them in the file
+    time_jumps: int = 0                   # gaps of more than canlog_time.JUMP_S with no frame
+    time_anomalies: list = field(default_factory=list)   # canlog_time.TimeAnomaly of the first MAX_REPORTED
     sequence: np.ndarray = None
     time: np.ndarray = None
     time_ns: np.ndarray = None
@@ -110,6 +120,11 @@ class CanLog:
     @property
     def duration(self) -> float:
         return self.end - self.start if self.frames_total else 0.0
+
+    @property
+    def time_ok(self) -> bool:
+        """True when the log's time only goes forward, without a jump (see canlog_time)."""
+        return not (self.time_backwards or self.time_jumps)
 
     @property
     def faults_seen(self) -> list:
@@ -178,33 +193,15 @@ def decode_log(path, dbc=DBC_PATH) -> CanLog:
         except Exception:   # noqa: BLE001
             pass
     if isinstance(reader, TextLogReader):
-        _text_damage(p, reader, out)
+        text_damage(p, reader, out)
     more = _integrity(p, fmt, reader, out.frames_total)
     if more:
         out.complete = False
+        out.truncated = True
         out.warnings += more
     for text in out.warnings:
         warnings.warn(text, CanLogWarning, stacklevel=2)
     return out
-
-
-def _text_damage(p: Path, reader: TextLogReader, out: CanLog):
-    """The skipped lines of a text log into `out`; CanLogError if nothing in the file could be read."""
-    out.lines_skipped, out.skipped_lines = reader.lines_skipped, list(reader.skipped)
-    name = SUPPORTED_FORMATS[out.format]
-    if not out.frames_total:
-        if reader.lines_skipped:
-            raise CanLogError(f'{p}: not a readable {name} log: no frame could be read, {reader.lines_skipped} of '
-                              f'its {reader.lines} lines are unreadable: {reader.skipped_text()}')
-        if out.format == '.asc' and not reader.header_lines and p.stat().st_size:
-            raise CanLogError(f'{p}: not a readable {name} log: none of its {reader.lines} lines is an ASC header '
-                              'or frame line')
-    if reader.lines_skipped:
-        out.complete = False
-        s = '' if reader.lines_skipped == 1 else 's'
-        out.warnings.append(f'{p}: skipped {reader.lines_skipped} unreadable line{s} of {reader.lines} '
-                            f'(the {out.frames_total} frames before and after them are decoded): '
-                            f'{reader.skipped_text()}')
 
 
 class _Damaged(Exception):
@@ -228,6 +225,8 @@ def _decode(reader, proto: Protocol, out: CanLog, offset: float = 0.0):
     a damaged stretch of the file is the result even then (_Damaged is raised after it is stored).
     """
     decoder = _Decoder(proto, out)
+    if isinstance(reader, TextLogReader):
+        decoder.line = lambda: reader.lines
     damaged = []
     try:
         for msg in frames_until_damage(reader, damaged):
@@ -257,6 +256,8 @@ class _Decoder:
         self.a = collections.defaultdict(list)   # the arrays of _ARRAYS, as lists; 'time' holds absolute times
         self.expected = self.last_status_seq = self.sp_ref = self.state = None
         self.temperature, self.faults = math.nan, 0
+        self.time_check = TimeCheck()
+        self.line = lambda: None    # the line being read, for a text log
 
     def frame(self, msg, t: float) -> None:
         """Count and decode one frame received at log time t [s]."""
@@ -265,6 +266,7 @@ class _Decoder:
             out.start = t
         out.end = t
         out.frames_total += 1
+        self.time_check.observe(t, out.frames_total, self.line())
         if msg.is_rx:
             out.frames_rx += 1
         else:
@@ -313,7 +315,9 @@ class _Decoder:
         # a packed frame's samples were taken before it was sent: spread them back over the sample period
         # the frames' arrival times show
         last = s + len(xs) - 1
-        period = (t - self.last_fb[0]) / (last - self.last_fb[1]) if self.last_fb and last > self.last_fb[1] else 0.0
+        # (not across a step back in the log's time: its samples keep the frame's stamp)
+        period = (t - self.last_fb[0]) / (last - self.last_fb[1]) \
+            if self.last_fb and last > self.last_fb[1] and t >= self.last_fb[0] else 0.0
         self.last_fb = (t, last)
         late, lost = meet(self.expected, s, len(xs))
         out.frames_late += late           # delayed or duplicated: their slots are already past (as the driver)
@@ -384,6 +388,10 @@ class _Decoder:
         t = out.time
         out.time_ns = np.round(t * 1e9).astype(np.int64)
         out.time = t - out.start if t.size else t
+        check = self.time_check
+        out.time_backwards, out.time_jumps, out.time_anomalies = check.backwards, check.jumps, list(check.anomalies)
+        if check.count:
+            out.warnings.append(check.warning(out.path))
 
 
 def _state_change(out: CanLog, state, code, rel):

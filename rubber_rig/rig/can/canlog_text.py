@@ -147,6 +147,8 @@ class _Lines:
         owner = self.owner
         for raw in self.raw:
             owner.lines += 1
+            if not raw.endswith(b'\n') and raw.strip():
+                owner.cut_line = owner.lines   # the file ends inside this line: whatever it holds is cut short
             try:
                 text = raw.decode('utf-8')
             except UnicodeDecodeError as exc:
@@ -186,7 +188,9 @@ class TextLogReader:
       other ASC lines (header, comments, statistics, events) are python-can's to read or pass over;
     - a frame line python-can's parser raises on (a damaged identifier, length or data byte);
     - a frame with fewer data bytes than its length field says, more than 8 in a classic frame, or a length no
-      CAN FD frame has (a line cut short).
+      CAN FD frame has (a line cut short);
+    - a frame on the last line when the file ends inside it, without its newline (``cut_line``: the log is
+      truncated; a cut candump -L line can look like a shorter frame).
 
     Iterate once. Counts: lines (read), lines_skipped, frames; skipped: (line number, why) of the first
     MAX_SKIPPED_REPORTED skipped lines; header_lines: ASC header/trigger block lines seen.
@@ -199,6 +203,7 @@ class TextLogReader:
             raise CanLogError(f'{self.path}: {SUPPORTED_FORMATS.get(self.format, self.format)} is no text log')
         self.lines = self.lines_skipped = self.frames = self.header_lines = 0
         self.skipped = []
+        self.cut_line = None   # number of the last line when the file ends inside it (truncated), else None
 
     def skip(self, why: str):
         """Count the line being read as skipped for the reason `why`."""
@@ -230,7 +235,11 @@ class TextLogReader:
             while True:
                 try:
                     for msg in parser:   # a fresh iteration after a line python-can raised on goes on after it
-                        problem = _frame_problem(msg)
+                        # a frame on a line the file ends inside may have lost data bytes nothing else shows
+                        # (candump -L has no length field): never a frame, always the log's damage
+                        problem = ('the file ends inside this line (the log is truncated)'
+                                   if self.cut_line is not None and self.lines == self.cut_line
+                                   else _frame_problem(msg))
                         if problem:
                             self.skip(f'{problem}: {_shown(lines.text)}')
                             continue
@@ -260,3 +269,22 @@ def frames_until_damage(reader, damaged: list):
             damaged.append(f'{type(exc).__name__}: {exc}')
             return
         yield msg
+
+
+def text_damage(p: Path, reader: TextLogReader, out) -> None:
+    """The skipped lines of a text log into the CanLog `out`; CanLogError if nothing in the file could be read."""
+    out.lines_skipped, out.skipped_lines = reader.lines_skipped, list(reader.skipped)
+    name = SUPPORTED_FORMATS[out.format]
+    if not out.frames_total:
+        if reader.lines_skipped:
+            raise CanLogError(f'{p}: not a readable {name} log: no frame could be read, {reader.lines_skipped} of '
+                              f'its {reader.lines} lines are unreadable: {reader.skipped_text()}')
+        if out.format == '.asc' and not reader.header_lines and p.stat().st_size:
+            raise CanLogError(f'{p}: not a readable {name} log: none of its {reader.lines} lines is an ASC header '
+                              'or frame line')
+    if reader.lines_skipped:
+        out.complete = False
+        s = '' if reader.lines_skipped == 1 else 's'
+        out.warnings.append(f'{p}: skipped {reader.lines_skipped} unreadable line{s} of {reader.lines} '
+                            f'(the {out.frames_total} frames before and after them are decoded): '
+                            f'{reader.skipped_text()}')

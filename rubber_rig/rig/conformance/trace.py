@@ -30,7 +30,8 @@ from pathlib import Path
 import can
 
 from ..can.canlog import CanLogError, log_format
-from ..can.canlog_text import frames_until_damage
+from ..can.canlog_text import TextLogReader, _integrity, frames_until_damage
+from ..can.canlog_time import TimeCheck
 from ..can.frames import PROFILES, SampleFrames
 from ..can.protocol import MalformedFrame, Protocol
 
@@ -63,6 +64,43 @@ class Trace:
     # runs only): a timing violation inside one cannot be blamed on the controller
     host_late: list = field(default_factory=list)
     source: str = 'live'
+    # what is wrong with the log itself (read_log): a verdict about the log, never about the controller
+    log_damage: list = field(default_factory=list)   # truncated / unreadable lines / unreadable after frame N
+    lines_skipped: int = 0
+    truncated: bool = False
+    time_backwards: int = 0
+    time_jumps: int = 0
+    time_anomalies: list = field(default_factory=list)
+    breaks: list = field(default_factory=list)   # indices into frames where the log's time series is cut
+
+    def segments(self) -> list:
+        """The frames between the breaks of the log (its damaged lines, its time stepping back or jumping): the
+        stretches in which intervals, rates and sequence continuity are the bus's.
+        """
+        cuts = sorted({0, *[b for b in self.breaks if 0 < b < len(self.frames)], len(self.frames)})
+        return [self.frames[a:b] for a, b in zip(cuts, cuts[1:], strict=False) if b > a]
+
+    @property
+    def log_intact(self) -> bool:
+        """True when the log was read whole, to its proper end, with a time that only goes forward."""
+        return not (self.log_damage or self.time_backwards or self.time_jumps)
+
+    def log_verdict(self) -> str:
+        """One line about the log (not the controller): intact, or what is wrong with it, counted."""
+        if self.log_intact:
+            return f'log verdict: intact ({len(self.frames)} frames, time monotonic)'
+        parts = []
+        if self.truncated:
+            parts.append('TRUNCATED (the file ends early: cut short or never closed)')
+        if self.lines_skipped:
+            parts.append(f'{self.lines_skipped} unreadable line{"s" if self.lines_skipped > 1 else ""} skipped')
+        if any(d.startswith('unreadable after') for d in self.log_damage):
+            parts.append('unreadable after a damaged record')
+        if self.time_backwards or self.time_jumps:
+            parts.append(f'time goes backwards {_times(self.time_backwards)}, jumps forward {_times(self.time_jumps)} '
+                         f'({"; ".join(a.text() for a in self.time_anomalies[:3])})')
+        return ('log verdict: DAMAGED LOG: ' + '; '.join(parts) + '. These are faults of the log, not of the '
+                'controller: what a requirement measures across these places is not evidence against it')
 
     def __post_init__(self):
         self.proto = Protocol()
@@ -114,30 +152,65 @@ class Trace:
         return self.frames[-1].t if self.frames else math.nan
 
 
+def _times(n: int) -> str:
+    return f'{n} time{"" if n == 1 else "s"}'
+
+
 def read_log(path, sample_rate: float) -> Trace:
-    """A Trace from the raw CAN log `path` (.blf, .asc, .log). A log that is damaged part way is read up to the
-    damage, with a warning in Trace.warnings. CanLogError for a file that is no readable log.
+    """A Trace from the raw CAN log `path` (.blf, .asc, .log), with what is wrong with the log itself.
+
+    A text log (.asc, .log) is read line by line (canlog_text.TextLogReader): an unreadable line is skipped and
+    counted and the frames after it are read; a last line the file ends inside is the log's truncation, never a
+    frame. A BLF is read up to the first object python-can cannot read. Truncation, skipped lines and time that
+    goes backwards or jumps (canlog_time.TimeCheck; the frames stay in file order) are named in Trace.warnings and
+    Trace.log_damage / time_*: a verdict about the log (Trace.log_verdict). CanLogError for a file that is no
+    readable log.
     """
+    fmt = log_format(path)
     p = Path(str(path)).expanduser()
-    log_format(p)
     if not p.is_file():
         raise CanLogError(f'{p}: no such CAN log')
     trace = Trace(float(sample_rate), source=str(p))
-    try:
-        reader = can.LogReader(str(p))
-    except Exception as exc:   # noqa: BLE001 - python-can raises anything from struct.error to its own errors
-        raise CanLogError(f'{p}: not a readable CAN log: {exc or type(exc).__name__}') from None
+    if fmt == '.blf':
+        try:
+            reader = can.LogReader(str(p))
+        except Exception as exc:   # noqa: BLE001 - python-can raises anything from struct.error to its own errors
+            raise CanLogError(f'{p}: not a readable CAN log: {exc or type(exc).__name__}') from None
+        line = lambda: None   # noqa: E731
+    else:
+        reader = TextLogReader(p, fmt)
+        line = lambda: reader.lines   # noqa: E731
+    check = TimeCheck()
     damaged = []
+    skipped = 0
     try:
         for msg in frames_until_damage(reader, damaged):
             trace.add(msg, float(msg.timestamp))
+            check.observe(float(msg.timestamp), len(trace.frames), line())
+            now_skipped = getattr(reader, 'lines_skipped', 0)
+            if now_skipped != skipped:       # unreadable lines before this frame: its frames are missing here
+                skipped = now_skipped
+                trace.breaks.append(len(trace.frames) - 1)
         if damaged:
-            trace.warnings.append(f'{p}: unreadable after frame {len(trace.frames)}: {damaged[0]}')
+            trace.log_damage.append(f'unreadable after frame {len(trace.frames)}: {damaged[0]}')
     finally:
         try:
             reader.stop()
         except Exception:   # noqa: BLE001
             pass
+    if isinstance(reader, TextLogReader) and reader.lines_skipped:
+        trace.lines_skipped = reader.lines_skipped
+        trace.log_damage.append(f'skipped {reader.lines_skipped} unreadable line'
+                                f'{"s" if reader.lines_skipped > 1 else ""}: {reader.skipped_text()}')
+    cut = _integrity(p, fmt, reader, len(trace.frames))
+    trace.truncated = bool(cut)
+    trace.log_damage += [c.removeprefix(f'{p}: ') for c in cut]
+    trace.time_backwards, trace.time_jumps, trace.time_anomalies = check.backwards, check.jumps, list(check.anomalies)
+    trace.breaks = sorted(set(trace.breaks) | {b - 1 for b in check.breaks})   # frame numbers are 1-based
+    trace.warnings += [f'{p}: {d}' for d in trace.log_damage]
+    if check.count:
+        trace.warnings.append(check.warning(p))
     if not trace.frames:
-        raise CanLogError(f'{p}: holds no CAN frame')
+        raise CanLogError(f'{p}: holds no CAN frame' + (f' ({"; ".join(trace.log_damage)})' if trace.log_damage
+                                                        else ''))
     return trace
