@@ -27,12 +27,14 @@ delay                  a load-cell delay estimated from the data, beyond the dec
 calibration_undeclared a transducer calibration the fit needs was not declared
 calibration_disagrees  a calibration estimated from the data disagrees with the declared one
 short_blocks           too few settled cycles per block for unbiased parameters
+noise_overstated       chi^2 below what the noise allows (two-sided misfit test): the noise judged against
+                       was overstated, so the misfit test is blind by that much
 =====================  ==============================================================================
 """
 from __future__ import annotations
 
 CODES = ('misfit', 'identifiability', 'bounds', 'delay', 'calibration_undeclared', 'calibration_disagrees',
-         'short_blocks')
+         'short_blocks', 'noise_overstated')
 
 
 class FitWarning(str):

@@ -19,7 +19,9 @@ Each warning is one sentence a test engineer can act on. A clean fit has none. T
 * misfit: a statistical test (:func:`misfit_test`), not a fixed chi^2/dof: the residual variance against the
   noise variance the recording shows (load cell, plus the displacement transducer's noise carried through the
   model, errors in variables), with the chi^2 distribution's spread for these degrees of freedom and the
-  uncertainty of the noise estimate itself; a misfit when the excess has a p-value below ``MISFIT_P``;
+  uncertainty of the noise estimate itself; a misfit when the excess has a p-value below ``MISFIT_P``; the
+  test is two-sided: chi^2 too *small* (lower-tail p-value below ``MISFIT_P``) means the noise the residual is
+  measured against was overstated (or the model fitted the noise), its own warning ``noise_overstated``;
 * per-block errors of the fitted model run over the measured displacement above the README's targets,
   ``TARGET_K`` for K_dyn and ``TARGET_C`` for C_eq, and above 3 sigma of the block's measurement (a
   small loss measured with a noisy load cell is not a target miss);
@@ -45,7 +47,8 @@ from .budget import CLASS_05_GAIN_U, undeclared
 from .fitwarnings import FitWarning
 from .modelfit import DELAY
 
-MISFIT_P = 1e-3      # one-sided p-value of the chi^2 excess below which the model misfits (3.1 sigma)
+MISFIT_P = 1e-3      # p-value of each tail of the chi^2 test: the excess below which the model misfits (3.1 sigma),
+#                      the deficit below which the noise was overstated
 TARGET_K, TARGET_C = 0.01, 0.05
 PATTERN_K, PATTERN_C = 0.005, 0.025
 MAX_CORRELATION = 0.95
@@ -75,18 +78,37 @@ def misfit_test(chi2: float, dof: int, noise_variance_u: float = 0.0) -> dict:
 
     Under the model, R = chi^2/dof has mean 1 and variance 2/dof (the chi^2 distribution) plus u^2, the relative
     variance of the noise-variance estimate that chi^2 is divided by (``noise_variance_u``, relative standard
-    uncertainty: blocks.noise_variance_uncertainty). z = (R - 1) / sqrt(2/dof + u^2); a misfit when its
-    one-sided p-value is below MISFIT_P. With ~5000 points and a 1 % noise estimate, R above ~1.07 misfits;
-    with 40 points, R above ~1.7.
+    uncertainty: noise.band_noise). z = (R - 1) / sqrt(2/dof + u^2); a misfit when its upper-tail p-value is
+    below MISFIT_P. With ~5000 points and a 1 % noise estimate, R above ~1.07 misfits; with 40 points, R above
+    ~1.7. Two-sided: the lower tail (``p_value_low``) below MISFIT_P is ``overstated``, a residual smaller
+    than the noise allows (the noise estimate too large, or sigmas declared too large).
+
+    Returns {chi2, dof, ratio (chi^2/dof), sd (of the ratio under the model), z, p_value (upper tail),
+    p_value_low, p_value_two_sided (twice the smaller tail), noise_variance_u, misfit, overstated, test}.
     """
     dof = max(int(dof), 1)
     ratio = float(chi2) / dof
     u = float(noise_variance_u) if math.isfinite(noise_variance_u) else 1.0
     sd = math.sqrt(2.0 / dof + u ** 2)
     z = (ratio - 1.0) / sd
-    p = float(norm.sf(z))
-    return {'chi2': float(chi2), 'dof': dof, 'ratio': ratio, 'sd': sd, 'z': z, 'p_value': p,
-            'noise_variance_u': u, 'misfit': p < MISFIT_P}
+    p, p_low = float(norm.sf(z)), float(norm.cdf(z))
+    return {'chi2': float(chi2), 'dof': dof, 'ratio': ratio, 'sd': sd, 'z': z, 'p_value': p, 'p_value_low': p_low,
+            'p_value_two_sided': min(1.0, 2 * min(p, p_low)), 'noise_variance_u': u, 'misfit': p < MISFIT_P,
+            'overstated': p_low < MISFIT_P, 'test': TEST_NAME}
+
+
+TEST_NAME = ('two-sided chi2/dof test against the measured noise variance (normal approximation, sd = sqrt(2/dof '
+             '+ u_noise^2), each tail at p < 1e-3)')
+
+
+def misfit_sentence(test: dict) -> str:
+    """The misfit test in one line, as the CLI, the JSON and the report state it (one figure everywhere)."""
+    if not test or 'ratio' not in test:
+        return 'misfit test: not made (no measured noise to judge the residual against)'
+    outcome = ('misfit' if test.get('misfit') else 'noise overstated' if test.get('overstated')
+               else 'consistent with noise')
+    return (f'chi2/dof = {test["ratio"]:.3g} with {test["dof"]} degrees of freedom, {test["z"]:+.1f} sigma, '
+            f'p = {test.get("p_value_two_sided", test["p_value"]):.2g} (two-sided): {outcome}')
 
 
 def misfit_warnings(fit) -> list:
@@ -114,6 +136,13 @@ def misfit_warnings(fit) -> list:
                 f'noise (load cell {sigma:.3g} N{carried}): the model does not describe what the data show, and no '
                 'sensor delay, gain or offset may be read from this fit; the uncertainties are inflated by this '
                 'misfit'))
+    if test.get('overstated'):
+        out.append(FitWarning(
+            'noise_overstated', f'the residual is smaller than the noise allows: chi2/dof = {test["ratio"]:.3g} with '
+            f'{test["dof"]} degrees of freedom is {-test["z"]:.1f} sigma below 1 (p = {test["p_value_low"]:.1g}): '
+            'the noise the fit is judged against was overstated (a noise estimate eaten by the signal, or declared '
+            'sigmas too large), so the misfit test is blind by that much and the noise-based uncertainties are '
+            'too wide; check the load-cell noise figure'))
     out += structure_warnings((fit.misfit or {}).get('structure'))
     kind = 'simulated' if any('simulated' in q for q in fit.quality) else 'analytic'
     rows = [q for q in fit.quality if kind in q]
