@@ -106,6 +106,8 @@ def _jsonable(v):
         return [_jsonable(x) for x in v]
     if isinstance(v, (np.floating, float)):
         f = float(v)
+        if math.isinf(f):        # an unbounded side of an interval (budget.interval_note says why): not null
+            return 'inf' if f > 0 else '-inf'
         return f if math.isfinite(f) else None
     if isinstance(v, (np.integer, np.bool_)):
         return v.item()
@@ -114,7 +116,7 @@ def _jsonable(v):
 
 def load_runs(paths, temperature=None):
     """RunData for every readable recording, plus messages for those that are not."""
-    from rubber_rig.fitting.data import load_run
+    from rubber_rig.fitting.data import load_run, with_temperature
     runs, messages = [], []
     for p in paths:
         try:
@@ -126,7 +128,7 @@ def load_runs(paths, temperature=None):
             messages.append(f'{p}: cannot be read: {exc}')
             continue
         if temperature is not None:
-            run.temperature = float(temperature)
+            run = with_temperature(run, override=temperature)
         runs.append(run)
     return runs, messages
 

@@ -29,6 +29,7 @@ from rubber_rig.models.modelfile import ModelSpec, named_model, parse_model
 
 from .budget import add_budget, linearised_shift
 from .calibration import corrected_force
+from .diagnoses import drift_across_blocks, flat_tops, outlier_test
 from .metrics import window_properties
 from .modelfit import ModelFit, TimeProblem, covariance, fit_time_model, jacobian, physical_uncertainty
 from .noise import run_noise
@@ -130,8 +131,7 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     else:
         sol = _time_solution(spec, items, search, points_per_block, known, estimate_delay, seed, progress, estimates)
         timings['time_fit_s'] = time.perf_counter() - t0 - timings['harmonic_s']
-    fit = _assemble(spec, sol, items, blocks, targets, noise, known, temperature, method, calibration)
-    fit.noise_estimates = {name: {k: e.as_dict() for k, e in est.items()} for name, est in estimates.items()}
+    fit = _assemble(spec, sol, items, blocks, targets, noise, known, temperature, method, calibration, estimates)
     fit.timings = {**timings, 'total_s': time.perf_counter() - t0}
     return fit
 
@@ -205,7 +205,24 @@ def _time_solution(spec, items, search, points_per_block, known, estimate_delay,
     return sol
 
 
-def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, method, calibration) -> ModelFit:
+def diagnose(fit, runs: dict) -> dict:
+    """The fit's named diagnoses (fitting.diagnoses): {'drift': drift across blocks, 'outliers': {recording:
+    {channel: test}}, 'saturation': {recording: {channel: flat tops}}} (only what was found, besides drift).
+    """
+    out = {'drift': drift_across_blocks(fit.quality, fit.blocks), 'outliers': {}, 'saturation': {}}
+    for name, run in runs.items():
+        for channel in ('force', 'displacement'):
+            test = outlier_test((fit.noise_estimates.get(name) or {}).get(channel) or {})
+            if test:
+                out['outliers'].setdefault(name, {})[channel] = {**test, 'dt': run.dt}
+            flat = flat_tops(getattr(run, channel))
+            if flat:
+                out['saturation'].setdefault(name, {})[channel] = flat
+    return out
+
+
+def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, method, calibration,
+              estimates) -> ModelFit:
     """The ModelFit of a solution: canonical names, the GUM budget, per-block quality, warnings and notes."""
     coords, values, unc = sol.coords, sol.values, sol.unc
     runs = {run.name: run for run, _, _ in items}
@@ -239,10 +256,16 @@ def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, meth
                    load_cell=_load_cell_record(cal, params, unc, sol.delay_check), quality=quality,
                    messages=sol.messages)
     fit.misfit = sol.misfit
+    fit.noise_estimates = {name: {k: e.as_dict() for k, e in est.items()} for name, est in estimates.items()}
     fit.bounds_hit = [rename.get(n, n) for n in _at_bounds(coords, sol.z, coords.lo, coords.hi)]
     if method == 'time':
         fit.refinement_limited = [rename.get(n, n) for n in sol.limited if rename.get(n, n) not in fit.bounds_hit]
     fit.truth = truth_of(spec, [run for run, _, _ in items])
+    fit.temperature_records = {run.name: run.temperature_record for run, _, _ in items if run.temperature_record}
+    fit.model_temperature = spec.meta.get('temperature')
+    free = {n for n, _, _ in spec.free()}
+    fit.fixed = [n for n in spec.values() if n not in free]
+    fit.diagnoses = diagnose(fit, runs)
     fit.warnings = verdict(fit, coords)
     fit.notes = notes(fit)
     return fit

@@ -309,6 +309,10 @@ class ModelFit:
     notes: list = field(default_factory=list)        # not defects, worth knowing (correlated pairs)
     misfit: dict = field(default_factory=dict)       # the misfit test (verdict.misfit_test)
     noise_estimates: dict = field(default_factory=dict)   # recording -> {force, displacement}: noise.NoiseEstimate
+    temperature_records: dict = field(default_factory=dict)   # recording -> temperature.resolve: which was used
+    model_temperature: float | None = None           # the temperature the fitted model file states (fixed values)
+    fixed: list = field(default_factory=list)        # the model's parameters held at their given values
+    diagnoses: dict = field(default_factory=dict)    # non-stationarity, outliers, saturation (fitting.diagnoses)
 
     @property
     def chi2_per_dof(self) -> float:
@@ -341,7 +345,8 @@ class ModelFit:
                'noise': {'force_sigma': self.noise, 'estimates': self.noise_estimates}, 'load_cell': self.load_cell,
                'correlation': {'names': list(self.uncertainty), 'matrix': self.correlation},
                'model_file': self.model.to_dict(self.uncertainty), 'blocks': self.quality,
-               'timings': self.timings, 'messages': self.messages}
+               'timings': self.timings, 'messages': self.messages,
+               'temperature_record': self.temperature_records, 'diagnoses': self.diagnoses}
         if self.truth:
             out['truth'] = self.truth
             out['errors'] = {k: self.parameters[k] / self.truth[k] - 1.0 for k in self.parameters

@@ -48,6 +48,7 @@ MAX_HARMONICS = 20          # harmonics of the excitation removed per stretch (a
 STRETCH = 4096              # samples per projected stretch (cost ~ STRETCH (2 MAX_HARMONICS)^2)
 MAX_STRETCHES = 4           # stretches per block, spread over its analysed window
 SEGMENTS = 16               # parts for the estimate's own scatter
+OUTLIER_Z = 6.0             # |residual| beyond this many sigmas is an outlier (white noise: 2e-9 of the samples)
 
 
 @dataclass(frozen=True)
@@ -63,9 +64,15 @@ class NoiseEstimate:
     variance_u: float
     samples: int
     method: str
+    outliers: int = 0             # residual samples beyond OUTLIER_Z sigma (diagnoses.outlier_sentence)
+    examined: int = 0             # residual samples examined for outliers
+    largest: float = 0.0          # the largest |residual| [sigma]
+    largest_at: int = -1          # its sample index in the record (-1: none examined)
 
     def as_dict(self) -> dict:
-        return {'sigma': self.sigma, 'variance_u': self.variance_u, 'samples': self.samples, 'method': self.method}
+        return {'sigma': self.sigma, 'variance_u': self.variance_u, 'samples': self.samples, 'method': self.method,
+                'outliers': self.outliers, 'examined': self.examined, 'largest': self.largest,
+                'largest_at': self.largest_at}
 
 
 def _mad_sigma(d) -> float:
@@ -105,7 +112,7 @@ def band_noise(x, dt: float, windows) -> NoiseEstimate:
     differences of the whole record (`blocks.noise_level`'s estimator).
     """
     x = np.asarray(x, float)
-    parts, removed, total = [], 0.0, 0
+    parts, removed, total, residuals = [], 0.0, 0, []
     for start, stop, frequency in windows or ():
         start, stop = int(max(start, 0)), int(min(stop, x.size))
         if stop - start < 16 or not frequency or not np.isfinite(frequency):
@@ -117,6 +124,7 @@ def band_noise(x, dt: float, windows) -> NoiseEstimate:
             if not np.isfinite(seg).all():
                 continue
             residual, dq2 = harmonic_residual(seg, dt, float(frequency))
+            residuals.append((a, residual))
             d3 = np.diff(residual, 3)
             parts.append(d3)
             removed += dq2
@@ -129,7 +137,18 @@ def band_noise(x, dt: float, windows) -> NoiseEstimate:
     # the projection took ||D Q||^2 noise variances out of the third differences' expected sum of squares
     keep = max(1.0 - removed / (D3_GAIN * total), 0.5)
     scale = 1.0 / math.sqrt(D3_GAIN * keep)
-    return NoiseEstimate(_mad_sigma(d3) * scale, _segment_u(d3, scale), int(d3.size), 'harmonics_removed')
+    sigma = _mad_sigma(d3) * scale
+    count, examined, largest, at = 0, 0, 0.0, -1
+    if sigma > 0:
+        for a, residual in residuals:
+            z = np.abs(residual) / sigma
+            count += int(np.count_nonzero(z > OUTLIER_Z))
+            examined += z.size
+            k = int(np.argmax(z))
+            if z[k] > largest:
+                largest, at = float(z[k]), a + k
+    return NoiseEstimate(sigma, _segment_u(d3, scale), int(d3.size), 'harmonics_removed', count, examined, largest,
+                         at)
 
 
 def _segment_u(d3, scale: float) -> float:

@@ -41,7 +41,7 @@ from .timefit import run_input
 
 _NO_MODEL = defaultdict(lambda: math.nan)
 BAND_SAMPLES = 50          # parameter sets drawn for the model band of kdyn_ceq.png
-_RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma', 'budget', 'interval_method')
+_RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma', 'budget', 'interval_method', 'interval_note')
 
 
 # ---- the model reported on ---------------------------------------------------------------------------
