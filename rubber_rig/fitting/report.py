@@ -174,8 +174,12 @@ def _fit_box(model: ReportModel):
                 'written by <code>rubber-rig fit</code>. Judge it by the residuals and the error bars below.</div>']
     chi = fit.get('chi2_per_dof')
     lc = model.load_cell
-    parts = [f'<p>Fit: chi2/dof = <b>{_g(chi, ".3g") if chi is not None else "&ndash;"}</b> (residuals in units '
-             f'of the load-cell noise; near 1 when the model describes the data to their noise)'
+    test = fit.get('misfit_test') or {}
+    # the same figure and test as `rubber-rig fit` prints and its JSON states (verdict.misfit_sentence)
+    verdict_text = (f'{esc(str(test["summary"]))} ({esc(str(test.get("test", "")))})' if test.get('summary') else
+                    'residuals in units of the load-cell noise; near 1 when the model describes the data to their '
+                    'noise; this model file records no misfit test')
+    parts = [f'<p>Fit: chi2/dof = <b>{_g(chi, ".3g") if chi is not None else "&ndash;"}</b>: {verdict_text}'
              + (f', method {esc(str(fit["method"]))}' if fit.get('method') else '')
              + (f', recordings {esc(", ".join(map(str, fit["recordings"])))}' if fit.get('recordings') else '')
              + '.</p>']

@@ -124,6 +124,17 @@ def misfit_sentence(test: dict) -> str:
             f'p = {test.get("p_value_two_sided", test["p_value"]):.2g} (two-sided): {outcome}')
 
 
+def misfit_record(test: dict) -> dict:
+    """The misfit test as a model file and the report keep it (plain numbers and its sentence): the same figure
+    the CLI prints and its JSON states.
+    """
+    keep = ('ratio', 'dof', 'z', 'p_value', 'p_value_low', 'p_value_two_sided', 'misfit', 'overstated', 'test')
+    out = {k: (float(test[k]) if isinstance(test[k], (float, np.floating)) else test[k])
+           for k in keep if k in (test or {})}
+    out['summary'] = misfit_sentence(test)
+    return out
+
+
 def misfit_warnings(fit) -> list:
     out = []
     test = fit.misfit or (misfit_test(fit.chi2, fit.dof) if math.isfinite(fit.chi2) else {'misfit': False})
