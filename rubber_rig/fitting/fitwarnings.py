@@ -35,12 +35,15 @@ non_stationary         the specimen changed during the test: the per-block error
                        frequency and amplitude taken out (heating, settling, wear)
 outliers               spikes: residual samples beyond 6 noise sigmas, more than white noise gives
 saturation             a clipped channel: it holds its extreme value exactly in flat tops
+extrapolation          a limit parameter (K0 at 0 Hz, K_inf) set by the model's shape outside the measured
+                       band by more than its stated uncertainty
 =====================  ==============================================================================
 """
 from __future__ import annotations
 
 CODES = ('misfit', 'identifiability', 'bounds', 'delay', 'calibration_undeclared', 'calibration_disagrees',
-         'short_blocks', 'noise_overstated', 'temperature_disagrees', 'non_stationary', 'outliers', 'saturation')
+         'short_blocks', 'noise_overstated', 'temperature_disagrees', 'non_stationary', 'outliers', 'saturation',
+         'extrapolation')
 
 
 class FitWarning(str):

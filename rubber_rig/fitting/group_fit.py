@@ -30,6 +30,7 @@ from rubber_rig.models.modelfile import ModelSpec, named_model, parse_model
 from .budget import add_budget, linearised_shift
 from .calibration import corrected_force
 from .diagnoses import drift_across_blocks, flat_tops, outlier_test
+from .extrapolation import band_extrapolation
 from .metrics import window_properties
 from .modelfit import ModelFit, TimeProblem, covariance, fit_time_model, jacobian, physical_uncertainty
 from .noise import run_noise
@@ -205,6 +206,17 @@ def _time_solution(spec, items, search, points_per_block, known, estimate_delay,
     return sol
 
 
+def mark_extrapolations(fitted, values: dict, blocks, unc: dict) -> dict:
+    """Record in ``unc`` (name -> result) each limit parameter's extrapolation beyond the measured band
+    (fitting.extrapolation); returns the band.
+    """
+    found = band_extrapolation(fitted, values, blocks, unc)
+    for name, x in found.items():
+        if name in unc:
+            unc[name]['extrapolation'] = x
+    return found['_band']
+
+
 def diagnose(fit, runs: dict) -> dict:
     """The fit's named diagnoses (fitting.diagnoses): {'drift': drift across blocks, 'outliers': {recording:
     {channel: test}}, 'saturation': {recording: {channel: flat tops}}} (only what was found, besides drift).
@@ -241,6 +253,7 @@ def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, meth
                             else {rename.get(k, k): v for k, v in sol.delay_shift.items()}),
                delay_estimated=DELAY in coords.names,
                units={rename.get(n, n): spec.param_spec(n).unit for n in coords.names if n != DELAY})
+    band = mark_extrapolations(fitted, {n: v for n, v in params.items() if n != DELAY}, blocks, unc)
     forces = dict(zip(runs, sol.predicted, strict=True))
     # with an estimated delay the blocks are compared as the specimen behaved: the measured force corrected
     # for it (compared as measured, a late load cell's phase would remove most of the loss at high frequency
@@ -256,6 +269,7 @@ def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, meth
                    load_cell=_load_cell_record(cal, params, unc, sol.delay_check), quality=quality,
                    messages=sol.messages)
     fit.misfit = sol.misfit
+    fit.band = band
     fit.noise_estimates = {name: {k: e.as_dict() for k, e in est.items()} for name, est in estimates.items()}
     fit.bounds_hit = [rename.get(n, n) for n in _at_bounds(coords, sol.z, coords.lo, coords.hi)]
     if method == 'time':

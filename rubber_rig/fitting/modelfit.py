@@ -313,6 +313,7 @@ class ModelFit:
     model_temperature: float | None = None           # the temperature the fitted model file states (fixed values)
     fixed: list = field(default_factory=list)        # the model's parameters held at their given values
     diagnoses: dict = field(default_factory=dict)    # non-stationarity, outliers, saturation (fitting.diagnoses)
+    band: dict = field(default_factory=dict)         # the measured frequency [Hz] and amplitude [m] ranges
 
     @property
     def chi2_per_dof(self) -> float:
@@ -358,7 +359,7 @@ class ModelFit:
                'correlation': {'names': list(self.uncertainty), 'matrix': self.correlation},
                'model_file': self.model.to_dict(self.uncertainty), 'blocks': self.quality,
                'timings': self.timings, 'messages': self.messages,
-               'temperature_record': self.temperature_records, 'diagnoses': self.diagnoses}
+               'temperature_record': self.temperature_records, 'diagnoses': self.diagnoses, 'band': self.band}
         if self.truth:
             out['truth'] = self.truth
             out['errors'] = {k: self.parameters[k] / self.truth[k] - 1.0 for k in self.parameters

@@ -47,8 +47,9 @@ from scipy.stats import norm
 
 from .budget import CLASS_05_GAIN_U, undeclared
 from .diagnoses import drift_sentence, outlier_sentence, saturation_sentence
+from .extrapolation import extrapolation_sentence
 from .fitwarnings import FitWarning
-from .modelfit import DELAY
+from .modelfit import DELAY, paper_unit
 from .temperature import temperature_sentences
 
 MISFIT_P = 1e-3      # p-value of each tail of the chi^2 test: the excess below which the model misfits (3.1 sigma),
@@ -404,6 +405,20 @@ def diagnosis_warnings(fit) -> list:
     return out
 
 
+def extrapolation_warnings(fit) -> list:
+    """'extrapolation' for each limit parameter the model's shape outside the measured band sets beyond its
+    stated uncertainty (fitting.extrapolation).
+    """
+    out = []
+    for name, u in fit.uncertainty.items():
+        x = u.get('extrapolation')
+        if x and x.get('warn'):
+            factor, unit = paper_unit(fit.model, name)
+            out.append(FitWarning('extrapolation', extrapolation_sentence(
+                name, x, f'{u["value"] * factor:.4g} +- {u["sigma"] * factor:.2g} {unit}'), (name,)))
+    return out
+
+
 def verdict(fit, coords) -> list:
     """All warnings of ``fit`` (a ModelFit) in the order: misfit, identifiability, load cell, calibration,
     temperature.
@@ -411,4 +426,4 @@ def verdict(fit, coords) -> list:
     misfit = misfit_warnings(fit)
     return (misfit + identifiability_warnings(fit, coords) + delay_warnings(fit)
             + calibration_warnings(fit, any(w.code == 'misfit' for w in misfit)) + short_block_warnings(fit)
-            + temperature_warnings(fit) + diagnosis_warnings(fit))
+            + temperature_warnings(fit) + diagnosis_warnings(fit) + extrapolation_warnings(fit))
