@@ -14,7 +14,6 @@
 
 """The measured band as a limit (issue 38 item 2): limit parameters carry the share the model's shape supplies
 beyond the band, and a warning of their own when it exceeds their stated uncertainty."""
-import numpy as np
 import pytest
 
 from rubber_rig.fitting.blocks import BlockResult
@@ -71,12 +70,12 @@ def test_a_missing_fast_branch_on_a_narrow_high_band_is_an_extrapolation_of_k0()
     found = [w for w in fit.warnings if w.code == 'extrapolation']
     assert any(w.parameters == ['k0'] for w in found), fit.warnings
     x = fit.uncertainty['k0']['extrapolation']
+    # the fit made the Zener branch so broad (order at its bound) that K0 still acts far above the band
     assert x['band_hz'] == [15, 40] and x['share'] > 0.05
     assert '15-40 Hz' in next(w for w in found if w.parameters == ['k0'])
     assert fit.band['frequency'] == [15, 40]
     # the measured amplitudes: the actuator lags behind its setpoint at 40 Hz
     assert fit.as_dict()['band']['amplitude'] == pytest.approx([0.25e-3, 0.6e-3], rel=0.15)
-    # the fitted K0 is indeed off the specimen's static stiffness by more than its interval says
-    k0 = fit.uncertainty['k0']
-    assert abs(k0['value'] / 12.29e6 - 1) > 3 * k0['relative_sigma'] or x['share'] > 3 * k0['relative_sigma']
-    assert np.isfinite(k0['interval_95']).all()
+    # and the misfit test, now measured against the right noise (20-50 Hz no longer reads the noise 8-15 % high),
+    # sees the missing branch too
+    assert 'misfit' in {w.code for w in fit.warnings}

@@ -115,10 +115,11 @@ def band_extrapolation(spec, values: dict, blocks, uncertainty: dict) -> dict:
 
 def extrapolation_sentence(name: str, x: dict, unit_value: str) -> str:
     """The 'extrapolation' warning's sentence for parameter ``name``."""
-    where = 'static (0 Hz)' if x['side'] == 'low' else 'high-frequency'
-    edge = x['band_hz'][0] if x['side'] == 'low' else x['band_hz'][1]
-    return (f'{name} = {unit_value} is an extrapolation: it is the model\'s {where} limit, and the measured band '
-            f'{x["band_hz"][0]:.3g}-{x["band_hz"][1]:.3g} Hz reaches it only to {100 * (1 - x["share"]):.0f} %: the '
-            f'remaining {100 * x["share"]:.1f} % between {edge:.3g} Hz and the limit is the model\'s shape, not data, '
-            'beyond the parameter\'s stated uncertainty; a model error (a missing branch) moves it without a trace '
-            'in the band: measure closer to the limit, or quote K_dyn and C_eq inside the band instead')
+    low = x['side'] == 'low'
+    edge = x['band_hz'][0] if low else x['band_hz'][1]
+    where = f'below {edge:.3g} Hz down to 0 Hz' if low else f'above {edge:.3g} Hz'
+    return (f'{name} = {unit_value} is an extrapolation: it acts on the model\'s stiffness {where}, outside the '
+            f'measured band {x["band_hz"][0]:.3g}-{x["band_hz"][1]:.3g} Hz, and {100 * x["share"]:.1f} % of the '
+            f'model\'s K_dyn at the {"static" if low else "high-frequency"} limit comes from its shape there, not '
+            'from data: more than the parameter\'s stated uncertainty, and a model error (a missing branch) moves '
+            'it without a trace in the band; measure closer to that limit, or quote K_dyn and C_eq inside the band')
