@@ -24,7 +24,7 @@ import pytest
 from rubber_rig.fitting.blocks import noise_level, noise_variance_uncertainty
 from rubber_rig.fitting.budget import add_budget, interval, undeclared
 from rubber_rig.fitting.fitwarnings import FitWarning, warning_dict, warning_text
-from rubber_rig.fitting.verdict import MISFIT_P, misfit_test
+from rubber_rig.fitting.misfit import MISFIT_P, misfit_test
 
 
 def test_the_misfit_test_is_calibrated_on_chi2_draws_and_sees_a_5_percent_excess():

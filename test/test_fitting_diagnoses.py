@@ -31,9 +31,9 @@ from rubber_rig.fitting.budget import add_budget
 from rubber_rig.fitting.data import _program_blocks, from_arrays
 from rubber_rig.fitting.diagnoses import drift_across_blocks, flat_tops
 from rubber_rig.fitting.identification import fit_model
+from rubber_rig.fitting.misfit import row_threshold
 from rubber_rig.fitting.simulate import EXACT_SENSORS, run_simulated
 from rubber_rig.fitting.temperature import resolve, temperature_sentences
-from rubber_rig.fitting.verdict import row_threshold
 from rubber_rig.models.modelfile import named_model
 
 PROGRAM = {'name': 'grid', 'defaults': {'taper_cycles': 1, 'cycles': 7, 'mean': 0.0},

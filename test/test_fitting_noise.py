@@ -27,9 +27,9 @@ import pytest
 from rubber_rig.fitting.blocks import noise_level, split_blocks
 from rubber_rig.fitting.data import _program_blocks, from_arrays
 from rubber_rig.fitting.identification import fit_model
+from rubber_rig.fitting.misfit import misfit_sentence, misfit_test
 from rubber_rig.fitting.noise import band_noise, run_noise
 from rubber_rig.fitting.simulate import EXACT_SENSORS, run_simulated
-from rubber_rig.fitting.verdict import misfit_sentence, misfit_test
 from rubber_rig.models import build_model, load_parameter_set
 from rubber_rig.models.modelfile import named_model
 

@@ -206,7 +206,7 @@ def _out_path(base, fit, n_fits):
 
 def _write(fits, output, sources):
     from rubber_rig.fitting.fitwarnings import warning_dict
-    from rubber_rig.fitting.verdict import misfit_record
+    from rubber_rig.fitting.misfit import misfit_record
     written = []
     if not output or output == '-':
         return written

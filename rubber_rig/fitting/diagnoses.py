@@ -39,6 +39,8 @@ import math
 import numpy as np
 from scipy.stats import norm, poisson
 
+from .noise import OUTLIER_Z
+
 DRIFT_SIGMAS = 4.0     # standard errors of the time trend before it is a drift
 PATTERN_K, PATTERN_C = 0.005, 0.025     # the smallest drift worth a warning over the test (as verdict's patterns)
 MIN_OUTLIERS = 3
@@ -115,7 +117,6 @@ def outlier_test(estimate: dict) -> dict | None:
     count, examined = int(estimate.get('outliers', 0)), int(estimate.get('examined', 0))
     if examined <= 0 or count < MIN_OUTLIERS:
         return None
-    from .noise import OUTLIER_Z
     expected = examined * 2 * float(norm.sf(OUTLIER_Z))
     p = float(poisson.sf(count - 1, expected))
     if p >= MISFIT_P:
@@ -125,7 +126,6 @@ def outlier_test(estimate: dict) -> dict | None:
 
 
 def outlier_sentence(channel: str, recording: str, test: dict, sigma: float, unit: str, dt: float) -> str:
-    from .noise import OUTLIER_Z
     return (f'{recording}: {test["count"]} {channel} samples of {test["examined"]} examined lie beyond '
             f'{OUTLIER_Z:g} sigma of the noise ({sigma:.3g} {unit}), where white noise puts '
             f'{test["expected"]:.2g} (p = {test["p_value"]:.1g}); the largest is {test["largest"]:.0f} sigma at '

@@ -32,14 +32,15 @@ from .calibration import corrected_force
 from .diagnoses import drift_across_blocks, flat_tops, outlier_test
 from .extrapolation import band_extrapolation
 from .metrics import window_properties
+from .misfit import misfit_test
 from .modelfit import ModelFit, TimeProblem, covariance, fit_time_model, jacobian, physical_uncertainty
 from .noise import run_noise
 from .search import DELAY, BlockTargets, coordinates, fit_harmonic_model
 from .structure import residual_structure
-from .verdict import misfit_test, notes, verdict
+from .verdict import notes, verdict
 
 RESTART_CHI2 = 1.5   # a time-domain fit this far above noise tries other starts of the global search (a search
-#                      heuristic; whether the final fit misfits is verdict.misfit_test's statistical decision)
+#                      heuristic; whether the final fit misfits is misfit.misfit_test's statistical decision)
 
 
 def block_quality(spec: ModelSpec, blocks, forces: dict, runs: dict, measured: dict | None = None,
@@ -319,7 +320,7 @@ def delay_sensitivity(problem: TimeProblem, coords, z, jac, r, inflation: float,
 
 
 def time_misfit(problem: TimeProblem, values: dict, r, dof: int, predictions) -> dict:
-    """The misfit test (verdict.misfit_test) of a time-domain fit with residual ``r`` (load-cell noise units).
+    """The misfit test (misfit.misfit_test) of a time-domain fit with residual ``r`` (load-cell noise units).
 
     The noise the residual is judged against is the load cell's plus the displacement noise carried through
     the model (TimeProblem.input_noise: errors in variables); each recording's chi^2 share is rescaled to that

@@ -57,6 +57,7 @@ from rubber_rig.models.modelfile import ModelSpec
 from rubber_rig.units import PAPER_UNITS
 
 from .fitwarnings import warning_dict
+from .misfit import misfit_sentence
 from .noise import run_noise
 from .search import DELAY, Coordinates
 from .timefit import model_input, run_input
@@ -307,7 +308,7 @@ class ModelFit:
     bounds_hit: list = field(default_factory=list)   # parameters that ended at a search bound
     refinement_limited: list = field(default_factory=list)   # ... at the time-domain fit's range around its start
     notes: list = field(default_factory=list)        # not defects, worth knowing (correlated pairs)
-    misfit: dict = field(default_factory=dict)       # the misfit test (verdict.misfit_test)
+    misfit: dict = field(default_factory=dict)       # the misfit test (misfit.misfit_test)
     noise_estimates: dict = field(default_factory=dict)   # recording -> {force, displacement}: noise.NoiseEstimate
     temperature_records: dict = field(default_factory=dict)   # recording -> temperature.resolve: which was used
     model_temperature: float | None = None           # the temperature the fitted model file states (fixed values)
@@ -317,7 +318,7 @@ class ModelFit:
 
     @property
     def chi2_per_dof(self) -> float:
-        """The misfit test's chi^2/dof (verdict.misfit_test: against the whole noise, the load cell's and the
+        """The misfit test's chi^2/dof (misfit.misfit_test: against the whole noise, the load cell's and the
         displacement noise carried through the model), the one figure the CLI, the JSON, the model file and the
         report state; chi2 / dof against the load cell alone where no test was made (``chi2`` keeps that sum
         for AIC and BIC).
@@ -327,8 +328,7 @@ class ModelFit:
 
     @property
     def misfit_summary(self) -> str:
-        """The misfit test in one sentence (verdict.misfit_sentence), as everywhere."""
-        from .verdict import misfit_sentence
+        """The misfit test in one sentence (misfit.misfit_sentence), as everywhere."""
         return misfit_sentence(self.misfit)
 
     @property

@@ -29,7 +29,7 @@ third differences of what is left give the noise by their median absolute deviat
 projection takes away from white noise is known exactly (the third differences of the projection's
 orthonormal basis Q: E||D r||^2 = sigma^2 (20 (n - 3) - ||D Q||_F^2)), and the estimate is corrected for it.
 The estimate's own uncertainty is the measured scatter of the same estimator over ``SEGMENTS`` parts of the
-pooled differences (the misfit test carries it, verdict.misfit_test).
+pooled differences (the misfit test carries it, misfit.misfit_test).
 
 Checked against the truth (test/test_fitting_noise.py, and the closing figures of the CHANGELOG) on simulated
 records from 0.05 Hz to 100 Hz at 1 kHz and 10 kHz.

@@ -35,10 +35,10 @@ from rubber_rig.units import to_si
 from .blocks import harmonic_sigma
 from .calibration import calibrate, corrected_force
 from .metrics import window_properties
+from .misfit import misfit_record
 from .modelfit import DELAY, Z95
 from .paramfile import PARAM_NAMES
 from .timefit import run_input
-from .verdict import misfit_record
 
 _NO_MODEL = defaultdict(lambda: math.nan)
 BAND_SAMPLES = 50          # parameter sets drawn for the model band of kdyn_ceq.png

@@ -45,9 +45,10 @@ from rubber_rig.units import to_si
 from .blocks import BlockResult
 from .budget import add_budget, linearised_shift
 from .group_fit import block_quality, harmonic_uncertainty, mark_extrapolations
+from .misfit import misfit_test
 from .modelfit import ModelFit
 from .search import BlockTargets, coordinates, fit_harmonic_model, harmonic_residuals
-from .verdict import misfit_test, notes, verdict
+from .verdict import notes, verdict
 
 COLUMNS = {'frequency': 'frequency', 'amplitude': 'length', 'preload': 'length', 'mean': 'length',
            'temperature': 'temperature', 'k_dyn': 'stiffness', 'c_eq': 'damping', 'k_dyn_sigma': 'stiffness',
