@@ -132,6 +132,10 @@ def test_flat_tops_only_where_a_channel_holds_its_extreme():
     assert flat_tops(x) is None
     assert flat_tops(np.clip(x, -2000, 900))['side'] == 'max'
     assert flat_tops(np.round(x / 5) * 5) is None       # a quantised noisy signal does not hold its extreme
+    # a quiet channel read to 0.1 um holds a slow sine's peak for many samples, but steps onto it by one quantum
+    slow = np.round(1e-3 * np.sin(2 * np.pi * 0.5 * np.arange(6000) * 1e-3) / 1e-7) * 1e-7
+    assert flat_tops(slow) is None
+    assert flat_tops(np.clip(slow, -2e-3, 0.9e-3))['side'] == 'max'
 
 
 def test_drift_needs_time_apart_from_frequency():

@@ -29,8 +29,10 @@ warning code (fitwarnings):
   Poisson p-value is below ``MISFIT_P`` (and at least ``MIN_OUTLIERS``) is spikes (EMI, a loose connector, a
   dropped bit), which a least-squares fit spreads over every parameter.
 * ``saturation`` (:func:`flat_tops`): a channel that sits at exactly its extreme value for at least
-  ``FLAT_RUN`` consecutive samples, in at least ``FLAT_RUNS`` places: a transducer or amplifier clipped (a
-  noisy measurement never repeats its maximum; a clipped one holds it). The force there is not the specimen's.
+  ``FLAT_RUN`` consecutive samples, in at least ``FLAT_RUNS`` places, reached by a step of more than
+  ``EDGE_QUANTA`` of its resolution: a transducer or amplifier clipped (a noisy measurement never repeats its
+  maximum; a clipped one holds it, arriving with its full slope; a quiet quantised one holds a smooth peak too,
+  but steps onto it by one quantum). The force there is not the specimen's.
 """
 from __future__ import annotations
 
@@ -47,6 +49,7 @@ MIN_OUTLIERS = 3
 MISFIT_P = 1e-3
 FLAT_RUN = 3           # consecutive samples at the extreme
 FLAT_RUNS = 2          # separate places (cycles) where it happens
+EDGE_QUANTA = 3        # a clip is entered and left by more than this many resolution steps
 
 
 def drift_across_blocks(rows, blocks) -> dict:
@@ -135,20 +138,33 @@ def outlier_sentence(channel: str, recording: str, test: dict, sigma: float, uni
 
 def flat_tops(x) -> dict | None:
     """{'side': 'max'/'min', 'level', 'runs', 'samples'} when ``x`` (shape (n,)) holds exactly its extreme for
-    at least FLAT_RUN consecutive samples in at least FLAT_RUNS places (a clipped channel), else None.
+    at least FLAT_RUN consecutive samples in at least FLAT_RUNS places, each entered and left by a step larger
+    than ``EDGE_QUANTA`` of the channel's resolution (a clipped channel), else None.
+
+    The step condition separates a clip from a smooth peak read by a quantised channel with little noise: a slow
+    sine holds its top value for many samples too (1 mm at 0.5 Hz read to 0.1 um: about 9 samples at 1 kHz),
+    but it reaches it by one quantum, where a clipped signal arrives at the limit with its full slope. The
+    resolution is the smallest non-zero step between consecutive samples.
     """
     x = np.asarray(x, float)
     x = x[np.isfinite(x)]
     if x.size < 10 or np.ptp(x) <= 0:
         return None
     tol = 1e-9 * float(np.ptp(x))
+    steps = np.abs(np.diff(x))
+    quantum = float(steps[steps > tol].min()) if np.any(steps > tol) else 0.0
     found = None
     for side, level in (('max', float(x.max())), ('min', float(x.min()))):
         at = np.abs(x - level) <= tol
         edges = np.diff(np.concatenate([[0], at.astype(np.int8), [0]]))
         starts, stops = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-        lengths = stops - starts
-        runs = int(np.count_nonzero(lengths >= FLAT_RUN))
+        runs = 0
+        for a, b in zip(starts, stops, strict=True):
+            if b - a < FLAT_RUN:
+                continue
+            into = [abs(x[i] - level) for i in (a - 1, b) if 0 <= i < x.size]
+            if into and min(into) > EDGE_QUANTA * quantum:
+                runs += 1
         if runs >= FLAT_RUNS and (found is None or runs > found['runs']):
             found = {'side': side, 'level': level, 'runs': runs, 'samples': int(np.count_nonzero(at))}
     return found
