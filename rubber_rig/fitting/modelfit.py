@@ -92,9 +92,9 @@ class TimeProblem:
             extra = list(item[2]) if len(item) > 2 else []
             if not blocks:
                 continue
-            end, x, h = run_input(run, blocks, max((s for _, s in extra), default=0))
             estimate = (noise or {}).get(run.name) or run_noise(run, blocks)
             self.noise_estimates.append(estimate)
+            end, x, h = run_input(run, blocks, max((s for _, s in extra), default=0), estimate['displacement'].sigma)
             sigma = max(estimate['force'].sigma, 1e-9 * float(np.max(np.abs(run.force[:end]))))
             windows, first_row = [], row
             self.block_frequency += [b.frequency for b in blocks] + [None] * len(extra)
@@ -161,7 +161,7 @@ class TimeProblem:
             if sx <= 0:
                 out.append((0.0, 0.0))
                 continue
-            x2, _ = model_input(raw + rng.normal(0.0, sx, raw.size), run.dt, f_max)
+            x2, _ = model_input(raw + rng.normal(0.0, sx, raw.size), run.dt, f_max, sx)
             try:
                 d = self.model(values, run.dt, h).run(x2) - pred
             except ValueError:
