@@ -143,6 +143,11 @@ def print_fit(fit, out=None):
     out = out or sys.stdout
     print(f'{fit.model.name or "model"} at {_t(fit.temperature)}: {len(fit.blocks)} blocks from '
           f'{", ".join(fit.runs)}; method {fit.method}; {fit.timings.get("total_s", math.nan):.1f} s', file=out)
+    for name, rec in (fit.temperature_records or {}).items():
+        if rec.get('source'):
+            other = (f'; metadata {rec["metadata"]:g} degC' if rec['source'] != 'metadata'
+                     and rec.get('metadata') is not None else '')
+            print(f'  temperature of {name}: {rec["value"]:.3g} degC from the {rec["source"]}{other}', file=out)
     truth = fit.truth or {}
     head = f'  {"parameter":18s} {"value":>12s} {"+-1 sigma":>11s} {"95 % interval":>27s} {"unit":>8s}'
     print(head + ('  vs true  in 95 %?' if truth else ''), file=out)
