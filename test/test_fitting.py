@@ -194,7 +194,11 @@ def test_fit_of_simulated_rig_recording_recovers_the_specimen(recordings, temper
     fits, messages = fit_model([run], 'zener_berg', method='time')
     assert messages == []
     f = fits[0]
-    assert f.temperature == temperature and len(f.blocks) == 8 and f.warnings == []
+    assert f.temperature == temperature and len(f.blocks) == 8
+    # at -40 degC (tau 15 ms, alpha 0.86) the 0.5-14 Hz grid reaches only ~80 % of the way to K_inf: the rest is
+    # the Zener shape, and the fit says so (issue 38: the measured band is a limit); nothing else is wrong
+    expected = [['k_inf']] if temperature < 0 else []
+    assert [w.parameters for w in f.warnings] == expected and all(w.code == 'extrapolation' for w in f.warnings)
     for k in PARAM_NAMES:
         assert f.parameters[k] == pytest.approx(run.true_params[k], rel=TOL[k]), k
     ek, ec = f.max_errors('simulated')

@@ -24,7 +24,7 @@ import pytest
 from rubber_rig.fitting.blocks import noise_level, noise_variance_uncertainty
 from rubber_rig.fitting.budget import add_budget, interval, undeclared
 from rubber_rig.fitting.fitwarnings import FitWarning, warning_dict, warning_text
-from rubber_rig.fitting.verdict import MISFIT_P, misfit_test
+from rubber_rig.fitting.misfit import MISFIT_P, misfit_test
 
 
 def test_the_misfit_test_is_calibrated_on_chi2_draws_and_sees_a_5_percent_excess():
@@ -66,7 +66,10 @@ def test_intervals_respect_physical_bounds():
     assert 0 < lo < 0.95 < hi < 1
     assert interval(-2.0, 1.0, 2.0, 'linear') == [-4.0, 0.0]        # a signed term keeps its symmetric interval
     assert interval(1.0, 2.2, 2.26, 'clipped') == [0.0, 1.0]         # an order at its bound 1, badly determined
-    assert interval(1e-300, 1.0, 2.0, 'log')[1] < math.inf
+    # a side the data do not bound is reported as unbounded (inf; 0 the physical bound), never an overflow
+    assert interval(1e-300, 1.0, 2.0, 'log') == [0.0, math.inf]
+    assert interval(2e5, 1e6, 2.0, 'log') == [0.0, math.inf]
+    assert interval(1.0, math.nan, 2.0, 'linear') == [-math.inf, math.inf]
 
 
 def test_the_budget_adds_declared_calibrations_by_root_sum_of_squares():

@@ -179,3 +179,28 @@ def test_the_delay_interval_is_the_fits_own(tmp_path):
     path.write_text(CUBIC_MODEL)          # written before fits stored it: +-1.96 sigma
     assert read_model_file(path).results['load_cell_delay']['interval_95'] == pytest.approx(
         [1e-4 - Z95 * 2e-5, 1e-4 + Z95 * 2e-5], rel=1e-12)
+
+
+def test_one_misfit_verdict_in_the_cli_the_json_the_model_file_and_the_report(recording, tmp_path, capsys):
+    """Issue 38 item 8: the report's header, the CLI and the JSON state the same misfit figure and test."""
+    import yaml
+
+    from rubber_rig.cli.main import main
+    fitted = tmp_path / 'fit.yaml'
+    assert main(['fit', str(recording), '-o', '-', '--json', '--no-progress']) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert main(['fit', str(recording), '-o', str(fitted), '--no-progress']) == 0
+    text = capsys.readouterr().out
+    summary = data['misfit_summary']
+    ratio = data['misfit']['ratio']
+    assert data['chi2_per_dof'] == ratio and data['fits'][0]['chi2_per_dof'] == ratio
+    assert summary.startswith(f'chi2/dof = {ratio:.3g} ') and '(two-sided)' in summary
+    assert summary in text                                       # the CLI prints the same sentence
+    record = yaml.safe_load(fitted.read_text())['fit']
+    assert record['chi2_per_dof'] == pytest.approx(ratio) and record['misfit_test']['summary'] == summary
+    out = tmp_path / 'report'
+    assert main(['report', str(recording), '--fit', str(fitted), '-o', str(out), '--json']) == 0
+    capsys.readouterr()
+    page = (out / 'report.html').read_text()
+    box = page.split('<p>Fit:')[1].split('</p>')[0]
+    assert f'<b>{ratio:.3g}</b>' in box and summary in box

@@ -106,6 +106,8 @@ def _jsonable(v):
         return [_jsonable(x) for x in v]
     if isinstance(v, (np.floating, float)):
         f = float(v)
+        if math.isinf(f):        # an unbounded side of an interval (budget.interval_note says why): not null
+            return 'inf' if f > 0 else '-inf'
         return f if math.isfinite(f) else None
     if isinstance(v, (np.integer, np.bool_)):
         return v.item()
@@ -114,7 +116,7 @@ def _jsonable(v):
 
 def load_runs(paths, temperature=None):
     """RunData for every readable recording, plus messages for those that are not."""
-    from rubber_rig.fitting.data import load_run
+    from rubber_rig.fitting.data import load_run, with_temperature
     runs, messages = [], []
     for p in paths:
         try:
@@ -126,7 +128,7 @@ def load_runs(paths, temperature=None):
             messages.append(f'{p}: cannot be read: {exc}')
             continue
         if temperature is not None:
-            run.temperature = float(temperature)
+            run = with_temperature(run, override=temperature)
         runs.append(run)
     return runs, messages
 
@@ -141,6 +143,11 @@ def print_fit(fit, out=None):
     out = out or sys.stdout
     print(f'{fit.model.name or "model"} at {_t(fit.temperature)}: {len(fit.blocks)} blocks from '
           f'{", ".join(fit.runs)}; method {fit.method}; {fit.timings.get("total_s", math.nan):.1f} s', file=out)
+    for name, rec in (fit.temperature_records or {}).items():
+        if rec.get('source'):
+            other = (f'; metadata {rec["metadata"]:g} degC' if rec['source'] != 'metadata'
+                     and rec.get('metadata') is not None else '')
+            print(f'  temperature of {name}: {rec["value"]:.3g} degC from the {rec["source"]}{other}', file=out)
     truth = fit.truth or {}
     head = f'  {"parameter":18s} {"value":>12s} {"+-1 sigma":>11s} {"95 % interval":>27s} {"unit":>8s}'
     print(head + ('  vs true  in 95 %?' if truth else ''), file=out)
@@ -153,6 +160,9 @@ def print_fit(fit, out=None):
             ok = lo <= truth[name] <= hi
             line += f'  {100 * (u["value"] / truth[name] - 1):+7.2f} %  {"yes" if ok else "NO"}'
         print(line, file=out)
+    for name, u in fit.uncertainty.items():
+        if u.get('interval_note'):
+            print(f'  {name}: {u["interval_note"]}', file=out)
     budgets = [(n, budget_text(u, u['value'])) for n, u in fit.uncertainty.items() if u.get('budget')]
     if budgets:
         print('  uncertainty budget (1 sigma, % of value; GUM Type A and the declared calibrations, total = root sum '
@@ -160,17 +170,14 @@ def print_fit(fit, out=None):
         for name, text in budgets:
             print(f'    {name:18s} {text}', file=out)
     sigma = ', '.join(f'{v:.3g} N' for v in fit.noise.values()) or 'not measured'
-    print(f'  chi2/dof = {fit.chi2_per_dof:.3g} ({fit.n_points} points, load-cell noise {sigma}); '
-          f'AIC {fit.aic:.1f}, BIC {fit.bic:.1f}', file=out)
     m = fit.misfit
+    carried = ''
     if m.get('input_noise') is not None:
-        carried = ', '.join(f'{v:.3g} N' for v in m['input_noise'].values())
-        print(f'  misfit test: chi2/dof = {m["ratio"]:.3g} against load-cell noise plus {carried} carried from the '
-              f'displacement noise; {m["z"]:+.1f} sigma, p = {m["p_value"]:.2g} '
-              f'({"misfit" if m["misfit"] else "consistent with noise"})', file=out)
-    elif m:
-        print(f'  misfit test: {m["z"]:+.1f} sigma, p = {m["p_value"]:.2g} '
-              f'({"misfit" if m["misfit"] else "consistent with noise"})', file=out)
+        carried = ' plus ' + ', '.join(f'{v:.3g} N' for v in m['input_noise'].values()) + (' carried from the '
+                                                                                          'displacement noise')
+    # one misfit figure everywhere (report header, JSON, model file): the test's
+    print(f'  {fit.misfit_summary} ({fit.n_points} points, load-cell noise {sigma}{carried}); '
+          f'AIC {fit.aic:.1f}, BIC {fit.bic:.1f}', file=out)
     st = m.get('structure') if m else None
     if st:
         parts = [f'{k} x excitation frequency {st[f"harmonic_{k}"]["z"]:+.1f} sigma' for k in (1, 3)
@@ -204,6 +211,7 @@ def _out_path(base, fit, n_fits):
 
 def _write(fits, output, sources):
     from rubber_rig.fitting.fitwarnings import warning_dict
+    from rubber_rig.fitting.misfit import misfit_record
     written = []
     if not output or output == '-':
         return written
@@ -213,6 +221,7 @@ def _write(fits, output, sources):
         if f.temperature is not None:
             f.model.meta['temperature'] = f.temperature
         f.model.meta['fit'] = {'recordings': f.runs, 'method': f.method, 'chi2_per_dof': f.chi2_per_dof,
+                               'misfit_test': misfit_record(f.misfit),
                                'warnings': [warning_dict(w) for w in f.warnings], 'load_cell': f.load_cell}
         header = (f'# rubber-rig fit {" ".join(sources)}\n# SI units; sigma = 1 sigma, interval_95 = 95 % '
                   'interval (see rubber-rig fit --help)')
@@ -287,6 +296,7 @@ def run(args) -> int:
         warnings = [dict(warning_dict(w), temperature=f.temperature) for f in fits for w in f.warnings]
         out = {'model': selected, 'parameters': first.parameters, 'uncertainty': first.uncertainty,
                'warnings': warnings, 'chi2_per_dof': first.chi2_per_dof, 'misfit': first.misfit,
+               'misfit_summary': first.misfit_summary,
                'fits': [f.as_dict() for f in fits], 'comparison': comparison,
                'candidates': {m: [f.as_dict() for f in fl] for m, fl in by_model.items() if m != selected},
                'messages': messages, 'output': written}

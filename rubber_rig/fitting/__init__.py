@@ -22,7 +22,12 @@ modelfit        any model (rubber_rig.models.modelfile): first-harmonic global s
 timefit         the displacement the time-domain fit runs its model on (low-pass, Berg deadband)
 identification  recordings -> one fit per temperature: calibration, quasi-static windows, block quality,
                 model comparison (BIC, AIC beside it)
+noise           the white noise of a channel with the blocks' excitation harmonics removed (every band, every rate)
+misfit          the two-sided chi^2 test against that noise and its one statement (CLI, JSON, model file, report)
 verdict         the warnings and notes of a fit (misfit, per-block errors, trends, identifiability, delay)
+extrapolation   the measured band as a limit: which parameters the model's shape carries beyond it
+temperature     metadata, temperature channel and model temperature compared; which one the fit used
+diagnoses       non-stationarity, outliers and saturation, each named
 table           fits from a CSV of K_dyn / C_eq; blocktrend: seed 004's per-block fit and its trend
 paramfile       seed-000 parameter tables (the shipped sets, older fit output) for reports
 report          PNG figures + self-contained HTML (seed 000 Fig. 4-7 style)

@@ -38,6 +38,12 @@ bounds (``interval_method``): ``log`` for positive parameters (value x exp(+-k u
 fractional order inside (0, 1), ``clipped`` (linear, cut to [0, 1]) for an order at its bound 1 (a legitimate
 value: a plain dashpot), ``linear`` for signed terms and the delay; k is the coverage factor the fit used for
 its Type A interval (Student's t over the blocks).
+
+An interval is honest at its edges: where the linearised uncertainty says nothing (a positive parameter whose
+k u exceeds ``UNBOUNDED_LOG`` in the log, i.e. an upper end beyond ``exp(UNBOUNDED_LOG)`` times the value), the
+side is reported as unbounded: ``inf`` above and the physical bound 0 below, and ``interval_note`` says why;
+never an overflowed number (the 2e-298 .. null of a bushing fitted on 0.2-2 Hz). A sigma that could not be
+computed at all gives [-inf, inf] (or [0, inf]) with its reason. JSON writes inf as the string "inf".
 """
 from __future__ import annotations
 
@@ -47,6 +53,7 @@ import numpy as np
 
 FORCE_SCALES = ('stiffness', 'force', 'damping', 'k2', 'k3', 'k5', 'frac_alpha', 'frac_beta')
 CLASS_05_GAIN_U = 0.005 / math.sqrt(3.0)   # a class 0.5 load cell: +-0.5 % of reading, rectangular
+UNBOUNDED_LOG = math.log(100.0)   # a log interval reaching past 100 x the value is no bound (linearisation fails)
 
 
 def _expit(z: float) -> float:
@@ -54,9 +61,15 @@ def _expit(z: float) -> float:
 
 
 def interval(value: float, sigma: float, k: float, method: str) -> list:
-    """[lo, hi]: value -+ k sigma in the parameterisation ``method`` (log, logit, clipped or linear)."""
+    """[lo, hi]: value -+ k sigma in the parameterisation ``method`` (log, logit, clipped or linear); a side the
+    data do not bound is inf (above) or the physical bound 0 (below a positive parameter): :func:`interval_note`.
+    """
+    if not (math.isfinite(sigma) and math.isfinite(value)):
+        return [0.0 if method == 'log' else -math.inf, math.inf]
     if method == 'log' and value > 0:
-        s = min(k * sigma / value, 700.0)
+        s = k * sigma / value
+        if s > UNBOUNDED_LOG:
+            return [0.0, math.inf]
         return [value * math.exp(-s), value * math.exp(s)]
     if method == 'logit' and 0 < value < 1:
         s = k * sigma / (value * (1 - value))
@@ -65,6 +78,16 @@ def interval(value: float, sigma: float, k: float, method: str) -> list:
     if method == 'clipped':            # an order at its bound 1 (or 0): the linear interval within [0, 1]
         return [max(0.0, value - k * sigma), min(1.0, value + k * sigma)]
     return [value - k * sigma, value + k * sigma]
+
+
+def interval_note(value: float, sigma: float, k: float, method: str) -> str | None:
+    """Why an interval (:func:`interval`) has an unbounded side, or None when both sides are bounds."""
+    if not (math.isfinite(sigma) and math.isfinite(value)):
+        return 'unbounded: no uncertainty could be computed for this parameter (the data carry no information on it)'
+    if method == 'log' and value > 0 and k * sigma / value > UNBOUNDED_LOG:
+        return (f'unbounded: k sigma is {k * sigma / value:.3g} x the value, so the data bound it neither above (inf) '
+                'nor below its physical bound 0; the parameter is not identified by these data')
+    return None
 
 
 def interval_method(kind: str, value: float) -> str:
@@ -119,6 +142,11 @@ def add_budget(unc: dict, kinds: dict, scales: dict, calibration: dict, delay_sh
                   'relative_sigma': total / abs(value) if value else math.inf,
                   'interval_95': [float(v) for v in interval(value, total, k, method)],
                   'interval_method': method, 'coverage_factor': k})
+        note = interval_note(value, total, k, method)
+        if note:
+            u['interval_note'] = note
+        else:
+            u.pop('interval_note', None)
 
 
 def linearised_shift(coords, z, jac, jd) -> tuple:

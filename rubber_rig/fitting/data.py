@@ -18,10 +18,12 @@ Channel problems are reported, not raised, whenever something is still usable:
 - no force channel: the recording cannot be fitted (message, recording skipped);
 - no displacement channel: the setpoint is used instead, with a warning (it lacks the actuator's
   amplitude and phase error, so stiffness and damping are biased at high frequency);
-- no temperature channel: the temperature from the metadata is used (or none).
+- the temperature: the channel's median when there is one, else the metadata's; both are kept and compared
+  (fitting.temperature: a disagreement is a warning naming both).
 """
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -33,6 +35,7 @@ from rubber_rig.models import load_parameter_set
 from rubber_rig.recording import RecordingError, load_recording
 
 from .events import recorded_cycles, recorded_events
+from .temperature import resolve as resolve_temperature
 
 
 @dataclass
@@ -50,6 +53,11 @@ class RunData:
     true_params: dict | None = None            # specimen parameters when the run is simulated
     cycles: dict | None = None                 # the element model's per-cycle metrics (fitting.events)
     events: list = field(default_factory=list)  # detector events (fitting.events)
+    # the temperature's three statements (fitting.temperature.resolve compares them; ``temperature`` is its choice)
+    temperature_metadata: float | None = None  # what the metadata says [degC]
+    temperature_channel: np.ndarray | None = None   # the recorded temperature channel [degC], per sample
+    temperature_override: float | None = None  # given by the user (rubber-rig fit --temperature) [degC]
+    temperature_record: dict | None = None     # fitting.temperature.resolve's result
 
     def usable(self) -> bool:
         return self.force is not None and self.displacement is not None
@@ -103,6 +111,12 @@ def _num(v):
 
 
 def _finish(run: RunData) -> RunData:
+    if run.temperature_metadata is None:
+        run.temperature_metadata = run.temperature      # from_arrays(temperature=...): a stated temperature
+    run.temperature_record = resolve_temperature(run.temperature_metadata, run.temperature_channel,
+                                                 metadata_u=_num((run.metadata or {}).get('temperature_u')),
+                                                 override=run.temperature_override)
+    run.temperature = run.temperature_record['value']
     if run.force is None:
         run.messages.append(f'{run.name}: no force channel; this recording cannot be fitted')
     if run.displacement is None:
@@ -125,6 +139,21 @@ def _finish(run: RunData) -> RunData:
         if run.block_index is not None:
             run.block_index = run.block_index[:n]
     return run
+
+
+def with_temperature(run: RunData, sensor_u=None, override=None) -> RunData:
+    """A copy of ``run`` whose temperature is resolved again (fitting.temperature.resolve) with the temperature
+    sensor's declared standard uncertainty ``sensor_u`` [K] and a user's ``override`` [degC] (None: keep the
+    run's own override).
+    """
+    out = copy.copy(run)
+    if override is not None:
+        out.temperature_override = float(override)
+    out.temperature_record = resolve_temperature(out.temperature_metadata, out.temperature_channel, sensor_u=sensor_u,
+                                                 metadata_u=_num((out.metadata or {}).get('temperature_u')),
+                                                 override=out.temperature_override)
+    out.temperature = out.temperature_record['value']
+    return out
 
 
 def from_arrays(name, dt, displacement, force, **kw) -> RunData:
@@ -170,15 +199,13 @@ def load_run(path) -> RunData:
         raise ValueError(f'{path.name}: no time channel and no sample rate in the metadata')
     temp_ch = sig('temperature')
     temperature = _meta_temperature(meta)
-    if temperature is None and temp_ch is not None and np.isfinite(temp_ch).any():
-        temperature = float(np.nanmedian(temp_ch))
-    elif temp_ch is None:
+    if temp_ch is None:
         messages.append(f'{path.name}: no temperature channel; using the metadata temperature '
                         f'({temperature if temperature is not None else "unknown"})')
     bi = sig('block_index')
     run = RunData(name=path.name, dt=dt, displacement=sig('displacement'), force=sig('force'),
-                  setpoint=sig('setpoint'), temperature=temperature,
-                  block_index=None if bi is None else bi.astype(int),
+                  setpoint=sig('setpoint'), temperature=temperature, temperature_metadata=temperature,
+                  temperature_channel=temp_ch, block_index=None if bi is None else bi.astype(int),
                   program_blocks=_program_blocks(_meta_program(meta)), metadata=meta,
                   messages=messages, true_params=_meta_true_params(meta), cycles=recorded_cycles(rec),
                   events=recorded_events(rec))

@@ -27,12 +27,23 @@ delay                  a load-cell delay estimated from the data, beyond the dec
 calibration_undeclared a transducer calibration the fit needs was not declared
 calibration_disagrees  a calibration estimated from the data disagrees with the declared one
 short_blocks           too few settled cycles per block for unbiased parameters
+noise_overstated       chi^2 below what the noise allows (two-sided misfit test): the noise judged against
+                       was overstated, so the misfit test is blind by that much
+temperature_disagrees  the metadata, the temperature channel or the model's fixed values state different
+                       temperatures beyond their uncertainties; the fit names both and which it used
+non_stationary         the specimen changed during the test: the per-block errors drift in time order with
+                       frequency and amplitude taken out (heating, settling, wear)
+outliers               spikes: residual samples beyond 6 noise sigmas, more than white noise gives
+saturation             a clipped channel: it holds its extreme value exactly in flat tops
+extrapolation          a limit parameter (K0 at 0 Hz, K_inf) set by the model's shape outside the measured
+                       band by more than its stated uncertainty
 =====================  ==============================================================================
 """
 from __future__ import annotations
 
 CODES = ('misfit', 'identifiability', 'bounds', 'delay', 'calibration_undeclared', 'calibration_disagrees',
-         'short_blocks')
+         'short_blocks', 'noise_overstated', 'temperature_disagrees', 'non_stationary', 'outliers', 'saturation',
+         'extrapolation')
 
 
 class FitWarning(str):

@@ -27,17 +27,20 @@ import numpy as np
 
 from rubber_rig.models.modelfile import ModelSpec, named_model, parse_model
 
-from .blocks import noise_level, noise_variance_uncertainty
 from .budget import add_budget, linearised_shift
 from .calibration import corrected_force
+from .diagnoses import drift_across_blocks, flat_tops, outlier_test
+from .extrapolation import band_extrapolation
 from .metrics import window_properties
+from .misfit import misfit_test
 from .modelfit import ModelFit, TimeProblem, covariance, fit_time_model, jacobian, physical_uncertainty
+from .noise import run_noise
 from .search import DELAY, BlockTargets, coordinates, fit_harmonic_model
 from .structure import residual_structure
-from .verdict import misfit_test, notes, verdict
+from .verdict import notes, verdict
 
 RESTART_CHI2 = 1.5   # a time-domain fit this far above noise tries other starts of the global search (a search
-#                      heuristic; whether the final fit misfits is verdict.misfit_test's statistical decision)
+#                      heuristic; whether the final fit misfits is misfit.misfit_test's statistical decision)
 
 
 def block_quality(spec: ModelSpec, blocks, forces: dict, runs: dict, measured: dict | None = None,
@@ -107,7 +110,9 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     """
     t0 = time.perf_counter()
     blocks = [b for _, bl, _ in items for b in bl]
-    noise = {run.name: noise_level(run.force) for run, _, _ in items}
+    # each recording's noise with its blocks' excitation harmonics removed (noise.band_noise), once per fit
+    estimates = {run.name: run_noise(run, bl) for run, bl, _ in items}
+    noise = {name: e['force'].sigma for name, e in estimates.items()}
     known = {name: cal.get('delay', 0.0) for name, cal in (calibration or {}).items()}
     targets = BlockTargets.from_blocks(blocks, noise, known)
     dt = min(run.dt for run, _, _ in items)
@@ -124,11 +129,11 @@ def fit_group(spec: ModelSpec, items, temperature, method='time', estimate_delay
     timings = {'harmonic_s': time.perf_counter() - t0}
     search = (hc, z_h, ls_h, targets, w_k, w_c)
     if method == 'harmonic':
-        sol = _harmonic_solution(spec, items, blocks, search, points_per_block, known)
+        sol = _harmonic_solution(spec, items, blocks, search, points_per_block, known, estimates)
     else:
-        sol = _time_solution(spec, items, search, points_per_block, known, estimate_delay, seed, progress)
+        sol = _time_solution(spec, items, search, points_per_block, known, estimate_delay, seed, progress, estimates)
         timings['time_fit_s'] = time.perf_counter() - t0 - timings['harmonic_s']
-    fit = _assemble(spec, sol, items, blocks, targets, noise, known, temperature, method, calibration)
+    fit = _assemble(spec, sol, items, blocks, targets, noise, known, temperature, method, calibration, estimates)
     fit.timings = {**timings, 'total_s': time.perf_counter() - t0}
     return fit
 
@@ -144,24 +149,25 @@ class _Solution:
         self.__dict__.update(kw)
 
 
-def _harmonic_solution(spec, items, blocks, search, points_per_block, known) -> _Solution:
+def _harmonic_solution(spec, items, blocks, search, points_per_block, known, estimates) -> _Solution:
     """The first-harmonic optimum as the answer (method 'harmonic')."""
     hc, z_h, ls_h, targets, w_k, w_c = search
     values = hc.values(z_h)
     unc, corr, chi2, dof = harmonic_uncertainty(hc, z_h, ls_h, targets, w_k, w_c)
     share = np.array([sum(b.recording == run.name for b in blocks) for run, _, _ in items], float)
-    u = [noise_variance_uncertainty(run.force) for run, _, _ in items]
+    u = [estimates[run.name]['force'].variance_u for run, _, _ in items]
     misfit = misfit_test(chi2, dof, float(np.sqrt(np.sum((share / share.sum() * np.array(u)) ** 2))))
-    problem = TimeProblem(spec.with_values(values), items, points_per_block, known)
+    problem = TimeProblem(spec.with_values(values), items, points_per_block, known, estimates)
     return _Solution(coords=hc, z=z_h, values=values, unc=unc, corr=corr, chi2=chi2, dof=dof,
                      n_points=2 * len(blocks), delay=0.0, misfit=misfit, problem=problem,
                      predicted=problem.predict({}))
 
 
-def _time_solution(spec, items, search, points_per_block, known, estimate_delay, seed, progress) -> _Solution:
+def _time_solution(spec, items, search, points_per_block, known, estimate_delay, seed, progress,
+                   estimates) -> _Solution:
     """The time-domain refinement from the first-harmonic optimum (method 'time'), with its uncertainty."""
     hc, z_h, _, targets, w_k, w_c = search
-    problem = TimeProblem(spec, items, points_per_block, known)
+    problem = TimeProblem(spec, items, points_per_block, known, estimates)
     coords = coordinates(spec, targets, min(run.dt for run, _, _ in items), delay=estimate_delay)
     if progress:
         progress(0.4, 'time-domain fit')
@@ -201,7 +207,35 @@ def _time_solution(spec, items, search, points_per_block, known, estimate_delay,
     return sol
 
 
-def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, method, calibration) -> ModelFit:
+def mark_extrapolations(fitted, values: dict, blocks, unc: dict) -> dict:
+    """Record in ``unc`` (name -> result) each limit parameter's extrapolation beyond the measured band
+    (fitting.extrapolation); returns the band.
+    """
+    found = band_extrapolation(fitted, values, blocks, unc)
+    for name, x in found.items():
+        if name in unc:
+            unc[name]['extrapolation'] = x
+    return found['_band']
+
+
+def diagnose(fit, runs: dict) -> dict:
+    """The fit's named diagnoses (fitting.diagnoses): {'drift': drift across blocks, 'outliers': {recording:
+    {channel: test}}, 'saturation': {recording: {channel: flat tops}}} (only what was found, besides drift).
+    """
+    out = {'drift': drift_across_blocks(fit.quality, fit.blocks), 'outliers': {}, 'saturation': {}}
+    for name, run in runs.items():
+        for channel in ('force', 'displacement'):
+            test = outlier_test((fit.noise_estimates.get(name) or {}).get(channel) or {})
+            if test:
+                out['outliers'].setdefault(name, {})[channel] = {**test, 'dt': run.dt}
+            flat = flat_tops(getattr(run, channel))
+            if flat:
+                out['saturation'].setdefault(name, {})[channel] = flat
+    return out
+
+
+def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, method, calibration,
+              estimates) -> ModelFit:
     """The ModelFit of a solution: canonical names, the GUM budget, per-block quality, warnings and notes."""
     coords, values, unc = sol.coords, sol.values, sol.unc
     runs = {run.name: run for run, _, _ in items}
@@ -220,6 +254,7 @@ def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, meth
                             else {rename.get(k, k): v for k, v in sol.delay_shift.items()}),
                delay_estimated=DELAY in coords.names,
                units={rename.get(n, n): spec.param_spec(n).unit for n in coords.names if n != DELAY})
+    band = mark_extrapolations(fitted, {n: v for n, v in params.items() if n != DELAY}, blocks, unc)
     forces = dict(zip(runs, sol.predicted, strict=True))
     # with an estimated delay the blocks are compared as the specimen behaved: the measured force corrected
     # for it (compared as measured, a late load cell's phase would remove most of the loss at high frequency
@@ -235,10 +270,17 @@ def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, meth
                    load_cell=_load_cell_record(cal, params, unc, sol.delay_check), quality=quality,
                    messages=sol.messages)
     fit.misfit = sol.misfit
+    fit.band = band
+    fit.noise_estimates = {name: {k: e.as_dict() for k, e in est.items()} for name, est in estimates.items()}
     fit.bounds_hit = [rename.get(n, n) for n in _at_bounds(coords, sol.z, coords.lo, coords.hi)]
     if method == 'time':
         fit.refinement_limited = [rename.get(n, n) for n in sol.limited if rename.get(n, n) not in fit.bounds_hit]
     fit.truth = truth_of(spec, [run for run, _, _ in items])
+    fit.temperature_records = {run.name: run.temperature_record for run, _, _ in items if run.temperature_record}
+    fit.model_temperature = spec.meta.get('temperature')
+    free = {n for n, _, _ in spec.free()}
+    fit.fixed = [n for n in spec.values() if n not in free]
+    fit.diagnoses = diagnose(fit, runs)
     fit.warnings = verdict(fit, coords)
     fit.notes = notes(fit)
     return fit
@@ -278,25 +320,25 @@ def delay_sensitivity(problem: TimeProblem, coords, z, jac, r, inflation: float,
 
 
 def time_misfit(problem: TimeProblem, values: dict, r, dof: int, predictions) -> dict:
-    """The misfit test (verdict.misfit_test) of a time-domain fit with residual ``r`` (load-cell noise units).
+    """The misfit test (misfit.misfit_test) of a time-domain fit with residual ``r`` (load-cell noise units).
 
     The noise the residual is judged against is the load cell's plus the displacement noise carried through
     the model (TimeProblem.input_noise: errors in variables); each recording's chi^2 share is rescaled to that
-    sum. The noise estimate's uncertainty is each recording's (blocks.noise_variance_uncertainty) for its load
+    sum. The noise estimate's uncertainty is each recording's (noise.band_noise's variance_u) for its load
     cell share, combined over recordings by their share of the points.
     """
     carried = problem.input_noise(values, predictions)
     chi2, u2, total = 0.0, 0.0, problem.m
     inputs, shares, lag1 = {}, [], []
-    for (run, _, _, force, _, sigma), rows, (s_in, rho) in zip(problem.items, problem.item_rows, carried,
-                                                               strict=True):
+    for (run, _, _, _, _, sigma), rows, (s_in, rho), est in zip(problem.items, problem.item_rows, carried,
+                                                                    problem.noise_estimates, strict=True):
         share = sigma ** 2 / (sigma ** 2 + s_in ** 2)
         shares.append(share)
         lag1.append((1.0 - share) * rho)       # a correct model's residual correlates this much (input noise)
         part = r[rows]
         chi2 += float(part @ part) * share
         n = part.size / max(total, 1)
-        u2 += (n * share * noise_variance_uncertainty(force)) ** 2
+        u2 += (n * share * est['force'].variance_u) ** 2
         inputs[run.name] = s_in
     out = misfit_test(chi2, dof, math.sqrt(u2))
     out['input_noise'] = inputs

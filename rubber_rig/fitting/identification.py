@@ -31,6 +31,7 @@ from rubber_rig.models.modelfile import resolve_model
 
 from .blocks import split_blocks
 from .calibration import calibrate
+from .data import with_temperature
 from .group_fit import fit_group
 
 METHODS = ('harmonic', 'time')
@@ -98,6 +99,8 @@ def fit_model(runs, model='zener_berg', method='time', load_cell_delay=None, loa
         if run.usable():
             run, cal = calibrate(run, load_cell_delay, load_cell_gain, load_cell_gain_u, load_cell_delay_u,
                                  displacement_gain_u=displacement_gain_u, temperature_u=temperature_u)
+            # the channel's uncertainty includes the sensor's, declared only now (fitting.temperature)
+            run = with_temperature(run, sensor_u=cal.get('temperature_u'))
             cals[run.name] = cal
         calibrated.append(run)
     groups, messages = split_runs(calibrated, settle_cycles, min_cycles)

@@ -24,7 +24,8 @@ Objectives.
 * time: the model is run over the measured displacement (low-passed, Berg deadband at the noise, see
   `timefit.model_input`) and its force is compared with the measured force at up to
   ``points_per_block`` samples per block, in units of the load-cell noise sigma_F the recording shows
-  (`blocks.noise_level`), a force offset per block removed: r = (F_model - F_measured - offset) / sigma_F.
+  (`noise.band_noise`: the blocks' excitation harmonics removed first), a force offset per block removed:
+  r = (F_model - F_measured - offset) / sigma_F.
   With the right model these residuals are the sensor noise, so chi^2 / dof = sum r^2 / (m - n - blocks)
   is near 1 and anything above says the model misses something the data show.
 * The load cell's delay d can be a parameter: the model force is compared at t - d (harmonic: K e^{-jwd}).
@@ -55,8 +56,9 @@ from rubber_rig.models.composite import ParallelModel
 from rubber_rig.models.modelfile import ModelSpec
 from rubber_rig.units import PAPER_UNITS
 
-from .blocks import noise_level
 from .fitwarnings import warning_dict
+from .misfit import misfit_sentence
+from .noise import run_noise
 from .search import DELAY, Coordinates
 from .timefit import model_input, run_input
 
@@ -68,11 +70,13 @@ Z95 = 1.959964
 class TimeProblem:
     """Force residuals in units of the load-cell noise, over the analysed cycles of every block."""
 
-    def __init__(self, spec: ModelSpec, runs_blocks, points_per_block=200, delays: dict | None = None):
+    def __init__(self, spec: ModelSpec, runs_blocks, points_per_block=200, delays: dict | None = None,
+                 noise: dict | None = None):
         """runs_blocks: [(RunData, [BlockResult])] or [(RunData, [BlockResult], [(start, stop)])]: the
         optional third item are sample ranges of quasi-static blocks (triangles) that join the residual
         like blocks (seed 000 Section 3 step 1, seed 001 Eq. 9: they pin the friction element down).
         ``delays``: recording name -> known load-cell delay [s]: the model is compared at t - delay.
+        ``noise``: recording name -> noise.run_noise of it (computed here when not given).
         """
         self.spec = spec
         self.items = []
@@ -81,14 +85,17 @@ class TimeProblem:
         self.f_max = []            # highest block frequency per item [Hz] (the model input's low-pass)
         self.item_rows = []        # slice of the residual vector per item (recording)
         self.block_frequency = []  # per block_rows entry: the block's frequency [Hz], None for quasi-static windows
+        self.noise_estimates = []  # per item: {'force', 'displacement'} noise.NoiseEstimate
         row = 0
         for item in runs_blocks:
             run, blocks = item[0], item[1]
             extra = list(item[2]) if len(item) > 2 else []
             if not blocks:
                 continue
-            end, x, h = run_input(run, blocks, max((s for _, s in extra), default=0))
-            sigma = max(noise_level(run.force[:end]), 1e-9 * float(np.max(np.abs(run.force[:end]))))
+            estimate = (noise or {}).get(run.name) or run_noise(run, blocks)
+            self.noise_estimates.append(estimate)
+            end, x, h = run_input(run, blocks, max((s for _, s in extra), default=0), estimate['displacement'].sigma)
+            sigma = max(estimate['force'].sigma, 1e-9 * float(np.max(np.abs(run.force[:end]))))
             windows, first_row = [], row
             self.block_frequency += [b.frequency for b in blocks] + [None] * len(extra)
             for start, stop in [(b.start, b.stop) for b in blocks] + [(a, min(s, end)) for a, s in extra]:
@@ -139,7 +146,7 @@ class TimeProblem:
         The model runs over the measured displacement, so that displacement's noise reaches the model force
         through the model's stiffness at the noise frequencies the input low-pass keeps (0.2 um on a 14 kN/mm
         specimen: ~3 N beside a 10 N load cell). Measured by running the model once more over the displacement
-        plus white noise of the same level (noise_level), through the same low-pass: the difference from
+        plus white noise of the same level (noise.band_noise), through the same low-pass: the difference from
         ``predictions`` (TimeProblem.predict at ``values``) is one more realisation of that propagated noise
         (the model is linear in small input changes). The low-pass makes it coloured: its autocorrelation
         between neighbouring analysed points is what a correct model's residual shows too
@@ -147,13 +154,14 @@ class TimeProblem:
         """
         rng = np.random.default_rng(seed)
         out = []
-        for (run, _x, h, force, windows, _), f_max, pred in zip(self.items, self.f_max, predictions, strict=True):
+        for (run, _x, h, force, windows, _), f_max, pred, est in zip(self.items, self.f_max, predictions,
+                                                                     self.noise_estimates, strict=True):
             raw = np.asarray(run.displacement[:force.size], float)
-            sx = noise_level(raw)
+            sx = est['displacement'].sigma
             if sx <= 0:
                 out.append((0.0, 0.0))
                 continue
-            x2, _ = model_input(raw + rng.normal(0.0, sx, raw.size), run.dt, f_max)
+            x2, _ = model_input(raw + rng.normal(0.0, sx, raw.size), run.dt, f_max, sx)
             try:
                 d = self.model(values, run.dt, h).run(x2) - pred
             except ValueError:
@@ -300,11 +308,28 @@ class ModelFit:
     bounds_hit: list = field(default_factory=list)   # parameters that ended at a search bound
     refinement_limited: list = field(default_factory=list)   # ... at the time-domain fit's range around its start
     notes: list = field(default_factory=list)        # not defects, worth knowing (correlated pairs)
-    misfit: dict = field(default_factory=dict)       # the misfit test (verdict.misfit_test)
+    misfit: dict = field(default_factory=dict)       # the misfit test (misfit.misfit_test)
+    noise_estimates: dict = field(default_factory=dict)   # recording -> {force, displacement}: noise.NoiseEstimate
+    temperature_records: dict = field(default_factory=dict)   # recording -> temperature.resolve: which was used
+    model_temperature: float | None = None           # the temperature the fitted model file states (fixed values)
+    fixed: list = field(default_factory=list)        # the model's parameters held at their given values
+    diagnoses: dict = field(default_factory=dict)    # non-stationarity, outliers, saturation (fitting.diagnoses)
+    band: dict = field(default_factory=dict)         # the measured frequency [Hz] and amplitude [m] ranges
 
     @property
     def chi2_per_dof(self) -> float:
-        return self.chi2 / max(self.dof, 1)
+        """The misfit test's chi^2/dof (misfit.misfit_test: against the whole noise, the load cell's and the
+        displacement noise carried through the model), the one figure the CLI, the JSON, the model file and the
+        report state; chi2 / dof against the load cell alone where no test was made (``chi2`` keeps that sum
+        for AIC and BIC).
+        """
+        ratio = (self.misfit or {}).get('ratio')
+        return float(ratio) if ratio is not None else self.chi2 / max(self.dof, 1)
+
+    @property
+    def misfit_summary(self) -> str:
+        """The misfit test in one sentence (misfit.misfit_sentence), as everywhere."""
+        return misfit_sentence(self.misfit)
 
     @property
     def n_params(self) -> int:
@@ -327,13 +352,14 @@ class ModelFit:
         out = {'model': self.model.name, 'temperature': self.temperature, 'recordings': self.runs,
                'method': self.method, 'parameters': self.parameters, 'uncertainty': self.uncertainty,
                'warnings': [warning_dict(w) for w in self.warnings], 'misfit': self.misfit, 'notes': self.notes,
-               'chi2_per_dof': self.chi2_per_dof, 'chi2': self.chi2,
+               'chi2_per_dof': self.chi2_per_dof, 'misfit_summary': self.misfit_summary, 'chi2': self.chi2,
                'dof': self.dof,
                'n_points': self.n_points, 'n_params': self.n_params, 'aic': self.aic, 'bic': self.bic,
-               'noise': {'force_sigma': self.noise}, 'load_cell': self.load_cell,
+               'noise': {'force_sigma': self.noise, 'estimates': self.noise_estimates}, 'load_cell': self.load_cell,
                'correlation': {'names': list(self.uncertainty), 'matrix': self.correlation},
                'model_file': self.model.to_dict(self.uncertainty), 'blocks': self.quality,
-               'timings': self.timings, 'messages': self.messages}
+               'timings': self.timings, 'messages': self.messages,
+               'temperature_record': self.temperature_records, 'diagnoses': self.diagnoses, 'band': self.band}
         if self.truth:
             out['truth'] = self.truth
             out['errors'] = {k: self.parameters[k] / self.truth[k] - 1.0 for k in self.parameters

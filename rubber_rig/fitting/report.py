@@ -123,6 +123,8 @@ _STYLE = ('<style>body{font-family:sans-serif;max-width:1250px;margin:2em auto;c
 
 
 def _g(v, fmt='.5g'):
+    if v is not None and math.isinf(v):       # an unbounded side of an interval (budget.interval_note)
+        return '&infin;' if v > 0 else '-&infin;'
     return '&ndash;' if v is None or not math.isfinite(v) else format(v, fmt)
 
 
@@ -158,11 +160,14 @@ def _param_table(model: ReportModel):
         rel = r.get('relative_sigma', s / abs(value) if s is not None and value else None)
         sig = 'fixed' if fixed else ('&ndash;' if s is None else f'&plusmn;{_g(s * f, ".3g")}')
         rel_s = '' if fixed or rel is None or name == DELAY else _g(100 * rel, '.3g')   # delay: near 0
-        ivs = '' if not iv else f'[{_g(iv[0] * f)}, {_g(iv[1] * f)}]'
+        ivs = '' if not iv else f'[{_g(float(iv[0]) * f)}, {_g(float(iv[1]) * f)}]'
         parts.append(f'<tr><td class="l">{html.escape(name)}</td><td class="l">{html.escape(label)}</td>'
                      f'<td>{_g(value * f)}</td><td>{sig}</td><td>{rel_s}</td><td>{ivs}</td>'
                      f'<td class="l">{html.escape(unit)}</td><td class="l">{budget_text(r, value)}</td></tr>')
     parts.append('</table>')
+    notes = [(name, res[name]['interval_note']) for name, *_ in rows if (res.get(name) or {}).get('interval_note')]
+    if notes:
+        parts.append('<ul>' + ''.join(f'<li>{html.escape(n)}: {html.escape(str(t))}</li>' for n, t in notes) + '</ul>')
     return parts
 
 
@@ -174,8 +179,12 @@ def _fit_box(model: ReportModel):
                 'written by <code>rubber-rig fit</code>. Judge it by the residuals and the error bars below.</div>']
     chi = fit.get('chi2_per_dof')
     lc = model.load_cell
-    parts = [f'<p>Fit: chi2/dof = <b>{_g(chi, ".3g") if chi is not None else "&ndash;"}</b> (residuals in units '
-             f'of the load-cell noise; near 1 when the model describes the data to their noise)'
+    test = fit.get('misfit_test') or {}
+    # the same figure and test as `rubber-rig fit` prints and its JSON states (misfit.misfit_sentence)
+    verdict_text = (f'{esc(str(test["summary"]))} ({esc(str(test.get("test", "")))})' if test.get('summary') else
+                    'residuals in units of the load-cell noise; near 1 when the model describes the data to their '
+                    'noise; this model file records no misfit test')
+    parts = [f'<p>Fit: chi2/dof = <b>{_g(chi, ".3g") if chi is not None else "&ndash;"}</b>: {verdict_text}'
              + (f', method {esc(str(fit["method"]))}' if fit.get('method') else '')
              + (f', recordings {esc(", ".join(map(str, fit["recordings"])))}' if fit.get('recordings') else '')
              + '.</p>']

@@ -35,13 +35,14 @@ from rubber_rig.units import to_si
 from .blocks import harmonic_sigma
 from .calibration import calibrate, corrected_force
 from .metrics import window_properties
+from .misfit import misfit_record
 from .modelfit import DELAY, Z95
 from .paramfile import PARAM_NAMES
 from .timefit import run_input
 
 _NO_MODEL = defaultdict(lambda: math.nan)
 BAND_SAMPLES = 50          # parameter sets drawn for the model band of kdyn_ceq.png
-_RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma', 'budget', 'interval_method')
+_RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma', 'budget', 'interval_method', 'interval_note')
 
 
 # ---- the model reported on ---------------------------------------------------------------------------
@@ -141,6 +142,7 @@ def read_model_file(path) -> ReportModel:
 def model_from_fit(fit, source: str = '') -> ReportModel:
     """The `ReportModel` of a `modelfit.ModelFit` (what `rubber-rig fit` would write)."""
     record = {'recordings': list(fit.runs), 'method': fit.method, 'chi2_per_dof': fit.chi2_per_dof,
+              'misfit_test': misfit_record(fit.misfit),
               'warnings': list(fit.warnings), 'notes': list(fit.notes), 'load_cell': dict(fit.load_cell)}
     results = {k: dict(v) for k, v in fit.uncertainty.items()}
     return ReportModel(fit.model, results, record, source)

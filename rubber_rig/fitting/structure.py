@@ -14,7 +14,7 @@
 
 """Residual-structure tests of a time-domain fit: is what the model leaves over shaped like noise.
 
-The overall chi^2 test (verdict.misfit_test) spreads a model error over every point. A model error is not
+The overall chi^2 test (misfit.misfit_test) spreads a model error over every point. A model error is not
 spread: a missing viscous branch or a wrong friction law leaves a residual *at the excitation frequency* (the
 first harmonic: K_dyn and C_eq wrong) or at its odd multiples (the loop's shape wrong), in every block. These
 tests concentrate on that, so they see model errors the overall chi^2 of a long record dilutes:
@@ -22,7 +22,7 @@ tests concentrate on that, so they see model errors the overall chi^2 of a long 
 * harmonics: per block, the residual's least-squares projection on cos/sin of k w t (k = 1 and k = 3). Under
   the noise model each block's projection is chi^2 with 2 degrees of freedom (in units of the noise variance:
   load cell plus the displacement noise carried through the model); summed over B blocks chi^2(2B), judged
-  by verdict.misfit_test with the noise estimate's own uncertainty, like the overall test;
+  by misfit.misfit_test with the noise estimate's own uncertainty, like the overall test;
 * per block: each block's chi^2 against chi^2(n_b - 1) (its mean is removed), Bonferroni-corrected over the
   blocks, so one bad block (a disturbance, a transient) is named rather than averaged away;
 * materiality: each test also needs its effect above a floor (HARMONIC_FLOOR, WHITENESS_FLOOR), what the fit's
@@ -41,7 +41,7 @@ import math
 import numpy as np
 from scipy.stats import norm
 
-from .verdict import MISFIT_P, misfit_test
+from .misfit import MISFIT_P, misfit_test
 
 HARMONICS = (1, 3)
 # Materiality: a structure is a misfit when it is beyond noise (MISFIT_P) AND larger than what the fit's own

@@ -44,10 +44,11 @@ from rubber_rig.units import to_si
 
 from .blocks import BlockResult
 from .budget import add_budget, linearised_shift
-from .group_fit import block_quality, harmonic_uncertainty
+from .group_fit import block_quality, harmonic_uncertainty, mark_extrapolations
+from .misfit import misfit_test
 from .modelfit import ModelFit
 from .search import BlockTargets, coordinates, fit_harmonic_model, harmonic_residuals
-from .verdict import misfit_test, notes, verdict
+from .verdict import notes, verdict
 
 COLUMNS = {'frequency': 'frequency', 'amplitude': 'length', 'preload': 'length', 'mean': 'length',
            'temperature': 'temperature', 'k_dyn': 'stiffness', 'c_eq': 'damping', 'k_dyn_sigma': 'stiffness',
@@ -168,6 +169,7 @@ def fit_table(path, model='zener_berg', w_k=100.0, w_c=1.0, seed=0, gain_u=None,
                    units={n: spec.param_spec(n).unit for n in coords.names})
         values = coords.values(z)
         fitted = spec.with_values(values)
+        band = mark_extrapolations(fitted, dict(values), blocks, unc)
         fit = ModelFit(model=fitted, temperature=temp, runs=[Path(path).name], blocks=blocks, method='harmonic',
                        parameters={n: float(values[n]) for n in coords.names}, uncertainty=unc,
                        correlation=corr.tolist(), chi2=chi2, dof=dof, n_points=2 * len(group), noise={},
@@ -175,6 +177,7 @@ def fit_table(path, model='zener_berg', w_k=100.0, w_c=1.0, seed=0, gain_u=None,
                                   and delay_u is not None else 'none', 'gain_u': gain_u, 'delay_u': delay_u,
                                   'displacement_gain_u': displacement_gain_u, 'temperature_u': temperature_u},
                        quality=block_quality(fitted, blocks, {}, {}, sigmas=(t.rel_sigma_k, t.rel_sigma_c)))
+        fit.band = band
         if not np.all(t.rel_sigma_k > 0):
             fit.chi2, fit.dof = float('nan'), dof
         else:   # the stated sigmas are the noise model: declared, so no estimate's uncertainty enters the test

@@ -23,7 +23,7 @@ from rubber_rig.units import to_si
 
 from .catalogue import OPERATING_POINT_TYPES, element_type
 
-RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma', 'budget', 'interval_method')
+RESULT_KEYS = ('sigma', 'interval_95', 'relative_sigma', 'budget', 'interval_method', 'interval_note')
 
 
 @dataclass

@@ -1,0 +1,174 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""Diagnoses named (issue 38 items 3-5): the temperature cross-check, non-stationarity, outliers, saturation, and
+intervals honest at their edges.
+
+One simulated-rig record (seed 000 at 20 degC, 0.5-14 Hz x 0.5/1 mm, 20 N load-cell noise, fixed seed) is fitted
+clean and with one thing wrong at a time: the specimen softening by 3 % over the test (heating), spikes on 0.1 % of
+the force samples, the load cell clipped at 80 % of its largest force, and a metadata temperature of 20 degC on a
+record whose temperature channel reads 0 degC. Each must carry its own warning code; the clean record none of them.
+"""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from rubber_rig.cli.fit import _jsonable
+from rubber_rig.fitting.budget import add_budget
+from rubber_rig.fitting.data import _program_blocks, from_arrays
+from rubber_rig.fitting.diagnoses import drift_across_blocks, flat_tops
+from rubber_rig.fitting.identification import fit_model
+from rubber_rig.fitting.misfit import row_threshold
+from rubber_rig.fitting.simulate import EXACT_SENSORS, run_simulated
+from rubber_rig.fitting.temperature import resolve, temperature_sentences
+from rubber_rig.models.modelfile import named_model
+
+PROGRAM = {'name': 'grid', 'defaults': {'taper_cycles': 1, 'cycles': 7, 'mean': 0.0},
+           'blocks': [{'name': 'sine', 'waveform': 'sine', 'amplitude': ['0.5 mm', '1 mm'],
+                       'frequency': ['0.5 Hz', '2 Hz', '6 Hz', '14 Hz']}]}
+NAMED = ('non_stationary', 'outliers', 'saturation', 'temperature_disagrees')
+DECLARED = {'load_cell_gain_u': 0.0, 'load_cell_delay_u': 0.0, 'displacement_gain_u': 0.0, 'temperature_u': 0.2}
+
+
+@pytest.fixture(scope='module')
+def record():
+    spec = named_model('swing_arm_joint_20C').to_dict()
+    res, text, cfg = run_simulated(PROGRAM, spec, 20.0, force_noise=20.0, seed=4, config_options=EXACT_SENSORS)
+    return {'x': np.asarray(res.displacement), 'f': np.asarray(res.force), 'bi': np.asarray(res.block_index),
+            'dt': 1 / res.sample_rate, 'program': _program_blocks(text), 'spec': spec, 'cfg': cfg}
+
+
+def _fit(record, force=None, **kw):
+    kw.setdefault('temperature', 20.0)
+    run = from_arrays('rec', record['dt'], record['x'], record['f'] if force is None else force,
+                      block_index=record['bi'], program_blocks=record['program'],
+                      metadata={'specimen': record['spec'], 'rig_config': record['cfg']}, **kw)
+    return fit_model([run], 'zener_berg', **DECLARED)[0][0]
+
+
+def _codes(fit):
+    return {w.code for w in fit.warnings}
+
+
+def test_clean_record_has_none_of_the_named_diagnoses(record):
+    fit = _fit(record)
+    assert not (_codes(fit) & set(NAMED)), fit.warnings
+    assert all(fit.as_dict()['covered'].values())
+    drift = fit.diagnoses['drift']
+    assert drift and not drift['K_dyn']['drift'] and not drift['C_eq']['drift']
+    assert fit.temperature_records['rec']['source'] == 'metadata'
+
+
+def test_heating_is_named_non_stationary(record):
+    t = np.arange(record['f'].size) * record['dt']
+    fit = _fit(record, force=record['f'] * (1 - 0.03 * t / t[-1]))     # 3 % softer by the end of the test
+    assert 'non_stationary' in _codes(fit), fit.warnings
+    # e = model / measured - 1 grows as the specimen softens; the first and last blocks' middles are 80 % of the
+    # record apart, and the amplitude term (0.5 mm blocks first, 1 mm after) takes part of the trend
+    change = fit.diagnoses['drift']['K_dyn']['change']
+    assert 0.005 < change < 0.03, change
+    assert 'relative to the model' in next(w for w in fit.warnings if w.code == 'non_stationary')
+
+
+def test_spikes_are_named_outliers(record):
+    rng = np.random.default_rng(11)
+    f = record['f'].copy()
+    hit = rng.choice(f.size, size=f.size // 1000, replace=False)          # 0.1 % of the samples
+    f[hit] += rng.choice([-1.0, 1.0], hit.size) * 600.0                    # 30 noise sigmas
+    fit = _fit(record, force=f)
+    assert 'outliers' in _codes(fit), fit.warnings
+    test = fit.diagnoses['outliers']['rec']['force']
+    assert test['count'] >= 3 and test['largest'] > 20
+    assert 'saturation' not in _codes(fit)
+
+
+def test_a_clipped_load_cell_is_named_saturation(record):
+    limit = 0.8 * np.max(np.abs(record['f']))
+    fit = _fit(record, force=np.clip(record['f'], -limit, limit))
+    assert 'saturation' in _codes(fit), fit.warnings
+    flat = fit.diagnoses['saturation']['rec']['force']
+    assert flat['level'] == pytest.approx(limit if flat['side'] == 'max' else -limit) and flat['runs'] >= 2
+
+
+def test_a_wrong_temperature_label_is_named_and_the_channel_is_used(record):
+    channel = np.full(record['f'].size, 0.0) + np.random.default_rng(1).normal(0, 0.05, record['f'].size)
+    fit = _fit(record, temperature=20.0, temperature_channel=channel)
+    assert 'temperature_disagrees' in _codes(fit)
+    text = next(w for w in fit.warnings if w.code == 'temperature_disagrees')
+    assert '20 degC' in text and '0 degC' in text and 'the fit used the channel' in text
+    assert fit.temperature == pytest.approx(0.0, abs=0.5)
+    assert fit.temperature_records['rec']['source'] == 'channel'
+
+
+def test_temperature_statements_compared_with_their_uncertainties():
+    agree = resolve(20.0, np.full(100, 20.4), sensor_u=0.2)
+    assert agree['disagreement'] is None and agree['source'] == 'channel' and agree['value'] == pytest.approx(20.4)
+    apart = resolve(20.0, np.full(100, 23.0), sensor_u=0.2)
+    assert apart['disagreement']['difference'] == pytest.approx(-3.0)
+    assert resolve(20.0, None)['source'] == 'metadata'
+    assert resolve(20.0, np.full(10, 0.0), override=5.0)['value'] == 5.0
+    # a model whose fixed values belong to 20 degC, used on a 0 degC record
+    text = temperature_sentences(resolve(None, np.full(10, 0.0), sensor_u=0.2), 20.0, ['alpha'], 'r')
+    assert text and 'alpha' in text[0] and '20 degC' in text[0]
+    assert not temperature_sentences(resolve(None, np.full(10, 0.0), sensor_u=0.2), 20.0, [], 'r')
+
+
+def test_flat_tops_only_where_a_channel_holds_its_extreme():
+    rng = np.random.default_rng(0)
+    x = 1000 * np.sin(2 * np.pi * np.arange(5000) / 500) + rng.normal(0, 10, 5000)
+    assert flat_tops(x) is None
+    assert flat_tops(np.clip(x, -2000, 900))['side'] == 'max'
+    assert flat_tops(np.round(x / 5) * 5) is None       # a quantised noisy signal does not hold its extreme
+    # a quiet channel read to 0.1 um holds a slow sine's peak for many samples, but steps onto it by one quantum
+    slow = np.round(1e-3 * np.sin(2 * np.pi * 0.5 * np.arange(6000) * 1e-3) / 1e-7) * 1e-7
+    assert flat_tops(slow) is None
+    assert flat_tops(np.clip(slow, -2e-3, 0.9e-3))['side'] == 'max'
+
+
+def test_drift_needs_time_apart_from_frequency():
+    class B:
+        def __init__(self, start, stop):
+            self.start, self.stop, self.recording = start, stop, 'r'
+    f = [1, 2, 4, 8, 1, 2, 4, 8]                  # log-spaced: the block *order* is a function of ln f and A
+    a = [0.5e-3] * 4 + [1e-3] * 4
+    edges = np.concatenate([[0], np.cumsum([8000 / fi for fi in f])])        # 8 cycles at 1 kHz each
+    blocks = [B(s, e) for s, e in zip(edges[:-1], edges[1:], strict=True)]
+    mid = 0.5 * (edges[:-1] + edges[1:])
+    rows = [{'frequency': fi, 'amplitude': ai, 'simulated': {'e_k': -0.01 + 0.02 * m / mid[-1], 'e_c': 0.0}}
+            for fi, ai, m in zip(f, a, mid, strict=True)]
+    d = drift_across_blocks(rows, blocks)
+    assert d['K_dyn']['drift'] and not d['C_eq']['drift']
+    assert d['K_dyn']['change'] == pytest.approx(0.02 * np.ptp(mid) / mid[-1], rel=1e-6)
+    assert not drift_across_blocks(rows[:5], blocks[:5])       # too few blocks to tell
+
+
+def test_intervals_unbounded_sides_are_inf_with_a_reason_and_never_null_in_json():
+    unc = {'k0': {'value': 2e5, 'sigma': 1e6, 'interval_95': [2e5 - 2e6, 2e5 + 2e6]},
+           'tau': {'value': 0.04, 'sigma': 0.004, 'interval_95': [0.032, 0.048]}}
+    add_budget(unc, {'k0': 'log', 'tau': 'log'}, {'k0': 'stiffness', 'tau': 'time'}, {'gain_u': 0.0})
+    assert unc['k0']['interval_95'] == [0.0, math.inf]
+    assert 'unbounded' in unc['k0']['interval_note'] and 'interval_note' not in unc['tau']
+    text = json.dumps(_jsonable(unc))
+    assert '"inf"' in text and 'null' not in text
+
+
+def test_row_tests_are_corrected_for_their_number():
+    assert row_threshold(1) == pytest.approx(3.0, abs=0.01)
+    assert 3.8 < row_threshold(30) < 4.0           # 15 table rows, K_dyn and C_eq each
+    # the family-wise false alarm of a correct table stays at 0.27 % however many rows
+    from scipy.stats import norm
+    for m in (2, 30, 200):
+        assert 1 - (1 - 2 * norm.sf(row_threshold(m))) ** m == pytest.approx(0.0027, rel=1e-6)
