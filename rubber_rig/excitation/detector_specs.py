@@ -72,7 +72,7 @@ class DetectorSpec:
     floor: float = 0.01
     c_eq_threshold: float = 0.15     # model_fit: tolerance of the C_eq ratio (threshold: of the K_dyn ratio)
     on_mismatch: str = 'recalibrate'  # model_fit: what becomes of the residual detectors (ON_MISMATCH)
-    confirm_cycles: int = 1          # load_cell: cycles after a mean-force step before it is called
+    confirm_cycles: int = 8          # load_cell: at most this many cycles after a mean-force step to tell its cause
     block: int = -1                  # -1: the whole program
 
     def to_dict(self) -> dict:

@@ -68,7 +68,7 @@ STUCK_FRACTION = 0.01      # force amplitude below this fraction of the expected
 SHAPE_DROP = 0.01          # shape factor down by more: the peaks are clipped (saturation)
 K_TOLERANCE, C_TOLERANCE = 0.03, 0.10    # stiffness / loop (C_eq) ratio unchanged within these (at least 5 sigma)
 PLAIN_CHANGE = 3.0         # a trip whose stiffness is off by this many times K_TOLERANCE is the specimen at once
-CREEP = 0.02               # a fixture slip's mean force creeps back by at least this fraction of the step per cycle
+CREEP = 0.02               # a fixture slip's mean force creeps back by at least this fraction of the step
 
 
 def _robust_sigma(values) -> float:
@@ -157,9 +157,12 @@ class Held:
 
     trips: list                  # (detector spec, judged tuple, Cycle it tripped on)
     since: int                   # program cycle of the first trip or anomaly
-    step: float = math.nan       # mean-force step [N] once seen
-    first_mean: float = math.nan  # offset on the first cycle of the step
-    step_cycles: int = 0
+    offsets: list = field(default_factory=list)   # mean-force offset from the reference [N], cycles of a step
+
+    @property
+    def step(self) -> float:
+        """The mean-force step [N] on its first whole cycle (NaN while none is seen)."""
+        return self.offsets[0] if self.offsets else math.nan
 
 
 @dataclass
@@ -187,6 +190,8 @@ class LoadCellJudge:
         self.held: Held | None = None
         self.offset = 0.0            # a load-cell offset found (subtracted from later cycles) [N]
         self.fault = ''              # stuck | saturation while the load cell is out (the detectors are blind)
+        self.last = 'normal'         # the previous cycle's class: a clipped cycle counts when two are in a row
+        self.reported: set = set()   # (block, code) reported: each code once per block, like a detector's trip
 
     @staticmethod
     def _signature(c) -> tuple:
@@ -259,44 +264,64 @@ class LoadCellJudge:
             self._learn(c.block, self._signature(c))
             return out + ([Verdict('specimen', 'changed', trips)] if trips else [])
         kind, s = self.classify(c)
-        if kind in ('stuck', 'saturated'):
+        # the cycle a step happens in loses its shape too (its loop does not close): clipping is two in a row
+        last, self.last = self.last, kind
+        if kind == 'stuck' or (kind == 'saturated' and last == 'saturated'):
             return self._sensor(c, 'stuck' if kind == 'stuck' else 'saturation', s)
         if self.held is None:
             if kind == 'normal' and not trips:
                 return []
-            if trips and self.changed(s, PLAIN_CHANGE):
+            if trips and kind == 'changed' and self.changed(s, PLAIN_CHANGE):
                 return [Verdict('specimen', 'changed', trips)]
+            # the cycle of a step holds only part of it: the step is measured from the next cycle on
             self.held = Held(list(trips), c.program_cycle)
-            return self._step(c, s) if kind == 'step' else []
+            return []
         self.held.trips += trips
+        if kind == 'saturated':
+            return []
         if kind == 'changed':
+            self.references.pop(c.block, None)     # the specimen changed: its new state is learnt afresh
+            self.learning.pop(c.block, None)
             return self._release('specimen', 'changed', c, s)
-        if kind == 'step' or math.isfinite(self.held.step):
+        if kind == 'step' or self.held.offsets:
             return self._step(c, s)
         return self._sensor(c, 'spikes', s)           # normal again: a transient with no lasting change
 
     def _step(self, c, s) -> list[Verdict]:
-        held, offset = self.held, s[2] - self.reference.offset
-        if not math.isfinite(held.step):
-            held.step, held.first_mean, held.step_cycles = offset, offset, 0
+        """A step of the mean force on cycle c: after each cycle, the first and second half of the cycles since
+        the step are compared (a fixture slip creeps back, a load-cell offset stays), until one is told or
+        ``confirm_cycles`` have gone by.
+        """
+        held = self.held
+        held.offsets.append(s[2] - self.reference.offset)
+        k = len(held.offsets)
+        if k < 2:
             return []
-        held.step_cycles += 1
-        if held.step_cycles < self.spec.confirm_cycles:
-            return []
-        noise = 3 * math.sqrt(2) * max(self.reference.sigma['offset'], 1e-9)
-        creep = (held.first_mean - offset) * math.copysign(1.0, held.step)      # back towards the level before
-        detail = (f'mean force stepped by {held.step:+.6g} N with K_dyn and C_eq unchanged; over '
-                  f'{held.step_cycles} cycle(s) it moved back {creep:+.6g} N (3 sigma {noise:.3g} N)')
+        half = k // 2
+        early, late = float(np.mean(held.offsets[:half])), float(np.mean(held.offsets[-half:]))
+        noise = 3 * max(self.reference.sigma['offset'], 1e-9) * math.sqrt(2 / half)
+        creep = (early - late) * math.copysign(1.0, held.step)       # back towards the level before the step
+        detail = (f'mean force stepped by {held.step:+.6g} N with K_dyn and C_eq unchanged; over {k} cycles it '
+                  f'moved back {creep:+.6g} N (3 sigma {noise:.3g} N)')
         if creep > noise:
+            self._rereference(c.block, late)
             return self._release('fixture', 'mean_step', c, s, detail + ': it relaxes, a displacement step '
                                  '(fixture slip)')
         if abs(creep) <= noise and CREEP * abs(held.step) > noise:
-            self.offset += 0.5 * (held.first_mean + offset)
-            out = self._sensor(c, 'offset_jump', s, detail + ': flat, a load-cell offset (subtracted from here on)',
-                               value=held.step)
-            return out
+            self.offset += late
+            return self._sensor(c, 'offset_jump', s, detail + ': flat, a load-cell offset (subtracted from here '
+                                'on)', value=held.step)
+        if k < max(self.spec.confirm_cycles, 2):
+            return []
+        self._rereference(c.block, late)
         return self._release('undetermined', 'mean_step', c, s, detail + ': too little to tell a load-cell offset '
                              'from a fixture slip')
+
+    def _rereference(self, block: int, offset: float) -> None:
+        """A step put down to the specimen or its fixture is its new level: later cycles are judged from it."""
+        ref = self.references.get(block)
+        if ref is not None:
+            self.references[block] = replace(ref, offset=ref.offset + offset)
 
     def _release(self, cause, code, c, s, detail='') -> list[Verdict]:
         trips = self.held.trips if self.held else []
@@ -306,6 +331,9 @@ class LoadCellJudge:
     def _sensor(self, c, code, s, detail='', value=math.nan) -> list[Verdict]:
         ref = self.reference
         self.held = None
+        if (c.block, code) in self.reported:
+            return []
+        self.reported.add((c.block, code))
         if code in ('stuck', 'saturation'):
             self.fault = code
         if code == 'stuck':
@@ -326,4 +354,5 @@ class LoadCellJudge:
 
     def rearm(self) -> None:
         """After a hold: judge the load cell afresh (a stuck or clipped one is reported again if it still is)."""
-        self.fault, self.held = '', None
+        self.fault, self.held, self.last = '', None, 'normal'
+        self.reported.clear()
