@@ -67,6 +67,7 @@ CAUSE_OF_TYPE = {'residual': 'specimen', 'stiffness_change': 'specimen', 'force_
 STUCK_FRACTION = 0.01      # force amplitude below this fraction of the expected: the load cell is stuck
 SHAPE_DROP = 0.01          # shape factor down by more: the peaks are clipped (saturation)
 K_TOLERANCE, C_TOLERANCE = 0.03, 0.10    # stiffness / loop (C_eq) ratio unchanged within these (at least 5 sigma)
+SHAPE_RISE = 0.1           # shape factor up by more: the cycle is distorted (a spike, a part-cycle freeze)
 PLAIN_CHANGE = 3.0         # a trip whose stiffness is off by this many times K_TOLERANCE is the specimen at once
 CREEP = 0.02               # a fixture slip's mean force creeps back by at least this fraction of the step
 
@@ -233,13 +234,15 @@ class LoadCellJudge:
         return self.reference.amplitude * c.model.get('force_amplitude', math.nan)
 
     def classify(self, c) -> tuple[str, tuple]:
-        """(stuck | saturated | changed | step | normal, signature) of cycle c against the reference."""
+        """(stuck | saturated | distorted | changed | step | normal, signature) of cycle c against the reference."""
         ref, s = self.reference, self._signature(c)
         k, cq, offset, shape, amp = s
         if not amp >= STUCK_FRACTION * ref.amplitude:
             return 'stuck', s
         if shape < ref.shape - max(SHAPE_DROP * ref.shape, 5 * ref.sigma['shape']):
             return 'saturated', s
+        if shape > ref.shape + max(SHAPE_RISE * ref.shape, 5 * ref.sigma['shape']):
+            return 'distorted', s        # a spike, or a reading that froze part of the way through the cycle
         if self.changed(s):
             return 'changed', s
         if abs(offset - ref.offset) > self.step_bound(c):

@@ -12,13 +12,14 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Load-cell faults applied to a measured force record: an offset jump, saturation at the range, spikes.
+"""Load-cell faults applied to a measured force record: an offset jump, saturation, spikes, a frozen reading.
 
-A stuck load cell is the simulated controller's own fault (``FaultSpec`` type ``stuck_sensor``, sensor
-``force``); these three act on the force channel only. In displacement control the force reading does not feed
-back into what the actuator does, so a fault applied to the recorded force is the force the rig would have
-reported (the one difference: the rig's force limits would see the faulty reading; keep them wide when
-comparing). Used by the detector tests and ``benchmarks/bench_detector_causes.py``.
+A stuck load cell is also the simulated controller's own fault (``FaultSpec`` type ``stuck_sensor``, sensor
+``force``), which its sensor check turns into an abort; these act on the force channel only. In displacement
+control the force reading does not feed back into what the actuator does, so a fault applied to the recorded
+force is the force the rig would have reported (the differences: the rig's force limits and the controller's
+stuck-sensor check would see the faulty reading).
+Used by the detector tests and ``benchmarks/bench_detector_causes.py``.
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-LOAD_CELL_FAULTS = ('offset_jump', 'saturation', 'spikes')
+LOAD_CELL_FAULTS = ('offset_jump', 'saturation', 'spikes', 'stuck')
 
 
 @dataclass
@@ -37,7 +38,9 @@ class LoadCellFault:
     offset_jump: the reading steps by `offset` [N] (an amplifier zero jump, a shunt calibration left on);
     saturation: the reading is clipped at +-`limit` [N] (the conditioning amplifier's range);
     spikes: every `period` [s] one sample is off by `offset` [N] with alternating sign (interference); with
-            `period` inf, a single spike at `start`.
+            `period` inf, a single spike at `start`;
+    stuck:  the reading freezes at its value at `start` (the simulated controller's own ``stuck_sensor`` fault
+            does the same, and its sensor check then aborts the run after 100 samples).
     """
 
     type: str
@@ -65,6 +68,10 @@ class LoadCellFault:
         on = t >= self.start
         if self.type == 'offset_jump':
             f[on] += self.offset
+        elif self.type == 'stuck':
+            index = np.flatnonzero(on)
+            if index.size:
+                f[index] = f[index[0]]
         elif self.type == 'saturation':
             f[on] = np.clip(f[on], -self.limit, self.limit)
         else:
