@@ -43,7 +43,8 @@ _DIMENSIONS = {'noise': 'force', 'floor': 'number', 'settle_cycles': 'number', '
                'consecutive': 'number', 'c_eq_threshold': 'number', 'confirm_cycles': 'number'}
 # fields only one type uses (left out of the others' to_dict)
 _OWN_FIELDS = {'c_eq_threshold': 'model_fit', 'on_mismatch': 'model_fit', 'confirm_cycles': 'load_cell'}
-DIAGNOSTIC_REFERENCE_CYCLES = 8      # model_fit/load_cell: medians and robust sigmas want more than 3 cycles
+# model_fit/load_cell: medians and robust sigmas want more than 3 cycles (load_cell's sigma sets its step test)
+DIAGNOSTIC_REFERENCE_CYCLES = {'model_fit': 8, 'load_cell': 16}
 # The default detectors every program runs with unless it declares its own (excitation parameter
 # `default_detectors`): thresholds from benchmarks/bench_detectors.py (README, "Detectors").
 DEFAULTS = ({'type': 'residual'}, {'type': 'stiffness_change'}, {'type': 'force_drift', 'threshold': 0.1},
@@ -127,7 +128,7 @@ def parse_detector(raw, where: str, block: int = -1) -> DetectorSpec:
         if key in raw:
             setattr(spec, key, _number(raw[key], dim, where, key))
     if kind in DIAGNOSTICS and 'reference_cycles' not in raw:
-        spec.reference_cycles = DIAGNOSTIC_REFERENCE_CYCLES
+        spec.reference_cycles = DIAGNOSTIC_REFERENCE_CYCLES[kind]
     for key in ('consecutive', 'settle_cycles', 'reference_cycles', 'confirm_cycles'):
         v = getattr(spec, key)
         if v != int(v) or v < (1 if key != 'settle_cycles' else 0) or v > 10000:

@@ -40,16 +40,23 @@ than ``threshold`` x the expected force amplitude) or ``normal``; every bound is
 deviations of the reference cycles. A specimen detector's trip on a cycle that is not plainly the specimen's
 (stiffness off by more than 9 %) is held back for ``confirm_cycles`` and decided by what follows:
 
-- stuck or saturated: a load-cell fault (cause ``sensor``, code ``stuck``/``saturation``): the load_cell event
-  with its own action, and the specimen detectors are blind (they say so) until the program is resumed;
+- stuck (at once) or saturated (two cycles in a row): a load-cell fault (cause ``sensor``, code ``stuck`` or
+  ``saturation``): the load_cell event with its own action, and the specimen detectors are blind (the event says
+  so) until the program is resumed;
 - the next cycle normal again (no lasting change of stiffness, loop or mean): ``spikes`` (cause ``sensor``);
-- a lasting stiffness or loop change: the held trips are released with cause ``specimen``;
+- a distorted cycle (shape factor up by more than 10 %: a spike, a reading frozen part of the way) is held too;
+- a lasting stiffness or loop change: the held trips are released with cause ``specimen``, and the block's
+  signature is learnt afresh;
 - a step of the mean force with stiffness and loop unchanged: a load-cell offset stays flat, while a fixture
   slip is a displacement step the viscoelastic specimen relaxes from (its mean force creeps back by a few per
-  cent of the step per cycle). After ``confirm_cycles`` more cycles, a creep back of more than 3 sigma of the
-  difference is ``fixture`` (the held trips are released with that cause), a flat step where a 2 % creep would
-  have shown is ``offset_jump`` (cause ``sensor``; the offset is then subtracted from the mean force and the
-  residual), anything else ``undetermined`` (the held trips are released: the safe side).
+  cent of the step over the next cycles). From the first whole cycle of the step on, after each cycle the mean
+  of the first half of its cycles is compared with that of the second half: a creep back beyond the bound (t x
+  sigma x sqrt(2 / half), t Student's 99.73 % quantile for the reference's cycles, sigma the reference's robust
+  standard deviation of the mean-force offset) is ``fixture`` (the held trips are released with that cause and
+  the new level becomes the reference); a step flat within the bound where a creep of 2 % of it would have
+  exceeded the bound is ``offset_jump`` (cause ``sensor``; the offset is subtracted from the mean force and the
+  residual from then on, so a later specimen change is still seen); after ``confirm_cycles`` without either,
+  ``undetermined`` (the held trips are released: the safe side).
 """
 from __future__ import annotations
 
@@ -58,6 +65,7 @@ import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.stats import t as student_t
 
 # cause labels an Event carries (DetectorEvent has no field for it: its message starts with "[cause ...]")
 CAUSES = ('specimen', 'fixture', 'sensor', 'model', 'control', 'program', 'undetermined')
@@ -302,10 +310,12 @@ class LoadCellJudge:
             return []
         half = k // 2
         early, late = float(np.mean(held.offsets[:half])), float(np.mean(held.offsets[-half:]))
-        noise = 3 * max(self.reference.sigma['offset'], 1e-9) * math.sqrt(2 / half)
+        # 3 sigma, widened for a sigma estimated from few reference cycles (Student's t, 99.73 % two-sided)
+        n = max(self.spec.reference_cycles, 2)
+        noise = float(student_t.ppf(0.99865, n - 1)) * max(self.reference.sigma['offset'], 1e-9) * math.sqrt(2 / half)
         creep = (early - late) * math.copysign(1.0, held.step)       # back towards the level before the step
         detail = (f'mean force stepped by {held.step:+.6g} N with K_dyn and C_eq unchanged; over {k} cycles it '
-                  f'moved back {creep:+.6g} N (3 sigma {noise:.3g} N)')
+                  f'moved back {creep:+.6g} N (bound {noise:.3g} N)')
         if creep > noise:
             self._rereference(c.block, late)
             return self._release('fixture', 'mean_step', c, s, detail + ': it relaxes, a displacement step '
