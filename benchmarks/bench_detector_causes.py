@@ -15,7 +15,7 @@
 """Detection table: which detector fires, how late, with which action and cause label, for specimen damage, a
 wrong model and load-cell faults; and the false trips of a long clean run.
 
-    .venv/bin/python benchmarks/bench_detector_causes.py            # about 3 min on 2 cores
+    .venv/bin/python benchmarks/bench_detector_causes.py            # about 10 min on 2 cores
     .venv/bin/python benchmarks/bench_detector_causes.py --quick    # the fault scenarios only (about 30 s)
 
 ROS-free: the simulated rig (unpaced, the specimen's damage and the controller's stuck load cell are its own)
@@ -27,7 +27,9 @@ defaults less model_fit and load_cell (what the detectors did before them, 'befo
 
 Delay: from the onset (the fault's start; for damage the specimen's own cycle count, as bench_detectors) to the
 end of the cycle the event was raised on, in cycles. False trips: events before the onset, or events whose
-cause is not the scenario's (a record-only event counts too).
+cause is not the scenario's (a record-only event counts too). The clean runs: a 10 Hz sine of 3000 cycles (20 and
+200 N noise, and with the 0 degC model: its mismatch event is expected), test_detectors_nodes' three-block
+program and the shipped programs it runs, at 200 N.
 """
 from __future__ import annotations
 
@@ -42,7 +44,7 @@ sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), '..'
 
 from rubber_rig.excitation.detector_specs import DEFAULTS, parse_detectors  # noqa: E402
 from rubber_rig.excitation.detectors import Monitor  # noqa: E402
-from rubber_rig.excitation.program import read_program  # noqa: E402
+from rubber_rig.excitation.program import load_program, read_program  # noqa: E402
 from rubber_rig.rig.options import DamageSpec  # noqa: E402
 from rubber_rig.rig.sim.damage import sample_at_cycle  # noqa: E402
 from rubber_rig.rig.sim.load_cell import LoadCellFault  # noqa: E402
@@ -89,8 +91,9 @@ def onset_time(r, force, kw) -> float:
     return 0.0          # the model mismatch: there from the start, judged on the first steady cycles
 
 
-def judge(name, cause, amplitude, kw, cycles=2 * ONSET, noise=20.0) -> dict:
-    program, _ = read_program(yaml_text=PROGRAM % (amplitude, cycles))
+def judge(name, cause, amplitude, kw, cycles=2 * ONSET, noise=20.0, program=None) -> dict:
+    if program is None:
+        program, _ = read_program(yaml_text=PROGRAM % (amplitude, cycles))
     r, force, stream = simulate(program, noise=noise, **kw)
     t_on = onset_time(r, force, kw) if kw.get('damage') or kw.get('faults') or kw.get('load_cell') else None
     row = {'scenario': name, 'noise': noise, 'expected': cause}
@@ -125,6 +128,24 @@ def clean(cycles: int, noise: float, model='swing_arm_joint_20C') -> dict:
                  None, '1 mm', {'model': model}, cycles=cycles, noise=noise)
 
 
+# test_detectors_nodes' clean program, and the shipped programs it runs (whole, amplitude control, 200 N noise)
+THREE_BLOCKS = """name: clean
+blocks:
+  - {name: a, waveform: sine, frequency: 10 Hz, amplitude: 1 mm, cycles: 40}
+  - {name: b, waveform: triangle, frequency: 2 Hz, amplitude: 0.5 mm, cycles: 8}
+  - {name: c, waveform: sine, frequency: 14 Hz, amplitude: 0.2 mm, cycles: 40}
+"""
+SHIPPED = ('dynamic_stiffness_grid', 'quasi_static_then_sine', 'log_sweeps_1_50hz', 'preload_sine_grid')
+
+
+def clean_programs(rows: list, noise: float = 200.0) -> None:
+    programs = [('three blocks (test_detectors_nodes)', read_program(yaml_text=THREE_BLOCKS)[0])]
+    programs += [(name, load_program(name)) for name in SHIPPED]
+    for name, program in programs:
+        rows.append(judge(f'no fault, {name}, {noise:g} N noise', None, '', {}, noise=noise, program=program))
+        print(f"  {rows[-1]['scenario']}: {cell(rows[-1], 'now')}", flush=True)
+
+
 def cell(row, label) -> str:
     r = row[label]
     delay = '-' if r['delay'] is None else f"{r['delay']:.2f}"
@@ -149,6 +170,7 @@ def main(argv=None) -> int:
             print(f"  {rows[-1]['scenario']}: {cell(rows[-1], 'now')}", flush=True)
         rows.append(clean(3000, 20.0, COLD))
         print(f"  {rows[-1]['scenario']}: {cell(rows[-1], 'now')}", flush=True)
+        clean_programs(rows)
         for name, cause, amplitude, kw in SCENARIOS[3:5] + SCENARIOS[-1:]:
             rows.append(judge(name + ', 200 N noise', cause, amplitude, kw, noise=200.0))
             print(f"  {rows[-1]['scenario']}: {cell(rows[-1], 'now')}", flush=True)
