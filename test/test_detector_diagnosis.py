@@ -250,3 +250,15 @@ def test_a_small_step_in_noise_is_undetermined_and_acted_on():
         m.on_cycle(cycle(n, **w, residual=math.hypot(20.0, w['mean'])))
     drift = [e for e in m.events if e.detector == 'force_drift']
     assert drift and drift[0].cause == 'undetermined' and 'too little to tell' in drift[0].message
+
+
+def test_the_monitor_says_why_it_is_blind():
+    m = defaults()
+    for n in range(1, 30):
+        m.on_cycle(cycle(n, **wobble(n), shape=1.0 if n < 25 else 0.001))
+    assert [(e.cause, e.code) for e in m.events] == [('sensor', 'stuck')]
+    assert m.blind.startswith('load cell stuck')
+    m.rearm()
+    assert m.blind == ''
+    m.on_cycle(cycle(30, **wobble(30), shape=0.001))
+    assert [(e.cause, e.code) for e in m.events[1:]] == [('sensor', 'stuck')]      # reported again after a resume

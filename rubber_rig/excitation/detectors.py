@@ -145,6 +145,18 @@ class Monitor:
         """Some detector judges measured cycles (not only the end-of-test triggers)."""
         return any(d.type not in TRIGGERS for d in self.detectors)
 
+    @property
+    def blind(self) -> str:
+        """Why some cycle detectors judge nothing now ('' when they all judge): a model mismatch declared the
+        residual detectors blind, or the load cell is stuck or clipped (until a resume).
+        """
+        why = []
+        if self.residual_mode == 'blind':
+            why.append('residual detectors declared blind after a model mismatch (model_fit on_mismatch: blind)')
+        if self.load_cell is not None and self.load_cell.fault:
+            why.append(f'load cell {self.load_cell.fault}: the specimen detectors judge nothing until a resume')
+        return '; '.join(why)
+
     def rearm(self) -> None:
         """After a hold: every detector may trip again (references are kept: the block is the same block)."""
         for state in self._blocks.values():
