@@ -66,7 +66,7 @@ SCENARIOS = [
     ('stuck load cell, the simulated controller\'s fault', 'sensor', '1 mm',
      {'faults': [{'type': 'stuck_sensor', 'sensor': 'force', 'start': T_ON}]}),
     ('load cell saturated at 12 kN', 'sensor', '1 mm', {'load_cell': LoadCellFault('saturation', T_ON, limit=12e3)}),
-    ('spikes 5 kN every 0.517 s', 'sensor', '1 mm', {'load_cell': LoadCellFault('spikes', T_ON, 5e3, period=0.517)}),
+    ('spikes 8 kN every 0.517 s', 'sensor', '1 mm', {'load_cell': LoadCellFault('spikes', T_ON, 8e3, period=0.517)}),
     ('crack 30 %', 'specimen', '1 mm', {'damage': [{'type': 'crack', 'cycle': ONSET, 'loss': 0.3}]}),
     ('fixture slip 0.2 mm', 'fixture', '1 mm', {'damage': [{'type': 'slip', 'cycle': ONSET, 'offset': -0.2e-3}]}),
 ]

@@ -207,7 +207,9 @@ class Monitor:
             return out
         for v in cell.observe(c, [t for t in trips if t[0].type != 'tracking']):
             if v.cause == 'sensor':
-                out.append(self._sensor_event(cell.spec, c, v))
+                out.append(self._cell_event(cell.spec, c, v, cell.spec.action))
+            elif v.code == 'mean_step' and not v.trips:
+                out.append(self._cell_event(cell.spec, c, v, 'record'))
             for d, judged, tc in v.trips:
                 out.append(self._release(d, judged, tc, c, v.cause, v.code, v.detail))
         # tracking judges the actuator, not the force: no load-cell verdict to wait for
@@ -230,14 +232,17 @@ class Monitor:
         return self._trip(d, state, c.block, c.cycle, c.program_cycle, c.elapsed, value, reference, threshold, units,
                           c.end_sequence, cause=cause, code=code, note=note)
 
-    def _sensor_event(self, spec, c: Cycle, v) -> Event:
+    def _cell_event(self, spec, c: Cycle, v, action: str) -> Event:
+        """The load_cell detector's event of verdict v (a sensor fault, or a step it could not put down)."""
         blind = ' The specimen detectors are blind until the program is resumed.' \
             if v.code in ('stuck', 'saturation') else ''
-        msg = (f"[cause sensor/{v.code}] detector '{spec.name}' (load_cell) in block {c.block}, cycle {c.cycle}: "
-               f"{v.detail}.{blind} Action {spec.action}")
+        if v.cause != 'sensor':
+            blind = ' No specimen detector tripped on it.'
+        msg = (f"[cause {v.cause}/{v.code}] detector '{spec.name}' (load_cell) in block {c.block}, cycle {c.cycle}: "
+               f"{v.detail}.{blind} Action {action}")
         event = Event(spec.name, 'load_cell', c.block, int(c.cycle), int(c.program_cycle), float(c.elapsed),
-                      float(v.value), float(v.reference), float(v.threshold), v.units, spec.action, msg,
-                      int(c.end_sequence), 'sensor', v.code)
+                      float(v.value), float(v.reference), float(v.threshold), v.units, action, msg,
+                      int(c.end_sequence), v.cause, v.code)
         self.events.append(event)
         return event
 

@@ -43,7 +43,8 @@ deviations of the reference cycles. A specimen detector's trip on a cycle that i
 - stuck (at once) or saturated (two cycles in a row): a load-cell fault (cause ``sensor``, code ``stuck`` or
   ``saturation``): the load_cell event with its own action, and the specimen detectors are blind (the event says
   so) until the program is resumed;
-- the next cycle normal again (no lasting change of stiffness, loop or mean): ``spikes`` (cause ``sensor``);
+- the next cycle normal again (no lasting change of stiffness, loop or mean): ``spikes`` (cause ``sensor``) if a
+  specimen detector had tripped on it, nothing otherwise;
 - a distorted cycle (shape factor up by more than 10 %: a spike, a reading frozen part of the way) is held too;
 - a lasting stiffness or loop change: the held trips are released with cause ``specimen``, and the block's
   signature is learnt afresh;
@@ -56,7 +57,12 @@ deviations of the reference cycles. A specimen detector's trip on a cycle that i
   the new level becomes the reference); a step flat within the bound where a creep of 2 % of it would have
   exceeded the bound is ``offset_jump`` (cause ``sensor``; the offset is subtracted from the mean force and the
   residual from then on, so a later specimen change is still seen); after ``confirm_cycles`` without either,
-  ``undetermined`` (the held trips are released: the safe side).
+  ``undetermined`` (the held trips are released: the safe side). A step no specimen detector tripped on is
+  recorded as a load_cell event with action ``record`` and its cause (fixture or undetermined).
+
+The reference is a rolling one: the median and robust sigma of the block's last ``reference_cycles`` normal
+cycles (a sweep's gradual change of frequency is not a fault; what the load_cell judges is abrupt). A verdict of
+``specimen``, ``fixture`` or ``undetermined`` makes the block learn its reference afresh.
 """
 from __future__ import annotations
 
@@ -232,6 +238,7 @@ class LoadCellJudge:
         rows.append(sig)
         if len(rows) < self.spec.reference_cycles:
             return
+        del rows[:-self.spec.reference_cycles]      # a rolling window: a sweep's slow change is not a fault
         cols = [np.array(col) for col in zip(*rows, strict=True)]
         med = [float(np.median(col)) for col in cols]
         sig_ = {name: _robust_sigma(col) for name, col in zip(('k', 'c', 'offset', 'shape', 'amplitude'), cols,
@@ -281,6 +288,7 @@ class LoadCellJudge:
             return self._sensor(c, 'stuck' if kind == 'stuck' else 'saturation', s)
         if self.held is None:
             if kind == 'normal' and not trips:
+                self._learn(c.block, s)
                 return []
             if trips and kind == 'changed' and self.changed(s, PLAIN_CHANGE):
                 return [Verdict('specimen', 'changed', trips)]
@@ -291,11 +299,13 @@ class LoadCellJudge:
         if kind == 'saturated':
             return []
         if kind == 'changed':
-            self.references.pop(c.block, None)     # the specimen changed: its new state is learnt afresh
-            self.learning.pop(c.block, None)
+            self._relearn(c.block)                  # the specimen changed: its new state is learnt afresh
             return self._release('specimen', 'changed', c, s)
         if kind == 'step' or self.held.offsets:
             return self._step(c, s)
+        if not self.held.trips:                     # a transient no detector tripped on: nothing to put down
+            self.held = None
+            return []
         return self._sensor(c, 'spikes', s)           # normal again: a transient with no lasting change
 
     def _step(self, c, s) -> list[Verdict]:
@@ -317,7 +327,7 @@ class LoadCellJudge:
         detail = (f'mean force stepped by {held.step:+.6g} N with K_dyn and C_eq unchanged; over {k} cycles it '
                   f'moved back {creep:+.6g} N (bound {noise:.3g} N)')
         if creep > noise:
-            self._rereference(c.block, late)
+            self._relearn(c.block)
             return self._release('fixture', 'mean_step', c, s, detail + ': it relaxes, a displacement step '
                                  '(fixture slip)')
         if abs(creep) <= noise and CREEP * abs(held.step) > noise:
@@ -326,20 +336,26 @@ class LoadCellJudge:
                                 'on)', value=held.step)
         if k < max(self.spec.confirm_cycles, 2):
             return []
-        self._rereference(c.block, late)
+        self._relearn(c.block)
         return self._release('undetermined', 'mean_step', c, s, detail + ': too little to tell a load-cell offset '
                              'from a fixture slip')
 
-    def _rereference(self, block: int, offset: float) -> None:
-        """A step put down to the specimen or its fixture is its new level: later cycles are judged from it."""
-        ref = self.references.get(block)
-        if ref is not None:
-            self.references[block] = replace(ref, offset=ref.offset + offset)
+    def _relearn(self, block: int) -> None:
+        """A change put down to the specimen or its fixture is its new state: the block's signature is learnt
+        afresh from the next cycles (trips meanwhile are released as the specimen's).
+        """
+        self.references.pop(block, None)
+        self.learning.pop(block, None)
 
     def _release(self, cause, code, c, s, detail='') -> list[Verdict]:
-        trips = self.held.trips if self.held else []
-        self.held = None
-        return [Verdict(cause, code, trips, detail=detail)]
+        """Release the held trips with `cause`; a mean-force step no detector tripped on is a verdict of its own
+        (the Monitor records it as a load_cell event: a step nobody explained is not passed over in silence).
+        """
+        held, self.held = self.held, None
+        trips = held.trips if held else []
+        step = held.step if held else math.nan
+        bound = self.step_bound(c) if self.reference is not None else math.nan
+        return [Verdict(cause, code, trips, step, 0.0, bound, 'N', detail)]
 
     def _sensor(self, c, code, s, detail='', value=math.nan) -> list[Verdict]:
         ref = self.reference
