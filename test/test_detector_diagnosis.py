@@ -276,3 +276,13 @@ blocks:
     for c in stream:
         m.on_cycle(c)
     assert len(stream) > 200 and m.events == [], [e.message for e in m.events]
+
+
+def test_fatigue_is_the_specimen_though_each_cycle_is_like_the_one_before():
+    m, r, _ = judged(cycles=ONSET + 80, damage=[{'type': 'fatigue', 'cycle': ONSET, 'loss': 0.4, 'life': 100}])
+    ends = [e for e in m.events if e.detector == 'stiffness_change']
+    assert len(ends) == 1 and ends[0].cause == 'specimen' and ends[0].action == 'end'
+    assert all(e.cause == 'specimen' for e in m.events), [e.message for e in m.events]
+    # 20 % of stiffness lost at cycle ONSET + 50: the end comes on the first whole cycle past it
+    t_end = sample_at_cycle(r.displacement, ONSET + 50) / r.sample_rate
+    assert 0 < delay(ends[0], t_end) <= 2.0

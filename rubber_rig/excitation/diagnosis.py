@@ -38,7 +38,8 @@ complete). A cycle is ``stuck`` (force amplitude below 1 % of the expected), ``s
 more than 1 %), ``changed`` (K_dyn or C_eq ratio off by more than 3 % or 10 %), ``step`` (mean force off by more
 than ``threshold`` x the expected force amplitude) or ``normal``; every bound is at least 5 robust standard
 deviations of the reference cycles. A specimen detector's trip on a cycle that is not plainly the specimen's
-(stiffness off by more than 9 %) is held back for ``confirm_cycles`` and decided by what follows:
+(stiffness off by more than 9 %), and not like the cycles before it (a gradual change such as fatigue is the
+specimen's at once), is held back for ``confirm_cycles`` and decided by what follows:
 
 - stuck (at once) or saturated (two cycles in a row): a load-cell fault (cause ``sensor``, code ``stuck`` or
   ``saturation``): the load_cell event with its own action, and the specimen detectors are blind (the event says
@@ -292,6 +293,11 @@ class LoadCellJudge:
                 return []
             if trips and kind == 'changed' and self.changed(s, PLAIN_CHANGE):
                 return [Verdict('specimen', 'changed', trips)]
+            if trips and kind == 'normal':
+                # nothing abrupt in the force: a detector whose reference is older saw a gradual change (fatigue)
+                self._learn(c.block, s)
+                return [Verdict('specimen', 'changed', trips, detail='a gradual change: the cycle is like the ones '
+                                'before it')]
             # the cycle of a step holds only part of it: the step is measured from the next cycle on
             self.held = Held(list(trips), c.program_cycle)
             return []
