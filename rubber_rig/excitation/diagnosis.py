@@ -31,15 +31,16 @@ the residual detectors are, by ``on_mismatch``:
 
 ``load_cell``: a signature of every steady cycle against its reference: the ratios to the model of K_dyn and C_eq,
 the mean-force offset from the model, the force amplitude against the expected one and the shape factor (half peak-
-to-peak force / (K_dyn x0): a clipped cycle loses its peaks, not its first harmonic), against the block's first
-steady cycles (a model's misfit differs between operating points; a change between blocks is the program-referenced
-stiffness_change's to see, released with cause ``specimen`` like every trip made before the block's reference is
-complete). A cycle is ``stuck`` (force amplitude below 1 % of the expected), ``saturated`` (shape factor down by
-more than 1 %), ``changed`` (K_dyn or C_eq ratio off by more than 3 % or 10 %), ``step`` (mean force off by more
-than ``threshold`` x the expected force amplitude) or ``normal``; every bound is at least 5 robust standard
-deviations of the reference cycles. A specimen detector's trip on a cycle that is not plainly the specimen's
-(stiffness off by more than 9 %), and not like the cycles before it (a gradual change such as fatigue is the
-specimen's at once), is held back for ``confirm_cycles`` and decided by what follows:
+to-peak force / (K_dyn x0): a clipped cycle loses its peaks, not its first harmonic), against the block's own
+recent cycles (a model's misfit differs between operating points; a change between blocks is the program-
+referenced stiffness_change's to see, released with cause ``specimen`` like every trip made before the block's
+reference is complete). A cycle is ``stuck`` (force amplitude below 1 % of the expected), ``saturated`` (shape
+factor down by more than 1 %), ``distorted`` (up by more than 10 %), ``changed`` (K_dyn or C_eq ratio off by more
+than 3 % or 10 %), ``step`` (mean force off by more than ``threshold`` x the expected force amplitude) or
+``normal``; every bound is at least 5 robust standard deviations of the reference cycles. A specimen detector's
+trip on a cycle that is not plainly the specimen's (stiffness off by more than 9 %), and not like the cycles before
+it (a gradual change such as fatigue is the specimen's at once), is held back for ``confirm_cycles`` and decided by
+what follows:
 
 - stuck (at once) or saturated (two cycles in a row): a load-cell fault (cause ``sensor``, code ``stuck`` or
   ``saturation``): the load_cell event with its own action, and the specimen detectors are blind (the event says
