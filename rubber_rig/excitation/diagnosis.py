@@ -84,6 +84,7 @@ STUCK_FRACTION = 0.01      # force amplitude below this fraction of the expected
 SHAPE_DROP = 0.01          # shape factor down by more: the peaks are clipped (saturation)
 K_TOLERANCE, C_TOLERANCE = 0.03, 0.10    # stiffness / loop (C_eq) ratio unchanged within these (at least 5 sigma)
 SHAPE_RISE = 0.1           # shape factor up by more: the cycle is distorted (a spike, a part-cycle freeze)
+RESIDUAL_JUMP = 2.0        # a residual over this many times the recent cycles' (+ 5 sigma) is an abrupt change
 PLAIN_CHANGE = 3.0         # a trip whose stiffness is off by this many times K_TOLERANCE is the specimen at once
 CREEP = 0.02               # a fixture slip's mean force creeps back by at least this fraction of the step
 
@@ -165,6 +166,7 @@ class Reference:
     offset: float                # measured - model mean force [N]
     shape: float
     amplitude: float             # force amplitude / model force amplitude
+    residual: float              # RMS of measured - model force [N]
     sigma: dict
 
 
@@ -218,7 +220,7 @@ class LoadCellJudge:
         offset = m.get('force_mean', math.nan) - md.get('force_mean', math.nan)
         shape = _ratio(m.get('force_amplitude', math.nan), m.get('k_dyn', math.nan) * c.amplitude)
         amp = _ratio(m.get('force_amplitude', math.nan), md.get('force_amplitude', math.nan))
-        return k, cq, offset, shape, amp
+        return k, cq, offset, shape, amp, c.residual_rms
 
     def compensate(self, c):
         """Cycle c with a found load-cell offset taken out of its mean force and residual (mean + zero-mean
@@ -243,8 +245,8 @@ class LoadCellJudge:
         del rows[:-self.spec.reference_cycles]      # a rolling window: a sweep's slow change is not a fault
         cols = [np.array(col) for col in zip(*rows, strict=True)]
         med = [float(np.median(col)) for col in cols]
-        sig_ = {name: _robust_sigma(col) for name, col in zip(('k', 'c', 'offset', 'shape', 'amplitude'), cols,
-                                                               strict=True)}
+        names = ('k', 'c', 'offset', 'shape', 'amplitude', 'residual')
+        sig_ = {name: _robust_sigma(col) for name, col in zip(names, cols, strict=True)}
         self.references[block] = Reference(*med, sigma=sig_)
 
     def expected_amplitude(self, c) -> float:
@@ -253,7 +255,7 @@ class LoadCellJudge:
     def classify(self, c) -> tuple[str, tuple]:
         """(stuck | saturated | distorted | changed | step | normal, signature) of cycle c against the reference."""
         ref, s = self.reference, self._signature(c)
-        k, cq, offset, shape, amp = s
+        k, cq, offset, shape, amp, residual = s
         if not amp >= STUCK_FRACTION * ref.amplitude:
             return 'stuck', s
         if shape < ref.shape - max(SHAPE_DROP * ref.shape, 5 * ref.sigma['shape']):
@@ -264,6 +266,8 @@ class LoadCellJudge:
             return 'changed', s
         if abs(offset - ref.offset) > self.step_bound(c):
             return 'step', s
+        if residual > RESIDUAL_JUMP * ref.residual + 5 * ref.sigma['residual']:
+            return 'distorted', s        # the model's misfit jumped from one cycle to the next: not gradual
         return 'normal', s
 
     def changed(self, s, factor: float = 1.0) -> bool:
