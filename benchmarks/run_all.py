@@ -72,6 +72,8 @@ BENCHMARKS = (
     Benchmark('fitting', 'bench_fitting.py', (), 'rubber-rig fit on seed-000 grid recordings at 4 temperatures', 15),
     Benchmark('detectors', 'bench_detectors.py', (), 'detection delay and false trips of the detectors', 10,
               '--json'),
+    Benchmark('detector_causes', 'bench_detector_causes.py', (), 'what each detector event is put down to: specimen, '
+              'model mismatch, load-cell faults, fixture slip; delays and false trips', 10),
     Benchmark('safety', 'bench_safety.py', (), 'abort latency per path, stopping distance, false trips', 40,
               '--json'),
     Benchmark('suite', 'bench_suite.py', ('--rate', '1000', '--duration', '600'), 'the node suite at 1 kHz for '

@@ -339,7 +339,8 @@ blocks:
 def test_a_program_criterion_replaces_the_default_of_its_type():
     program, _ = read_program(yaml_text=PROGRAM)
     got = with_defaults(program.all_detectors(), parse_detectors(list(DEFAULTS), 'default_detectors'))
-    expected = [('elapsed_time', -1), ('stiffness_change', 1), ('residual', 1), ('force_drift', -1), ('tracking', -1)]
+    expected = [('elapsed_time', -1), ('stiffness_change', 1), ('residual', 1), ('force_drift', -1), ('tracking', -1),
+                ('model_fit', -1), ('load_cell', -1)]
     assert [(d.name, d.block) for d in got] == expected
 
 

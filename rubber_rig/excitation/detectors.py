@@ -52,17 +52,20 @@ value), so a change while the reference is gathered trips too, on the cycle the 
 """
 from __future__ import annotations
 
+import cmath
 import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .detector_specs import (
+    DIAGNOSTICS,
     SEVERITY,
     TRIGGERS,
     UNITS,
     DetectorSpec,
 )
+from .diagnosis import CAUSE_OF_TYPE, LoadCellJudge, ModelFit, ModelFitCheck
 
 
 @dataclass
@@ -106,6 +109,8 @@ class Event:
     action: str
     message: str
     sequence: int = 0              # rig sample sequence the event belongs to (after the cycle or batch judged)
+    cause: str = ''                # diagnosis.CAUSES: what the event is put down to (also the message's start)
+    code: str = ''                 # finer: stuck | saturation | spikes | offset_jump | mean_step | changed | mismatch
 
 
 @dataclass
@@ -128,29 +133,65 @@ class Monitor:
         # detector name -> the largest fraction of its threshold any judged cycle reached (1 = trips): the
         # margin a clean run leaves, what a threshold is chosen from (benchmarks/bench_detectors.py)
         self.peak: dict[str, float] = {}
+        fit = next((d for d in self.detectors if d.type == 'model_fit'), None)
+        cell = next((d for d in self.detectors if d.type == 'load_cell'), None)
+        self.fit_check = ModelFitCheck(fit) if fit else None
+        self.load_cell = LoadCellJudge(cell) if cell else None
+        self.fit: ModelFit | None = None
+        self.residual_mode = ''         # '' (as declared) | 'recalibrated' | 'blind' after a model mismatch
 
     @property
     def needs_cycles(self) -> bool:
         """Some detector judges measured cycles (not only the end-of-test triggers)."""
         return any(d.type not in TRIGGERS for d in self.detectors)
 
+    @property
+    def blind(self) -> str:
+        """Why some cycle detectors judge nothing now ('' when they all judge): a model mismatch declared the
+        residual detectors blind, or the load cell is stuck or clipped (until a resume).
+        """
+        why = []
+        if self.residual_mode == 'blind':
+            why.append('residual detectors declared blind after a model mismatch (model_fit on_mismatch: blind)')
+        if self.load_cell is not None and self.load_cell.fault:
+            why.append(f'load cell {self.load_cell.fault}: the specimen detectors judge nothing until a resume')
+        return '; '.join(why)
+
     def rearm(self) -> None:
         """After a hold: every detector may trip again (references are kept: the block is the same block)."""
         for state in self._blocks.values():
             state.tripped.clear()
             state.over.clear()
+        if self.load_cell is not None:
+            self.load_cell.rearm()
 
     def _applies(self, d: DetectorSpec, block: int) -> bool:
         return d.block in (-1, block)
 
     def on_cycle(self, c: Cycle) -> list[Event]:
-        """Judge one measured cycle with every cycle detector of its block."""
+        """Judge one measured cycle with every cycle detector of its block (and the model_fit and load_cell
+        diagnostics of the program, :mod:`.diagnosis`).
+        """
         state = self._blocks.setdefault(c.block, _BlockState())
         out = []
         if not c.steady:
             return out
+        if self.fit_check is not None:
+            fit = self.fit_check.observe(c)
+            if fit is not None:
+                out += self._model_fit(self.fit_check.spec, c, fit)
+        cell = self.load_cell
+        if cell is not None:
+            if cell.fault:           # stuck or clipped: nothing the force says is judged until a resume
+                return out
+            c = cell.compensate(c)
+        held = {d.name for d, _, _ in cell.held.trips} if cell is not None and cell.held else set()
+        trips = []
         for d in self.detectors:
-            if d.type in TRIGGERS or not self._applies(d, c.block) or d.name in state.tripped:
+            if d.type in TRIGGERS or d.type in DIAGNOSTICS or not self._applies(d, c.block) \
+                    or d.name in state.tripped or d.name in held:
+                continue
+            if d.type == 'residual' and self.residual_mode == 'blind':
                 continue
             judged = self._judge(d, c, state)
             if judged is None:
@@ -159,9 +200,83 @@ class Monitor:
             self.peak[d.name] = max(self.peak.get(d.name, 0.0), deviation / threshold if threshold else math.inf)
             n = state.over[d.name] = state.over.get(d.name, 0) + 1 if deviation > threshold else 0
             if n >= d.consecutive:
-                out.append(self._trip(d, state, c.block, c.cycle, c.program_cycle, c.elapsed, value, reference,
-                                      threshold, units, c.end_sequence))
+                trips.append((d, judged, c))
+        if cell is None:
+            for d, judged, tc in trips:
+                out.append(self._release(d, judged, tc, c, CAUSE_OF_TYPE[d.type], '', ''))
+            return out
+        for v in cell.observe(c, [t for t in trips if t[0].type != 'tracking']):
+            if v.cause == 'sensor':
+                out.append(self._cell_event(cell.spec, c, v, cell.spec.action))
+            elif v.code == 'mean_step' and not v.trips:
+                out.append(self._cell_event(cell.spec, c, v, 'record'))
+            for d, judged, tc in v.trips:
+                out.append(self._release(d, judged, tc, c, v.cause, v.code, v.detail))
+        # tracking judges the actuator, not the force: no load-cell verdict to wait for
+        out += [self._release(d, j, tc, c, 'control', '', '') for d, j, tc in trips if d.type == 'tracking']
         return out
+
+    def _release(self, d, judged, tripped_on: Cycle, c: Cycle, cause: str, code: str, detail: str) -> Event:
+        """The Event of detector d's trip on cycle `tripped_on`, acted on at cycle c (later when the load cell
+        held it back while it judged what followed).
+        """
+        value, reference, threshold, units, _ = judged
+        state = self._blocks.setdefault(tripped_on.block, _BlockState())
+        note = ''
+        if tripped_on.program_cycle != c.program_cycle:
+            note = f' (tripped on cycle {tripped_on.cycle}, decided on cycle {c.cycle})'
+        if detail:
+            note += f'; {detail}'
+        if d.type == 'residual' and self.residual_mode == 'recalibrated':
+            note += '; first-harmonic residual of the recalibrated model'
+        return self._trip(d, state, c.block, c.cycle, c.program_cycle, c.elapsed, value, reference, threshold, units,
+                          c.end_sequence, cause=cause, code=code, note=note)
+
+    def _cell_event(self, spec, c: Cycle, v, action: str) -> Event:
+        """The load_cell detector's event of verdict v (a sensor fault, or a step it could not put down)."""
+        blind = ' The specimen detectors are blind until the program is resumed.' \
+            if v.code in ('stuck', 'saturation') else ''
+        if v.cause != 'sensor':
+            blind = ' No specimen detector tripped on it.'
+        msg = (f"[cause {v.cause}/{v.code}] detector '{spec.name}' (load_cell) in block {c.block}, cycle {c.cycle}: "
+               f"{v.detail}.{blind} Action {action}")
+        event = Event(spec.name, 'load_cell', c.block, int(c.cycle), int(c.program_cycle), float(c.elapsed),
+                      float(v.value), float(v.reference), float(v.threshold), v.units, action, msg,
+                      int(c.end_sequence), v.cause, v.code)
+        self.events.append(event)
+        return event
+
+    def _model_fit(self, spec, c: Cycle, fit: ModelFit) -> list[Event]:
+        """The model_mismatch event (and the residual detectors recalibrated or declared blind), or nothing."""
+        self.fit = fit
+        if fit.fits:
+            return []
+        residuals = [d for d in self.detectors if d.type == 'residual']
+        names = ', '.join(repr(d.name) for d in residuals) or 'none'
+        if spec.on_mismatch == 'blind':
+            self.residual_mode = 'blind'
+            then = f'residual detectors ({names}) declared blind for this program'
+        else:
+            self.residual_mode = 'recalibrated'
+            for state in [self._program, *self._blocks.values()]:
+                for d in residuals:
+                    state.samples.pop(d.name, None)
+                    state.references.pop(d.name, None)
+                    state.over.pop(d.name, None)
+            sensitivity = ', '.join(f'{d.name!r} about {d.threshold * d.floor * math.sqrt(2):.1%}' for d in residuals)
+            then = (f'residual detectors ({names}) recalibrated: they judge the first-harmonic residual of the model '
+                    f'scaled by the measured complex-stiffness ratio {abs(fit.rho):.4f} at '
+                    f'{math.degrees(cmath.phase(fit.rho)):+.2f} deg, with references gathered anew (detect a change '
+                    f'of |K*| of {sensitivity or "-"} where their floor sets the yardstick)')
+        msg = (f"[cause model/mismatch] detector '{spec.name}' (model_fit) in block {c.block}, cycle {c.cycle}: the "
+               f'online model does not fit the specimen over its first {fit.cycles} steady cycles: measured/model '
+               f'K_dyn {fit.k_ratio:.4f} (tolerance 1 +- {fit.k_tolerance:.3f}), C_eq {fit.c_ratio:.4f} (tolerance '
+               f'1 +- {fit.c_tolerance:.3f}); {then}; action {spec.action}')
+        event = Event(spec.name, 'model_mismatch', c.block, int(c.cycle), int(c.program_cycle), float(c.elapsed),
+                      fit.k_ratio, 1.0, fit.k_tolerance, '-', spec.action, msg, int(c.end_sequence), 'model',
+                      'mismatch')
+        self.events.append(event)
+        return [event]
 
     def on_progress(self, block: int, block_cycles: int, program_cycles: int, elapsed: float,
                     sequence: int = 0) -> list[Event]:
@@ -184,7 +299,7 @@ class Monitor:
         return out
 
     def _trip(self, d, state, block, cycle, program_cycle, elapsed, value, reference, threshold, units,
-              sequence) -> Event:
+              sequence, cause: str = '', code: str = '', note: str = '') -> Event:
         state.tripped.add(d.name)
         if d.type in TRIGGERS:
             what = f'{value:.6g} {units} reached (threshold {threshold:.6g} {units})'
@@ -196,9 +311,11 @@ class Monitor:
                     f'{threshold:.6g} {units}')
             if d.reference == 'program':
                 what += " (reference: the specimen's stabilised ratio to the model, at this cycle's model value)"
-        msg = f"detector '{d.name}' ({d.type}) in block {block}, cycle {cycle}: {what}; action {d.action}"
+        cause = cause or CAUSE_OF_TYPE[d.type]
+        label = f"[cause {cause}{'/' + code if code else ''}] "
+        msg = f"{label}detector '{d.name}' ({d.type}) in block {block}, cycle {cycle}: {what}{note}; action {d.action}"
         event = Event(d.name, d.type, block, int(cycle), int(program_cycle), float(elapsed), float(value),
-                      float(reference), float(threshold), units, d.action, msg, int(sequence))
+                      float(reference), float(threshold), units, d.action, msg, int(sequence), cause, code)
         self.events.append(event)
         return event
 
@@ -227,11 +344,14 @@ class Monitor:
         """
         m = c.measured
         if d.type == 'residual':
-            ref, window = self._stabilised(d, state, (c.residual_rms, m.get('force_amplitude', math.nan)), np.min)
-            if ref is None or not math.isfinite(c.residual_rms):
+            residual = c.residual_rms
+            if self.residual_mode == 'recalibrated':
+                residual = self.fit.first_harmonic_residual(c)
+            ref, window = self._stabilised(d, state, (residual, m.get('force_amplitude', math.nan)), np.min)
+            if ref is None or not math.isfinite(residual):
                 return None
             expected = max(ref[0], d.noise, d.floor * ref[1])
-            worst = max([c.residual_rms] + [w[0] for w in window])
+            worst = max([residual] + [w[0] for w in window])
             return worst, expected, d.threshold * expected, 'N', worst
         if d.type == 'stiffness_change':
             value, model = m.get(d.quantity, math.nan), c.model.get(d.quantity, math.nan)

@@ -169,8 +169,9 @@ class ProgramHealth:
         if session is None or status is None:
             return ''
         since = session.detectors_blind(status.sample_rate)
-        return (f'no cycle_metrics from element_model for {since:.1f} s of a periodic block (is it running?)'
-                if since else '')
+        why = [f'no cycle_metrics from element_model for {since:.1f} s of a periodic block (is it running?)'
+               if since else '', session.monitor.blind if session.monitor is not None else '']
+        return '; '.join(w for w in why if w)
 
     def feedback(self, p) -> RunProgram.Feedback:
         """The goal's feedback: the runner's Progress ``p`` and the detector events so far."""
