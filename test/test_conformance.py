@@ -118,8 +118,8 @@ def test_conformance_in_private_netns():
 def test_the_simulator_in_a_process_of_its_own_passes_conformance_over_a_real_bus():
     """End-to-end tier (make test): `rubber-rig conformance --sim` against the simulator in a process of its own
     over python-can's udp_multicast, in a private network namespace: every requirement not judged on this
-    host's timing passes (the wiring of bus, codec, driver and simulator across processes). The timing
-    requirements are the system tier's (test_conformance_in_private_netns).
+    host's timing or on the simulator keeping up in real time passes (the wiring of bus, codec, driver and
+    simulator across processes). Those are the system tier's (test_conformance_in_private_netns).
     """
     if in_private_netns():
         pytest.skip('already inside the namespace')
@@ -130,12 +130,21 @@ def test_the_simulator_in_a_process_of_its_own_passes_conformance_over_a_real_bu
     assert rc == 0 and '1 passed' in out and 'failed' not in out, out
 
 
+# besides TIMING, what a paced simulator process must keep up with in real time: the feedback rate, contiguous
+# sequences, one applied setpoint per tick and the ramp within 0.5 s of host silence (CTRL-WD-1: 0.630 s seen
+# under a moderate load, issue 34) (under a load average of 9 on two cores the simulator's process fell
+# behind: 93 ms arrival jitter, a 19-sample gap, 1981 of 2000 setpoints applied). The wiring check leaves them to
+# the system tier as well.
+REAL_TIME = TIMING | {'CTRL-FB-1', 'CTRL-SEQ-1', 'CTRL-STREAM-4', 'CTRL-ST-2', 'CTRL-WD-1'}
+
+
 @inside
 def test_correct_simulator_passes_every_requirement_apart_from_timing(tmp_path):
     assert in_private_netns()
     proc, online = _conformance(tmp_path, '--sim', '--power-up', '--envelope', '1mm')
     assert set(online) == CTRL, proc.stdout[-3000:] + proc.stderr[-2000:]
-    assert {k for k, v in online.items() if v != 'pass'} <= TIMING, proc.stdout[-3000:]
+    assert {k for k, v in online.items() if v != 'pass'} <= REAL_TIME, proc.stdout[-3000:]
+    assert len(CTRL - REAL_TIME) >= 15       # the wiring: frames, limits, ramps, faults, reset, power-up, identity
 
 
 @inside
