@@ -272,6 +272,12 @@ CASES = {
 # listed; fits not listed (and not the true one) are shown without a target (e.g. seed 000 fitted with an
 # unneeded cubic term: not wrong, and its "k3 consistent with zero" share is in the codes column).
 EXPECT = {
+    # at -40 degC the 0.5-14 Hz grid reaches only ~80 % of the way to K_inf (tau 15 ms, alpha 0.86): the rest is
+    # the Zener shape, and the true model's fit says so (issue 38, the measured band as a limit)
+    'seed000_m40C': {'zener_berg': 'extrapolation'},
+    # the Maxwell branch relaxes at 64 Hz, above the 14 Hz grid: K_inf and the branch's k are partly out-of-band
+    'maxwell': {'zener_berg + maxwell': 'extrapolation', 'zener_berg': 'misfit', 'zener_berg, --estimate-delay':
+                'misfit'},
     'cubic': {'zener_berg': 'misfit'},
     'seed003': {'seed003, all free': 'identifiability', 'zener_berg': 'misfit'},
     'pad': {'zener_berg': 'misfit'},
@@ -280,7 +286,6 @@ EXPECT = {
                  'zener_berg, --load-cell-gain 1.01': 'calibration_undeclared'},
     'gain_0.97': {'zener_berg, no calibration': 'calibration_undeclared',
                   'zener_berg, gain 1 +- 3 % declared': None},
-    'maxwell': {'zener_berg': 'misfit', 'zener_berg, --estimate-delay': 'misfit'},
     'short_blocks': {'zener_berg, --settle-cycles 1': 'short_blocks'},
     'dashpot': {'zener_berg': 'misfit'},
     'friction_tanh': {'zener_berg': 'misfit'},
