@@ -69,19 +69,19 @@ if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays 
 # its threads on them; on this 2-core machine under load that cost 2.6 x the CPU of one thread per fit (an
 # 8-parameter fit on 20-50 Hz: 4.7 s against 1.8 s) and no wall time. The jobs run in parallel instead.
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
-import argparse
-import contextlib
-import io
-import json
-import math
-import sys
-import time
-from multiprocessing import Pool
-from pathlib import Path
+import argparse  # noqa: E402 - after the environment above, which numpy reads when it loads
+import contextlib  # noqa: E402
+import io  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from multiprocessing import Pool  # noqa: E402
+from pathlib import Path  # noqa: E402
 
-import numpy as np
-import yaml
-from scipy.stats import binom
+import numpy as np  # noqa: E402
+import yaml  # noqa: E402
+from scipy.stats import binom  # noqa: E402
 
 GRID = 'dynamic_stiffness_grid'
 SEED003_PROGRAM = {'name': 'seed003_grid', 'defaults': {'taper_cycles': 2, 'cycles': 8, 'mean': 0.0},

@@ -221,4 +221,3 @@ def test_a_recorder_replaced_before_the_first_sample_is_where_the_program_is_rec
     assert o.verdict(11.2, 2000, ended=11.0) == 'recording complete in /rec/s/s_0.mcap'
     # once samples were measured, another recording is a loss, from the next sample on
     assert 'recording lost from about sample 1400: switched' in o.observe(report(11.3, path='/rec/t/t_0.mcap'), 1400)
-

@@ -232,9 +232,9 @@ def run(args) -> int:
              + (f" (simulated, defects: {', '.join(args.defect) or 'none'})" if args.sim else ''),
              'host requirements (HOST-*) are checked offline on a log written by the driver']
     late = [b - a for a, b in conf.host_timing.windows]
+    sim_late = f', the simulator it ran by {SIM_LATE_MIN * 1e3:g} ms or more' if args.sim else ''
     facts.append(f'host timing: this host ran late {len(late)} times (the run\'s receive loop and heartbeat by '
-                 f'{LATE_MIN * 1e3:g} ms or more' + (f', the simulator it ran by {SIM_LATE_MIN * 1e3:g} ms or more'
-                                                   if args.sim else '') + ')'
+                 f'{LATE_MIN * 1e3:g} ms or more' + sim_late + ')'
                  + (f', longest {max(late) * 1e3:.0f} ms, {sum(late):.3f} s in all' if late else '')
                  + '; a timing requirement violated only by as much as this host was late is not judged')
     if conf.deviation:

@@ -173,8 +173,8 @@ def print_fit(fit, out=None):
     m = fit.misfit
     carried = ''
     if m.get('input_noise') is not None:
-        carried = ' plus ' + ', '.join(f'{v:.3g} N' for v in m['input_noise'].values()) + (' carried from the '
-                                                                                          'displacement noise')
+        carried = (' plus ' + ', '.join(f'{v:.3g} N' for v in m['input_noise'].values())
+                   + ' carried from the displacement noise')
     # one misfit figure everywhere (report header, JSON, model file): the test's
     print(f'  {fit.misfit_summary} ({fit.n_points} points, load-cell noise {sigma}{carried}); '
           f'AIC {fit.aic:.1f}, BIC {fit.bic:.1f}', file=out)

@@ -330,8 +330,8 @@ def time_misfit(problem: TimeProblem, values: dict, r, dof: int, predictions) ->
     carried = problem.input_noise(values, predictions)
     chi2, u2, total = 0.0, 0.0, problem.m
     inputs, shares, lag1 = {}, [], []
-    for (run, _, _, _, _, sigma), rows, (s_in, rho), est in zip(problem.items, problem.item_rows, carried,
-                                                                    problem.noise_estimates, strict=True):
+    items = zip(problem.items, problem.item_rows, carried, problem.noise_estimates, strict=True)
+    for (run, _, _, _, _, sigma), rows, (s_in, rho), est in items:
         share = sigma ** 2 / (sigma ** 2 + s_in ** 2)
         shares.append(share)
         lag1.append((1.0 - share) * rho)       # a correct model's residual correlates this much (input noise)

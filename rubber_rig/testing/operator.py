@@ -225,8 +225,8 @@ class Operator:
         if action != 'run_program':
             client = self._clients.get(('action', action))
             if client is None:
-                client = self._clients[('action', action)] = ActionClient(self.node, RunProgram, action,
-                                                                            **topics.ACTION_SERVICES_QOS)
+                client = ActionClient(self.node, RunProgram, action, **topics.ACTION_SERVICES_QOS)
+                self._clients[('action', action)] = client
         if not client.wait_for_server(timeout_sec=timeout):
             return None
         goal = RunProgram.Goal(program_yaml=program_yaml, program_path=program_path,

@@ -127,8 +127,8 @@ def check_feedback(trace: Trace, results: Results, runs: list = None):
     host_gaps = [(a, b, n) for r in runs for a, b, n in r.gap_times if explains(trace.host_late, a, b, 0.5 * (b - a))]
     if gaps and not repeats and len(host_gaps) == gaps:
         late = max(late_total(trace.host_late, a, b) for a, b, _ in host_gaps)
-        results.put('CTRL-SEQ-1', NOT_TESTED, measured, not_judged(late, f'every gap ({lost} samples) falls where '
-                                                                          'it was'))
+        why = f'every gap ({lost} samples) falls where it was'
+        results.put('CTRL-SEQ-1', NOT_TESTED, measured, not_judged(late, why))
     else:
         results.put('CTRL-SEQ-1', FAIL if gaps or repeats else PASS, measured,
                     'feedback sequences must be contiguous' if gaps or repeats else '')

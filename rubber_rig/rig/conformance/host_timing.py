@@ -75,6 +75,7 @@ class HostTiming:
             added += 1
         return added
 
+
 def late_between(windows, t0: float, t1: float) -> float:
     """The longest lateness [s] of a window (start, end) that overlaps [t0, t1] widened by MARGIN, 0 if none."""
     worst = 0.0
