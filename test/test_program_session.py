@@ -223,3 +223,26 @@ def test_a_hold_during_the_approach_restarts_the_program_from_its_start(rig):
     assert s.runner.cycles_before == {}
     run_to_end(rig, s)
     assert full_cycles(rig, 1e-3, 100, mean=0.3e-3) == 20
+
+
+def test_goal_admission_reserves_at_acceptance_and_counts_every_goal_it_turns_away():
+    from rubber_rig.session import GoalAdmission
+    admission = GoalAdmission()
+    assert admission.reject() == '' and admission.rejected == 0          # nothing runs: a goal may start
+    admission.reserve()                                                  # accepted, not yet executing
+    assert admission.reject().startswith('busy: goal accepted is running')
+    admission.start(bytes.fromhex('1a2b3c4d5e6f'))
+    why = admission.reject('durability')
+    assert why == "busy: program 'durability' of goal 1a2b3c4d is running; one program at a time"
+    assert (admission.rejected, admission.last_rejection) == (2, why)
+    admission.finish()
+    assert admission.reject() == '' and admission.rejected == 2
+
+
+def test_rig_time_counts_samples_from_the_latest_batch_stamp():
+    from rubber_rig.session import RigTime
+    clock = RigTime()
+    assert clock.of(100, 1e-3, now=5.0) == 5.0                           # before any sample: the first applies now
+    assert clock.of(150, 1e-3, now=9.0) == pytest.approx(5.05)
+    clock.observe(1000, 12.0)
+    assert clock.of(1500, 1e-3, now=0.0) == pytest.approx(12.5) and clock.of(990, 1e-3, now=0.0) == pytest.approx(11.99)

@@ -41,6 +41,7 @@ class ProgramHealth:
         self.node = node
         self.events: list[DetectorEvent] = []   # detector events of the running (or last) program
         self.blind = ''                  # why the detectors were blind during the running program
+        self.last_feedback_ns = 0        # node clock of the goal's latest feedback
         # the suite's other nodes, their silences measured from their own heartbeats (observed.BeatLog); a stall of
         # this node (self.stall) is not theirs
         self.me = node.get_fully_qualified_name()
@@ -114,6 +115,8 @@ class ProgramHealth:
         values = {'state': node.state, 'program': node.session.runner.program.name if running else '',
                   'detector_events': len(self.events), 'last_event': last.message if last else '',
                   'detectors_blind': blind, 'recording_lost': lost, 'nodes_silent': silent, 'stalled': stalled}
+        values['goals_rejected_busy'] = node.admission.rejected      # run_program goals rejected while one ran
+        values['last_goal_rejection'] = node.admission.last_rejection
         reasons = [stalled, f'nodes silent: {silent}' if silent else '', f'detectors blind: {blind}' if blind else '',
                    lost, last.message if last is not None and last.action != 'record' else '']
         msg = DiagnosticArray()
@@ -172,6 +175,12 @@ class ProgramHealth:
         why = [f'no cycle_metrics from element_model for {since:.1f} s of a periodic block (is it running?)'
                if since else '', session.monitor.blind if session.monitor is not None else '']
         return '; '.join(w for w in why if w)
+
+    def publish_feedback(self, goal_handle, p, now_ns: int) -> None:
+        """The goal's feedback for the runner's Progress ``p``, at most every feedback_period (node clock)."""
+        if now_ns - self.last_feedback_ns >= self.node.feedback_period * 1e9:
+            self.last_feedback_ns = now_ns
+            goal_handle.publish_feedback(self.feedback(p))
 
     def feedback(self, p) -> RunProgram.Feedback:
         """The goal's feedback: the runner's Progress ``p`` and the detector events so far."""

@@ -15,8 +15,9 @@
 """excitation: runs test programs on the rig, streaming setpoints ahead of the measured samples.
 
 Action:      run_program (msg_defs/action/RunProgram; feedback: block, cycle, achieved amplitude; result:
-             per-block summaries and why it ended). Every goal is accepted and then either runs or ends at once
-             with the reason it cannot (busy, rig not ready, invalid program, no recording).
+             per-block summaries and why it ended). A goal that arrives while one runs is rejected at once
+             (session.admission: the reason and the count in the log and the diagnostics); every other goal
+             either runs or ends at once with the reason it cannot (rig not ready, invalid program, no recording).
 Services:    ~/abort (std_srvs/Trigger: ramp to rest now), ~/hold (std_srvs/SetBool: true = hold, false = resume),
              ~/load_program (msg_defs/srv/LoadProgram: validate without running)
 Subscribes:  samples (msg_defs/RigSampleBatch: amplitude control, progress), status (msg_defs/RigStatus,
@@ -34,11 +35,9 @@ latest measured sample. Abort, cancel and hold go to the driver directly (its co
 instead of after the queued lead); a rig that stops the stream, faults or goes silent ends the goal with the
 reason. No callback lets an exception take the node down: it ends the running program and logs.
 
-Detectors (rubber_rig.excitation.detectors): the program's own, plus the ``default_detectors`` of the types it
-does not declare, judge every steady cycle the element model measures and the end-of-test triggers on every
-sample batch. A trip is a DetectorEvent on ``events``, in the goal's feedback and result and in the
-diagnostics; its action (record, warn, hold, end) goes through the same hold and abort paths an operator uses.
-A held program resumes (``~/hold`` false) with the full cycles its block had not yet run.
+Detectors (rubber_rig.excitation.detectors, README "Detectors") judge every steady cycle the element model
+measures; a trip's action (record, warn, hold, end) takes the operator's own hold and abort paths. A held
+program resumes (``~/hold`` false) with the full cycles its block had not yet run.
 """
 from __future__ import annotations
 
@@ -64,7 +63,7 @@ from rubber_rig.nodes.excitation_params import declare_excitation_parameters
 from rubber_rig.nodes.excitation_recording import RecordingWatch
 from rubber_rig.nodes.heartbeat import start_heartbeat
 from rubber_rig.nodes.spin import spin_node
-from rubber_rig.session.program_session import ProgramSession
+from rubber_rig.session import GoalAdmission, ProgramSession, RigTime
 
 
 class ExcitationNode(Node):
@@ -75,12 +74,11 @@ class ExcitationNode(Node):
         self.status, self.status_wall = None, 0.0   # the latest rig status, received at status_wall (monotonic)
         self.driver_wall = 0.0          # the latest status or sample batch: the driver is alive
         self.recording = RecordingWatch(self, self.require_recording, self.recorder_timeout)
-        self._time_base: tuple[int, float] | None = None   # (sequence, rig time [s]) of the latest sample batch
+        self.rig_time = RigTime()       # the rig clock of a sequence, from the latest sample batch's stamp
         self.session: ProgramSession | None = None         # the running program on its stream
         self.opening = False            # an open_stream request is under way
         self.goal_handle = None
         self._done: Future | None = None
-        self._last_feedback = 0.0
         self.result: RunProgram.Result | None = None   # result of the last run (also for program runs)
         self.held_wall = 0.0            # time.monotonic() of the hold (hold_timeout)
 
@@ -101,9 +99,8 @@ class ExcitationNode(Node):
         self.stop_client = self.create_client(StopStream, f'{self.rig_driver}/stop_stream')
         self.create_service(Trigger, '~/abort', self.on_abort)
         self.create_service(SetBool, '~/hold', self.on_hold)
-        self.create_service(LoadProgram, '~/load_program', self.on_load_program)
-        self.executing = ''             # the goal being executed ('' when none): later goals end "busy"
-        self.refused_busy, self.last_refusal = 0, ''   # goals rejected as busy since start, and why
+        self.create_service(LoadProgram, '~/load_program', lambda req, res: readiness.load_program(self, req, res))
+        self.admission = GoalAdmission()   # one goal at a time; the others rejected at once, counted
         self.action = ActionServer(self, RunProgram, 'run_program', execute_callback=self.execute,
                                    goal_callback=self.admit_goal,
                                    cancel_callback=lambda _: CancelResponse.ACCEPT, **topics.ACTION_SERVICES_QOS)
@@ -142,7 +139,7 @@ class ExcitationNode(Node):
         s = self.session
         if s is not None and s.before_stream(msg.first_sequence, len(msg.displacement)):
             return                       # from before this program's stream
-        self._time_base = (msg.first_sequence, conv.to_seconds(msg.header.stamp))
+        self.rig_time.observe(msg.first_sequence, conv.to_seconds(msg.header.stamp))
         if s is None:
             return
         try:
@@ -247,30 +244,18 @@ class ExcitationNode(Node):
         if s.held or not s.stream_id:
             return
         s.stream(self._publish)
-        now = self.get_clock().now().nanoseconds * 1e-9
-        if self.goal_handle is not None and now - self._last_feedback >= self.feedback_period:
-            self._last_feedback = now
-            self.goal_handle.publish_feedback(self.health.feedback(s.runner.progress))
+        if self.goal_handle is not None:
+            self.health.publish_feedback(self.goal_handle, s.runner.progress, self.get_clock().now().nanoseconds)
         if s.measured_to_end:
             self._finish(success=not s.runner.aborted)   # measured to the end: the summaries are complete
 
     def _publish(self, first, x, block, end=False):
-        dt = 1.0 / self.status.sample_rate
-        msg = conv.setpoint_batch_msg(first, dt, x, block, t=self.rig_time(first, dt),
+        dt, now = 1.0 / self.status.sample_rate, self.get_clock().now().nanoseconds * 1e-9
+        msg = conv.setpoint_batch_msg(first, dt, x, block, t=self.rig_time.of(first, dt, now),
                                       stream_id=self.session.stream_id, source=self.get_fully_qualified_name(),
                                       end_of_stream=end)
         self.pub_stream.publish(msg)
         self.pub_setpoints.publish(msg)
-
-    def rig_time(self, sequence: int, dt: float) -> float:
-        """When the rig applies sample `sequence` [s, rig clock]: the latest sample batch's stamp plus the samples
-        between (a setpoint batch is stamped with the time it is for, as a sample batch with the time it was
-        measured); before any sample, the first setpoint applies now (a new stream starts with its first batch).
-        """
-        if self._time_base is None:
-            self._time_base = (sequence, self.get_clock().now().nanoseconds * 1e-9)
-        first, t0 = self._time_base
-        return t0 + (sequence - first) * dt
 
     # -- ending programs --------------------------------------------------------------------------------------------
     def abort_program(self, reason: str, success: bool = False) -> bool:
@@ -308,40 +293,21 @@ class ExcitationNode(Node):
                                                        target=float(target), reason=reason))
 
     # -- action -------------------------------------------------------------------------------------------------------
-    def busy(self) -> str:
-        """'' when a goal may start, else why not ("busy: program 'x' of goal 1a2b3c4d is running ...")."""
-        if not self.executing:
-            return ''
-        running = f"program '{self.session.runner.program.name}' of " if self.session is not None else ''
-        return f'busy: {running}goal {self.executing} is running; one program at a time'
-
     def admit_goal(self, goal) -> GoalResponse:
-        # A goal that arrives while another runs is rejected here, before the action server makes it a goal
-        # handle: the cheapest answer there is (an accepted goal costs two status messages listing every goal
-        # the server keeps, a result kept for 15 min, a task). 200 goals accepted and ended "busy" stalled the
-        # excitation past its 0.8 s heartbeat silence and its stream ran dry (load 6); rejected here, the same
-        # burst left the program running (test_request_admission). The goal response has no text: the reason
-        # and the count are in the log (once a second) and in the diagnostics.
-        why = self.busy()
+        why = self.admission.reject(self.session.runner.program.name if self.session is not None else '')
         if why:
-            self.refused_busy += 1
-            self.last_refusal = why
-            self.get_logger().warning(f'goal rejected, {why} ({self.refused_busy} rejected so far)',
+            self.get_logger().warning(f'goal rejected, {why} ({self.admission.rejected} rejected so far)',
                                       throttle_duration_sec=1.0)
             return GoalResponse.REJECT
+        self.admission.reserve()          # at once: a goal arriving before this one executes is busy too
         return GoalResponse.ACCEPT
 
     async def execute(self, goal_handle) -> RunProgram.Result:
-        # One goal at a time: admit_goal rejects goals while one executes; goals accepted in the same wake-up
-        # (before the first of them started executing) end here, before any await, with the reason.
-        if why := self.busy():
-            goal_handle.abort()
-            return RunProgram.Result(success=False, message=why)
-        self.executing = bytes(goal_handle.goal_id.uuid).hex()[:8]
+        self.admission.start(goal_handle.goal_id.uuid)
         try:
             return await self._execute(goal_handle)
         finally:
-            self.executing = ''
+            self.admission.finish()
 
     async def _execute(self, goal_handle) -> RunProgram.Result:
         goal = goal_handle.request
@@ -423,9 +389,6 @@ class ExcitationNode(Node):
             return
         s.resume(grant)
         self.get_logger().info(s.describe_resume())
-
-    def on_load_program(self, request, response):
-        return readiness.load_program(self, request, response)
 
 
 def main(args=None):

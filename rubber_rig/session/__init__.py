@@ -16,7 +16,9 @@
 """A test program run on a rig: the layer above excitation (what to move) and rig (how it moves), below the nodes
 and the command line. Pure Python (no rclpy).
 """
+from .admission import GoalAdmission
 from .program_session import ProgramSession
+from .rig_time import RigTime
 from .run import ProgramRun, RunResult, run_program
 
-__all__ = ['ProgramRun', 'ProgramSession', 'RunResult', 'run_program']
+__all__ = ['GoalAdmission', 'ProgramRun', 'ProgramSession', 'RigTime', 'RunResult', 'run_program']
