@@ -288,3 +288,10 @@ def test_fatigue_is_the_specimen_though_each_cycle_is_like_the_one_before():
     # 20 % of stiffness lost at cycle ONSET + 50: the end comes on the first whole cycle past it
     t_end = sample_at_cycle(r.displacement, ONSET + 50) / r.sample_rate
     assert 0 < delay(ends[0], t_end) <= 2.0
+
+
+def test_tracking_still_judges_the_displacement_while_the_load_cell_is_stuck():
+    m = defaults()
+    for n in range(1, 30):
+        m.on_cycle(cycle(n, **wobble(n), shape=1.0 if n < 25 else 0.001, amp=1e-3 if n < 28 else 0.8e-3))
+    assert [(e.detector, e.cause) for e in m.events] == [('load_cell', 'sensor'), ('tracking', 'control')]

@@ -196,8 +196,9 @@ def test_slip_is_held_by_the_force_drift_detector_within_two_cycles(suite):
     print(f'slip: mean force {drift.value - drift.reference:.0f} N off; hold {delay:.2f} cycles after onset')
     # the default load_cell detector holds a mean-force step back until the second whole cycle after it shows
     # whether it creeps back (a slip: cause fixture) or stays flat (a load-cell offset): one cycle more than before
+    # (bench_detector_causes: decided 2.2 cycles after the slip; the hold then leaves the queued setpoints)
     assert drift.message.startswith('[cause fixture/mean_step]'), drift.message
-    assert 0 < delay <= 3.0
+    assert 0 < delay <= 4.0
 
 
 @system

@@ -45,6 +45,11 @@ part, so tapers and approach ramps never trip them):
 - ``cycle_count``: ``threshold`` full-amplitude cycles of the program (of the block, in a block) are done.
 - ``elapsed_time``: ``threshold`` of rig time since the program started ('2 h').
 
+- ``model_fit``: the online model against the specimen over the program's first steady cycles (a
+  ``model_mismatch`` event; the residual detectors recalibrated or declared blind); ``load_cell``: load-cell
+  faults told from specimen changes by the cycle's signature, and the cause every trip is put down to. Both in
+  :mod:`.diagnosis`, whose docstring says how.
+
 ``consecutive``: cycles in a row over the threshold before it trips (default 1: a crack is acted on one cycle
 after it happens). A detector trips once per block; after a hold and resume it is armed again. The cycles a
 reference is gathered from are judged against it once it is set (a residual's reference is their smallest
@@ -181,15 +186,15 @@ class Monitor:
             if fit is not None:
                 out += self._model_fit(self.fit_check.spec, c, fit)
         cell = self.load_cell
+        # stuck or clipped: nothing the force says is judged until a resume (tracking judges the displacement)
+        force_blind = cell is not None and bool(cell.fault)
         if cell is not None:
-            if cell.fault:           # stuck or clipped: nothing the force says is judged until a resume
-                return out
             c = cell.compensate(c)
         held = {d.name for d, _, _ in cell.held.trips} if cell is not None and cell.held else set()
         trips = []
         for d in self.detectors:
             if d.type in TRIGGERS or d.type in DIAGNOSTICS or not self._applies(d, c.block) \
-                    or d.name in state.tripped or d.name in held:
+                    or d.name in state.tripped or d.name in held or (force_blind and d.type != 'tracking'):
                 continue
             if d.type == 'residual' and self.residual_mode == 'blind':
                 continue
@@ -205,7 +210,7 @@ class Monitor:
             for d, judged, tc in trips:
                 out.append(self._release(d, judged, tc, c, CAUSE_OF_TYPE[d.type], '', ''))
             return out
-        for v in cell.observe(c, [t for t in trips if t[0].type != 'tracking']):
+        for v in [] if force_blind else cell.observe(c, [t for t in trips if t[0].type != 'tracking']):
             if v.cause == 'sensor':
                 out.append(self._cell_event(cell.spec, c, v, cell.spec.action))
             elif v.code == 'mean_step' and not v.trips:

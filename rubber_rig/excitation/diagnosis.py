@@ -159,7 +159,7 @@ class ModelFitCheck:
 
 @dataclass
 class Reference:
-    """The load cell's view of the program's first steady cycles: medians and robust sigmas of the signature."""
+    """The load cell's view of a block's recent normal cycles: medians and robust sigmas of the signature."""
 
     k: float
     c: float
