@@ -22,9 +22,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..excitation.detectors import Cycle, cycle_of
+from ..excitation.judged_cycles import Cycle, cycle_of
 from ..excitation.runner import ProgramRunner
 from ..online import CyclePairer, ModelChoice, OnlinePredictor, cycle_properties
+from .run import run_program
 
 BATCH = 10                  # samples per prediction batch (rig_driver: 10 ms at 1 kHz)
 MIN_AMPLITUDE = 5e-6        # [m] smallest cycle the pairer keeps (element_model's default)
@@ -73,8 +74,6 @@ def simulate(program, *, specimen: str = 'swing_arm_joint_20C', model: str = 'sw
     load cell); load_cell: a LoadCellFault applied to the force record (its ``start`` counted from the first
     sample of the run). force is the force record the cycles were made from.
     """
-    from .run import run_program  # the simulated rig: imported when used
-
     np.random.seed(seed)
     sim = {'specimen': {'parameter_set': specimen, 'friction_reversal_threshold': REVERSAL_THRESHOLD},
            'force_noise': noise, 'damage': [dict(d) for d in damage], 'faults': [dict(f) for f in faults],
