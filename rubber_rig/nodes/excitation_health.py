@@ -17,8 +17,6 @@ nodes that went silent (heartbeats) and whether the detectors were blind, in /di
 """
 from __future__ import annotations
 
-import time
-
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 
@@ -60,7 +58,7 @@ class ProgramHealth:
         return self.witness.silent_seen
 
     def on_beat(self, msg: Heartbeat) -> None:
-        now = time.monotonic()
+        now = self.node.clock()
         self.stall.tick(now)
         if msg.node != self.me:
             self.beats.beat(msg.node, msg.pid, msg.count, conv.to_seconds(msg.header.stamp), now)
@@ -68,7 +66,7 @@ class ProgramHealth:
     def start_program(self) -> None:
         self.blind, self.events = '', []
         # silences that began before the program (a node restarted just before it) are not the program's
-        self.witness = ProgramWitness(self.me, time.monotonic(), silent_before=set(self.silent_now))
+        self.witness = ProgramWitness(self.me, self.node.clock(), silent_before=set(self.silent_now))
 
     def annotate(self, message: str, recording: str = '') -> str:
         """The goal's result message with what else happened: blind detectors, the recording (``recording``: its
@@ -81,7 +79,7 @@ class ProgramHealth:
             message += f' ({recording})'
         elif self.node.recording.lost:
             message += f' ({self.node.recording.lost})'
-        for words in self.witness.words(self.beats, self.stall, time.monotonic()):
+        for words in self.witness.words(self.beats, self.stall, self.node.clock()):
             message += f' ({words})'
         return message
 
@@ -109,7 +107,7 @@ class ProgramHealth:
         # look for the cause in the nodes it did not hear meanwhile
         stalls = self.stall.stalls
         stalled = (f'this node stalled for {stalls[-1][1] - stalls[-1][0]:.1f} s (its callbacks did not run)'
-                   if stalls and time.monotonic() - stalls[-1][1] < STALL_SHOWN else '')
+                   if stalls and self.node.clock() - stalls[-1][1] < STALL_SHOWN else '')
         if stalled:
             level = DiagnosticStatus.WARN
         values = {'state': node.state, 'program': node.session.runner.program.name if running else '',
@@ -132,7 +130,7 @@ class ProgramHealth:
         while a program runs, remember it for the goal's result. The rig driver's silence ends the program
         elsewhere (status_timeout).
         """
-        now = time.monotonic()
+        now = self.node.clock()
         if stall := self.stall.tick(now):
             self.node.get_logger().error(
                 f'{self.me} (this node) stalled for {stall[1] - stall[0]:.1f} s: its callbacks did not run; what it '
@@ -196,7 +194,7 @@ class ProgramHealth:
         the goal's future ``done`` (None for a program started without a goal).
         """
         node = self.node
-        end_wall, end_sample = time.monotonic(), session.measured_sequence
+        end_wall, end_sample = self.node.clock(), session.measured_sequence
         words = node.recording.verdict(outcome, end_sample, end_wall, self.beats)
         while words is None:
             await awaitables.sleep(node, 0.02)

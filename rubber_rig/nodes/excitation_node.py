@@ -68,8 +68,9 @@ from rubber_rig.session import GoalAdmission, ProgramSession, RigTime
 
 class ExcitationNode(Node):
 
-    def __init__(self, node_name: str = 'excitation', **kwargs):
+    def __init__(self, node_name: str = 'excitation', clock=time.monotonic, **kwargs):
         super().__init__(node_name, **kwargs)
+        self.clock = clock              # [s] the one clock of this node and its helpers (injected: a test's own)
         declare_excitation_parameters(self)   # the parameters become attributes (lead_time, batch_size, ...)
         self.status, self.status_wall = None, 0.0   # the latest rig status, received at status_wall (monotonic)
         self.driver_wall = 0.0          # the latest status or sample batch: the driver is alive
@@ -80,7 +81,7 @@ class ExcitationNode(Node):
         self.goal_handle = None
         self._done: Future | None = None
         self.result: RunProgram.Result | None = None   # result of the last run (also for program runs)
-        self.held_wall = 0.0            # time.monotonic() of the hold (hold_timeout)
+        self.held_wall = 0.0            # clock() of the hold (hold_timeout)
 
         # commands to the driver's private channel, the same batches to `setpoints` for observers (topics.py)
         self.pub_stream = self.create_publisher(
@@ -116,7 +117,7 @@ class ExcitationNode(Node):
 
     # -- inputs -----------------------------------------------------------------------------------------------
     def on_status(self, msg: RigStatus) -> None:
-        self.status, self.status_wall = msg, time.monotonic()
+        self.status, self.status_wall = msg, self.clock()
         self.driver_wall = self.status_wall
         s = self.session
         if s is None or not s.stream_id or self.opening:
@@ -135,7 +136,7 @@ class ExcitationNode(Node):
     def on_samples(self, msg: RigSampleBatch) -> None:
         # samples prove the driver alive as well as its status does: one late status message (DDS can hold a
         # topic back for a second when a subscriber process dies) must not stop a running program
-        self.driver_wall = time.monotonic()
+        self.driver_wall = self.clock()
         s = self.session
         if s is not None and s.before_stream(msg.first_sequence, len(msg.displacement)):
             return                       # from before this program's stream
@@ -223,7 +224,7 @@ class ExcitationNode(Node):
 
     # -- streaming (timer) ------------------------------------------------------------------------------------------
     def stream(self) -> None:
-        self.health.stall.tick(time.monotonic())
+        self.health.stall.tick(self.clock())
         try:
             self._stream()
         except Exception as exc:   # noqa: BLE001 - no callback may take the node down
@@ -375,7 +376,7 @@ class ExcitationNode(Node):
             return why
         self._stop_stream(StopStream.Request.ACTION_HOLD, reason, s.runner.hold_target)
         s.hold()
-        self.held_wall = time.monotonic()
+        self.held_wall = self.clock()
         self.get_logger().warning(f'program held at {s.runner.hold_target * 1e3:.4f} mm: {reason}')
         return ''
 

@@ -21,8 +21,6 @@ Each check returns '' or why not, which is what a refused goal or a stopped prog
 """
 from __future__ import annotations
 
-import time
-
 from rclpy.node import Node
 
 from msg_defs.msg import RigStatus
@@ -36,7 +34,7 @@ READY_STATES = (RigStatus.STATE_IDLE, RigStatus.STATE_RUNNING, RigStatus.STATE_H
 
 def rig_ready(node: Node) -> str:
     """'' when the excitation ``node`` can start a program, else why not."""
-    status, age = node.status, time.monotonic() - node.status_wall
+    status, age = node.status, node.clock() - node.status_wall
     if status is None:
         return "no rig status received on 'status' yet (is rig_driver active?)"
     if age > node.status_timeout * 3:
@@ -70,9 +68,9 @@ def links_ready(node: Node) -> str:
 
 def statuses_fresh(node: Node, since: float) -> bool:
     """The rig status, the recorder status (with require_recording) and the node's topics are ready to judge a
-    goal that arrived at ``since`` (time.monotonic()).
+    goal that arrived at ``since`` (node clock [s]).
     """
-    rig = node.status is not None and time.monotonic() - node.status_wall <= node.status_timeout
+    rig = node.status is not None and node.clock() - node.status_wall <= node.status_timeout
     return rig and node.recording.fresh(since) and not links_ready(node)
 
 
@@ -91,7 +89,7 @@ def why_stop(node: Node) -> str:
     """
     s = node.session
     if s.held:
-        if time.monotonic() - node.held_wall > node.hold_timeout:
+        if node.clock() - node.held_wall > node.hold_timeout:
             return f'held for {node.hold_timeout:g} s without a resume (hold_timeout): ramp to rest'
         return ''
     if not s.stream_id:
@@ -101,7 +99,7 @@ def why_stop(node: Node) -> str:
     # their full timeout to be heard again before they are called silent
     if node.require_recording and node.recording.age > node.recorder_timeout:
         return f'recording lost: no recorder status for {node.recording.age:.1f} s (the recorder is gone)'
-    silent = node.health.stall.since(node.driver_wall, time.monotonic())
+    silent = node.health.stall.since(node.driver_wall, node.clock())
     if silent > node.status_timeout:
         return (f'{node.rig_driver} silent for {silent:.1f} s (no status, no samples): the rig controller ramps '
                 'to rest on its own host watchdog')
@@ -112,9 +110,9 @@ async def wait_for_statuses(node: Node) -> None:
     """A goal sent right after launch (or a restart of the driver or recorder) may arrive before their latched
     statuses: wait for them (and for DDS to match our topics), at most the node's start_timeout.
     """
-    since = time.monotonic()
+    since = node.clock()
     deadline = since + node.start_timeout
-    while not statuses_fresh(node, since) and time.monotonic() < deadline:
+    while not statuses_fresh(node, since) and node.clock() < deadline:
         await awaitables.sleep(node, 0.05)
 
 

@@ -23,8 +23,6 @@ before that change speaks for the old one and does not count.
 """
 from __future__ import annotations
 
-import time
-
 from rclpy.node import Node
 
 from msg_defs.msg import RecorderStatus
@@ -44,7 +42,7 @@ class RecordingWatch:
     def __init__(self, node: Node, require: bool, timeout: float):
         self.node, self.require, self.timeout = node, require, timeout
         self.status: RecorderStatus | None = None
-        self.wall = 0.0                  # time.monotonic() of the latest status
+        self.wall = 0.0                  # node clock [s] of the latest status
         self.outcome = RecordingOutcome(timeout)   # of the running (or last) program
         self.ended: list[RecordingOutcome] = []    # of programs that ended and whose result waits for the recorder
         self.recorder_node = ''          # fully qualified name of the recorder publishing the status (heartbeats)
@@ -58,7 +56,7 @@ class RecordingWatch:
     @property
     def age(self) -> float:
         """Seconds since the latest recorder status, counting only time this node ran (StallWatch)."""
-        return self.node.health.stall.since(self.wall, time.monotonic())
+        return self.node.health.stall.since(self.wall, self.node.clock())
 
     @property
     def recorded_by(self) -> str:
@@ -77,7 +75,7 @@ class RecordingWatch:
 
     def on_status(self, msg: RecorderStatus, session) -> str:
         """A recorder status while ``session`` (a ProgramSession, or None) runs: why it must stop, or ''."""
-        self.status, self.wall = msg, time.monotonic()
+        self.status, self.wall = msg, self.node.clock()
         self._name_recorder()
         report = self.report()
         for outcome in self.ended:
@@ -106,7 +104,7 @@ class RecordingWatch:
     def start_program(self) -> None:
         """A program starts: a new outcome, from the recording it starts in."""
         self.outcome = RecordingOutcome(self.timeout, self.samples_topic)
-        self.outcome.start(self.report(), time.monotonic(), self.node.health.stall.resumed_at)
+        self.outcome.start(self.report(), self.node.clock(), self.node.health.stall.resumed_at)
 
     def path(self) -> str:
         """The file the recorder reports recording this namespace's samples into ('' if none, or stale)."""
@@ -121,7 +119,7 @@ class RecordingWatch:
         the diagnostics and the goal's result (without require_recording the program runs on; with it, the node
         stops it). The silence counts only while this node ran: a stall of its own is not the recorder's.
         """
-        if self.outcome.check(time.monotonic(), next_sample, self.node.health.stall.resumed_at):
+        if self.outcome.check(self.node.clock(), next_sample, self.node.health.stall.resumed_at):
             self.node.get_logger().error(self.outcome.lost)
 
     def end_program(self) -> RecordingOutcome:
@@ -134,7 +132,7 @@ class RecordingWatch:
         """The result's words on `outcome`'s recording (None: wait). The recorder's heartbeat after the end with its
         latest status recording the same files confirms it (a status comes every 0.5 s, a heartbeat every 0.25 s).
         """
-        now = time.monotonic()
+        now = self.node.clock()
         beat = beats.last.get(self.recorder_node) if self.recorder_node else None
         words = outcome.verdict(now, end_sample, ended, self.node.health.stall.resumed_at,
                                 heard=beat.received if beat is not None else None, wait=RESULT_WAIT)
@@ -144,7 +142,7 @@ class RecordingWatch:
 
     def fresh(self, since: float) -> bool:
         """The recorder status (with require_recording) is ready to judge a goal that arrived at ``since``
-        (time.monotonic()). An error counts only if reported since then: the error of a recorder that was just
+        (the node clock). An error counts only if reported since then: the error of a recorder that was just
         replaced must not refuse a goal the new one would record.
         """
         return not self.require or (
@@ -152,11 +150,11 @@ class RecordingWatch:
             and ((self.failed and self.wall >= since) or self.ready() == ''))
 
     def _publishers_changed(self, topic: str) -> tuple[int, float]:
-        """(number of publishers of ``topic``, time.monotonic() when that set of publishers last changed)."""
+        """(number of publishers of ``topic``, node clock [s] when that set of publishers last changed)."""
         gids = frozenset(bytes(i.endpoint_gid) for i in self.node.get_publishers_info_by_topic(topic))
         known, since = self._publisher_sets.get(topic, (None, 0.0))
         if gids != known:
-            since = time.monotonic()
+            since = self.node.clock()
             self._publisher_sets[topic] = (gids, since)
         return len(gids), since
 
