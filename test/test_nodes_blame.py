@@ -37,6 +37,7 @@ from rubber_rig.recording.parts import survey
 from rubber_rig.testing.operator import Operator
 from rubber_rig.testing.processes import SuiteProcesses
 
+from support.mounts import IN_PRIVATE_MOUNT, private_mounts_available
 from support.waiting import wait_for
 
 pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
@@ -195,7 +196,6 @@ def test_a_recorder_whose_disk_fills_up_is_in_the_result(suite, tmp_path):
     mention the recording. The recorder runs in a private mount namespace on a small tmpfs (as in
     test_recorder_failures); the program runs on (require_recording false) and its result says from which sample on
     the recording was lost, and why."""
-    from test_recorder_failures import IN_PRIVATE_MOUNT, private_mounts_available  # noqa: PLC0415
     why = private_mounts_available()
     if why:
         pytest.skip(why)

@@ -17,7 +17,6 @@ up mid-recording (a real ENOSPC on a small tmpfs in a private mount namespace), 
 accounting (a sequence jump between programs is not loss; the driver's frames_lost is). The recorder runs as
 its own process where the failure needs it (mount namespace, SIGKILL), in-process otherwise."""
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -42,6 +41,7 @@ from rubber_rig.nodes import topics
 from rubber_rig.nodes.recorder_node import RecorderNode
 from rubber_rig.recording import GapTracker, load_recording, recover
 
+from support.mounts import IN_PRIVATE_MOUNT, private_mounts_available
 from support.ros import ros_context, sample_batch, spin_until, spinning
 
 REPO = Path(__file__).resolve().parents[1]
@@ -109,29 +109,6 @@ def stop_process(proc, sig=signal.SIGTERM, timeout=30):
     except subprocess.TimeoutExpired:
         proc.kill()
         return proc.wait()
-
-
-def private_mounts_available() -> str:
-    """'' if this process may create a mount namespace and mount there (root), else why not."""
-    if shutil.which('unshare') is None:
-        return 'unshare(1) not installed'
-    probe = subprocess.run(['unshare', '-m', '--propagation', 'private', 'sh', '-c',
-                            'mount -t tmpfs -o size=64k tmpfs /mnt'], capture_output=True, text=True)
-    return '' if probe.returncode == 0 else f'cannot mount in a private mount namespace: {probe.stderr.strip()}'
-
-
-# The recorder runs in a private mount namespace where `mnt` is prepared by `setup`; when it ends (SIGTERM is
-# passed on), what it wrote there is copied to `visible` (the mount itself vanishes with the namespace).
-IN_PRIVATE_MOUNT = '''
-{setup} || exit 97
-"$@" &
-pid=$!
-trap 'kill -TERM $pid' TERM INT
-wait $pid
-wait $pid 2>/dev/null
-cp -a {mnt}/. {visible}/ 2>/dev/null
-exit 0
-'''
 
 
 # -- unwritable / uncreatable output directory ---------------------------------------------------------------------
