@@ -332,7 +332,10 @@ blocks:
     # the block would make about 78. The exact count at every hold phase is test_program_session's (simulated
     # time); here the hold lands wherever the executors put it, so the bound allows the interrupted cycle.
     why = (before, after, f'{missing} sequence numbers without a sample')
-    assert 20 < before < 48 and 53 - 0.05 < before + after < 54.5, why   # the hold lands 0-2 s after 25 cycles
+    # a sequence number without a sample (the resume's lead, a batch DDS dropped on the way to this test) is
+    # counted as moving when the command moved across it: the count is uncertain by that many samples at most
+    unknown = missing / FS * F
+    assert 20 < before < 48 and 53 - 0.05 < before + after < 54.5 + unknown, why   # hold 0-2 s after 25 cycles
     # the excitation says how many full cycles it still owed: the resumed run is exactly those and its two tapers,
     # to a few samples (a taper's first and last steps are below the 0.1 um the count looks for; the hold ramp's
     # last ones may come after the operator saw the rig idle) - one cycle more or less would be 100 samples
