@@ -178,8 +178,10 @@ class FaultScenarios(ConformanceLink):
         try:
             # slow enough that the controller is well on its way (LEAD x this short of the limit) when the first
             # setpoint beyond the limit reaches it: its fault ramp then starts from motion, whose shape is judged
+            # (and no longer than until the controller stops: a fault's latch is timed from there)
             self.stream(first, self.ramp_to(p0, target, APPROACH_VELOCITY),
-                        abs(target - p0) / APPROACH_VELOCITY + 0.1)
+                        abs(target - p0) / APPROACH_VELOCITY + 0.1,
+                        until=lambda: self.state in ('ramping_down', 'fault', 'idle'))
         finally:
             self.heartbeat = True
         self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)

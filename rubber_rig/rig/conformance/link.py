@@ -280,9 +280,9 @@ class ConformanceLink:
         """
         return {s[1] for s in self._states_since(t) if unwrap(s[3], end, 1 << 16) < end - 1}
 
-    def stream(self, first: int, wave, duration: float, start: bool = True) -> int:
+    def stream(self, first: int, wave, duration: float, start: bool = True, until=None) -> int:
         """Stream wave(k) [m] (k: samples since `first`) for `duration` [s] of samples, LEAD ahead, with the host
-        heartbeat on; returns the sequence after the last setpoint sent.
+        heartbeat on, or until until() is true; returns the sequence after the last setpoint sent.
         """
         if start:
             self.send('HostStreamStart', {'HS_FirstSequence': first % (1 << 32)})
@@ -292,7 +292,7 @@ class ConformanceLink:
         total = int(round(duration * self.fs))
         per = self.frames.setpoints_per_frame
         t0, sent = time.monotonic(), first
-        while sent < first + total:
+        while sent < first + total and not (until is not None and until()):
             self._check()
             due = first + int((time.monotonic() - t0 + LEAD) * self.fs)
             while sent < min(due, first + total):
