@@ -181,7 +181,7 @@ class FaultScenarios(ConformanceLink):
             # (and no longer than until the controller stops: a fault's latch is timed from there)
             self.stream(first, self.ramp_to(p0, target, APPROACH_VELOCITY),
                         abs(target - p0) / APPROACH_VELOCITY + 0.1,
-                        until=lambda: self.state in ('ramping_down', 'fault', 'idle'))
+                        until=lambda: self.state in ('ramping_down', 'fault'))
         finally:
             self.heartbeat = True
         self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)

@@ -311,10 +311,16 @@ class ConformanceLink:
     def to_rest(self, target: float = 0.0):
         """Bring the controller to rest at target (ABORT if it ticks), clear faults (RESET), wait for idle."""
         self.heartbeat = True
-        if self.state in ('running', 'holding'):
-            self.command(CMD_ABORT, target)
-        if not self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT):
-            raise Aborted(f'the controller did not come to rest within {REST_TIMEOUT:g} s (state {self.state})')
+        end = time.monotonic() + REST_TIMEOUT
+        while True:
+            # ABORT again every second while the controller still ticks: a frame lost on a loaded host (a full
+            # receive queue) must not leave the rig running
+            if self.state in ('running', 'holding'):
+                self.command(CMD_ABORT, target)
+            if self._wait(lambda: self.state in ('idle', 'fault'), min(1.0, max(0.0, end - time.monotonic()))):
+                break
+            if time.monotonic() >= end:
+                raise Aborted(f'the controller did not come to rest within {REST_TIMEOUT:g} s (state {self.state})')
         if self.state == 'fault' or self.faults:
             self.command(CMD_RESET)
             self._wait(lambda: self.state == 'idle' and not self.faults, 1.0)
