@@ -282,3 +282,20 @@ def test_host_timing_records_late_wakeups_and_merges_a_file_once(tmp_path):
     assert timing.add_from_file(log) == 1 and timing.windows[-1] == (14.0, 14.05)
     assert late_between(timing.windows, 13.05, 13.2) == pytest.approx(0.1)
     assert late_between(timing.windows, 15.0, 16.0) == 0.0
+
+
+def test_a_state_change_across_a_lost_status_frame_is_not_judged():
+    """holding -> idle is no transition of the state machine, but with the status frame between them lost (the
+    counter skips) the states between are unknown: only the counter skip is reported.
+    """
+    trace = Trace(FS)
+    for k, (state, counter) in enumerate([('holding', 1), ('holding', 2), ('idle', 4), ('idle', 5)]):
+        trace.add(PROTO.encode('ControllerStatus', {'ST_State': STATE_CODE[state], 'ST_Counter': counter,
+                                                    'ST_Faults': 0, 'ST_LastSequence': 0, 'ST_BufferLevel': 0}),
+                  0.01 * k)
+    res = check_offline(trace)
+    assert res['CTRL-ST-2'].status == FAIL and res['CTRL-ST-2'].detail == 'ST_Counter skipped or repeated 1 times'
+    trace.frames[2].signals['ST_Counter'] = 3           # nothing lost: the change itself is illegal
+    trace.frames[3].signals['ST_Counter'] = 4
+    res = check_offline(trace)
+    assert 'holding -> idle' in res['CTRL-ST-2'].detail

@@ -178,8 +178,10 @@ class FaultScenarios(ConformanceLink):
         try:
             # slow enough that the controller is well on its way (LEAD x this short of the limit) when the first
             # setpoint beyond the limit reaches it: its fault ramp then starts from motion, whose shape is judged
+            # (and no longer than until the controller stops: a fault's latch is timed from there)
             self.stream(first, self.ramp_to(p0, target, APPROACH_VELOCITY),
-                        abs(target - p0) / APPROACH_VELOCITY + 0.1)
+                        abs(target - p0) / APPROACH_VELOCITY + 0.1,
+                        until=lambda: self.state in ('ramping_down', 'fault'))
         finally:
             self.heartbeat = True
         self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)
@@ -314,8 +316,14 @@ class FaultScenarios(ConformanceLink):
         t_ramp = next((s[0] for s in self._states_since(t_silent) if s[1] in ('ramping_down', 'fault', 'idle')),
                       None)
         if not ramped:
-            self.results.put('CTRL-WD-1', FAIL, f'still {self.state} {timeout + 1.0:.2f} s after the host fell silent '
-                             f'(stated host timeout {timeout:g} s)', 'the controller must ramp to rest on host silence')
+            self.merge_host_timing()
+            late = explains(self.trace.host_late, t_silent, time.time(), 1.0)
+            measured = f'still {self.state} {timeout + 1.0:.2f} s after the host fell silent (stated host timeout ' \
+                       f'{timeout:g} s)'
+            if late:     # the simulator on this host does not count time it was not scheduled
+                self.results.put('CTRL-WD-1', NOT_TESTED, measured, not_judged(late, 'after the host fell silent'))
+            else:
+                self.results.put('CTRL-WD-1', FAIL, measured, 'the controller must ramp to rest on host silence')
             self.to_rest(0.0)
             return
         self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)

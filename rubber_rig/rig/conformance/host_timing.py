@@ -86,10 +86,11 @@ def late_between(windows, t0: float, t1: float) -> float:
 
 
 def late_total(windows, t0: float, t1: float) -> float:
-    """How long [s] this host was late around [t0, t1]: the total of the (merged) windows that overlap it widened
-    by MARGIN. A violation longer than this cannot be the host's alone.
+    """How long [s] this host was late within [t0, t1] widened by MARGIN on each side: the union of the windows'
+    overlaps with it. A violation longer than this cannot be the host's alone.
     """
-    spans = sorted((a, b) for a, b in windows if a - MARGIN <= t1 and b + MARGIN >= t0)
+    lo, hi = t0 - MARGIN, t1 + MARGIN
+    spans = sorted((max(a, lo), min(b, hi)) for a, b in windows if a <= hi and b >= lo)
     total, end = 0.0, -float('inf')
     for a, b in spans:
         if b > end:

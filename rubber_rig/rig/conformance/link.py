@@ -280,9 +280,9 @@ class ConformanceLink:
         """
         return {s[1] for s in self._states_since(t) if unwrap(s[3], end, 1 << 16) < end - 1}
 
-    def stream(self, first: int, wave, duration: float, start: bool = True) -> int:
+    def stream(self, first: int, wave, duration: float, start: bool = True, until=None) -> int:
         """Stream wave(k) [m] (k: samples since `first`) for `duration` [s] of samples, LEAD ahead, with the host
-        heartbeat on; returns the sequence after the last setpoint sent.
+        heartbeat on, or until until() is true; returns the sequence after the last setpoint sent.
         """
         if start:
             self.send('HostStreamStart', {'HS_FirstSequence': first % (1 << 32)})
@@ -292,7 +292,7 @@ class ConformanceLink:
         total = int(round(duration * self.fs))
         per = self.frames.setpoints_per_frame
         t0, sent = time.monotonic(), first
-        while sent < first + total:
+        while sent < first + total and not (until is not None and until()):
             self._check()
             due = first + int((time.monotonic() - t0 + LEAD) * self.fs)
             while sent < min(due, first + total):
@@ -311,10 +311,16 @@ class ConformanceLink:
     def to_rest(self, target: float = 0.0):
         """Bring the controller to rest at target (ABORT if it ticks), clear faults (RESET), wait for idle."""
         self.heartbeat = True
-        if self.state in ('running', 'holding'):
-            self.command(CMD_ABORT, target)
-        if not self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT):
-            raise Aborted(f'the controller did not come to rest within {REST_TIMEOUT:g} s (state {self.state})')
+        end = time.monotonic() + REST_TIMEOUT
+        while True:
+            # ABORT again every second while the controller still ticks: a frame lost on a loaded host (a full
+            # receive queue) must not leave the rig running
+            if self.state in ('running', 'holding'):
+                self.command(CMD_ABORT, target)
+            if self._wait(lambda: self.state in ('idle', 'fault'), min(1.0, max(0.0, end - time.monotonic()))):
+                break
+            if time.monotonic() >= end:
+                raise Aborted(f'the controller did not come to rest within {REST_TIMEOUT:g} s (state {self.state})')
         if self.state == 'fault' or self.faults:
             self.command(CMD_RESET)
             self._wait(lambda: self.state == 'idle' and not self.faults, 1.0)
