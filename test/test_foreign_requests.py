@@ -43,7 +43,12 @@ from rubber_rig.nodes import topics
 from rubber_rig.testing.operator import Operator
 from rubber_rig.testing.processes import SuiteProcesses
 
-pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.timeout(600)]
+# system tier (make test-system): each test judges that a program on the wall clock completes while the requests
+# arrive; on a loaded machine the excitation's own stalls can end it first (issue 34, item 4), which is not what
+# these tests are about. The rules they exercise are tested on their own in make test: goal admission
+# (test_program_session), protective settings (test_rig_driver_parts), the owner's channel (test_rig_safety_core),
+# bounded program files (test_yaml_bounded).
+pytestmark = [pytest.mark.ros, pytest.mark.slow, pytest.mark.system, pytest.mark.timeout(600)]
 
 CONFIG = Path(__file__).resolve().parents[1] / 'config' / 'rig_sim.yaml'
 NS = '/admit'
