@@ -1,0 +1,252 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""A scenario on simulated time: the suite's ROS-free core in one process, stepped on one clock, deterministically.
+
+What runs, each the same code the nodes call:
+
+* the simulated controller (rig.sim.SimController, paced on the scenario's clock: ``serve(now)``) and the host's
+  RigDriver, on a simulated CAN segment with the configured bit timing (rig.can.simbus.BusMedium);
+* the driver's admission of setpoint batches (rig.can.gate.StreamGate) and its owner watch
+  (session.liveness.OwnerWatch: an owner that beat and fell silent for owner_timeout loses its stream);
+* the excitation's program session (session.ProgramSession): setpoints generated from the sample index and
+  streamed ``lead_time`` ahead of the measured samples, every ``stream_period``, with a heartbeat every
+  liveness.PERIOD.
+
+Each component wakes on its own period, like a node's timer; between wake-ups the messages it would receive
+wait in its inbox (a topic's queue). :meth:`Scenario.stall` makes a component miss its wake-ups for a while (an
+executor stalled by a busy computer: its inbox is handled late, all at once) or for ever (a process frozen or
+killed); ``freeze`` stops the controller. Nothing here reads the wall clock: the same seed gives the same samples,
+events and outcome on any computer, however busy, and much faster than real time (benchmarks/bench_scenario.py).
+What still needs the wall clock - DDS, processes, the executor itself - is the end-to-end tier's (test_nodes*.py).
+"""
+from __future__ import annotations
+
+import math
+from collections import deque
+from dataclasses import dataclass, field
+from typing import Optional
+
+import numpy as np
+
+from ..excitation.program import Program, load_program
+from ..rig.can.driver import RigDriver
+from ..rig.can.gate import StreamGate
+from ..rig.can.simbus import BusMedium
+from ..rig.can.stream import StreamRefused
+from ..rig.config import RigConfig
+from ..rig.sim.controller import SimController
+from ..session.liveness import PERIOD, OwnerWatch, Peers
+from ..session.program_session import ProgramSession
+
+#: the names components are stalled by
+COMPONENTS = ('excitation', 'driver', 'controller')
+
+
+@dataclass
+class Beat:
+    """A heartbeat as the owner watch reads it (msg_defs/Heartbeat's node and pid)."""
+
+    node: str
+    pid: int
+
+
+@dataclass
+class Stall:
+    """`component` misses its wake-ups from `at` for `duration` [s] on the scenario clock (inf: never again)."""
+
+    component: str
+    at: float
+    duration: float
+
+    def covers(self, now: float) -> bool:
+        return self.at <= now < self.at + self.duration
+
+
+@dataclass
+class Outcome:
+    """What a scenario ran: the measured samples (SI units, one entry per sample), how the program ended and the
+    driver's events and counters. ``ended_at`` [s] is scenario time from the program's start.
+    """
+
+    sequence: np.ndarray
+    displacement: np.ndarray
+    force: np.ndarray
+    setpoint: np.ndarray
+    completed: bool
+    reason: str
+    ended_at: float
+    events: list = field(default_factory=list)
+    faults: list = field(default_factory=list)
+    counters: dict = field(default_factory=dict)
+    blocks: list = field(default_factory=list)     # excitation.runner.BlockResult of each block run
+
+    @property
+    def final_position(self) -> float:
+        return float(self.setpoint[-1]) if self.setpoint.size else math.nan
+
+
+class Scenario:
+    """One program on a simulated rig, stepped on simulated time (see the module docstring).
+
+    program: Program, YAML path or shipped name; rig: RigConfig settings over the defaults (paced, with bus timing;
+    sim.seed sets the noise); lead_time [s], stream_period [s], batch_size [samples] as the excitation node's
+    parameters; owner_timeout [s] as rig_driver's; poll_period [s] the driver's poll timer, the scenario's step.
+    """
+
+    OWNER = '/scenario/excitation'
+
+    def __init__(self, program, rig: Optional[dict] = None, *, lead_time: float = 0.5, stream_period: float = 0.02,
+                 batch_size: int = 50, owner_timeout: float = 1.0, poll_period: float = 0.002,
+                 amplitude_control: bool = False, start: float = 100.0):
+        self.now = float(start)
+        self.cfg = RigConfig.from_dict({**(rig or {}), 'paced': True})
+        self.program = program if isinstance(program, Program) else load_program(program)
+        self.fs = self.cfg.sample_rate
+        self.lead, self.batch = math.ceil(lead_time * self.fs), int(batch_size)
+        self.periods = {'excitation': float(stream_period), 'driver': float(poll_period), 'controller': 0.0}
+        self.owner_timeout, self.amplitude_control = float(owner_timeout), amplitude_control
+        clock = self.clock
+        medium = BusMedium(self.cfg.bitrate, self.cfg.data_bitrate, self.cfg.fd, tx_queue=self.cfg.tx_queue,
+                           clock=clock, threaded=False)
+        self.controller = SimController(medium.attach('controller'), self.fs, self.cfg.sim, paced=True,
+                                        profile=self.cfg.frame_profile, clock=clock)
+        self.driver = RigDriver(medium.attach('host'), self.cfg, clock=clock)
+        self.driver.measured_load = medium.load
+        self.gate = StreamGate(self.driver, clock=clock)
+        self.peers = Peers(silent=owner_timeout, clock=clock)
+        self.owner_watch = OwnerWatch(self.peers)
+        self.stalls: list[Stall] = []
+        self.session: Optional[ProgramSession] = None
+        self.grant = None
+        self.samples = deque()          # the driver's sample blocks on their way to the excitation (its inbox)
+        self.batches = deque()          # setpoint batches on their way to the driver
+        self.measured = []              # every block the driver measured (what a recorder would record)
+        self.ended, self.completed, self.started_at = '', False, None
+        self._due = {name: self.now for name in COMPONENTS}
+        self._next_beat = self.now
+
+    def clock(self) -> float:
+        return self.now
+
+    # -- what a test injects --------------------------------------------------------------------------------------
+    def stall(self, component: str, at: float, duration: float = math.inf) -> 'Scenario':
+        """`component` ('excitation', 'driver', 'controller') misses its wake-ups from `at` [s after the program's
+        start] for `duration` [s] (default: for ever, a dead or frozen process). Returns self.
+        """
+        if component not in COMPONENTS:
+            raise ValueError(f'no component {component!r}: one of {", ".join(COMPONENTS)}')
+        self.stalls.append(Stall(component, float(at), float(duration)))
+        return self
+
+    def _stalled(self, component: str) -> bool:
+        if self.started_at is None:
+            return False
+        t = self.now - self.started_at
+        return any(s.component == component and s.covers(t) for s in self.stalls)
+
+    # -- running ----------------------------------------------------------------------------------------------------
+    def run(self, timeout: float = None) -> Outcome:
+        """Power up, open the stream, run the program until it ends (or `timeout` [s] of scenario time after the
+        start: by default the program's duration plus 10 s) and until the rig is at rest; returns the Outcome.
+        """
+        self._advance_until(lambda: self.driver.why_not_ready() == '', 5.0, 'the simulated rig did not come up')
+        self._open()
+        limit = self.now + (timeout if timeout is not None else self.program.duration(self.fs) + 10.0)
+        while not self.ended and self.now < limit:
+            self._step()
+        if not self.ended:
+            self.ended = f'timeout: the program had not ended after {limit - self.started_at:.1f} s'
+        ended_at = self.now - self.started_at
+        self._advance_until(self._at_rest, 10.0, '')
+        return self._outcome(ended_at)
+
+    def _open(self) -> None:
+        try:
+            self.grant = self.driver.open_stream(self.OWNER, self.lead)
+        except StreamRefused as exc:
+            raise RuntimeError(f'the driver refused the stream: {exc}') from exc
+        self.session = ProgramSession.on_grant(self.program, self.fs, self.cfg.limits, self.grant, self.lead,
+                                               self.batch, self.amplitude_control)
+        self.runner = self.session.runner
+        self.started_at = self.now
+        self._wake_excitation()
+
+    def _advance_until(self, done, seconds: float, why: str) -> None:
+        end = self.now + seconds
+        while not done() and self.now < end:
+            self._step()
+        if why and not done():
+            raise RuntimeError(f'{why} within {seconds} s of scenario time ({self.driver.why_not_ready()})')
+
+    def _step(self) -> None:
+        """One poll period of scenario time: every component due wakes (controller first: it runs on its own CPU)."""
+        self.now += self.periods['driver']
+        if not self._stalled('controller'):
+            self.controller.serve(self.now)
+        if not self._stalled('driver'):
+            self._wake_driver()
+        if self.session is not None and self.now >= self._due['excitation'] and not self._stalled('excitation'):
+            self._wake_excitation()
+
+    def _wake_driver(self) -> None:
+        while self.batches:
+            self.gate.offer(self.OWNER, self.OWNER, *self.batches.popleft())
+        why = self.owner_watch.lost(self.driver.stream, self.owner_timeout)
+        if why:
+            self.driver.owner_lost(why)
+        block = self.driver.poll()
+        while block is not None:
+            self.measured.append(block)
+            self.samples.append(block)
+            block = self.driver.poll()
+
+    def _wake_excitation(self) -> None:
+        """The excitation node's timer and callbacks: samples in, setpoints out, a heartbeat when one is due."""
+        self._due['excitation'] = self.now + self.periods['excitation']
+        if self.now >= self._next_beat:
+            self.peers.on_beat(Beat(self.OWNER, 1))
+            self._next_beat = self.now + PERIOD
+        s = self.session
+        while self.samples:
+            b = self.samples.popleft()
+            if not s.before_stream(b.first_sequence, len(b)):
+                s.measured(b.first_sequence, b.displacement, b.setpoint)
+        status = self.driver.status
+        if status.faults:
+            self._end('rig fault: ' + '; '.join(status.fault_messages))
+            return
+        if self.driver.stream is None and s.end_sequence is None:
+            self._end(f'the rig stopped the program: {status.extra.get("last_event", "")}')
+            return
+        s.stream(lambda first, x, block, end: self.batches.append(
+            (first, np.asarray(x, dtype=float), s.stream_id, bool(end))))
+        if s.measured_to_end:
+            self._end('', completed=not s.runner.aborted)
+
+    def _end(self, reason: str, completed: bool = False) -> None:
+        self.ended, self.completed = reason or 'completed', completed
+        self.session = None      # the excitation forgets the program (the runner keeps its block results)
+
+    def _at_rest(self) -> bool:
+        return self.driver.controller_state in ('idle', 'fault', 'holding') and self.driver.stream is None
+
+    def _outcome(self, ended_at: float) -> Outcome:
+        blocks = self.measured
+        cat = (lambda name: np.concatenate([getattr(b, name) for b in blocks]) if blocks else np.zeros(0))
+        seq = np.concatenate([b.sequence for b in blocks]) if blocks else np.zeros(0, dtype=np.int64)
+        st = self.driver.status
+        return Outcome(seq, cat('displacement'), cat('force'), cat('setpoint'), self.completed, self.ended,
+                       ended_at, events=list(self.driver.events), faults=list(st.fault_messages),
+                       counters=dict(self.driver.counters), blocks=self.runner.block_summaries)
