@@ -29,7 +29,6 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from rclpy.node import Node
 
 from msg_defs.msg import Heartbeat
-
 from rubber_rig.session import liveness
 from rubber_rig.session.liveness import PERIOD, SILENT, OwnerWatch  # noqa: F401 - the nodes' names for them
 

@@ -48,7 +48,7 @@ from ..rig.can.stream import StreamRefused
 from ..rig.config import RigConfig
 from ..rig.sim.controller import SimController
 from ..session.liveness import PERIOD, OwnerWatch, Peers
-from ..session.program_session import ProgramSession
+from ..session.program_session import LEAD_TIME, ProgramSession
 
 #: the names components are stalled by
 COMPONENTS = ('excitation', 'driver', 'controller')
@@ -107,9 +107,9 @@ class Scenario:
 
     OWNER = '/scenario/excitation'
 
-    def __init__(self, program, rig: Optional[dict] = None, *, lead_time: float = 0.5, stream_period: float = 0.02,
-                 batch_size: int = 50, owner_timeout: float = 1.0, poll_period: float = 0.002,
-                 amplitude_control: bool = False, start: float = 100.0):
+    def __init__(self, program, rig: Optional[dict] = None, *, lead_time: float = LEAD_TIME,
+                 stream_period: float = 0.02, batch_size: int = 50, owner_timeout: float = 1.0,
+                 poll_period: float = 0.002, amplitude_control: bool = False, start: float = 100.0):
         self.now = float(start)
         self.cfg = RigConfig.from_dict({**(rig or {}), 'paced': True})
         self.program = program if isinstance(program, Program) else load_program(program)
@@ -128,6 +128,8 @@ class Scenario:
         self.peers = Peers(silent=owner_timeout, clock=clock)
         self.owner_watch = OwnerWatch(self.peers)
         self.stalls: list[Stall] = []
+        self.holds: list = []           # [hold at, resume at, 'due' | 'held' | 'resumed' | refusal] [s]
+        self.log: list[str] = []        # what the excitation said (hold, resume)
         self.session: Optional[ProgramSession] = None
         self.grant = None
         self.samples = deque()          # the driver's sample blocks on their way to the excitation (its inbox)
@@ -150,6 +152,13 @@ class Scenario:
         self.stalls.append(Stall(component, float(at), float(duration)))
         return self
 
+    def hold(self, at: float, duration: float) -> 'Scenario':
+        """The operator holds the program at `at` [s after its start] and resumes it `duration` [s] later, through
+        the excitation's own hold path (excitation/hold true, then false). Returns self.
+        """
+        self.holds.append([float(at), float(at) + float(duration), 'due'])
+        return self
+
     def _stalled(self, component: str) -> bool:
         if self.started_at is None:
             return False
@@ -166,6 +175,8 @@ class Scenario:
         limit = self.now + (timeout if timeout is not None else self.program.duration(self.fs) + 10.0)
         while not self.ended and self.now < limit:
             self._step()
+            if self.driver.faults and self._stalled('excitation'):   # nobody left to notice but the driver
+                self._end('rig fault (the excitation stalled): ' + '; '.join(self.driver.fault_messages))
         if not self.ended:
             self.ended = f'timeout: the program had not ended after {limit - self.started_at:.1f} s'
         ended_at = self.now - self.started_at
@@ -223,6 +234,7 @@ class Scenario:
             b = self.samples.popleft()
             if not s.before_stream(b.first_sequence, len(b)):
                 s.measured(b.first_sequence, b.displacement, b.setpoint)
+        self._operator(s)
         status = self.driver.status
         if status.faults:
             self._end('rig fault: ' + '; '.join(status.fault_messages))
@@ -230,10 +242,28 @@ class Scenario:
         if self.driver.stream is None and s.end_sequence is None:
             self._end(f'the rig stopped the program: {status.extra.get("last_event", "")}')
             return
+        if s.held:
+            return
         s.stream(lambda first, x, block, end: self.batches.append(
             (first, np.asarray(x, dtype=float), s.stream_id, bool(end))))
         if s.measured_to_end:
             self._end('', completed=not s.runner.aborted)
+
+    def _operator(self, s: ProgramSession) -> None:
+        """The hold and resume requests that are due, as the excitation node's on_hold handles them."""
+        t = self.now - self.started_at
+        for h in self.holds:
+            if h[2] == 'due' and t >= h[0]:
+                why = s.why_not_hold() or self.driver.stop_stream(s.stream_id, s.runner.hold_target,
+                                                                  'operator hold', hold=True)
+                h[2] = why or 'held'
+                if not why:
+                    s.hold()
+                    self.log.append(f'held at {t:.3f} s')
+            elif h[2] == 'held' and t >= h[1]:
+                s.resume(self.driver.open_stream(self.OWNER, self.lead))
+                h[2] = 'resumed'
+                self.log.append(s.describe_resume())
 
     def _end(self, reason: str, completed: bool = False) -> None:
         self.ended, self.completed = reason or 'completed', completed
@@ -244,7 +274,9 @@ class Scenario:
 
     def _outcome(self, ended_at: float) -> Outcome:
         blocks = self.measured
-        cat = (lambda name: np.concatenate([getattr(b, name) for b in blocks]) if blocks else np.zeros(0))
+
+        def cat(name):
+            return np.concatenate([getattr(b, name) for b in blocks]) if blocks else np.zeros(0)
         seq = np.concatenate([b.sequence for b in blocks]) if blocks else np.zeros(0, dtype=np.int64)
         st = self.driver.status
         return Outcome(seq, cat('displacement'), cat('force'), cat('setpoint'), self.completed, self.ended,
