@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The scenario harness (rubber_rig.testing.scenario): the simulated controller, the driver, its gate and owner
+"""The scenario harness (rubber_rig.session.scenario): the simulated controller, the driver, its gate and owner
 watch and the program session on one simulated clock. Every check here is logic, so none reads the wall clock:
 a busy computer runs them slower, never differently.
 """
@@ -25,7 +25,7 @@ from rubber_rig.excitation.program import Program
 from rubber_rig.rig.can.protocol import cycle_time
 from rubber_rig.rig.config import RigConfig
 from rubber_rig.session.program_session import LEAD_TIME
-from rubber_rig.testing.scenario import Scenario
+from rubber_rig.session.scenario import Scenario
 
 FS = 1000.0
 # 60 cycles of 1 mm at 10 Hz (2 taper cycles each end), then a short second block: 8.2 s of program

@@ -84,8 +84,7 @@ class ProgramRunner(Whereabouts):
     def __init__(self, program, sample_rate: float, limits: Limits = None, amplitude_control: bool = False,
                  start_sequence: int = 0, compensation_memory: bool = True, start_position: float = None,
                  start_velocity: float = 0.0, check_program: bool = True):
-        # its own copy: a resume shortens the held block (resume_at), which must not change the caller's program
-        self.program, self.fs = program.copy(), float(sample_rate)
+        self.program, self.fs = program.copy(), float(sample_rate)   # resume_at shortens a block of its own copy
         self.limits = limits if limits is not None else Limits()
         if check_program:
             precheck(self.limits, program, self.fs)

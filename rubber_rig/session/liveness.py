@@ -16,7 +16,7 @@
 stream's owner has been silent (the rule by which rig_driver takes the stream from a frozen or dead owner).
 
 The beats come from the node's ``heartbeat`` subscription (rubber_rig.nodes.heartbeat) or, on simulated time, from
-a scenario (rubber_rig.testing.scenario); ``clock`` is the time they are judged on.
+a scenario (rubber_rig.session.scenario); ``clock`` is the time they are judged on.
 """
 from __future__ import annotations
 

@@ -256,8 +256,12 @@ class ProgramSession:
                     measured: dict, model: dict, residual_rms: float) -> list[Event]:
         """The detector events of the measured cycle of samples start..end-1 (none outside the program's
         periodic blocks: an approach or hold ramp, another stream's cycle).
+
+        A cycle that began before this stream (a resumed program's: the element model's cycle runs from before the
+        hold, through the hold ramp and the rest at the block mean, into the resumed block) is not the program's:
+        its flat stretch looked like a saturated load cell to the detectors.
         """
-        if self.held or self.monitor is None:
+        if self.held or self.monitor is None or start < self.start_sequence:
             return []
         cycle = cycle_of(self.runner, start, end, amplitude, peak_amplitude, mean, measured, model, residual_rms,
                          self.elapsed)

@@ -104,13 +104,10 @@ class SimController(ControllerReceive, ControllerTransmit):
         self._held = []                   # (release_tick, message) for delayed frames
         self._hb = self._st = self._tc = 0
         hb_period = 0.08 if 'heartbeat_80ms' in self.defects else cycle_time('ControllerHeartbeat')
-        self._periods = {'ControllerHeartbeat': hb_period, 'ControllerStatus': cycle_time('ControllerStatus'),
-                         'Temperature': cycle_time('Temperature'),
-                         'ControllerIdentity': cycle_time('ControllerIdentity')}
-        per = lambda s: max(1, round(s * self.fs))  # noqa: E731
-        self._hb_every, self._st_every, self._tc_every, self._id_every = (
-            per(self._periods[name]) for name in ('ControllerHeartbeat', 'ControllerStatus', 'Temperature',
-                                                  'ControllerIdentity'))
+        self._periods = {'ControllerHeartbeat': hb_period, **{name: cycle_time(name) for name in (
+            'ControllerStatus', 'Temperature', 'ControllerIdentity')}}
+        self._hb_every, self._st_every, self._tc_every, self._id_every = (   # in ticks
+            max(1, round(period * self.fs)) for period in self._periods.values())
         self._idle_due = {}               # frame name -> wall-clock time it is next due while idle (paced)
         self._id_next_tick = 0            # rig tick the next ControllerIdentity is due at while ticking
         self._jitter_until = 0            # feedback_jitter defect: release tick of the last held feedback frame
@@ -118,9 +115,8 @@ class SimController(ControllerReceive, ControllerTransmit):
         # paced: a text file that gets a 'start end' line (wall-clock s) for every deadline this process missed by
         # SIM_LATE_MIN or more - its host was late, which a real controller on its own CPU would not be
         self.timing_log = None
-        self._announced = False
+        self._announced, self._thread = False, None
         self._deadline, self._idle_before, self._next_idle_hk = None, True, 0.0   # paced schedule (serve)
-        self._thread = None
         base = options.specimen.get('temperature', options.temperature)
         self.temperature = float(base if isinstance(base, (int, float)) else options.temperature)
 
@@ -142,10 +138,10 @@ class SimController(ControllerReceive, ControllerTransmit):
         self.announce(self._clock())
         while not self._stop.is_set():
             if self.paced:
-                msg = self.bus.recv(self.serve(self._clock()))
-                while msg is not None:
+                msg = self.bus.recv(self.serve(self._clock()))   # wait for a frame until the next moment due
+                if msg is not None:
                     self._handle(msg)
-                    msg = self.bus.recv(0)
+                    self._receive_all()
             else:
                 msg = self.bus.recv(0.02)
                 while msg is not None:
@@ -161,14 +157,12 @@ class SimController(ControllerReceive, ControllerTransmit):
         self._id_next_tick = self.ticks + self._id_every
         self._next_idle_hk = now
         self._idle_due = {name: now + period for name, period in self._periods.items()}
-        self._deadline, self._idle_before = None, True
         self._announced = True
 
     def serve(self, now: float) -> float:
-        """Paced: one wake-up at `now` [s] on the clock (time.monotonic, or a simulated clock that a scenario
-        steps): handle the frames received, tick every sample due (deadline based: no drift from late wake-ups)
-        or do the idle housekeeping; returns how long [s] the controller may wait for a frame before it is next
-        due. run_forever waits that long on the bus; a simulated clock calls serve again at its next step.
+        """Paced: one wake-up at `now` [s] on the clock (time.monotonic, or a scenario's simulated clock): handle
+        the frames received, tick every sample due (deadline based: no drift from late wake-ups) or do the idle
+        housekeeping; returns how long [s] the controller may wait for a frame before anything is due.
         """
         if not self._announced:
             self.announce(now)
@@ -203,12 +197,6 @@ class SimController(ControllerReceive, ControllerTransmit):
             self.counters['overruns'] += n - 1
         self._idle_before = False
         return max(0.0, min(deadline - self._clock(), 0.01)) if self.state in STREAMING else 0.0
-
-    def _receive_all(self):
-        msg = self.bus.recv(0)
-        while msg is not None:
-            self._handle(msg)
-            msg = self.bus.recv(0)
 
     def _serve_idle(self, now: float) -> float:
         """Paced and not streaming: periodic frames on the clock; returns the wait [s] until they are next due."""

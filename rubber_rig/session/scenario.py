@@ -22,7 +22,10 @@ What runs, each the same code the nodes call:
   (session.liveness.OwnerWatch: an owner that beat and fell silent for owner_timeout loses its stream);
 * the excitation's program session (session.ProgramSession): setpoints generated from the sample index and
   streamed ``lead_time`` ahead of the measured samples, every ``stream_period``, with a heartbeat every
-  liveness.PERIOD.
+  liveness.PERIOD; its detectors judge each cycle and their strongest action (hold, end) is taken as the
+  excitation node takes it;
+* the element model (online.OnlinePredictor) predicting every sample batch, and its cycle cutter
+  (online.cutter.CycleCutter) pairing measured and predicted cycles block by block for the detectors.
 
 Each component wakes on its own period, like a node's timer; between wake-ups the messages it would receive
 wait in its inbox (a topic's queue). :meth:`Scenario.stall` makes a component miss its wake-ups for a while (an
@@ -40,18 +43,23 @@ from typing import Optional
 
 import numpy as np
 
+from ..excitation.detector_specs import DEFAULTS, parse_detectors, with_defaults
+from ..excitation.detectors import strongest
 from ..excitation.program import Program, load_program
+from ..online import ModelChoice, OnlinePredictor, cycle_properties
+from ..online.cutter import CycleCutter
 from ..rig.can.driver import RigDriver
 from ..rig.can.gate import StreamGate
 from ..rig.can.simbus import BusMedium
 from ..rig.can.stream import StreamRefused
 from ..rig.config import RigConfig
 from ..rig.sim.controller import SimController
-from ..session.liveness import PERIOD, OwnerWatch, Peers
-from ..session.program_session import LEAD_TIME, ProgramSession
+from .liveness import PERIOD, OwnerWatch, Peers
+from .program_session import LEAD_TIME, ProgramSession
 
 #: the names components are stalled by
-COMPONENTS = ('excitation', 'driver', 'controller')
+COMPONENTS = ('excitation', 'driver', 'controller', 'element_model')
+MIN_CYCLE_AMPLITUDE = 5e-6      # [m] smallest cycle the element model pairs (its min_cycle_amplitude default)
 
 
 @dataclass
@@ -102,14 +110,17 @@ class Scenario:
 
     program: Program, YAML path or shipped name; rig: RigConfig settings over the defaults (paced, with bus timing;
     sim.seed sets the noise); lead_time [s], stream_period [s], batch_size [samples] as the excitation node's
-    parameters; owner_timeout [s] as rig_driver's; poll_period [s] the driver's poll timer, the scenario's step.
+    parameters; owner_timeout [s] as rig_driver's; poll_period [s] the driver's poll timer, the scenario's step;
+    model the element model's choice (default: the simulated specimen's parameter set); detectors the
+    DetectorSpecs (default: the program's own plus the excitation's defaults).
     """
 
     OWNER = '/scenario/excitation'
 
     def __init__(self, program, rig: Optional[dict] = None, *, lead_time: float = LEAD_TIME,
                  stream_period: float = 0.02, batch_size: int = 50, owner_timeout: float = 1.0,
-                 poll_period: float = 0.002, amplitude_control: bool = False, start: float = 100.0):
+                 poll_period: float = 0.002, amplitude_control: bool = False, model: Optional[ModelChoice] = None,
+                 detectors: Optional[list] = None, start: float = 100.0):
         self.now = float(start)
         self.cfg = RigConfig.from_dict({**(rig or {}), 'paced': True})
         self.program = program if isinstance(program, Program) else load_program(program)
@@ -130,9 +141,17 @@ class Scenario:
         self.stalls: list[Stall] = []
         self.holds: list = []           # [hold at, resume at, 'due' | 'held' | 'resumed' | refusal] [s]
         self.log: list[str] = []        # what the excitation said (hold, resume)
+        self.predictor = OnlinePredictor(model or ModelChoice())
+        self.cutter = CycleCutter(MIN_CYCLE_AMPLITUDE, clock=clock)
+        self.detectors = detectors if detectors is not None else with_defaults(
+            self.program.all_detectors(), parse_detectors(list(DEFAULTS), 'default_detectors'))
+        self.events: list = []          # every detector event: (scenario time [s], Event)
         self.session: Optional[ProgramSession] = None
         self.grant = None
-        self.samples = deque()          # the driver's sample blocks on their way to the excitation (its inbox)
+        # the topics: what each component receives at its next wake-up
+        self.samples = deque()          # sample blocks on their way to the excitation
+        self.model_inbox = deque()      # sample blocks and setpoint batches on their way to the element model
+        self.cycles = deque()           # the element model's cycles on their way to the excitation
         self.batches = deque()          # setpoint batches on their way to the driver
         self.measured = []              # every block the driver measured (what a recorder would record)
         self.ended, self.completed, self.started_at = '', False, None
@@ -189,7 +208,7 @@ class Scenario:
         except StreamRefused as exc:
             raise RuntimeError(f'the driver refused the stream: {exc}') from exc
         self.session = ProgramSession.on_grant(self.program, self.fs, self.cfg.limits, self.grant, self.lead,
-                                               self.batch, self.amplitude_control)
+                                               self.batch, self.amplitude_control, detectors=self.detectors)
         self.runner = self.session.runner
         self.started_at = self.now
         self._wake_excitation()
@@ -208,6 +227,8 @@ class Scenario:
             self.controller.serve(self.now)
         if not self._stalled('driver'):
             self._wake_driver()
+        if not self._stalled('element_model'):
+            self._wake_model()
         if self.session is not None and self.now >= self._due['excitation'] and not self._stalled('excitation'):
             self._wake_excitation()
 
@@ -221,7 +242,44 @@ class Scenario:
         while block is not None:
             self.measured.append(block)
             self.samples.append(block)
+            self.model_inbox.append(block)
             block = self.driver.poll()
+
+    def _wake_model(self) -> None:
+        """The element model node: predict each sample batch, cut cycles once their block is known."""
+        while self.model_inbox:
+            m = self.model_inbox.popleft()
+            if isinstance(m, tuple):       # a setpoint batch: (first, displacement, stream id, end, block)
+                self.cutter.setpoints(m[0], len(m[1]), m[4], m[3])
+                continue
+            predicted, _ = self.predictor.process(m.first_sequence, m.sample_period, m.displacement, m.temperature)
+            self.cutter.samples(m.first_sequence, m.sample_period, m.displacement, m.force, predicted, m.t0)
+        self.cycles.extend(self.cutter.cycles())
+
+    def _publish(self, first, x, block, end) -> None:
+        """The excitation's setpoint batch, to the driver's command channel and the setpoints topic."""
+        batch = (first, np.asarray(x, dtype=float), self.session.stream_id, bool(end), block)
+        self.batches.append(batch[:4])
+        self.model_inbox.append(batch)
+
+    def _act(self, events) -> None:
+        """The strongest action among the detector events, as the excitation node takes it."""
+        if not events or self.session is None:
+            return
+        self.events.extend((self.now - self.started_at, e) for e in events)
+        top, s = strongest(events), self.session
+        if top.action == 'end':
+            self.driver.stop_stream(s.stream_id, self.program.rest_position, f'detector {top.detector}')
+            s.runner.abort(f'ended by detector: {top.message}')
+            self._end(f'ended by detector: {top.message}', completed=top.kind in ('cycle_count', 'elapsed_time'))
+        elif top.action == 'hold' and not s.held:
+            why = s.why_not_hold() or self.driver.stop_stream(s.stream_id, s.runner.hold_target,
+                                                              f'detector {top.detector}', hold=True)
+            if why:
+                self._end(f'detector {top.detector} asked for a hold, which failed ({why})')
+                return
+            s.hold()
+            self._end(f'held by detector {top.detector}: {top.message}')
 
     def _wake_excitation(self) -> None:
         """The excitation node's timer and callbacks: samples in, setpoints out, a heartbeat when one is due."""
@@ -233,7 +291,16 @@ class Scenario:
         while self.samples:
             b = self.samples.popleft()
             if not s.before_stream(b.first_sequence, len(b)):
-                s.measured(b.first_sequence, b.displacement, b.setpoint)
+                self._act(s.measured(b.first_sequence, b.displacement, b.setpoint))
+            if self.session is None:
+                return
+        while self.cycles:
+            c = self.cycles.popleft().cycle
+            m = c.measured
+            self._act(s.judge_cycle(c.start_sequence, c.end_sequence, m['amplitude'], m['peak_amplitude'], m['mean'],
+                                    cycle_properties(m), cycle_properties(c.model), c.residual_rms))
+            if self.session is None:
+                return
         self._operator(s)
         status = self.driver.status
         if status.faults:
@@ -244,8 +311,7 @@ class Scenario:
             return
         if s.held:
             return
-        s.stream(lambda first, x, block, end: self.batches.append(
-            (first, np.asarray(x, dtype=float), s.stream_id, bool(end))))
+        s.stream(self._publish)
         if s.measured_to_end:
             self._end('', completed=not s.runner.aborted)
 
