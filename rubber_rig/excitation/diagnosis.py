@@ -356,9 +356,7 @@ class LoadCellJudge:
                              'from a fixture slip')
 
     def _relearn(self, block: int) -> None:
-        """A change put down to the specimen or its fixture is its new state: the block's signature is learnt
-        afresh from the next cycles (trips meanwhile are released as the specimen's).
-        """
+        """A change of the specimen or its fixture is its new state: the block's signature is learnt afresh."""
         self.references.pop(block, None)
         self.learning.pop(block, None)
 
@@ -381,9 +379,8 @@ class LoadCellJudge:
         if code in ('stuck', 'saturation'):
             self.fault = code
         if code == 'stuck':
-            value, reference, threshold, units = (c.measured.get('force_amplitude', math.nan),
-                                                  self.expected_amplitude(c), STUCK_FRACTION
-                                                  * self.expected_amplitude(c), 'N')
+            reference = self.expected_amplitude(c)
+            value, threshold, units = c.measured.get('force_amplitude', math.nan), STUCK_FRACTION * reference, 'N'
             detail = detail or 'the force amplitude fell to nothing while the displacement kept its amplitude'
         elif code == 'saturation':
             value, reference, threshold, units = s[3], ref.shape, SHAPE_DROP, '-'
@@ -397,13 +394,7 @@ class LoadCellJudge:
         return [Verdict('sensor', code, [], value, reference, threshold, units, detail)]
 
     def rearm(self) -> None:
-        """After a hold: judge the load cell afresh (a stuck or clipped one is reported again if it still is).
-
-        The specimen rested at the block mean: its first cycles after the resume relax back (the friction and the
-        fractional memory start from rest), and their loop shape differs from the reference by a few percent,
-        which read as a clipped load cell (a scenario on simulated time found it: 1.0003 -> 0.9771 four cycles
-        after a 1 s hold). For settle_cycles + 2 steady cycles only a stuck cell is judged.
-        """
+        """After a hold: judge afresh; a rested specimen relaxes, so settle_cycles + 2 cycles judge only stuck."""
         self.fault, self.held, self.last = '', None, 'normal'
         self.settling = self.spec.settle_cycles + 2
         self.reported.clear()

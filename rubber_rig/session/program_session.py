@@ -120,7 +120,10 @@ class ProgramSession:
         self.next_sample = first_sequence + n
         if self.held:
             if n and setpoint is not None and len(setpoint) == n:
-                self._follow(first_sequence, np.asarray(setpoint, dtype=float))
+                ran = self._follow(first_sequence, np.asarray(setpoint, dtype=float))
+                if ran:   # program samples the rig ran after the hold was asked for: they finish a measured cycle
+                    self.runner.feed_measurement(ran[0], np.asarray(displacement, dtype=float)[
+                        ran[0] - first_sequence:ran[1] - first_sequence])
             return []
         if not n:
             return []
@@ -172,22 +175,24 @@ class ProgramSession:
                 return float(x[sequence - first])
         return None
 
-    def _follow(self, first_sequence: int, applied: np.ndarray) -> None:
+    def _follow(self, first_sequence: int, applied: np.ndarray) -> Optional[tuple[int, int]]:
         """Held: move ``left_at`` over the samples (contiguous with it) whose applied command is the setpoint this
         session handed on, to the first one that is not (the hold ramp began there; the frames carry the
         command to 0.1 um) or that was never sent. A gap in the measurement stops it (a lower bound: the cycles
-        it may miss are run again, never skipped).
+        it may miss are run again, never skipped). Returns the sequences (start, end) it moved over, or None.
         """
         if self._left_known or first_sequence > self.left_at:
             self._left_known = self._left_known or first_sequence > self.left_at
-            return
+            return None
+        start = self.left_at
         for i in range(self.left_at - first_sequence, applied.size):
             sent = self._sent_setpoint(first_sequence + i)
             if sent is None or abs(applied[i] - sent) > FOLLOW_TOLERANCE:
                 self._left_known = True
-                return
+                break
             self.left_at = first_sequence + i + 1
             self.elapsed_samples += 1          # the rig ran this program sample after the hold was asked for
+        return (start, self.left_at) if self.left_at > start else None
 
     def stream(self, publish: Publish) -> None:
         """Hand on what is due; the program's end once (an empty batch if its last setpoints went out before);

@@ -48,6 +48,7 @@ from ..excitation.detectors import strongest
 from ..excitation.program import Program, load_program
 from ..online import ModelChoice, OnlinePredictor, cycle_properties
 from ..online.cutter import CycleCutter
+from ..rig.can.batcher import SampleBatcher
 from ..rig.can.driver import RigDriver
 from ..rig.can.gate import StreamGate
 from ..rig.can.simbus import BusMedium
@@ -59,6 +60,7 @@ from .program_session import LEAD_TIME, ProgramSession
 
 #: the names components are stalled by
 COMPONENTS = ('excitation', 'driver', 'controller', 'element_model')
+BATCH_PERIOD, MAX_BATCH_DELAY = 0.01, 0.1   # [s] rig_driver's sample batches (batch_size 0), max_batch_delay
 MIN_CYCLE_AMPLITUDE = 5e-6      # [m] smallest cycle the element model pairs (its min_cycle_amplitude default)
 
 
@@ -99,10 +101,24 @@ class Outcome:
     faults: list = field(default_factory=list)
     counters: dict = field(default_factory=dict)
     blocks: list = field(default_factory=list)     # excitation.runner.BlockResult of each block run
+    detections: list = field(default_factory=list)  # (scenario time [s], excitation.detectors.Event)
+    streamed: list = field(default_factory=list)   # (first sequence, setpoints [m]) of every batch published
 
     @property
     def final_position(self) -> float:
         return float(self.setpoint[-1]) if self.setpoint.size else math.nan
+
+    def first_departure(self, since: int = 0, tolerance: float = 1.5e-7) -> Optional[int]:
+        """The first sample (sequence >= since) whose applied command is not the setpoint streamed for it (by more
+        than `tolerance` [m]; a hold or abort ramp took over from the program), or None.
+        """
+        queued = {}
+        for first, x in self.streamed:
+            queued.update(zip(range(first, first + len(x)), x.tolist(), strict=True))
+        for seq, u in zip(self.sequence.tolist(), self.setpoint.tolist(), strict=True):
+            if seq >= since and (seq not in queued or abs(u - queued[seq]) > tolerance):
+                return seq
+        return None
 
 
 class Scenario:
@@ -136,6 +152,7 @@ class Scenario:
         self.driver = RigDriver(medium.attach('host'), self.cfg, clock=clock)
         self.driver.measured_load = medium.load
         self.gate = StreamGate(self.driver, clock=clock)
+        self.batcher, self.samples_per_batch = SampleBatcher(clock=clock), max(1, round(BATCH_PERIOD * self.fs))
         self.peers = Peers(silent=owner_timeout, clock=clock)
         self.owner_watch = OwnerWatch(self.peers)
         self.stalls: list[Stall] = []
@@ -146,6 +163,7 @@ class Scenario:
         self.detectors = detectors if detectors is not None else with_defaults(
             self.program.all_detectors(), parse_detectors(list(DEFAULTS), 'default_detectors'))
         self.events: list = []          # every detector event: (scenario time [s], Event)
+        self.streamed: list = []        # (first sequence, setpoints) of every batch the excitation published
         self.session: Optional[ProgramSession] = None
         self.grant = None
         # the topics: what each component receives at its next wake-up
@@ -239,11 +257,17 @@ class Scenario:
         if why:
             self.driver.owner_lost(why)
         block = self.driver.poll()
-        while block is not None:
-            self.measured.append(block)
-            self.samples.append(block)
-            self.model_inbox.append(block)
+        while block is not None:     # rig_driver's poll: blocks into batches of BATCH_PERIOD (its batch_size 0)
+            self._publish_samples(*self.batcher.add(block, self.samples_per_batch))
             block = self.driver.poll()
+        self._publish_samples(self.batcher.due(MAX_BATCH_DELAY))
+
+    def _publish_samples(self, *batches) -> None:
+        for batch in batches:
+            if batch is not None:
+                self.measured.append(batch)
+                self.samples.append(batch)
+                self.model_inbox.append(batch)
 
     def _wake_model(self) -> None:
         """The element model node: predict each sample batch, cut cycles once their block is known."""
@@ -260,6 +284,7 @@ class Scenario:
         """The excitation's setpoint batch, to the driver's command channel and the setpoints topic."""
         batch = (first, np.asarray(x, dtype=float), self.session.stream_id, bool(end), block)
         self.batches.append(batch[:4])
+        self.streamed.append(batch[:2])
         self.model_inbox.append(batch)
 
     def _act(self, events) -> None:
@@ -339,6 +364,7 @@ class Scenario:
         return self.driver.controller_state in ('idle', 'fault', 'holding') and self.driver.stream is None
 
     def _outcome(self, ended_at: float) -> Outcome:
+        self._publish_samples(self.batcher.take())    # the rig is at rest: its last partial batch goes now
         blocks = self.measured
 
         def cat(name):
@@ -347,4 +373,5 @@ class Scenario:
         st = self.driver.status
         return Outcome(seq, cat('displacement'), cat('force'), cat('setpoint'), self.completed, self.ended,
                        ended_at, events=list(self.driver.events), faults=list(st.fault_messages),
-                       counters=dict(self.driver.counters), blocks=self.runner.block_summaries)
+                       counters=dict(self.driver.counters), blocks=self.runner.block_summaries,
+                       detections=list(self.events), streamed=list(self.streamed))
