@@ -38,7 +38,7 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
@@ -57,6 +57,7 @@ from ..rig.config import RigConfig
 from ..rig.sim.controller import SimController
 from .liveness import PERIOD, OwnerWatch, Peers
 from .program_session import LEAD_TIME, ProgramSession
+from .scenario_outcome import Outcome
 
 #: the names components are stalled by
 COMPONENTS = ('excitation', 'driver', 'controller', 'element_model')
@@ -82,43 +83,6 @@ class Stall:
 
     def covers(self, now: float) -> bool:
         return self.at <= now < self.at + self.duration
-
-
-@dataclass
-class Outcome:
-    """What a scenario ran: the measured samples (SI units, one entry per sample), how the program ended and the
-    driver's events and counters. ``ended_at`` [s] is scenario time from the program's start.
-    """
-
-    sequence: np.ndarray
-    displacement: np.ndarray
-    force: np.ndarray
-    setpoint: np.ndarray
-    completed: bool
-    reason: str
-    ended_at: float
-    events: list = field(default_factory=list)
-    faults: list = field(default_factory=list)
-    counters: dict = field(default_factory=dict)
-    blocks: list = field(default_factory=list)     # excitation.runner.BlockResult of each block run
-    detections: list = field(default_factory=list)  # (scenario time [s], excitation.detectors.Event)
-    streamed: list = field(default_factory=list)   # (first sequence, setpoints [m]) of every batch published
-
-    @property
-    def final_position(self) -> float:
-        return float(self.setpoint[-1]) if self.setpoint.size else math.nan
-
-    def first_departure(self, since: int = 0, tolerance: float = 1.5e-7) -> Optional[int]:
-        """The first sample (sequence >= since) whose applied command is not the setpoint streamed for it (by more
-        than `tolerance` [m]; a hold or abort ramp took over from the program), or None.
-        """
-        queued = {}
-        for first, x in self.streamed:
-            queued.update(zip(range(first, first + len(x)), x.tolist(), strict=True))
-        for seq, u in zip(self.sequence.tolist(), self.setpoint.tolist(), strict=True):
-            if seq >= since and (seq not in queued or abs(u - queued[seq]) > tolerance):
-                return seq
-        return None
 
 
 class Scenario:
@@ -157,6 +121,8 @@ class Scenario:
         self.owner_watch = OwnerWatch(self.peers)
         self.stalls: list[Stall] = []
         self.holds: list = []           # [hold at, resume at, 'due' | 'held' | 'resumed' | refusal] [s]
+        self.actions: list = []         # [at [s], action(scenario)] not yet taken
+        self.refusals: list = []        # the gate's verdicts on foreign batches
         self.log: list[str] = []        # what the excitation said (hold, resume)
         self.predictor = OnlinePredictor(model or ModelChoice())
         self.cutter = CycleCutter(MIN_CYCLE_AMPLITUDE, clock=clock)
@@ -172,7 +138,7 @@ class Scenario:
         self.cycles = deque()           # the element model's cycles on their way to the excitation
         self.batches = deque()          # setpoint batches on their way to the driver
         self.measured = []              # every block the driver measured (what a recorder would record)
-        self.ended, self.completed, self.started_at = '', False, None
+        self.ended, self.completed, self.started_at, self._measured_from = '', False, None, 0
         self._due = {name: self.now for name in COMPONENTS}
         self._next_beat = self.now
 
@@ -196,6 +162,31 @@ class Scenario:
         self.holds.append([float(at), float(at) + float(duration), 'due'])
         return self
 
+    def at(self, t: float, action) -> 'Scenario':
+        """Call ``action(scenario)`` once, `t` [s] after the program's start (an operator, another process on the
+        domain, a parameter change): e.g. ``lambda sc: sc.driver.abort('operator')``. Returns self.
+        """
+        self.actions.append([float(t), action])
+        return self
+
+    def foreign(self, t: float, channel: str, source: str, displacement: float, n: int = 1,
+                copy_stream: bool = True) -> 'Scenario':
+        """`n` setpoint batches of 50 samples at `displacement` [m] from another process, `t` [s] after the start:
+        on `channel` (the owner's command channel, or another one) under the sender name `source`, with the open
+        stream's id and next sequence copied (copy_stream) or made up. The gate's verdicts go to ``self.refusals``.
+        """
+        def send(sc):           # what the setpoints topic shows anyone: the stream id and where the stream goes on
+            first, x = sc.streamed[-1] if sc.streamed else (0, ())
+            stream_id = sc.session.stream_id if copy_stream and sc.session is not None else 12345
+            for _ in range(n):
+                sc.refusals.append(sc.gate.offer(channel, source, first + len(x), np.full(50, displacement),
+                                                 stream_id))
+        return self.at(t, send)
+
+    def wait(self, seconds: float) -> None:
+        """Let `seconds` [s] of scenario time pass (between programs: an operator looking at the rig)."""
+        self._advance_until(lambda: False, seconds, '')
+
     def _stalled(self, component: str) -> bool:
         if self.started_at is None:
             return False
@@ -203,10 +194,20 @@ class Scenario:
         return any(s.component == component and s.covers(t) for s in self.stalls)
 
     # -- running ----------------------------------------------------------------------------------------------------
-    def run(self, timeout: float = None) -> Outcome:
+    def run(self, timeout: float = None, program=None) -> Outcome:
         """Power up, open the stream, run the program until it ends (or `timeout` [s] of scenario time after the
         start: by default the program's duration plus 10 s) and until the rig is at rest; returns the Outcome.
+
+        program: the next program on the same rig (after the first run): the operator resets the faults the
+        last one left (rig_driver/reset) and it runs without the stalls, holds and actions of the first.
         """
+        if program is not None:
+            self.program = program if isinstance(program, Program) else load_program(program)
+            self.stalls, self.holds, self.actions = [], [], []
+            self.ended, self.completed, self.started_at = '', False, None
+            why = self.driver.reset()
+            if why:
+                raise RuntimeError(f'rig_driver/reset refused: {why}')
         self._advance_until(lambda: self.driver.why_not_ready() == '', 5.0, 'the simulated rig did not come up')
         self._open()
         limit = self.now + (timeout if timeout is not None else self.program.duration(self.fs) + 10.0)
@@ -228,7 +229,7 @@ class Scenario:
         self.session = ProgramSession.on_grant(self.program, self.fs, self.cfg.limits, self.grant, self.lead,
                                                self.batch, self.amplitude_control, detectors=self.detectors)
         self.runner = self.session.runner
-        self.started_at = self.now
+        self.started_at, self._measured_from = self.now, len(self.measured)
         self._wake_excitation()
 
     def _advance_until(self, done, seconds: float, why: str) -> None:
@@ -241,6 +242,11 @@ class Scenario:
     def _step(self) -> None:
         """One poll period of scenario time: every component due wakes (controller first: it runs on its own CPU)."""
         self.now += self.periods['driver']
+        if self.actions and self.started_at is not None:
+            due = [a for a in self.actions if self.now - self.started_at >= a[0]]
+            self.actions = [a for a in self.actions if a not in due]
+            for _, action in due:
+                action(self)
         if not self._stalled('controller'):
             self.controller.serve(self.now)
         if not self._stalled('driver'):
@@ -365,7 +371,7 @@ class Scenario:
 
     def _outcome(self, ended_at: float) -> Outcome:
         self._publish_samples(self.batcher.take())    # the rig is at rest: its last partial batch goes now
-        blocks = self.measured
+        blocks = self.measured[self._measured_from:]
 
         def cat(name):
             return np.concatenate([getattr(b, name) for b in blocks]) if blocks else np.zeros(0)
@@ -374,4 +380,5 @@ class Scenario:
         return Outcome(seq, cat('displacement'), cat('force'), cat('setpoint'), self.completed, self.ended,
                        ended_at, events=list(self.driver.events), faults=list(st.fault_messages),
                        counters=dict(self.driver.counters), blocks=self.runner.block_summaries,
-                       detections=list(self.events), streamed=list(self.streamed))
+                       detections=list(self.events), streamed=list(self.streamed),
+                       played_end=self.driver.controller_sequence + 1)
