@@ -39,9 +39,9 @@ FOLLOW_TOLERANCE = 1.5e-7
 
 #: [s] how far ahead of the latest measured sample a program is streamed by default (the excitation's lead_time):
 #: the queue rides out a stall of its producer of lead - the driver's stream_timeout (0.15 s) - one stream period
-#: (0.8 s: 0.6 s; a busy computer delays an executor 0.3-0.8 s), at the price of amplitude-loop latency (a 30 Hz
-#: block of 40 cycles ends 1.3 % short, 0.0 % at 0.5 s: benchmarks/bench_scenario.py --lead)
-LEAD_TIME = 0.8
+#: (0.7 s: 0.55 s; a busy computer delays an executor 0.3-0.8 s), at the price of amplitude-loop latency (a 30 Hz
+#: block of 40 cycles ends 0.6 % short, 0.0 % at 0.5 s, 1.3 % at 0.8 s: benchmarks/bench_scenario.py --lead)
+LEAD_TIME = 0.7
 
 #: publish(first_sequence, displacement [m], block_index, end_of_stream): how a session hands setpoints on
 Publish = Callable[[int, object, int, bool], None]
