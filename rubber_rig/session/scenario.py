@@ -49,12 +49,9 @@ from ..excitation.program import Program, load_program
 from ..online import ModelChoice, OnlinePredictor, cycle_properties
 from ..online.cutter import CycleCutter
 from ..rig.can.batcher import SampleBatcher
-from ..rig.can.driver import RigDriver
 from ..rig.can.gate import StreamGate
-from ..rig.can.simbus import BusMedium
 from ..rig.can.stream import StreamRefused
-from ..rig.config import RigConfig
-from ..rig.sim.controller import SimController
+from ..rig.stepped import SteppedRig
 from .liveness import PERIOD, OwnerWatch, Peers
 from .program_session import LEAD_TIME, ProgramSession
 from .scenario_outcome import Outcome
@@ -101,20 +98,15 @@ class Scenario:
                  stream_period: float = 0.02, batch_size: int = 50, owner_timeout: float = 1.0,
                  poll_period: float = 0.002, amplitude_control: bool = False, model: Optional[ModelChoice] = None,
                  detectors: Optional[list] = None, start: float = 100.0):
-        self.now = float(start)
-        self.cfg = RigConfig.from_dict({**(rig or {}), 'paced': True})
+        self.rig = SteppedRig(rig, step=poll_period, start=start)
+        self.cfg = self.rig.cfg
         self.program = program if isinstance(program, Program) else load_program(program)
         self.fs = self.cfg.sample_rate
         self.lead, self.batch = math.ceil(lead_time * self.fs), int(batch_size)
         self.periods = {'excitation': float(stream_period), 'driver': float(poll_period), 'controller': 0.0}
         self.owner_timeout, self.amplitude_control = float(owner_timeout), amplitude_control
         clock = self.clock
-        medium = BusMedium(self.cfg.bitrate, self.cfg.data_bitrate, self.cfg.fd, tx_queue=self.cfg.tx_queue,
-                           clock=clock, threaded=False)
-        self.controller = SimController(medium.attach('controller'), self.fs, self.cfg.sim, paced=True,
-                                        profile=self.cfg.frame_profile, clock=clock)
-        self.driver = RigDriver(medium.attach('host'), self.cfg, clock=clock)
-        self.driver.measured_load = medium.load
+        self.controller, self.driver = self.rig.controller, self.rig.driver
         self.gate = StreamGate(self.driver, clock=clock)
         self.batcher, self.samples_per_batch = SampleBatcher(clock=clock), max(1, round(BATCH_PERIOD * self.fs))
         self.peers = Peers(silent=owner_timeout, clock=clock)
@@ -142,8 +134,13 @@ class Scenario:
         self._due = {name: self.now for name in COMPONENTS}
         self._next_beat = self.now
 
+    @property
+    def now(self) -> float:
+        """Scenario time [s]: the rig's clock."""
+        return self.rig.now
+
     def clock(self) -> float:
-        return self.now
+        return self.rig.now
 
     # -- what a test injects --------------------------------------------------------------------------------------
     def stall(self, component: str, at: float, duration: float = math.inf) -> 'Scenario':
@@ -241,14 +238,14 @@ class Scenario:
 
     def _step(self) -> None:
         """One poll period of scenario time: every component due wakes (controller first: it runs on its own CPU)."""
-        self.now += self.periods['driver']
+        self.rig.advance(serve=False)
         if self.actions and self.started_at is not None:
             due = [a for a in self.actions if self.now - self.started_at >= a[0]]
             self.actions = [a for a in self.actions if a not in due]
             for _, action in due:
                 action(self)
         if not self._stalled('controller'):
-            self.controller.serve(self.now)
+            self.controller.serve(self.rig.now)
         if not self._stalled('driver'):
             self._wake_driver()
         if not self._stalled('element_model'):
