@@ -43,7 +43,7 @@ ALLOWED = {
     'excitation': {'models', 'safety', 'settings', 'units'},
     'recording': {'__init__', 'versions'},
     'rig': {'models', 'safety', 'settings'},
-    'session': {'excitation', 'online', 'rig', 'safety'},
+    'session': {'excitation', 'online', 'recording', 'rig', 'safety'},
     'online': {'analysis', 'excitation', 'models'},
     'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig', 'session', 'units'},
     'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'session',

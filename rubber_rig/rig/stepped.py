@@ -36,8 +36,9 @@ class SteppedRig:
     def __init__(self, config=None, step: float = 0.001, start: float = 100.0):
         cfg = config if isinstance(config, RigConfig) else RigConfig.from_dict({**(config or {}), 'paced': True})
         self.cfg, self.step, self.now = cfg, float(step), float(start)
+        # frames are stamped with the simulated time itself: the same run gives the same stamps
         medium = BusMedium(cfg.bitrate, cfg.data_bitrate, cfg.fd, tx_queue=cfg.tx_queue, clock=self.clock,
-                           threaded=False)
+                           threaded=False, time_offset=0.0)
         controller_bus, host_bus = medium.attach('controller'), medium.attach('host')
         self.controller = SimController(controller_bus, cfg.sample_rate, cfg.sim, paced=True,
                                         profile=cfg.frame_profile, clock=self.clock)

@@ -48,13 +48,14 @@ from ..excitation.detectors import strongest
 from ..excitation.program import Program, load_program
 from ..online import ModelChoice, OnlinePredictor, cycle_properties
 from ..online.cutter import CycleCutter
+from ..recording.writer import RecordingWriter
 from ..rig.can.batcher import SampleBatcher
 from ..rig.can.gate import StreamGate
 from ..rig.can.stream import StreamRefused
 from ..rig.stepped import SteppedRig
 from .liveness import PERIOD, OwnerWatch, Peers
 from .program_session import LEAD_TIME, ProgramSession
-from .scenario_outcome import Outcome
+from .scenario_outcome import Outcome, sample_batch_record, setpoint_batch_record
 
 #: the names components are stalled by
 COMPONENTS = ('excitation', 'driver', 'controller', 'element_model')
@@ -89,7 +90,8 @@ class Scenario:
     sim.seed sets the noise); lead_time [s], stream_period [s], batch_size [samples] as the excitation node's
     parameters; owner_timeout [s] as rig_driver's; poll_period [s] the driver's poll timer, the scenario's step;
     model the element model's choice (default: the simulated specimen's parameter set); detectors the
-    DetectorSpecs (default: the program's own plus the excitation's defaults).
+    DetectorSpecs (default: the program's own plus the excitation's defaults); record: an MCAP path the samples
+    and setpoints of each program are written to as the recorder writes them, stamped with scenario time.
     """
 
     OWNER = '/scenario/excitation'
@@ -97,7 +99,7 @@ class Scenario:
     def __init__(self, program, rig: Optional[dict] = None, *, lead_time: float = LEAD_TIME,
                  stream_period: float = 0.02, batch_size: int = 50, owner_timeout: float = 1.0,
                  poll_period: float = 0.002, amplitude_control: bool = False, model: Optional[ModelChoice] = None,
-                 detectors: Optional[list] = None, start: float = 100.0):
+                 detectors: Optional[list] = None, record=None, start: float = 100.0):
         self.rig = SteppedRig(rig, step=poll_period, start=start)
         self.cfg = self.rig.cfg
         self.program = program if isinstance(program, Program) else load_program(program)
@@ -124,6 +126,7 @@ class Scenario:
         self.streamed: list = []        # (first sequence, setpoints) of every batch the excitation published
         self.session: Optional[ProgramSession] = None
         self.grant = None
+        self.record, self.writer = record, None
         # the topics: what each component receives at its next wake-up
         self.samples = deque()          # sample blocks on their way to the excitation
         self.model_inbox = deque()      # sample blocks and setpoint batches on their way to the element model
@@ -226,6 +229,10 @@ class Scenario:
         self.session = ProgramSession.on_grant(self.program, self.fs, self.cfg.limits, self.grant, self.lead,
                                                self.batch, self.amplitude_control, detectors=self.detectors)
         self.runner = self.session.runner
+        if self.record is not None:
+            self.writer = RecordingWriter(self.record, {'source': 'rubber_rig.session.scenario', 'program':
+                                                        self.program.name}, overwrite=True,
+                                          clock_ns=lambda: int(round(self.now * 1e9)))
         self.started_at, self._measured_from = self.now, len(self.measured)
         self._wake_excitation()
 
@@ -267,6 +274,8 @@ class Scenario:
 
     def _publish_samples(self, *batches) -> None:
         for batch in batches:
+            if batch is not None and self.writer is not None:
+                self.writer.write_message(*sample_batch_record(batch))
             if batch is not None:
                 self.measured.append(batch)
                 self.samples.append(batch)
@@ -288,6 +297,8 @@ class Scenario:
         batch = (first, np.asarray(x, dtype=float), self.session.stream_id, bool(end), block)
         self.batches.append(batch[:4])
         self.streamed.append(batch[:2])
+        if self.writer is not None:
+            self.writer.write_message(*setpoint_batch_record(self.now, batch, self.OWNER, 1.0 / self.fs))
         self.model_inbox.append(batch)
 
     def _act(self, events) -> None:
@@ -368,6 +379,9 @@ class Scenario:
 
     def _outcome(self, ended_at: float) -> Outcome:
         self._publish_samples(self.batcher.take())    # the rig is at rest: its last partial batch goes now
+        if self.writer is not None:
+            self.writer.close()
+            self.writer = None
         blocks = self.measured[self._measured_from:]
 
         def cat(name):
@@ -379,3 +393,4 @@ class Scenario:
                        counters=dict(self.driver.counters), blocks=self.runner.block_summaries,
                        detections=list(self.events), streamed=list(self.streamed),
                        played_end=self.driver.controller_sequence + 1)
+

@@ -13,7 +13,8 @@
 # limitations under the License.
 
 """What a scenario (rubber_rig.session.scenario) ran: the measured samples, how its program ended, the driver's
-and the detectors' events, and the questions a test asks of them (where the rig left the program).
+and the detectors' events, and the questions a test asks of them (where the rig left the program); and the
+records it writes to MCAP as the recorder node writes the topics (stamped with scenario time).
 """
 from __future__ import annotations
 
@@ -60,3 +61,32 @@ class Outcome:
             if seq >= since and (seq not in queued or abs(u - queued[seq]) > tolerance):
                 return seq
         return None
+
+
+NS = '/scenario'        # the namespace of a scenario's recorded topics
+
+
+def header(t: float) -> dict:
+    """A std_msgs/Header stamped `t` [s] (scenario time: the same run, the same stamps)."""
+    ns = int(round(t * 1e9))
+    return {'stamp': {'sec': ns // 1_000_000_000, 'nanosec': ns % 1_000_000_000}, 'frame_id': ''}
+
+
+def sample_batch_record(batch) -> tuple[str, str, dict]:
+    """(topic, type, fields) of a rig.can.stream.SampleBlock as rig_driver publishes it (msg_defs/RigSampleBatch)."""
+    return f'{NS}/samples', 'msg_defs/msg/RigSampleBatch', {
+        'header': header(batch.t0), 'first_sequence': batch.first_sequence, 'sample_period': batch.sample_period,
+        'displacement': batch.displacement.tolist(), 'force': batch.force.tolist(),
+        'setpoint': batch.setpoint.tolist(), 'temperature': float(batch.temperature),
+        'status_flags': int(batch.status_flags), 'frames_lost': int(batch.frames_lost)}
+
+
+def setpoint_batch_record(t: float, batch: tuple, source: str, sample_period: float) -> tuple[str, str, dict]:
+    """(topic, type, fields) of an excitation setpoint batch (first, displacement [m], stream id, end, block)
+    published at `t` [s] (msg_defs/SetpointBatch).
+    """
+    first, x, stream_id, end, block = batch
+    return f'{NS}/setpoints', 'msg_defs/msg/SetpointBatch', {
+        'header': header(t), 'stream_id': int(stream_id), 'source': source, 'first_sequence': int(first),
+        'sample_period': sample_period, 'displacement': x.tolist(), 'block_index': int(block),
+        'end_of_stream': bool(end)}

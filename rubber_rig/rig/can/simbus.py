@@ -70,13 +70,15 @@ class BusMedium:
     makes a classic-only segment that refuses FD frames), tx_queue [frames] the transmit queue of each node,
     clock a function returning seconds [s] (time.monotonic, or a fake clock in tests; waits in recv assume it
     runs at real speed), load_window [s] how far back :meth:`load` can look, threaded False when one thread
-    steps every node on a simulated clock (an empty receive then never yields the GIL). Thread safe.
+    steps every node on a simulated clock (an empty receive then never yields the GIL), time_offset [s] what
+    turns clock() into frame timestamps (default: time.time()'s scale; a simulated clock gives its own). Thread
+    safe.
     Delivered frames carry their arrival time on time.time()'s scale: clock() + time_offset [s].
     """
 
     def __init__(self, bitrate: float = 1_000_000, data_bitrate: float = 5_000_000, fd: bool = True,
                  tx_queue: int = 256, clock=time.monotonic, load_window: float = 1.0, name: str = None,
-                 threaded: bool = True):
+                 threaded: bool = True, time_offset: float = None):
         if bitrate <= 0 or (data_bitrate is not None and data_bitrate <= 0):
             raise ValueError(f'bitrates must be positive, not {bitrate}, {data_bitrate} bit/s')
         if tx_queue < 1:
@@ -97,7 +99,7 @@ class BusMedium:
         self._cond = threading.Condition(self._lock)
         self._now = clock()
         # delivered timestamps are on time.time()'s scale, like those of the hardware interfaces
-        self.time_offset = time.time() - self._now
+        self.time_offset = time.time() - self._now if time_offset is None else float(time_offset)
         self._nodes = []
         self._node_names = itertools.count()
         # frames waiting for the bus: (arbitration key, enqueue counter, enqueue time, duration, node, frame)
