@@ -132,7 +132,7 @@ class ProgramSession:
         self.elapsed_samples += n
         if self.monitor is None:
             return []
-        block, block_cycles, program_cycles = self.runner.cycles_done(self.next_sample - 1)
+        block, block_cycles, program_cycles = self.runner.where.cycles_done(self.next_sample - 1)
         if block < 0:
             return []
         return self.monitor.on_progress(block, block_cycles, program_cycles, self.elapsed, self.next_sample)
@@ -250,7 +250,7 @@ class ProgramSession:
             return f'resumed after the rig had run the whole program (it left it at sample {self.left_at})'
         b = r.block_index
         blk = r.program.blocks[b]
-        done = r.cycles_before.get(b, 0)
+        done = r.where.cycles_before.get(b, 0)
         owed = f', {blk.cycles} full cycles still owed of {blk.cycles + done}' if blk.periodic else ''
         return (f"resumed block {b} '{blk.name}' on stream {self.stream_id} from sample {self.start_sequence}: the "
                 f'rig left the program at sample {self.left_at} ({self.left_at - self.held_at} samples after the '
