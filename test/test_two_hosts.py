@@ -67,6 +67,7 @@ def drop_hosts(*hosts):
         sh('ip', 'netns', 'del', host, check=False)      # its end of the veth pair goes with it
 
 
+@pytest.mark.ros
 def test_two_hosts_run_a_program_survive_a_cut_link_and_run_the_next():
     if os.environ.get(RIG_PC):
         pytest.skip('the run on the second host (test_on_the_second_host)')
@@ -89,6 +90,7 @@ def test_two_hosts_run_a_program_survive_a_cut_link_and_run_the_next():
         drop_hosts(rig, lab)
 
 
+@pytest.mark.ros
 def test_on_the_second_host(tmp_path):
     rig = os.environ.get(RIG_PC)
     if not rig:

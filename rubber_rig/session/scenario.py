@@ -393,4 +393,3 @@ class Scenario:
                        counters=dict(self.driver.counters), blocks=self.runner.block_summaries,
                        detections=list(self.events), streamed=list(self.streamed),
                        played_end=self.driver.controller_sequence + 1)
-
