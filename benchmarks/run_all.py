@@ -74,6 +74,8 @@ BENCHMARKS = (
               '--json'),
     Benchmark('detector_causes', 'bench_detector_causes.py', (), 'what each detector event is put down to: specimen, '
               'model mismatch, load-cell faults, fixture slip; delays and false trips', 10),
+    Benchmark('scenario', 'bench_scenario.py', ('--lead',), 'the scenario harness on simulated time: speed, scenarios, '
+              'the lead_time table', 2),
     Benchmark('safety', 'bench_safety.py', (), 'abort latency per path, stopping distance, false trips', 40,
               '--json'),
     Benchmark('suite', 'bench_suite.py', ('--rate', '1000', '--duration', '600'), 'the node suite at 1 kHz for '

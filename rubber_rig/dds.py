@@ -18,8 +18,10 @@
   file: the shipped ``config/fastdds_localhost.xml`` (UDPv4 on 127.0.0.1 only, no shared memory, unicast
   discovery of at most 64 participants). rmw is handed ``SYSTEM_DEFAULT`` so that it applies the file instead
   of its own LOCALHOST set-up, which adds shared memory whatever ``FASTDDS_BUILTIN_TRANSPORTS`` says.
-- ``SUBNET``, or unset (a node started by hand): rmw's SUBNET discovery, built-in transports UDPv4 only
-  (``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` unless set).
+- ``SUBNET``, or unset (a node started by hand, a suite over several hosts): rmw's SUBNET discovery with the
+  shipped ``config/fastdds_subnet.xml`` (UDPv4 on every interface, no shared memory, 50 ms writer heartbeats:
+  samples a network outage lost are repaired at once, not after Fast DDS's 3 s); ``FASTDDS_BUILTIN_TRANSPORTS``
+  is UDPv4 for any participant the file does not set up.
 - ``LOCALHOST`` with ``ROS_STATIC_PEERS``: rmw's own LOCALHOST set-up (UDPv4 and shared memory) with the peers.
 - a profile file of the user's (``FASTRTPS_DEFAULT_PROFILES_FILE``): theirs, untouched.
 
@@ -36,6 +38,7 @@ PEERS_VARIABLE = 'ROS_STATIC_PEERS'
 PROFILES_VARIABLE = 'FASTRTPS_DEFAULT_PROFILES_FILE'      # the name Fast DDS 2.14 (Jazzy) reads
 TRANSPORTS_VARIABLE = 'FASTDDS_BUILTIN_TRANSPORTS'
 LOCALHOST_PROFILE = 'fastdds_localhost.xml'
+SUBNET_PROFILE = 'fastdds_subnet.xml'
 PINNED_MARK = 'RUBBER_RIG_DDS'                            # says the suite chose (children keep the choice)
 
 
@@ -62,5 +65,8 @@ def configure_dds(environ=os.environ) -> str:
     if chosen == 'LOCALHOST':
         return (f'localhost with static peers {environ[PEERS_VARIABLE]}: rmw_fastrtps LOCALHOST set-up (UDPv4 and '
                 'shared memory)')
-    return (f'discovery range {chosen or "SUBNET (ROS default)"}, Fast DDS built-in transports '
-            f'{environ[TRANSPORTS_VARIABLE]}')
+    profile = find_config(SUBNET_PROFILE)
+    environ[PROFILES_VARIABLE] = str(profile)
+    environ[PINNED_MARK] = (f'discovery range {chosen or "SUBNET (ROS default)"}: Fast DDS profile {profile} '
+                            '(UDPv4 on every interface, no shared memory, 50 ms writer heartbeats)')
+    return environ[PINNED_MARK]

@@ -16,6 +16,11 @@
 import os
 
 os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+# One BLAS thread (before numpy is imported): on two cores OpenBLAS's threads cost the fits 2-3x the CPU for the same
+# numbers to the last digit (docs/benchmarks/identification_notes.md), and they take the cores the node processes
+# of the end-to-end tests need. A caller's choice is kept.
+for _threads in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
+    os.environ.setdefault(_threads, '1')
 # Keep test traffic on this machine and away from other ROS graphs on the network, unless the caller chose
 # a range (README "Networking"); an empty value counts as unset, as in `rubber-rig`. Set here, at import,
 # before any test module imports rclpy; node processes the tests start inherit it.

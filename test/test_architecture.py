@@ -43,7 +43,7 @@ ALLOWED = {
     'excitation': {'models', 'safety', 'settings', 'units'},
     'recording': {'__init__', 'versions'},
     'rig': {'models', 'safety', 'settings'},
-    'session': {'excitation', 'online', 'rig', 'safety'},
+    'session': {'excitation', 'online', 'recording', 'rig', 'safety'},
     'online': {'analysis', 'excitation', 'models'},
     'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig', 'session', 'units'},
     'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'session',
@@ -211,7 +211,7 @@ def test_benchmarks_and_scripts_import_names_that_exist():
 # they are. Target: 0.
 RAW_CLOCKS = {('time', 'monotonic'), ('time', 'time'), ('time', 'perf_counter'), ('time', 'monotonic_ns'),
               ('time', 'time_ns'), ('time', 'perf_counter_ns')}
-RAW_CLOCK_CALLS_IN_NODES = 9
+RAW_CLOCK_CALLS_IN_NODES = 6
 
 
 def raw_clock_calls(tree: ast.Module) -> list:

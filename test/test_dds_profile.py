@@ -31,6 +31,7 @@ from rubber_rig.testing.processes import NODES, SuiteProcesses
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / 'config' / 'rig_sim.yaml'
 PROFILE = ROOT / 'config' / dds.LOCALHOST_PROFILE
+SUBNET_PROFILE = ROOT / 'config' / dds.SUBNET_PROFILE
 NS = '/ddsprofile'
 PROGRAM = """name: dds
 blocks:
@@ -127,8 +128,8 @@ def test_the_profile_is_what_the_readme_states():
 
 @pytest.mark.parametrize('env,range_,profile', [
     ({'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}, 'SYSTEM_DEFAULT', PROFILE),
-    ({'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}, 'SUBNET', None),
-    ({}, None, None),                                  # a node started by hand: the ROS default (SUBNET)
+    ({'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}, 'SUBNET', SUBNET_PROFILE),
+    ({}, None, SUBNET_PROFILE),                        # a node started by hand: the ROS default (SUBNET)
     ({'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'ROS_STATIC_PEERS': '10.0.0.2'}, 'LOCALHOST', None),
     ({'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST', 'FASTRTPS_DEFAULT_PROFILES_FILE': '/x.xml'}, 'LOCALHOST',
      '/x.xml'),
@@ -138,7 +139,7 @@ def test_configure_dds_keeps_what_the_user_chose(env, range_, profile):
     first = dds.configure_dds(env)
     assert env.get(dds.RANGE_VARIABLE) == range_
     assert env.get(dds.PROFILES_VARIABLE) == (str(profile) if profile else None)
-    if profile is None:
+    if profile is None or profile == SUBNET_PROFILE:
         assert env[dds.TRANSPORTS_VARIABLE] == 'UDPv4'
     child = dict(env)
     assert dds.configure_dds(child) == first and child == env      # a child process keeps the choice

@@ -312,15 +312,15 @@ blocks:
     r = ProgramRunner(program, fs)
     per_a, per_b = 200, 100
     b0 = 6 * per_a                                      # block b starts after a's 1 + 4 + 1 cycles
-    assert r.cycle_position(per_a, 2 * per_a) is None   # not generated yet
+    assert r.where.cycle_position(per_a, 2 * per_a) is None   # not generated yet
     r.next_setpoints(b0 + 8 * per_b)                    # ... into block b's 8th cycle (its taper first)
-    assert r.cycle_position(0, per_a) == (0, 0, False)                      # taper
-    assert r.cycle_position(2 * per_a, 3 * per_a) == (0, 2, True)
-    assert r.cycle_position(per_a - 50, 2 * per_a - 50)[2] is False              # starts in the taper
-    assert r.cycle_position(4 * per_a + 50, 5 * per_a + 50)[2] is True          # ends a lag after the full part
-    assert r.cycle_position(b0 + 3 * per_b, b0 + 4 * per_b) == (1, 3, True)
-    assert r.cycle_position(b0 - 50, b0 + 50) is None                        # across two blocks
-    assert r.cycles_done(b0 + 6 * per_b) == (1, 5, 9)
+    assert r.where.cycle_position(0, per_a) == (0, 0, False)                      # taper
+    assert r.where.cycle_position(2 * per_a, 3 * per_a) == (0, 2, True)
+    assert r.where.cycle_position(per_a - 50, 2 * per_a - 50)[2] is False              # starts in the taper
+    assert r.where.cycle_position(4 * per_a + 50, 5 * per_a + 50)[2] is True          # ends a lag after the full part
+    assert r.where.cycle_position(b0 + 3 * per_b, b0 + 4 * per_b) == (1, 3, True)
+    assert r.where.cycle_position(b0 - 50, b0 + 50) is None                        # across two blocks
+    assert r.where.cycles_done(b0 + 6 * per_b) == (1, 5, 9)
     r.hold()
     r.next_setpoints(2000)
     # resumed on a new stream, measured up to block b's 6th full cycle: 15 cycles (and tapers) remain
@@ -328,11 +328,11 @@ blocks:
     r.resume_at(start, r.hold_target, measured_sequence=b0 + 6 * per_b + 30)
     x = r.next_setpoints(20000)
     assert r.finished
-    assert r.cycles_before == {1: 5}
+    assert r.where.cycles_before == {1: 5}
     first_b = int(np.argmax(r.last_block_index == 1)) + start
     n_b = int(np.sum(r.last_block_index == 1))
     assert n_b == (1 + 15 + 1) * per_b
-    assert r.cycles_done(first_b + 3 * per_b) == (1, 5 + 2, 4 + 5 + 2)
+    assert r.where.cycles_done(first_b + 3 * per_b) == (1, 5 + 2, 4 + 5 + 2)
     assert np.max(np.abs(x)) <= 0.5e-3 + 1e-12
 
 

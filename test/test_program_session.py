@@ -80,7 +80,7 @@ def test_a_resumed_block_runs_the_cycles_it_had_not_run_and_ends_once_measured()
     # by the hold (10 cycles measured) the taper cycle and 9 of the 20 full ones had run: the other 11 run, with a
     # taper in and out 13 (a block restarted from its beginning would run 22)
     assert 12.5 < cycles < 13.5, cycles
-    assert s.runner.cycles_before == {0: 9}
+    assert s.runner.where.cycles_before == {0: 9}
     assert s.runner.finished and not s.runner.aborted
 
 
@@ -189,7 +189,7 @@ def test_a_held_durability_block_runs_exactly_the_cycles_it_still_owes(rig, phas
     start = grant.first_sequence
     hold_and_resume(rig, s, start + at, lag)
     assert s.left_at == start + at, (s.held_at, s.left_at)     # found in the applied command, not the measurement
-    assert s.runner.cycles_before.get(0, 0) == (done if done < 20 else 0)
+    assert s.runner.where.cycles_before.get(0, 0) == (done if done < 20 else 0)
     run_to_end(rig, s)
     assert full_cycles(rig, 1e-3, 100) == 20
     summary = s.runner.block_summaries[0]
@@ -205,7 +205,7 @@ def test_a_hold_near_a_block_end_resumes_the_block_the_rig_was_in_not_the_one_ge
     s = ProgramSession.on_grant(program, FS, rig.cfg.limits, grant, lead=500, chunk=50, detectors=[])
     start = grant.first_sequence
     hold_and_resume(rig, s, start + 2070, lag=400)
-    assert s.runner.cycles_before == {0: 19}
+    assert s.runner.where.cycles_before == {0: 19}
     run_to_end(rig, s)
     assert full_cycles(rig, 1e-3, 100) == 25
     assert [(b.cycles, b.completed) for b in s.runner.block_summaries] == [(20, True), (5, True)]
@@ -220,7 +220,7 @@ def test_a_hold_during_the_approach_restarts_the_program_from_its_start(rig):
     s = ProgramSession.on_grant(program, FS, rig.cfg.limits, grant, lead=500, chunk=50, detectors=[])
     assert s.runner.state == 'approaching'
     hold_and_resume(rig, s, grant.first_sequence + 20, lag=0)
-    assert s.runner.cycles_before == {}
+    assert s.runner.where.cycles_before == {}
     run_to_end(rig, s)
     assert full_cycles(rig, 1e-3, 100, mean=0.3e-3) == 20
 

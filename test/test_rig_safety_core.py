@@ -16,7 +16,6 @@
 any phase, stream ownership and the true continuation of the command, stream loss, reset and the 16-bit
 sequence wrap, slow and small stuck sensors, limits changed at run time."""
 import math
-import time
 
 import numpy as np
 import pytest
@@ -33,6 +32,7 @@ from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.can.gate import MUTE_AFTER, MUTE_FOR, StreamGate
 from rubber_rig.rig.can.protocol import FAULT_STREAM, SEQ_MOD
 from rubber_rig.rig.can.sensor_check import SensorCheck
+from rubber_rig.rig.stepped import SteppedRig
 from rubber_rig.safety import Limits
 from rubber_rig.safety.ramp import SafeRamp, stopping_positions
 from rubber_rig.session import run_program
@@ -113,7 +113,8 @@ def _at_rest(drv):
 
 
 def _poll_until(drv, condition, n=400000, blocks=None):
-    """Poll until condition() (at most n polls); the SampleBlocks polled are appended to `blocks`."""
+    """Poll until condition() (at most n polls); the SampleBlocks polled are appended to `blocks`. `drv` is a
+    RigDriver (its own thread or pump moves the rig) or a SteppedRig (each poll is one step of its time)."""
     for _ in range(n):
         b = drv.poll()
         if b is not None and blocks is not None:
@@ -243,114 +244,115 @@ def test_stream_must_stop_inside_the_limits_at_deceleration_max():
 # -- item 6: stream loss --------------------------------------------------------------------------------------------
 @pytest.mark.parametrize('action', ['ramp', 'hold'])
 def test_a_stream_that_runs_dry_before_its_end_is_lost_and_ends_in_a_ramp_or_hold(action):
-    """Paced: the owner keeps the stream alive (empty batches every 50 ms) but sends no more setpoints after
-    0.6 s: the rig runs dry, moving, before the owner's last batch. A real controller would hold there under
-    load; the driver calls it a lost stream and ramps to rest (or, stream_loss_action hold, stops and holds,
-    still a fault), says so in status and the events."""
-    with open_rig({'paced': True, 'limits': ISSUE_LIMITS, 'stream_loss_action': action}) as rig:
-        assert rig.wait_ready(5.0)
-        drv = rig.driver
-        g = drv.open_stream('/rig1/excitation')
-        t = np.arange(600) / FS
-        x = 1e-3 * np.sin(2 * np.pi * 5 * t) * np.minimum(t / 0.2, 1.0) ** 2   # ends at ~-0.95 mm, moving
-        assert drv.queue_setpoints(g.first_sequence, x, g.stream_id)
-        end = g.first_sequence + x.size
-        keep_alive = {'t': time.monotonic()}
+    """Paced (on simulated time): the owner keeps the stream alive (empty batches every 50 ms) but sends no more
+    setpoints after 0.6 s: the rig runs dry, moving, before the owner's last batch. A real controller would hold
+    there under load; the driver calls it a lost stream and ramps to rest (or, stream_loss_action hold, stops and
+    holds, still a fault), says so in status and the events."""
+    rig = SteppedRig({'limits': ISSUE_LIMITS, 'stream_loss_action': action})
+    assert rig.wait_ready(5.0)
+    drv = rig.driver
+    g = drv.open_stream('/rig1/excitation')
+    t = np.arange(600) / FS
+    x = 1e-3 * np.sin(2 * np.pi * 5 * t) * np.minimum(t / 0.2, 1.0) ** 2   # ends at ~-0.95 mm, moving
+    assert drv.queue_setpoints(g.first_sequence, x, g.stream_id)
+    end = g.first_sequence + x.size
+    keep_alive = {'t': rig.now}
 
-        def lost():
-            if time.monotonic() - keep_alive['t'] > 0.05:
-                keep_alive['t'] = time.monotonic()
-                drv.queue_setpoints(end, np.empty(0), g.stream_id)
-            return drv.status.faults & FAULT_STREAM
-        blocks = []
-        assert _poll_until(drv, lost, 10 ** 8, blocks)
-        st = drv.status
-        assert 'setpoint stream lost' in st.fault_messages[-1] and 'ran out of setpoints' in st.fault_messages[-1]
-        assert drv.controller_sequence - end < 50                   # detected within 50 ms of running dry
-        assert any('stream lost' in text for _, text in drv.events)
-        seq, u = _poll_collect(drv, 10 ** 8, blocks)
-        assert seq[0] == g.first_sequence and np.all(np.diff(seq) == 1)
-        v = np.abs(contiguous_diffs(seq, u)) * FS
-        assert v.max() <= V_MAX
-        final = drv.status.extra['position']
-        if action == 'ramp':
-            assert final == 0.0
-        else:   # hold: stops where the motion can stop (braking from its last velocity), then stays there
-            assert -D_MAX <= final < 0.0 and final == pytest.approx(x[-1], abs=0.3e-3)
-        assert drv.status.state == 'fault'
-        assert drv.reset() == '' and drv.status.faults == 0
-        # the next stream starts from wherever the rig is, at rest
-        g2 = drv.open_stream('/rig1/excitation')
-        assert g2.position == final and g2.velocity == 0.0
+    def lost():
+        if rig.now - keep_alive['t'] > 0.05:
+            keep_alive['t'] = rig.now
+            drv.queue_setpoints(end, np.empty(0), g.stream_id)
+        return drv.status.faults & FAULT_STREAM
+    blocks = []
+    assert _poll_until(rig, lost, 10 ** 5, blocks)
+    st = drv.status
+    assert 'setpoint stream lost' in st.fault_messages[-1] and 'ran out of setpoints' in st.fault_messages[-1]
+    assert drv.controller_sequence - end < 50                   # detected within 50 ms of running dry
+    assert any('stream lost' in text for _, text in drv.events)
+    seq, u = _poll_collect(rig, 10 ** 5, blocks)
+    assert seq[0] == g.first_sequence and np.all(np.diff(seq) == 1)
+    v = np.abs(contiguous_diffs(seq, u)) * FS
+    assert v.max() <= V_MAX
+    final = drv.status.extra['position']
+    if action == 'ramp':
+        assert final == 0.0
+    else:   # hold: stops where the motion can stop (braking from its last velocity), then stays there
+        assert -D_MAX <= final < 0.0 and final == pytest.approx(x[-1], abs=0.3e-3)
+    assert drv.status.state == 'fault'
+    assert drv.reset() == '' and drv.status.faults == 0
+    # the next stream starts from wherever the rig is, at rest
+    g2 = drv.open_stream('/rig1/excitation')
+    assert g2.position == final and g2.velocity == 0.0
 
 
 def test_a_paced_stream_that_goes_silent_is_lost_while_stream_timeout_of_setpoints_is_left():
-    """Paced at 1 kHz: setpoints for 2 s are queued, then the owner goes silent. Silence alone is not loss (the
-    queue covers it); the driver faults when less than stream_timeout (0.3 s) of setpoints is left, before the
-    rig runs dry, and the rig ramps to rest."""
-    with open_rig({'paced': True, 'limits': ISSUE_LIMITS, 'stream_timeout': 0.3}) as rig:
-        assert rig.wait_ready(5.0)
-        drv = rig.driver
-        g = drv.open_stream('/rig1/excitation')
-        t = np.arange(2000) / FS
-        x = 1e-3 * np.sin(2 * np.pi * 2 * t) * np.minimum(t / 0.3, 1.0) ** 2
-        assert drv.queue_setpoints(g.first_sequence, x, g.stream_id)
-        assert _poll_until(drv, lambda: drv.status.faults & FAULT_STREAM, 10 ** 8)
-        at = drv.controller_sequence - g.first_sequence
-        # 300 setpoints left (+ poll and bus latency, which only make the driver see it later): not earlier
-        assert 1700 <= at <= 1800, at
-        message = drv.status.fault_messages[-1]
-        assert 'no setpoints from /rig1/excitation for 1.' in message and 'ms of setpoints left' in message
-        left_ms = float(message.split('(')[-1].split(' ms')[0])
-        assert 200 <= left_ms <= 300, message
-        assert _poll_until(drv, lambda: _at_rest(drv), 10 ** 8)
-        assert drv.status.extra['position'] == 0.0
+    """Paced at 1 kHz (on simulated time): setpoints for 2 s are queued, then the owner goes silent. Silence alone
+    is not loss (the queue covers it); the driver faults when less than stream_timeout (0.3 s) of setpoints is
+    left, before the rig runs dry, and the rig ramps to rest."""
+    rig = SteppedRig({'limits': ISSUE_LIMITS, 'stream_timeout': 0.3})
+    assert rig.wait_ready(5.0)
+    drv = rig.driver
+    g = drv.open_stream('/rig1/excitation')
+    t = np.arange(2000) / FS
+    x = 1e-3 * np.sin(2 * np.pi * 2 * t) * np.minimum(t / 0.3, 1.0) ** 2
+    assert drv.queue_setpoints(g.first_sequence, x, g.stream_id)
+    assert _poll_until(rig, lambda: drv.status.faults & FAULT_STREAM, 10 ** 5)
+    at = drv.controller_sequence - g.first_sequence
+    # 300 setpoints left (+ poll and bus latency, which only make the driver see it later): not earlier
+    assert 1700 <= at <= 1800, at
+    message = drv.status.fault_messages[-1]
+    assert 'no setpoints from /rig1/excitation for 1.' in message and 'ms of setpoints left' in message
+    left_ms = float(message.split('(')[-1].split(' ms')[0])
+    assert 200 <= left_ms <= 300, message
+    assert _poll_until(rig, lambda: _at_rest(drv), 10 ** 5)
+    assert drv.status.extra['position'] == 0.0
 
 
 def test_a_stalled_owner_whose_queue_covers_the_stall_costs_nothing():
     """Paced at 1 kHz: the owner streams 1.2 s ahead (the excitation's lead_time), then stalls for 0.8 s (a busy
     computer delays its executor) and resumes where it left off. No fault: the rig played the queue through the
-    stall; the program ends with its last batch and nothing lost."""
-    with open_rig({'paced': True, 'limits': ISSUE_LIMITS, 'stream_timeout': 0.3}) as rig:
-        assert rig.wait_ready(5.0)
-        drv = rig.driver
-        g = drv.open_stream('/rig1/excitation')
-        t = np.arange(4000) / FS
-        x = 1e-3 * np.sin(2 * np.pi * 2 * t) * np.minimum(t / 0.3, 1.0) ** 2 * np.minimum((4.0 - t) / 0.3, 1.0) ** 2
-        assert drv.queue_setpoints(g.first_sequence, x[:1200], g.stream_id)
-        # the owner is silent while the rig plays 800 samples (0.8 s of rig time), 400 still queued
-        assert _poll_until(drv, lambda: drv.controller_sequence - g.first_sequence >= 800, 10 ** 8)
-        assert drv.status.faults == 0, drv.status.fault_messages
-        for first in range(1200, 4000, 100):                  # it resumes, and ends its stream
-            assert drv.queue_setpoints(g.first_sequence + first, x[first:first + 100], g.stream_id)
-        drv.end_stream(g.stream_id)
-        assert _poll_until(drv, lambda: not drv.status.extra['stream_owner'] or drv.status.faults, 10 ** 8)
-        assert drv.status.faults == 0, drv.status.fault_messages
-        assert 'completed at sample' in drv.last_event
+    stall; the program ends with its last batch and nothing lost. On simulated time."""
+    rig = SteppedRig({'limits': ISSUE_LIMITS, 'stream_timeout': 0.3})
+    assert rig.wait_ready(5.0)
+    drv = rig.driver
+    g = drv.open_stream('/rig1/excitation')
+    t = np.arange(4000) / FS
+    x = 1e-3 * np.sin(2 * np.pi * 2 * t) * np.minimum(t / 0.3, 1.0) ** 2 * np.minimum((4.0 - t) / 0.3, 1.0) ** 2
+    assert drv.queue_setpoints(g.first_sequence, x[:1200], g.stream_id)
+    # the owner is silent while the rig plays 800 samples (0.8 s of rig time), 400 still queued
+    assert _poll_until(rig, lambda: drv.controller_sequence - g.first_sequence >= 800, 10 ** 5)
+    assert drv.status.faults == 0, drv.status.fault_messages
+    for first in range(1200, 4000, 100):                  # it resumes, and ends its stream
+        assert drv.queue_setpoints(g.first_sequence + first, x[first:first + 100], g.stream_id)
+    drv.end_stream(g.stream_id)
+    assert _poll_until(rig, lambda: not drv.status.extra['stream_owner'] or drv.status.faults, 10 ** 5)
+    assert drv.status.faults == 0, drv.status.fault_messages
+    assert 'completed at sample' in drv.last_event
 
 
 def test_a_granted_stream_that_never_sends_is_withdrawn_without_a_fault():
     """Paced: a client is granted the stream and sends nothing (it died, or is slow to hear the grant). Nothing
     moved, so stream_timeout (for a stream that stops while moving the rig) does not fault it: after
-    FIRST_BATCH_TIMEOUT (2 s) it is withdrawn with an event, the rig idle and free for the next client."""
-    with open_rig({'paced': True, 'limits': ISSUE_LIMITS, 'stream_timeout': 0.3}) as rig:
-        assert rig.wait_ready(5.0)
-        drv = rig.driver
-        g = drv.open_stream('/rig1/excitation')
-        t0 = time.monotonic()
-        # deliberately let 0.6 s pass (twice stream_timeout) with the rig polled: a silence to be survived
-        assert _poll_until(drv, lambda: time.monotonic() - t0 > 0.6, 10 ** 8)
-        # past 0.3 s: no fault
-        assert drv.status.faults == 0 and drv.status.extra['stream_owner'] == '/rig1/excitation'
-        assert _poll_until(drv, lambda: not drv.status.extra['stream_owner'], 10 ** 8)
-        waited = time.monotonic() - t0
-        assert drv.FIRST_BATCH_TIMEOUT <= waited <= drv.FIRST_BATCH_TIMEOUT + 0.5, waited
-        assert drv.status.faults == 0 and drv.status.state == 'idle'
-        assert 'withdrawn: no batch within 2.0' in drv.last_event and str(g.stream_id) in drv.last_event
-        assert drv.queue_setpoints(g.first_sequence, [0.0], g.stream_id) is False      # the old grant is gone
-        g2 = drv.open_stream('/rig1/other')                                            # the rig is free
-        x = np.zeros(100)
-        assert drv.queue_setpoints(g2.first_sequence, x, g2.stream_id)
+    FIRST_BATCH_TIMEOUT (2 s) it is withdrawn with an event, the rig idle and free for the next client. On
+    simulated time."""
+    rig = SteppedRig({'limits': ISSUE_LIMITS, 'stream_timeout': 0.3})
+    assert rig.wait_ready(5.0)
+    drv = rig.driver
+    g = drv.open_stream('/rig1/excitation')
+    t0 = rig.now
+    # deliberately let 0.6 s pass (twice stream_timeout) with the rig polled: a silence to be survived
+    assert _poll_until(rig, lambda: rig.now - t0 > 0.6, 10 ** 5)
+    # past 0.3 s: no fault
+    assert drv.status.faults == 0 and drv.status.extra['stream_owner'] == '/rig1/excitation'
+    assert _poll_until(rig, lambda: not drv.status.extra['stream_owner'], 10 ** 5)
+    waited = rig.now - t0
+    assert drv.FIRST_BATCH_TIMEOUT <= waited <= drv.FIRST_BATCH_TIMEOUT + 0.01, waited
+    assert drv.status.faults == 0 and drv.status.state == 'idle'
+    assert 'withdrawn: no batch within 2.0' in drv.last_event and str(g.stream_id) in drv.last_event
+    assert drv.queue_setpoints(g.first_sequence, [0.0], g.stream_id) is False      # the old grant is gone
+    g2 = drv.open_stream('/rig1/other')                                            # the rig is free
+    x = np.zeros(100)
+    assert drv.queue_setpoints(g2.first_sequence, x, g2.stream_id)
 
 
 # -- item 5: reset, and the 16-bit sequence wrap ------------------------------------------------------------------
@@ -413,13 +415,13 @@ def test_no_false_stuck_sensor_on_slow_and_small_healthy_motion():
 # -- item 8: limits at run time ------------------------------------------------------------------------------------
 def _poll_collect(drv, n=400000, blocks=None):
     """Poll until the rig is at rest and nothing more arrives; (sequence, applied command) of every sample
-    polled, after those already in `blocks`."""
+    polled, after those already in `blocks` (drv: a RigDriver or a SteppedRig, as _poll_until)."""
     blocks = [] if blocks is None else blocks
     for _ in range(n):
         b = drv.poll()
         if b is not None:
             blocks.append(b)
-        elif _at_rest(drv):
+        elif _at_rest(getattr(drv, 'driver', drv)):
             break
     return np.concatenate([b.sequence for b in blocks]), np.concatenate([b.setpoint for b in blocks])
 

@@ -211,6 +211,7 @@ class LoadCellJudge:
         self.fault = ''              # stuck | saturation while the load cell is out (the detectors are blind)
         self.last = 'normal'         # the previous cycle's class: a clipped cycle counts when two are in a row
         self.reported: set = set()   # (block, code) reported: each code once per block, like a detector's trip
+        self.settling = 0            # steady cycles after a resume judged only for a stuck cell (see rearm)
 
     @staticmethod
     def _signature(c) -> tuple:
@@ -288,6 +289,9 @@ class LoadCellJudge:
             self._learn(c.block, self._signature(c))
             return out + ([Verdict('specimen', 'changed', trips)] if trips else [])
         kind, s = self.classify(c)
+        if self.settling and kind != 'stuck':
+            self.settling -= 1
+            return [Verdict('specimen', 'changed', trips)] if trips else []
         # the cycle a step happens in loses its shape too (its loop does not close): clipping is two in a row
         last, self.last = self.last, kind
         if kind == 'stuck' or (kind == 'saturated' and last == 'saturated'):
@@ -352,9 +356,7 @@ class LoadCellJudge:
                              'from a fixture slip')
 
     def _relearn(self, block: int) -> None:
-        """A change put down to the specimen or its fixture is its new state: the block's signature is learnt
-        afresh from the next cycles (trips meanwhile are released as the specimen's).
-        """
+        """A change of the specimen or its fixture is its new state: the block's signature is learnt afresh."""
         self.references.pop(block, None)
         self.learning.pop(block, None)
 
@@ -377,9 +379,8 @@ class LoadCellJudge:
         if code in ('stuck', 'saturation'):
             self.fault = code
         if code == 'stuck':
-            value, reference, threshold, units = (c.measured.get('force_amplitude', math.nan),
-                                                  self.expected_amplitude(c), STUCK_FRACTION
-                                                  * self.expected_amplitude(c), 'N')
+            reference = self.expected_amplitude(c)
+            value, threshold, units = c.measured.get('force_amplitude', math.nan), STUCK_FRACTION * reference, 'N'
             detail = detail or 'the force amplitude fell to nothing while the displacement kept its amplitude'
         elif code == 'saturation':
             value, reference, threshold, units = s[3], ref.shape, SHAPE_DROP, '-'
@@ -393,6 +394,7 @@ class LoadCellJudge:
         return [Verdict('sensor', code, [], value, reference, threshold, units, detail)]
 
     def rearm(self) -> None:
-        """After a hold: judge the load cell afresh (a stuck or clipped one is reported again if it still is)."""
+        """After a hold: judge afresh; a rested specimen relaxes, so settle_cycles + 2 cycles judge only stuck."""
         self.fault, self.held, self.last = '', None, 'normal'
+        self.settling = self.spec.settle_cycles + 2
         self.reported.clear()

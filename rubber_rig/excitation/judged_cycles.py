@@ -55,12 +55,12 @@ def cycle_of(runner, start: int, end: int, amplitude: float, peak_amplitude: flo
     excitation ProgramRunner), or None outside one periodic block (an approach or hold ramp, a foreign stream) or
     in one whose cycles are not judged (WaveformType.judged). Amplitude as WaveformType.cycle_amplitude reads it.
     """
-    where = runner.cycle_position(start, end)
+    where = runner.where.cycle_position(start, end)
     blk = runner.program.blocks[where[0]] if where is not None else None
     if blk is None or not blk.type.judged:
         return None
     block, number, steady = where
-    _, _, program_cycles = runner.cycles_done(end - 1)
+    _, _, program_cycles = runner.where.cycles_done(end - 1)
     return Cycle(block, number, steady, blk.type.cycle_amplitude(amplitude, peak_amplitude), mean, measured, model,
                  residual_rms, blk.amplitude, blk.mean, elapsed, program_cycles, int(end))
 
@@ -74,7 +74,7 @@ def blind_for(runner, sequence: int, last_cycle_end: int, sample_rate: float) ->
     BLIND_SECONDS and BLIND_CYCLES cycles: the element model's cycle metrics are not arriving, so no cycle
     detector can trip. 0.0 otherwise (judging keeps up, or the rig is not in a periodic block).
     """
-    located = runner.locate(sequence)
+    located = runner.where.locate(sequence)
     if located is None:
         return 0.0
     block, phase = located

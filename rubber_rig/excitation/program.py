@@ -21,6 +21,7 @@ MAX_PROGRAM_DURATION (24 h) of rig time, every number finite, every block freque
 the sample-rate rule (f <= MAX_FREQUENCY_FRACTION * fs, i.e. fs/10) is checked by Program.check_sample_rate
 where the rate is known (Limits.check_program, ProgramRunner).
 """
+import dataclasses
 import itertools
 import math
 from dataclasses import dataclass, field
@@ -146,6 +147,12 @@ class Program:
                                f'({MAX_PROGRAM_DURATION / 3600:g} h), the longest accepted')
 
     # ---- timing
+    def copy(self) -> 'Program':
+        """A copy whose block list (and its cached block starts) can change without touching this one (a resumed
+        block runs only the cycles it still owes: ProgramRunner.resume_at).
+        """
+        return dataclasses.replace(self, blocks=list(self.blocks), detectors=list(self.detectors), _starts={})
+
     def block_starts(self, sample_rate: float) -> np.ndarray:
         """Program sample index at which each block starts, plus the total as last element (shape n+1)."""
         key = float(sample_rate)

@@ -15,7 +15,6 @@
 """ProgramRunner: turns a program into setpoint chunks from the sample index, with amplitude control,
 limit enforcement on every setpoint, hold/resume and the abort ramp.
 """
-import bisect
 import dataclasses
 import math
 from dataclasses import dataclass
@@ -62,7 +61,7 @@ class BlockResult:
     message: str = ''
 
 
-class ProgramRunner(Whereabouts):
+class ProgramRunner:
     """Generates the setpoints [m] of `program` at `sample_rate` [Hz], chunk by chunk, from the sample index.
 
     Setpoint sequence numbers start at start_sequence; measurements fed back with the same numbering drive the
@@ -84,7 +83,7 @@ class ProgramRunner(Whereabouts):
     def __init__(self, program, sample_rate: float, limits: Limits = None, amplitude_control: bool = False,
                  start_sequence: int = 0, compensation_memory: bool = True, start_position: float = None,
                  start_velocity: float = 0.0, check_program: bool = True):
-        self.program, self.fs = program, float(sample_rate)
+        self.program, self.fs = program.copy(), float(sample_rate)   # resume_at shortens a block of its own copy
         self.limits = limits if limits is not None else Limits()
         if check_program:
             precheck(self.limits, program, self.fs)
@@ -110,10 +109,8 @@ class ProgramRunner(Whereabouts):
         self._ramp_from = {}                          # ramp block index -> start override after a hold
         self._loops = {}                              # block index -> BlockLoop of its latest run
         self._learned = {}                            # block index -> (loop, estimates) last put in memory
-        self._segments = []                           # [seq0, seq1, block, local0, loop]
-        self._seg_starts = []
+        self.where = Whereabouts(self.program, self.fs)   # what was generated for which sample: where a sample is
         self._completed = set()
-        self.cycles_before = {}                       # block index -> full cycles run before its latest resume
         self.cycles_measured_before = {}              # block index -> steady cycles measured before it
         self.last_block_index = np.empty(0, dtype=np.int32)
 
@@ -172,7 +169,7 @@ class ProgramRunner(Whereabouts):
         if self.state != 'holding':
             return
         b, run = self._hold_block, None
-        at = self.program_position(measured_sequence) if measured_sequence is not None else None
+        at = self.where.program_position(measured_sequence) if measured_sequence is not None else None
         if at is not None:
             b, run = at
         blk = self.program.blocks[b]
@@ -190,7 +187,7 @@ class ProgramRunner(Whereabouts):
                 self.program._starts.clear()
                 self._starts = self.program.block_starts(self.fs)
                 self._total = int(self._starts[-1])
-                self.cycles_before[b] = self.cycles_before.get(b, 0) + done
+                self.where.cycles_before[b] = self.where.cycles_before.get(b, 0) + done
         for later in range(b, len(self.program.blocks)):
             self._completed.discard(later)             # generated before the hold, not run: they run again
         self.sequence = int(sequence)
@@ -320,13 +317,7 @@ class ProgramRunner(Whereabouts):
 
     def _record(self, seq0, m, b):
         local0 = self._p - int(self._starts[b])
-        loop = self._loops.get(b)
-        last = self._segments[-1] if self._segments else None
-        if last and last[1] == seq0 and last[2] == b and last[4] is loop and last[3] + (last[1] - last[0]) == local0:
-            last[1] += m
-            return
-        self._segments.append([seq0, seq0 + m, b, local0, loop])
-        self._seg_starts.append(seq0)
+        self.where.record(seq0, m, b, local0, self._loops.get(b))
 
     # ---- measurement
     def feed_measurement(self, first_seq: int, displacement) -> None:
@@ -339,9 +330,7 @@ class ProgramRunner(Whereabouts):
         if x.size == 0:
             return
         s0, s1 = int(first_seq), int(first_seq) + x.size
-        j = max(bisect.bisect_right(self._seg_starts, s0) - 1, 0)
-        while j < len(self._segments) and self._segments[j][0] < s1:
-            seq0, seq1, b, local0, loop = self._segments[j]
+        for seq0, seq1, b, local0, loop in self.where.overlapping(s0, s1):
             lo, hi = max(s0, seq0), min(s1, seq1)
             if lo < hi and loop is not None:
                 t = (local0 + np.arange(lo - seq0, hi - seq0)) / self.fs
@@ -350,7 +339,6 @@ class ProgramRunner(Whereabouts):
                 loop.flush()   # the block's last cycle is complete only once generation has left the block
             if loop is not None and self.compensation is not None:
                 self._learn(b, loop)
-            j += 1
 
     def _learn(self, b, loop):
         """Put what `loop` (block b) learned so far into the compensation memory (once per new judged cycle)."""
@@ -396,5 +384,5 @@ class ProgramRunner(Whereabouts):
             # a resumed block runs the cycles it still owed: its summary counts the block's cycles, all of them
             measured = self.cycles_measured_before.get(b, 0) + (len(loop.cycles) if loop else 0)
             out.append(BlockResult(b, blk.name, blk.waveform, blk.frequency, blk.amplitude, amp, blk.mean, mean,
-                                   blk.cycles + self.cycles_before.get(b, 0), measured, done, msg))
+                                   blk.cycles + self.where.cycles_before.get(b, 0), measured, done, msg))
         return out

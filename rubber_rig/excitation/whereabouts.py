@@ -13,8 +13,9 @@
 # limitations under the License.
 
 """Where a sample is in the program: the block and phase of a setpoint's sequence number, the cycle a measured
-cycle belongs to, the cycles done at a sample (counted across holds). Mixed into ProgramRunner, whose setpoint
-generation records the segments these answers are read from (``_segments``, ``_seg_starts``).
+cycle belongs to, the cycles done at a sample (counted across holds). A ProgramRunner records here what it
+generated, segment by segment (``record``), and the cycles a resumed block had run (``cycles_before``); the
+program session, the detectors and the runner's own measurement ask it (``ProgramRunner.where``).
 """
 import bisect
 import math
@@ -23,7 +24,33 @@ import numpy as np
 
 
 class Whereabouts:
-    """The questions about sequence numbers a running program answers (ProgramRunner holds the state)."""
+    """The generation record of one run of `program` at `fs` [Hz], and the questions about sequence numbers it
+    answers. A segment is [seq0, seq1, block, local0 (block sample of seq0), amplitude loop or None].
+    """
+
+    def __init__(self, program, fs: float):
+        self.program, self.fs = program, float(fs)
+        self.segments: list = []
+        self.seg_starts: list = []
+        self.cycles_before: dict = {}       # block index -> full cycles run before its latest resume
+
+    def record(self, seq0: int, m: int, b: int, local0: int, loop) -> None:
+        """Setpoints seq0 .. seq0 + m - 1 were generated for block b from its sample local0 (one segment with the
+        previous one if they continue it).
+        """
+        last = self.segments[-1] if self.segments else None
+        if last and last[1] == seq0 and last[2] == b and last[4] is loop and last[3] + (last[1] - last[0]) == local0:
+            last[1] += m
+            return
+        self.segments.append([seq0, seq0 + m, b, local0, loop])
+        self.seg_starts.append(seq0)
+
+    def overlapping(self, s0: int, s1: int):
+        """The segments holding any of the sequences s0 .. s1 - 1, in order."""
+        j = max(bisect.bisect_right(self.seg_starts, s0) - 1, 0)
+        while j < len(self.segments) and self.segments[j][0] < s1:
+            yield self.segments[j]
+            j += 1
 
     def locate(self, sequence: int):
         """(block index, phase [cycles since the block's start, tapers included; seconds for hold/ramp blocks
@@ -41,10 +68,10 @@ class Whereabouts:
         """The generated segment [seq0, seq1, block, local0, loop] holding the setpoint `sequence`, or None."""
         if sequence is None:
             return None
-        j = bisect.bisect_right(self._seg_starts, sequence) - 1
+        j = bisect.bisect_right(self.seg_starts, sequence) - 1
         if j < 0:
             return None
-        segment = self._segments[j]
+        segment = self.segments[j]
         return segment if segment[0] <= sequence < segment[1] else None
 
     def program_position(self, sequence: int):

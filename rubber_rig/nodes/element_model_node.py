@@ -61,9 +61,6 @@ driver) restarts the model and the cycle detection with a log line.
 """
 from __future__ import annotations
 
-import time
-from collections import deque
-
 import numpy as np
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
@@ -78,13 +75,12 @@ from rubber_rig.nodes.spin import spin_node
 from rubber_rig.online import (
     DEFAULT_REVERSAL_THRESHOLD,
     SOURCES,
-    BlockIndex,
     ChoiceError,
-    CyclePairer,
     ModelChoice,
     OnlinePredictor,
     batch_problem,
 )
+from rubber_rig.online.cutter import CycleCutter
 from rubber_rig.recording.gaps import RESTART, StrayOrRestart
 
 VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
@@ -92,7 +88,6 @@ VALUE_UNITS = {'k0': 'N/m', 'k_inf': 'N/m', 'tau': 's', 'alpha': '-', 'x2': 'm',
 VALUE_RANGES = {'k0': (1e3, 1e11), 'k_inf': (1e3, 1e11), 'tau': (1e-7, 1e4), 'alpha': (1e-3, 1.0),
                 'x2': (1e-8, 1e-1), 'f_fmax': (1e-3, 1e7)}   # wide physical bounds; k_inf >= k0 is checked too
 WARN_EVERY = 5.0      # [s] throttle of the warnings about bad sample batches
-SETPOINT_WAIT = 1.0   # [s] a sample batch waits at most this long for the setpoints that say its block
 CHOICE_PARAMS = ('source', 'parameter_set', 'temperature', 'friction_reversal_threshold') + tuple(
     'values.' + n for n in VALUE_NAMES)
 
@@ -138,13 +133,9 @@ class ElementModelNode(Node):
         self.add_on_set_parameters_callback(self._on_set_parameters)
         self.add_post_set_parameters_callback(self._after_set_parameters)
 
-        self.blocks = BlockIndex()
-        self.cycles = CyclePairer(min_amplitude=min_amplitude)
-        self._cycle_queue = deque()      # sample batches waiting for the setpoints that say their block
-        self._setpoints_wall = -1e9      # time.monotonic() of the latest setpoint batch
+        self.cutter = CycleCutter(min_amplitude)   # cycles block by block, once their setpoints are known
         self._validated = None           # (choice, resolved) of the parameter change being set
         self.batches_dropped = 0         # sample batches refused (batch_problem)
-        self.cycle_errors = 0            # cycles the metrics could not evaluate
         self.stray_batches = 0           # batches that went back and were not followed: stale or foreign
         self.went_back = StrayOrRestart()   # a batch that went back, until the next one says restart or stray
         self.pub_prediction = self.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
@@ -161,10 +152,7 @@ class ElementModelNode(Node):
 
     # -- data path --------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
-        if len(msg.displacement):        # (an empty batch is a keep-alive of the stream: no samples to map)
-            self.blocks.add(msg.first_sequence, len(msg.displacement), msg.block_index)
-        self.blocks.ended = msg.end_of_stream
-        self._setpoints_wall = time.monotonic()
+        self.cutter.setpoints(msg.first_sequence, len(msg.displacement), msg.block_index, msg.end_of_stream)
         self.process_cycles()
 
     def on_samples(self, msg: RigSampleBatch) -> None:
@@ -187,8 +175,7 @@ class ElementModelNode(Node):
                                    f'{held.first_sequence} (driver restarted?): model and cycle detection start '
                                    'afresh')
             self.predictor.restart()
-            self._cycle_queue.clear()
-            self.cycles = CyclePairer(self.cycles.hysteresis, self.cycles.min_amplitude)
+            self.cutter.restart()
             self.on_samples(held)
         elif verdict is not None:
             self.stray_batches += 1
@@ -213,45 +200,19 @@ class ElementModelNode(Node):
         self.pub_prediction.publish(conv.prediction_msg(
             msg, predicted, self.predictor.branch_names, branches if self.publish_branches else None))
         if self.cycle_metrics:
-            self._cycle_queue.append((msg.first_sequence, msg.sample_period, x, f, predicted,
-                                      conv.to_seconds(msg.header.stamp), time.monotonic()))
+            self.cutter.samples(msg.first_sequence, msg.sample_period, x, f, predicted,
+                                conv.to_seconds(msg.header.stamp))
             self.process_cycles()
 
     def process_cycles(self) -> None:
-        """Cut cycles block by block and publish their metrics. Setpoints (which carry the block index) and
-        samples travel on different topics, so the setpoints of a batch can arrive after its samples: a batch
-        waits for them while a stream is open, at most SETPOINT_WAIT seconds (wall time: an unpaced rig runs
-        many seconds of samples per second). Samples after the stream's last batch (a rig holding or at rest),
-        or with no setpoints for SETPOINT_WAIT (a rig moved by something else), belong to no block and go at
-        once.
-        """
-        while self._cycle_queue:
-            first, dt, x, f, predicted, t0, arrived = self._cycle_queue[0]
-            end = first + len(x)
-            now = time.monotonic()
-            if not self.blocks.covered(end - 1) and not self.blocks.ended and now - arrived < SETPOINT_WAIT \
-                    and now - self._setpoints_wall < SETPOINT_WAIT:
-                return
-            self._cycle_queue.popleft()
-            for lo, hi, block in self.blocks.segments(first, len(x)):
-                for a, b in _finite_runs(x[lo:hi], f[lo:hi], predicted[lo:hi]):
-                    # a run after skipped samples starts at a later sequence: the pairer restarts its detector
-                    self._feed_cycles(first, first + lo + a, dt, x[lo + a:lo + b], f[lo + a:lo + b],
-                                      predicted[lo + a:lo + b], block, t0)
-
-    def _feed_cycles(self, first, start, dt, x, f, predicted, block, t0) -> None:
-        try:
-            cycles = self.cycles.feed(start, dt, x, f, predicted, block)
-        except ValueError as exc:   # a cycle the harmonic fit cannot evaluate: report it, start the detection afresh
-            self.cycle_errors += 1
-            self.get_logger().warning(f'cycle metrics at sequence {start}: {exc}; cycle detection restarts '
-                                      f'({self.cycle_errors} so far)', throttle_duration_sec=WARN_EVERY)
-            self.cycles = CyclePairer(self.cycles.hysteresis, self.cycles.min_amplitude)
-            return
-        for c in cycles:
-            t_end = t0 + (c.end_sequence - first) * dt
-            self.pub_metrics.publish(conv.cycle_metrics_msg(c.measured, c.model, block, c.index, t_end,
-                                                            c.start_sequence, c.end_sequence, c.residual_rms))
+        """Publish the metrics of the cycles finished (online.cutter.CycleCutter: block by block)."""
+        for c in self.cutter.cycles():
+            m = c.cycle
+            self.pub_metrics.publish(conv.cycle_metrics_msg(m.measured, m.model, c.block, m.index, c.t_end,
+                                                            m.start_sequence, m.end_sequence, m.residual_rms))
+        for why in self.cutter.error_messages:
+            self.get_logger().warning(why, throttle_duration_sec=WARN_EVERY)
+        self.cutter.error_messages.clear()
 
     def publish_parameters(self) -> None:
         p = self.predictor
@@ -329,15 +290,6 @@ class ElementModelNode(Node):
             self.publish_branches = self.get_parameter('publish_branches').value
         if 'cycle_metrics' in names:
             self.cycle_metrics = self.get_parameter('cycle_metrics').value
-
-
-def _finite_runs(*arrays) -> list[tuple[int, int]]:
-    """[(start, stop)] of the runs of samples finite in every array (all of them when there is nothing to skip)."""
-    good = np.logical_and.reduce([np.isfinite(a) for a in arrays])
-    if good.all():
-        return [(0, len(good))] if len(good) else []
-    edges = np.flatnonzero(np.diff(np.concatenate([[False], good, [False]]).astype(np.int8)))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=False))
 
 
 def main(args=None):

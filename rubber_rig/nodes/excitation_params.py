@@ -24,6 +24,7 @@ from rubber_rig.excitation import read_program
 from rubber_rig.excitation.detector_specs import DEFAULTS, DetectorError, parse_detectors
 from rubber_rig.excitation.limits import element_force_model
 from rubber_rig.nodes.params import ParameterError, declare
+from rubber_rig.session.program_session import LEAD_TIME
 
 
 def declare_excitation_parameters(node: Node) -> None:
@@ -37,7 +38,7 @@ def declare_excitation_parameters(node: Node) -> None:
     node.compensation_memory = declare(node, 'compensation_memory', True, 'with amplitude control, each '
                                        'block starts from the gain and mean offset earlier blocks of the run '
                                        'learned (false: every block starts uncompensated)')
-    node.lead_time = declare(node, 'lead_time', 0.5, 'how far ahead of the latest measured sample '
+    node.lead_time = declare(node, 'lead_time', LEAD_TIME, 'how far ahead of the latest measured sample '
                              'setpoints are streamed', range=(0.02, 5.0), units='s')
     node.batch_size = declare(node, 'batch_size', 50, 'setpoints per SetpointBatch', range=(1, 5000))
     node.stream_period = declare(node, 'stream_period', 0.02, 'period of the streaming timer',

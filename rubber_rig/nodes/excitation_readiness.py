@@ -21,6 +21,7 @@ Each check returns '' or why not, which is what a refused goal or a stopped prog
 """
 from __future__ import annotations
 
+from rclpy.duration import Duration
 from rclpy.node import Node
 
 from msg_defs.msg import RigStatus
@@ -29,6 +30,7 @@ from rubber_rig.excitation.limits import check_program
 from rubber_rig.nodes import awaitables
 from rubber_rig.nodes import conversions as conv
 
+NOW = Duration(seconds=0)    # wait_for_all_acked: ask, do not wait
 READY_STATES = (RigStatus.STATE_IDLE, RigStatus.STATE_RUNNING, RigStatus.STATE_HOLDING)
 
 
@@ -63,6 +65,10 @@ def links_ready(node: Node) -> str:
              node.count_subscribers(node.pub_setpoints.topic_name))):
         if matched < max(known, 1):
             return f'waiting for discovery: our {what} is matched with {matched} of {max(known, 1)} endpoints'
+    # a reliable reader delivers in order: batches of an earlier stream that a broken network link lost are repaired
+    # before anything newer, so a stream opened before that would reach the driver late and run dry
+    if not node.pub_stream.wait_for_all_acked(NOW):
+        return 'waiting for rig_driver to acknowledge the setpoints sent before (a network link came back?)'
     return ''
 
 

@@ -51,7 +51,7 @@ from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import OpenStream, StopStream
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.heartbeat import OwnerWatch, Peers, start_heartbeat
+from rubber_rig.nodes.heartbeat import OwnerSilence, OwnerWatch, Peers, start_heartbeat
 from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles
 from rubber_rig.nodes.rclpy_compat import lifecycle_state
 from rubber_rig.nodes.rig_driver_params import (  # noqa: F401 - also imported from here
@@ -104,7 +104,9 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self.create_timer(1.0, self.find_channels)
         self._poll_timer = None
         start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig is not None else 'unconfigured')
-        self.owner_watch = OwnerWatch(Peers(self, silent=self.owner_timeout))
+        peers = Peers(self, silent=self.owner_timeout)
+        self.owner_watch = OwnerWatch(peers)      # the rule: an owner silent for owner_timeout loses its stream
+        self.owner_silence = OwnerSilence(peers)  # the latest owner while silent, for /diagnostics
         self.create_timer(self.status_period, self.publish_status)
         self.create_timer(self.diagnostics_period, self.publish_diagnostics)
         self.publish_status()
@@ -280,16 +282,15 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self.watch_owner()
         self._last_status = self.status_message()
         self.pub_status.publish(self._last_status)
-        self.owner_watch.silence.update(self._last_status, self.publish_diagnostics)   # news: /diagnostics at once
+        self.owner_silence.update(self._last_status, self.publish_diagnostics)   # news: /diagnostics at once
 
     def watch_owner(self) -> None:
         """A stream owner that beat and then went silent for owner_timeout (OwnerWatch) loses its stream."""
         grant = self.rig.driver.stream if self.rig is not None and self._poll_timer is not None else None
         if grant is None or not grant.owner:
             return
-        age = self.owner_watch.silent_for(grant)
-        if age is not None and age > self.owner_timeout and self.rig.driver.owner_lost(
-                f'{grant.owner} silent for {age:.2f} s (no heartbeat; alive but stuck, or gone)'):
+        why = self.owner_watch.lost(grant, self.owner_timeout)
+        if why and self.rig.driver.owner_lost(why):
             self._log_events()
 
     def publish_diagnostics(self) -> None:
@@ -297,7 +298,7 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         backend = self.config.backend if self.config is not None else self.get_parameter('backend').value
         channel = self.config.channel if self.config is not None else self.get_parameter('can.channel').value
         hw = f'{backend}:{channel or self.get_fully_qualified_name()}'
-        self.pub_diag.publish(self.owner_watch.silence.annotate(conv.diagnostics_msg(
+        self.pub_diag.publish(self.owner_silence.annotate(conv.diagnostics_msg(
             status, hw, self.bus_diagnostics(), name=self.get_fully_qualified_name())))
 
     def bus_diagnostics(self) -> dict:

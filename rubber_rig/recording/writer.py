@@ -57,8 +57,9 @@ class RecordingWriter:
 
     def __init__(self, path, metadata: dict = None, *, compression: str = 'zstd',
                  chunk_size: int = 1 << 20, flush_interval_s: float = 1.0, gaps: LossLedger = None,
-                 overwrite: bool = False, bookkeeping_topic: str | None = None):
+                 overwrite: bool = False, bookkeeping_topic: str | None = None, clock_ns=time.time_ns):
         self.path = Path(path)
+        self._clock_ns = clock_ns          # ns since the epoch: start, close and default log times (a scenario's)
         self.bookkeeping_topic = bookkeeping_topic   # where close() also writes the records as a message
         if compression not in COMPRESSION:
             raise RecordingError(f'unknown compression {compression!r}; use zstd, lz4 or none')
@@ -82,7 +83,7 @@ class RecordingWriter:
         self._pending = 0                  # uncompressed bytes in the chunk in progress
         self.failure = None                # the OSError that stopped this writer, if any
         self.closed = False
-        start_time_ns = time.time_ns()
+        start_time_ns = self._clock_ns()
         self.metadata = dict(metadata or {})
         self.metadata.setdefault('software_version', __version__)
         self.metadata.setdefault('start_time', datetime.fromtimestamp(
@@ -183,7 +184,7 @@ class RecordingWriter:
                 raise RecordingError(f'cannot encode a {msg_type} for {topic}: {exc}') from None
             decoded = msg
         if log_time_ns is None:
-            log_time_ns = time.time_ns()
+            log_time_ns = self._clock_ns()
         if publish_time_ns is None:
             publish_time_ns = log_time_ns
         sequence = int(self._channels.sequence(channel_id, sequence)) & 0xFFFFFFFF
@@ -259,7 +260,7 @@ class RecordingWriter:
         report = self.loss_report()
         try:
             if self.failure is None:
-                values = dict(report, end_time_ns=time.time_ns(), clean_close=True, **(extra or {}))
+                values = dict(report, end_time_ns=self._clock_ns(), clean_close=True, **(extra or {}))
                 if self.bookkeeping_topic:
                     self._write_bookkeeping(values)
                 self._guard(self._mcap.add_metadata, CLOSE_METADATA_NAME, encode_metadata(values))

@@ -98,7 +98,7 @@ class RigConfig:
                                       'time of HostHeartbeat)', units='s', range=(0.001, 5.0))
     bus_error_max: int = setting(20, 'bad frames per second of samples that fault the bus', range=(0, 100000))
     lost_burst_max: float = setting(0.02, 'longest run of lost samples tolerated', units='s', range=(1e-4, 10.0))
-    stream_timeout: float = setting(0.3, "a running program's setpoint stream silent this long, with less than this "
+    stream_timeout: float = setting(0.15, "a running program's setpoint stream silent this long, with less than this "
                                     'much of setpoints queued ahead of the rig, is lost (the rig ramps to rest, or '
                                     'holds: stream_loss_action); a stall of the owner that its queue covers is '
                                     'not', units='s', range=(0.01, 10.0))

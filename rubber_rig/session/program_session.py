@@ -37,6 +37,12 @@ from ..excitation.streamer import SetpointChunk, SetpointStreamer
 #: carry the command in 0.1 um steps; run_program's fault split uses the same bound)
 FOLLOW_TOLERANCE = 1.5e-7
 
+#: [s] how far ahead of the latest measured sample a program is streamed by default (the excitation's lead_time):
+#: the queue rides out a stall of its producer of lead - the driver's stream_timeout (0.15 s) - one stream period
+#: (0.7 s: 0.55 s; a busy computer delays an executor 0.3-0.8 s), at the price of amplitude-loop latency (a 30 Hz
+#: block of 40 cycles ends 0.6 % short, 0.0 % at 0.5 s, 1.3 % at 0.8 s: benchmarks/bench_scenario.py --lead)
+LEAD_TIME = 0.7
+
 #: publish(first_sequence, displacement [m], block_index, end_of_stream): how a session hands setpoints on
 Publish = Callable[[int, object, int, bool], None]
 
@@ -114,7 +120,10 @@ class ProgramSession:
         self.next_sample = first_sequence + n
         if self.held:
             if n and setpoint is not None and len(setpoint) == n:
-                self._follow(first_sequence, np.asarray(setpoint, dtype=float))
+                ran = self._follow(first_sequence, np.asarray(setpoint, dtype=float))
+                if ran:   # program samples the rig ran after the hold was asked for: they finish a measured cycle
+                    self.runner.feed_measurement(ran[0], np.asarray(displacement, dtype=float)[
+                        ran[0] - first_sequence:ran[1] - first_sequence])
             return []
         if not n:
             return []
@@ -123,7 +132,7 @@ class ProgramSession:
         self.elapsed_samples += n
         if self.monitor is None:
             return []
-        block, block_cycles, program_cycles = self.runner.cycles_done(self.next_sample - 1)
+        block, block_cycles, program_cycles = self.runner.where.cycles_done(self.next_sample - 1)
         if block < 0:
             return []
         return self.monitor.on_progress(block, block_cycles, program_cycles, self.elapsed, self.next_sample)
@@ -166,22 +175,24 @@ class ProgramSession:
                 return float(x[sequence - first])
         return None
 
-    def _follow(self, first_sequence: int, applied: np.ndarray) -> None:
+    def _follow(self, first_sequence: int, applied: np.ndarray) -> Optional[tuple[int, int]]:
         """Held: move ``left_at`` over the samples (contiguous with it) whose applied command is the setpoint this
         session handed on, to the first one that is not (the hold ramp began there; the frames carry the
         command to 0.1 um) or that was never sent. A gap in the measurement stops it (a lower bound: the cycles
-        it may miss are run again, never skipped).
+        it may miss are run again, never skipped). Returns the sequences (start, end) it moved over, or None.
         """
         if self._left_known or first_sequence > self.left_at:
             self._left_known = self._left_known or first_sequence > self.left_at
-            return
+            return None
+        start = self.left_at
         for i in range(self.left_at - first_sequence, applied.size):
             sent = self._sent_setpoint(first_sequence + i)
             if sent is None or abs(applied[i] - sent) > FOLLOW_TOLERANCE:
                 self._left_known = True
-                return
+                break
             self.left_at = first_sequence + i + 1
             self.elapsed_samples += 1          # the rig ran this program sample after the hold was asked for
+        return (start, self.left_at) if self.left_at > start else None
 
     def stream(self, publish: Publish) -> None:
         """Hand on what is due; the program's end once (an empty batch if its last setpoints went out before);
@@ -239,7 +250,7 @@ class ProgramSession:
             return f'resumed after the rig had run the whole program (it left it at sample {self.left_at})'
         b = r.block_index
         blk = r.program.blocks[b]
-        done = r.cycles_before.get(b, 0)
+        done = r.where.cycles_before.get(b, 0)
         owed = f', {blk.cycles} full cycles still owed of {blk.cycles + done}' if blk.periodic else ''
         return (f"resumed block {b} '{blk.name}' on stream {self.stream_id} from sample {self.start_sequence}: the "
                 f'rig left the program at sample {self.left_at} ({self.left_at - self.held_at} samples after the '
@@ -250,8 +261,12 @@ class ProgramSession:
                     measured: dict, model: dict, residual_rms: float) -> list[Event]:
         """The detector events of the measured cycle of samples start..end-1 (none outside the program's
         periodic blocks: an approach or hold ramp, another stream's cycle).
+
+        A cycle that began before this stream (a resumed program's: the element model's cycle runs from before the
+        hold, through the hold ramp and the rest at the block mean, into the resumed block) is not the program's:
+        its flat stretch looked like a saturated load cell to the detectors.
         """
-        if self.held or self.monitor is None:
+        if self.held or self.monitor is None or start < self.start_sequence:
             return []
         cycle = cycle_of(self.runner, start, end, amplitude, peak_amplitude, mean, measured, model, residual_rms,
                          self.elapsed)

@@ -52,6 +52,7 @@ class SuiteProcesses:
         self.procs: dict[str, subprocess.Popen] = {}
         self._logs = {}
         self.extra_args: dict[str, list[str]] = {}   # more --ros-args per node (remappings)
+        self.prefix: dict[str, list[str]] = {}       # a command to run a node under (ip netns exec HOST: another host)
         self._log_offset = {}
         self.env = dict(os.environ, ROS_DOMAIN_ID=str(self.domain_id), PYTHONUNBUFFERED='1')
         self.env.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
@@ -59,8 +60,8 @@ class SuiteProcesses:
             self.env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
     def command(self, node: str, overrides: dict | None = None) -> list[str]:
-        cmd = [sys.executable, '-m', f'rubber_rig.nodes.{node}_node', '--ros-args', '-r', f'__ns:={self.namespace}',
-               '--params-file', self.params_file]
+        cmd = [*self.prefix.get(node, []), sys.executable, '-m', f'rubber_rig.nodes.{node}_node', '--ros-args',
+               '-r', f'__ns:={self.namespace}', '--params-file', self.params_file]
         cmd += self.extra_args.get(node, [])
         params = dict(self.overrides.get(node, {}), **(overrides or {}))
         if params:

@@ -69,12 +69,16 @@ class BusMedium:
     bitrate and data_bitrate [bit/s] (the data bitrate is used by CAN FD frames with bit-rate switch; fd False
     makes a classic-only segment that refuses FD frames), tx_queue [frames] the transmit queue of each node,
     clock a function returning seconds [s] (time.monotonic, or a fake clock in tests; waits in recv assume it
-    runs at real speed), load_window [s] how far back :meth:`load` can look. Thread safe.
+    runs at real speed), load_window [s] how far back :meth:`load` can look, threaded False when one thread
+    steps every node on a simulated clock (an empty receive then never yields the GIL), time_offset [s] what
+    turns clock() into frame timestamps (default: time.time()'s scale; a simulated clock gives its own). Thread
+    safe.
     Delivered frames carry their arrival time on time.time()'s scale: clock() + time_offset [s].
     """
 
     def __init__(self, bitrate: float = 1_000_000, data_bitrate: float = 5_000_000, fd: bool = True,
-                 tx_queue: int = 256, clock=time.monotonic, load_window: float = 1.0, name: str = None):
+                 tx_queue: int = 256, clock=time.monotonic, load_window: float = 1.0, name: str = None,
+                 threaded: bool = True, time_offset: float = None):
         if bitrate <= 0 or (data_bitrate is not None and data_bitrate <= 0):
             raise ValueError(f'bitrates must be positive, not {bitrate}, {data_bitrate} bit/s')
         if tx_queue < 1:
@@ -87,6 +91,7 @@ class BusMedium:
         self.tx_queue = tx_queue
         self.load_window = load_window
         self.name = name or f'simbus{next(_medium_names)}'
+        self.threaded = threaded
         rates = f'{bitrate:g}/{data_bitrate or bitrate:g} bit/s CAN FD' if fd else f'{bitrate:g} bit/s classic CAN'
         self.channel_info = f'simulated CAN bus {self.name} ({rates})'
         self._clock = clock
@@ -94,7 +99,7 @@ class BusMedium:
         self._cond = threading.Condition(self._lock)
         self._now = clock()
         # delivered timestamps are on time.time()'s scale, like those of the hardware interfaces
-        self.time_offset = time.time() - self._now
+        self.time_offset = time.time() - self._now if time_offset is None else float(time_offset)
         self._nodes = []
         self._node_names = itertools.count()
         # frames waiting for the bus: (arbitration key, enqueue counter, enqueue time, duration, node, frame)
@@ -344,8 +349,10 @@ class TimedBus(can.BusABC):
                     wait = min(wait, left)
                 medium._cond.wait(None if wait == _INF else max(wait, _MIN_WAIT))
         # nothing yet: let the other nodes' threads run (a host polling in a tight loop would otherwise hold
-        # the GIL and starve the controller thread, which a real controller's own CPU never is)
-        time.sleep(0)
+        # the GIL and starve the controller thread, which a real controller's own CPU never is); a medium whose
+        # nodes are all stepped by one thread on a simulated clock (threaded False) has no one to yield to
+        if medium.threaded:
+            time.sleep(0)
         return None, False
 
     def flush_tx_buffer(self) -> None:

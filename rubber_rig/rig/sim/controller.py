@@ -22,6 +22,7 @@ tick is there, so it advances only as far as setpoints are queued; waveform and 
 import math
 import threading
 import time
+from typing import Callable
 
 import numpy as np
 
@@ -52,8 +53,9 @@ class SimController(ControllerReceive, ControllerTransmit):
     MIN_RUN = 32               # from this many ticks the specimen model's batch run beats its per-sample step
 
     def __init__(self, bus, sample_rate: float, options, paced: bool, protocol: Protocol = None,
-                 profile: str = 'packed', flood_bus=None):
+                 profile: str = 'packed', flood_bus=None, clock: Callable[[], float] = time.monotonic):
         self.bus, self.fs, self.opt, self.paced = bus, float(sample_rate), options, paced
+        self._clock = clock               # paced: the time the rig runs on (a scenario's simulated clock in tests)
         self.proto = protocol or Protocol()
         self.defects = frozenset(options.defects)   # deliberate protocol defects (conformance testing only)
         self.frames = SampleFrames(profile, self.proto.db, self.fs)
@@ -102,13 +104,10 @@ class SimController(ControllerReceive, ControllerTransmit):
         self._held = []                   # (release_tick, message) for delayed frames
         self._hb = self._st = self._tc = 0
         hb_period = 0.08 if 'heartbeat_80ms' in self.defects else cycle_time('ControllerHeartbeat')
-        self._periods = {'ControllerHeartbeat': hb_period, 'ControllerStatus': cycle_time('ControllerStatus'),
-                         'Temperature': cycle_time('Temperature'),
-                         'ControllerIdentity': cycle_time('ControllerIdentity')}
-        per = lambda s: max(1, round(s * self.fs))  # noqa: E731
-        self._hb_every, self._st_every, self._tc_every, self._id_every = (
-            per(self._periods[name]) for name in ('ControllerHeartbeat', 'ControllerStatus', 'Temperature',
-                                                  'ControllerIdentity'))
+        self._periods = {'ControllerHeartbeat': hb_period, **{name: cycle_time(name) for name in (
+            'ControllerStatus', 'Temperature', 'ControllerIdentity')}}
+        self._hb_every, self._st_every, self._tc_every, self._id_every = (   # in ticks
+            max(1, round(period * self.fs)) for period in self._periods.values())
         self._idle_due = {}               # frame name -> wall-clock time it is next due while idle (paced)
         self._id_next_tick = 0            # rig tick the next ControllerIdentity is due at while ticking
         self._jitter_until = 0            # feedback_jitter defect: release tick of the last held feedback frame
@@ -116,8 +115,8 @@ class SimController(ControllerReceive, ControllerTransmit):
         # paced: a text file that gets a 'start end' line (wall-clock s) for every deadline this process missed by
         # SIM_LATE_MIN or more - its host was late, which a real controller on its own CPU would not be
         self.timing_log = None
-        self._announced = False
-        self._thread = None
+        self._announced, self._thread = False, None
+        self._deadline, self._idle_before, self._next_idle_hk = None, True, 0.0   # paced schedule (serve)
         base = options.specimen.get('temperature', options.temperature)
         self.temperature = float(base if isinstance(base, (int, float)) else options.temperature)
 
@@ -133,68 +132,16 @@ class SimController(ControllerReceive, ControllerTransmit):
             self._thread.join(timeout=5.0)
 
     def run_forever(self):
-        """Serve the bus until stop(): announce, then receive frames and tick."""
-        self._housekeeping(force=True)
-        self._send_identity()
-        self._id_next_tick = self.ticks + self._id_every
-        next_idle_hk = time.monotonic()
-        self._idle_due = {name: next_idle_hk + period for name, period in self._periods.items()}
-        deadline, idle_before = None, True
+        """Serve the bus until stop(): announce, then receive frames and tick (paced: on the clock, waiting on the
+        bus until the next tick or housekeeping is due; fast: as far as the queued setpoints allow).
+        """
+        self.announce(self._clock())
         while not self._stop.is_set():
             if self.paced:
-                now = time.monotonic()
-                if self.flood_bus is not None:
-                    self._flood(now)
-                if self.state in STREAMING:
-                    if deadline is None:
-                        deadline = now
-                        # the identity keeps its period across the change from wall-clock to tick time
-                        due = self._idle_due.get('ControllerIdentity', now)
-                        self._id_next_tick = self.ticks + max(0, round((due - now) * self.fs))
-                        if self._idle_since is not None:
-                            self.idle_ticks += int((now - self._idle_since) * self.fs)
-                            self._idle_since = None
-                    # catch up on every tick that is due (deadline based: no drift from late wake-ups); frames
-                    # that arrived meanwhile are handled first
-                    msg = self.bus.recv(0)
-                    while msg is not None:
-                        self._handle(msg)
-                        msg = self.bus.recv(0)
-                    n = 0
-                    due = int((now - deadline) * self.fs) + 1 if now >= deadline else 0
-                    if due > 1:
-                        # this process was not scheduled for `due` ticks: neither was the host in it, so the host
-                        # watchdog does not count that time (a real controller has its own CPU)
-                        self.last_host_hb += due - 1
-                        self._log_late(now - deadline)
-                    while now >= deadline and self.state in STREAMING:
-                        done = self._tick_block(int((now - deadline) * self.fs) + 1) or self._tick()
-                        deadline += done / self.fs
-                        n += done
-                    if n > 1:
-                        self.counters['overruns'] += n - 1
-                    timeout = max(0.0, min(deadline - time.monotonic(), 0.01)) if self.state in STREAMING \
-                        else 0.0
-                    idle_before = False
-                else:
-                    if deadline is not None:   # stopped ticking: back to wall-clock time
-                        self._idle_due['ControllerIdentity'] = now + max(0, self._id_next_tick - self.ticks) / self.fs
-                    deadline = None
-                    if self._idle_since is None and self.ticks:
-                        self._idle_since = now
-                    if 'fault_clears_after_500ms' in self.defects:
-                        self._clear_fault_by_itself(now)
-                    if now >= next_idle_hk:
-                        if idle_before:      # due while idle: a late wake-up is this host's lateness
-                            self._log_late(now - next_idle_hk)
-                        self._idle_housekeeping(now)
-                        next_idle_hk = max(next_idle_hk + IDLE_PERIOD, now)
-                    timeout = min(IDLE_PERIOD, max(0.0, next_idle_hk - now))
-                    idle_before = True
-                msg = self.bus.recv(timeout)
-                while msg is not None:
+                msg = self.bus.recv(self.serve(self._clock()))   # wait for a frame until the next moment due
+                if msg is not None:
                     self._handle(msg)
-                    msg = self.bus.recv(0)
+                    self._receive_all()
             else:
                 msg = self.bus.recv(0.02)
                 while msg is not None:
@@ -202,6 +149,71 @@ class SimController(ControllerReceive, ControllerTransmit):
                     msg = self.bus.recv(0)
                 self._catch_up()   # ticks only as far as setpoints are queued (or while ramping down)
                 self._send_feedback()
+
+    def announce(self, now: float):
+        """Power-up at `now` [s] on the clock: status and identity go out, the idle periods start."""
+        self._housekeeping(force=True)
+        self._send_identity()
+        self._id_next_tick = self.ticks + self._id_every
+        self._next_idle_hk = now
+        self._idle_due = {name: now + period for name, period in self._periods.items()}
+        self._announced = True
+
+    def serve(self, now: float) -> float:
+        """Paced: one wake-up at `now` [s] on the clock (time.monotonic, or a scenario's simulated clock): handle
+        the frames received, tick every sample due (deadline based: no drift from late wake-ups) or do the idle
+        housekeeping; returns how long [s] the controller may wait for a frame before anything is due.
+        """
+        if not self._announced:
+            self.announce(now)
+        if self.flood_bus is not None:
+            self._flood(now)
+        if self.state not in STREAMING:
+            self._receive_all()          # a HostStreamStart and the first setpoints start the stream
+        if self.state not in STREAMING:
+            return self._serve_idle(now)
+        if self._deadline is None:
+            self._deadline = now
+            # the identity keeps its period across the change from wall-clock to tick time
+            due = self._idle_due.get('ControllerIdentity', now)
+            self._id_next_tick = self.ticks + max(0, round((due - now) * self.fs))
+            if self._idle_since is not None:
+                self.idle_ticks += int((now - self._idle_since) * self.fs)
+                self._idle_since = None
+        self._receive_all()              # frames that arrived meanwhile come before the ticks that are due
+        n, deadline = 0, self._deadline
+        due = int((now - deadline) * self.fs) + 1 if now >= deadline else 0
+        if due > 1:
+            # this process was not scheduled for `due` ticks: neither was the host in it, so the host watchdog does
+            # not count that time (a real controller has its own CPU)
+            self.last_host_hb += due - 1
+            self._log_late(now - deadline)
+        while now >= deadline and self.state in STREAMING:
+            done = self._tick_block(int((now - deadline) * self.fs) + 1) or self._tick()
+            deadline += done / self.fs
+            n += done
+        self._deadline = deadline
+        if n > 1:
+            self.counters['overruns'] += n - 1
+        self._idle_before = False
+        return max(0.0, min(deadline - self._clock(), 0.01)) if self.state in STREAMING else 0.0
+
+    def _serve_idle(self, now: float) -> float:
+        """Paced and not streaming: periodic frames on the clock; returns the wait [s] until they are next due."""
+        if self._deadline is not None:   # stopped ticking: back to wall-clock time
+            self._idle_due['ControllerIdentity'] = now + max(0, self._id_next_tick - self.ticks) / self.fs
+        self._deadline = None
+        if self._idle_since is None and self.ticks:
+            self._idle_since = now
+        if 'fault_clears_after_500ms' in self.defects:
+            self._clear_fault_by_itself(now)
+        if now >= self._next_idle_hk:
+            if self._idle_before:      # due while idle: a late wake-up is this host's lateness
+                self._log_late(now - self._next_idle_hk)
+            self._idle_housekeeping(now)
+            self._next_idle_hk = max(self._next_idle_hk + IDLE_PERIOD, now)
+        self._idle_before = True
+        return min(IDLE_PERIOD, max(0.0, self._next_idle_hk - now))
 
     def _log_late(self, late: float):
         """A deadline missed by `late` [s]: a line in timing_log when SIM_LATE_MIN or more."""
@@ -215,10 +227,7 @@ class SimController(ControllerReceive, ControllerTransmit):
         the host and the simulator never fight over the GIL; frames still cross the bus both ways.
         """
         if not self._announced:
-            self._housekeeping(force=True)
-            self._send_identity()
-            self._id_next_tick = self.ticks + self._id_every
-            self._announced = True
+            self.announce(self._clock())
         msg = self.bus.recv(0)
         while msg is not None:
             self._handle_in_order(msg)
@@ -387,5 +396,5 @@ class SimController(ControllerReceive, ControllerTransmit):
         """Time [s] on the fault schedule: rig time, plus (paced) the wall time stood idle after the first tick."""
         idle = self.idle_ticks
         if self._idle_since is not None:
-            idle += int((time.monotonic() - self._idle_since) * self.fs)
+            idle += int((self._clock() - self._idle_since) * self.fs)
         return (self.ticks + idle) / self.fs

@@ -79,6 +79,13 @@ class ControllerReceive:
                 self.state = 'idle'
                 self._housekeeping(force=True)
 
+    def _receive_all(self):
+        """Handle every frame waiting on the bus."""
+        msg = self.bus.recv(0)
+        while msg is not None:
+            self._handle(msg)
+            msg = self.bus.recv(0)
+
     def _clear_fault_by_itself(self, now: float):
         """Defect fault_clears_after_500ms: a fault that goes back to idle 0.5 s after it began, without RESET."""
         if self.state != 'fault':
