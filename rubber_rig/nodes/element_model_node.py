@@ -72,6 +72,7 @@ from msg_defs.msg import CycleMetrics, ModelParameters, ModelPrediction, RigSamp
 from rubber_rig.models import load_parameter_set
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.auth import SAMPLES, SETPOINTS, declare_auth, start_auth_diagnostics
 from rubber_rig.nodes.heartbeat import start_heartbeat
 from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.nodes.spin import spin_node
@@ -150,8 +151,12 @@ class ElementModelNode(Node):
         self.pub_prediction = self.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
         self.pub_metrics = self.create_publisher(CycleMetrics, topics.CYCLE_METRICS, topics.EVENT_QOS)
         self.pub_params = self.create_publisher(ModelParameters, topics.MODEL_PARAMETERS, topics.LATCHED_QOS)
-        self.create_subscription(RigSampleBatch, topics.SAMPLES, self.on_samples, topics.STREAM_QOS)
-        self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints, topics.STREAM_QOS)
+        self.auth = declare_auth(self)   # samples and setpoints must carry the rig key's signature (nodes/auth.py)
+        self.samples_topic = self.create_subscription(RigSampleBatch, topics.SAMPLES, self.on_samples,
+                                                      topics.STREAM_QOS).topic_name
+        self.setpoints_topic = self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints,
+                                                        topics.STREAM_QOS).topic_name
+        start_auth_diagnostics(self, self.auth)
         self._published_params = None
         self.publish_parameters()
         start_heartbeat(self, lambda: self.predictor.model_name)
@@ -161,6 +166,8 @@ class ElementModelNode(Node):
 
     # -- data path --------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
+        if self.auth.refuse(self, msg, SETPOINTS, self.setpoints_topic):
+            return
         if len(msg.displacement):        # (an empty batch is a keep-alive of the stream: no samples to map)
             self.blocks.add(msg.first_sequence, len(msg.displacement), msg.block_index)
         self.blocks.ended = msg.end_of_stream
@@ -168,6 +175,13 @@ class ElementModelNode(Node):
         self.process_cycles()
 
     def on_samples(self, msg: RigSampleBatch) -> None:
+        """A batch with a valid signature goes to the model; a forged one is refused (counted, named in
+        /diagnostics): it neither enters the prediction nor makes a cycle the detectors judge.
+        """
+        if not self.auth.refuse(self, msg, SAMPLES, self.samples_topic):
+            self.take_samples(msg)
+
+    def take_samples(self, msg: RigSampleBatch) -> None:
         x, f, _ = conv.batch_arrays(msg)
         problem = batch_problem(msg.first_sequence, msg.sample_period, len(x), len(f))
         if problem is not None:
@@ -189,7 +203,7 @@ class ElementModelNode(Node):
             self.predictor.restart()
             self._cycle_queue.clear()
             self.cycles = CyclePairer(self.cycles.hysteresis, self.cycles.min_amplitude)
-            self.on_samples(held)
+            self.take_samples(held)
         elif verdict is not None:
             self.stray_batches += 1
             self.get_logger().warning(f'sample batch at sequence {verdict[1].first_sequence} ignored: it went back '

@@ -31,6 +31,7 @@ from rclpy.node import Node
 from msg_defs.msg import Heartbeat
 
 from . import topics
+from .auth import HEARTBEAT
 
 PERIOD = 0.25        # [s] between beats
 # [s] without a beat: the node is called silent (three beats missed; a watcher that checks every 0.1 s names
@@ -39,13 +40,18 @@ SILENT = 0.75
 
 
 def start_heartbeat(node: Node, state: Callable[[], str] = lambda: '') -> None:
-    """Beat every PERIOD on the node's relative ``heartbeat`` topic, with `state()` as the state text."""
+    """Beat every PERIOD on the node's relative ``heartbeat`` topic, with `state()` as the state text; signed when
+    the node has an ``auth`` (NodeAuth): a forged beat in its name is refused by a Peers that verifies.
+    """
     pub = node.create_publisher(Heartbeat, topics.HEARTBEAT, topics.HEARTBEAT_QOS)
+    auth = getattr(node, 'auth', None)     # signed with the rig's key when the node has one (nodes/auth.py)
     name, pid, count = node.get_fully_qualified_name(), os.getpid(), [0]
 
     def beat():
         msg = Heartbeat(node=name, pid=pid, count=count[0], state=str(state()))
         msg.header.stamp = node.get_clock().now().to_msg()
+        if auth is not None:
+            auth.sign(msg, HEARTBEAT)
         pub.publish(msg)
         count[0] += 1
     node.create_timer(PERIOD, beat)
@@ -55,19 +61,24 @@ def start_heartbeat(node: Node, state: Callable[[], str] = lambda: '') -> None:
 class Peers:
     """Which of the expected nodes (fully qualified names) beat, and which have gone silent.
 
-    A node never heard from is not silent (it may not run in this set-up); one heard from and then silent for
+    With `auth` (NodeAuth) only beats with a valid signature count. A node never heard from is not silent (it may
+    not run in this set-up); one heard from and then silent for
     more than `silent` seconds is, until it beats again (a restarted node is a new pid and says so).
     """
 
     def __init__(self, node: Node, expected: list[str] | None = None, silent: float = SILENT,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic, auth=None):
         self.expected = set(expected or ())
         self.silent_after, self._clock = float(silent), clock
         self.last: dict[str, tuple[float, Heartbeat]] = {}
         self.restarts: dict[str, int] = {}
+        self.auth = auth     # NodeAuth: beats without a valid signature are refused (counted in its verifier)
+        self._topic = node.resolve_topic_name(topics.HEARTBEAT)
         node.create_subscription(Heartbeat, topics.HEARTBEAT, self.on_beat, topics.HEARTBEAT_QOS)
 
     def on_beat(self, msg: Heartbeat) -> None:
+        if self.auth is not None and self.auth.verify(msg, HEARTBEAT, f'{self._topic} (beat of {msg.node})'):
+            return     # a forged beat must not keep a frozen stream owner alive
         old = self.last.get(msg.node)
         if old is not None and old[1].pid != msg.pid:
             self.restarts[msg.node] = self.restarts.get(msg.node, 0) + 1
