@@ -40,6 +40,7 @@ from rclpy.signals import SignalHandlerOptions
 from msg_defs.action import RunProgram
 from msg_defs.msg import RigStatus
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.auth import RUN_PROGRAM, signed
 from rubber_rig.testing.operator import Operator
 from rubber_rig.testing.processes import SuiteProcesses
 
@@ -118,7 +119,12 @@ class Crowd:
         futures, queued = [], threading.Event()
 
         def send_all():
-            futures.extend(c.send_goal_async(goal) for c in self.clients for _ in range(per_client))
+            # the rig's operators: each goal signed anew
+            for node, client in zip(self.nodes, self.clients, strict=True):
+                futures.extend(client.send_goal_async(signed(RunProgram.Goal(
+                    program_path=goal.program_path, program_yaml=goal.program_yaml,
+                    amplitude_control=goal.amplitude_control), RUN_PROGRAM, node.get_fully_qualified_name()))
+                    for _ in range(per_client))
             queued.set()
         self.executor.create_task(send_all)
         assert queued.wait(30.0), 'the goals were not sent'

@@ -32,6 +32,7 @@ from msg_defs.msg import RigSampleBatch, RigStatus
 from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.auth import RECORDER_CONTROL, signed
 from rubber_rig.nodes.recorder_node import RecorderNode
 from rubber_rig.recording import load_recording
 from rubber_rig.recording.qos import parse_offered_qos
@@ -54,7 +55,7 @@ def context():
 def control_caller(executor, control):
     """call(command, path='') -> RecorderControl response, spinning ``executor`` until it arrives."""
     def call(command, path=''):
-        future = control.call_async(RecorderControl.Request(command=command, path=path))
+        future = control.call_async(signed(RecorderControl.Request(command=command, path=path), RECORDER_CONTROL))
         assert spin_until(executor, future.done)
         return future.result()
     return call
@@ -247,8 +248,8 @@ def test_unwritable_output_dir_is_reported_not_fatal(context, tmp_path):
         assert level == DiagnosticStatus.ERROR and 'cannot create recording directory' in message
         control = client_node.create_client(RecorderControl, '/unwritable/recorder/control')
         assert control.wait_for_service(timeout_sec=10)
-        future = control.call_async(RecorderControl.Request(command=RecorderControl.Request.START,
-                                                            path=str(tmp_path / 'elsewhere')))
+        future = control.call_async(signed(RecorderControl.Request(command=RecorderControl.Request.START,
+                                                                   path=str(tmp_path / 'elsewhere')), RECORDER_CONTROL))
         assert spin_until(executor, future.done) and future.result().success
         assert rec.core.recording and rec.core.current_file.parent == tmp_path / 'elsewhere'
 

@@ -143,3 +143,12 @@ def test_development_mode_without_key_accepts_unsigned_and_says_so():
     lax = Verifier(KEY, required=False, clock=Clock())
     assert lax.verify('samples', '/s', '', 0, b'', batch()) == ''
     assert 'bad signature' in lax.verify('samples', '/s', '/x', int(NOW * 1e6), b'\1' * 32, batch())
+
+
+def test_refusals_are_said_once_a_second_per_channel():
+    clock = Clock()
+    verifier = Verifier(KEY, clock=clock)
+    assert verifier.due_to_say('samples', '/a') and not verifier.due_to_say('samples', '/a')
+    assert verifier.due_to_say('open_stream', '/b')      # a flood on /a does not hide /b
+    clock.t += 1.0
+    assert verifier.due_to_say('samples', '/a')

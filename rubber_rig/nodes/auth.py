@@ -88,7 +88,9 @@ class NodeAuth:
         """Whether `msg` (from channel `where`) is refused; a refusal is counted and logged (at most once a second)."""
         why = self.verify(msg, purpose, where)
         if why:
-            node.get_logger().warning(f'{purpose} on {where} refused: {why}', throttle_duration_sec=1.0)
+            if self.verifier.due_to_say(purpose, where):    # once a second per channel: a flood on one channel
+                node.get_logger().warning(                     # does not hide the refusals on another
+                    f'{purpose} on {where} refused: {why} ({self.verifier.refused.get((purpose, where), 0)} so far)')
         return bool(why)
 
     def refuse_request(self, node: Node, request, purpose: str, response) -> bool:

@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import hashlib
 import hmac
+import math
 import struct
 import threading
 import time
@@ -143,6 +144,7 @@ class Verifier:
         self.unsigned_accepted = 0
         self.refused: dict[tuple[str, str], int] = {}
         self.last_refusal: Refusal | None = None
+        self._said: dict[tuple[str, str], float] = {}   # (purpose, channel) -> clock() of its latest log line
         self._lock = threading.Lock()
 
     def check(self, purpose: str, link: str, counter: int, tag: bytes, fields) -> str:
@@ -184,6 +186,18 @@ class Verifier:
                 self.unsigned_accepted += 1
             self.accepted += 1
             return ''
+
+    def due_to_say(self, purpose: str, where: str, every: float = 1.0) -> bool:
+        """Whether a refusal on (purpose, channel) is to be logged now: at most once per `every` seconds per channel,
+        so that a flood on one channel does not hide the refusals on another.
+        """
+        now, key = self._clock(), (purpose, where)
+        if now - self._said.get(key, -math.inf) < every:
+            return False
+        if len(self._said) >= MAX_CHANNELS and key not in self._said:
+            self._said.clear()
+        self._said[key] = now
+        return True
 
     @property
     def refused_total(self) -> int:
