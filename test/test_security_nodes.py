@@ -51,6 +51,11 @@ from support.ros import ros_context
 KEY = bytes(range(32))
 
 
+def make_node(context, **params):
+    return Node('keyed', namespace='/auth_test', context=context, parameter_overrides=[
+        Parameter(name, value=value) for name, value in params.items()])
+
+
 def examples():
     x = np.sin(np.arange(100) * 0.01) * 1e-3
     return [
@@ -91,11 +96,7 @@ def test_every_field_but_the_signature_is_covered():
                      'displacement', 'force', 'setpoint', 'temperature', 'status_flags', 'frames_lost']
 
 
-def make_node(context, **params):
-    return Node('keyed', namespace='/auth_test', context=context, parameter_overrides=[
-        Parameter(name, value=value) for name, value in params.items()])
-
-
+@pytest.mark.ros
 def test_a_node_without_a_usable_key_refuses_to_start_unless_in_development_mode(tmp_path):
     with ros_context() as context:
         node = make_node(context, **{'auth.key_file': str(tmp_path / 'missing.key')})

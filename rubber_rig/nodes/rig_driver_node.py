@@ -232,9 +232,10 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         """
         if self.rig is None or self._poll_timer is None:   # only an active driver moves the rig
             return
-        if self.auth.refuse(self, msg, SETPOINT_STREAM, topics.setpoint_stream_topic(self.get_name(), channel)):
+        if channel == getattr(self.rig.driver.stream, 'owner', None) and self.auth.refuse(
+                self, msg, SETPOINT_STREAM, topics.setpoint_stream_topic(self.get_name(), channel)):
             self.rig.driver.refuse(len(msg.displacement), self.auth.verifier.last_refusal.describe())
-            return   # forged, replayed or unsigned: counted with the setpoints refused, never offered to the gate
+            return   # unsigned/forged/replayed on the owner's channel: counted (other channels: the gate's to refuse)
         verdict = self.gate.offer(channel, msg.source, msg.first_sequence, conv.as_array(msg.displacement),
                                   msg.stream_id, msg.end_of_stream)
         if verdict.action == 'mute':
