@@ -21,6 +21,7 @@ import stat
 import numpy as np
 import pytest
 
+from rubber_rig.cli.main import main as cli
 from rubber_rig.security import KeyFileError, Signer, Verifier, canonical, init_key, load_key
 from rubber_rig.security.signing import MAX_CHANNELS
 
@@ -152,3 +153,18 @@ def test_refusals_are_said_once_a_second_per_channel():
     assert verifier.due_to_say('open_stream', '/b')      # a flood on /a does not hide /b
     clock.t += 1.0
     assert verifier.due_to_say('samples', '/a')
+
+
+def test_keys_command_creates_checks_and_refuses(tmp_path, capsys):
+    path = tmp_path / 'rig.key'
+    assert cli(['keys', 'init', '--path', str(path)]) == 0
+    assert f'key written to {path} (mode 0600)' in capsys.readouterr().out
+    assert stat.S_IMODE(os.stat(path).st_mode) == 0o600
+    key = load_key(path)
+    assert cli(['keys', 'init', '--path', str(path)]) == 2            # an existing key is kept
+    assert 'exists' in capsys.readouterr().err and load_key(path) == key
+    assert cli(['keys', 'check', '--path', str(path)]) == 0
+    os.chmod(path, 0o604)
+    assert cli(['keys', 'check', '--path', str(path)]) == 2
+    assert 'mode 0604' in capsys.readouterr().err
+    assert cli(['keys', 'init', '--path', str(path), '--force']) == 0 and load_key(path) != key
