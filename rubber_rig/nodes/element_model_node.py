@@ -14,7 +14,8 @@
 
 """element_model: predicts the element force online from the measured displacement.
 
-Subscribes:  samples (msg_defs/RigSampleBatch), setpoints (msg_defs/SetpointBatch, only for block indices)
+Subscribes:  samples (msg_defs/RigSampleBatch), setpoints (msg_defs/SetpointBatch, only for block indices), both
+             only with the rig key's signature (nodes/auth.py: refusals in /diagnostics, status ``<node>/auth``)
 Publishes:   prediction (msg_defs/ModelPrediction: prediction, residual, branch forces per batch)
              cycle_metrics (msg_defs/CycleMetrics: measured and model K_dyn, loss angle, D, C_eq, energy)
              model_parameters (msg_defs/ModelParameters, latched)

@@ -27,6 +27,8 @@ Subscribes:  samples (msg_defs/RigSampleBatch: amplitude control, progress), sta
 Publishes:   setpoints (msg_defs/SetpointBatch), program (std_msgs/String, latched: YAML of the running program),
              events (msg_defs/DetectorEvent: every detector trip), /diagnostics (program state, detector events)
 Calls:       <rig_driver>/open_stream, <rig_driver>/stop_stream
+Signatures:  its setpoints, stream requests and heartbeats carry the rig key's signature; it takes only signed
+             goals and sample batches (nodes/auth.py; refusals counted and named in /diagnostics)
 
 A program starts only on a stream the driver grants (one owner at a time), from wherever the rig holds (an
 approach ramp leads to the program's start). Setpoints are generated from the sample index by a

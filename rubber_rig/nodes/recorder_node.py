@@ -22,7 +22,8 @@ splitting, snapshots and loss accounting are rubber_rig.recording.Recorder's.
   transient-local, as rosbag2 adapts its requests), and a deep history.
 - Topics: the ``topics`` parameter (relative names resolve in the node's namespace), or, if empty,
   every topic under the node's namespace; discovery repeats every ``discovery_period`` seconds.
-- ``~/control`` (msg_defs/srv/RecorderControl): START [path], STOP, SPLIT, SNAPSHOT [path].
+- ``~/control`` (msg_defs/srv/RecorderControl, signed): START [path], STOP, SPLIT, SNAPSHOT [path]. Sample and
+  setpoint batches without the rig key's signature are refused, never written (``messages_refused``; nodes/auth.py).
 - ``recorder_status`` (msg_defs/msg/RecorderStatus, latched): IDLE / RECORDING / ERROR with the file, the
   error, the topics subscribed and matched with a publisher, messages written and samples known lost;
   published at once on a change of state, file, error, topics or loss (a failed write is reported by the

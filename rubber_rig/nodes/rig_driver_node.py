@@ -22,17 +22,17 @@ the node configures and activates itself (what ``ros2 launch`` users expect from
 Parameters: rubber_rig/nodes/rig_driver_params.py (what a bad value or a rate the bus cannot carry does).
 
 Subscribes:  ~/setpoint_stream/<owner> (msg_defs/SetpointBatch): each owner's command channel; only the open
-             stream's owner commands the rig (batches on other channels are refused and counted). The public
+             stream's owner commands the rig, with batches signed by the rig key (nodes/auth.py; others are
+             refused and counted, named in /diagnostics with their channel). The public
              ``setpoints`` is not read: traffic there (a script, a replayed recording) never moves the rig, and
-             no traffic delays the owner's batches (topics.py)
-Publishes:   samples (msg_defs/RigSampleBatch, at least ``batch_size`` samples per message)
+             no traffic delays the owner's batches (topics.py). heartbeat: the owner's, signed only
+Publishes:   samples (msg_defs/RigSampleBatch, signed, at least ``batch_size`` samples per message)
              status (msg_defs/RigStatus, latched, on change and every ``status_period``)
              /diagnostics (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period``)
-Services:    ~/open_stream (msg_defs/OpenStream): the right to command the rig; one owner at a time
-             ~/stop_stream (msg_defs/StopStream): the owner stops now: abort (ramp to rest) or hold
+Services:    ~/open_stream (msg_defs/OpenStream, signed): the right to command the rig; one owner at a time
+             ~/stop_stream (msg_defs/StopStream, signed): the owner stops now: abort (ramp to rest) or hold
              ~/abort (std_srvs/Trigger): safe ramp to rest now, whoever streams
-             ~/reset (std_srvs/Trigger): acknowledge and clear faults once the rig is at rest
-QoS: see rubber_rig/nodes/topics.py.
+             ~/reset (std_srvs/Trigger): acknowledge and clear faults once the rig is at rest. QoS: topics.py
 
 The driver is the one safety authority: the watchdog, the limits (changeable at run time: applied at once),
 stream ownership and stream-loss detection, fault detection and the safe ramp are the core driver's
