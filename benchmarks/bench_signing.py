@@ -23,7 +23,8 @@ receiving side, the same plus the comparison and the replay check. Batch sizes a
 a sample batch per 10 ms (10 samples at 1 kHz, 100 at 10 kHz) and a setpoint batch per stream_period 20 ms
 (20 and 200 setpoints). The CPU share is per node and per core: signatures made and checked per second times
 their cost. A forged batch costs its receiver one verification (the tag is compared before anything else), so
-the refusal rate one core sustains is 1 / verify time.
+the refusal rate one core sustains is 1 / verify time. The recorder, which subscribes raw, also turns the CDR bytes
+of each sample and setpoint batch into a message before it checks it (timed too).
 """
 from __future__ import annotations
 
@@ -35,6 +36,7 @@ import sys
 import time
 
 import numpy as np
+from rclpy.serialization import deserialize_message, serialize_message
 
 from msg_defs.msg import Heartbeat
 from rubber_rig.nodes import conversions as conv
@@ -95,6 +97,19 @@ def forged_refusal(repeats: int) -> dict:
     return {'refuse_us': med, 'refuse_p99_us': p99, 'refusals_per_s_one_core': 1e6 / med}
 
 
+def recorder_check(repeats: int) -> dict:
+    """µs the recorder spends on one sample batch before writing it: CDR bytes -> message -> verify."""
+    out = {}
+    for rate in (1000.0, 10000.0):
+        signer, recorder = NodeAuth('/rig/rig_driver', KEY, True, '-'), NodeAuth('/rig/recorder', KEY, True, '-')
+        msg = messages(rate)[0][1]
+        data = iter([serialize_message(signer.sign(copy.deepcopy(msg), SAMPLES)) for _ in range(repeats)])
+        cost = time_per_call(lambda d=data, cls=type(msg): recorder.verify(deserialize_message(next(d), cls), SAMPLES,
+                                                                           '/bench'), repeats)
+        out[f'{rate / 1000:g} kHz'] = {'us': cost[0], 'p99_us': cost[1], 'cpu_pct': cost[0] * 1e-4 / SAMPLE_BATCH_PERIOD}
+    return out
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--repeats', type=int, default=2000)
@@ -114,12 +129,16 @@ def main(argv=None) -> int:
         subscriber = mine[0]['cpu_verify_pct'] + mine[2]['cpu_sign_pct']
         print(f'\n{rate / 1000:g} kHz: rig_driver (signs samples, verifies setpoints and beats) {driver:.3f} % of a '
               f'core; each sample subscriber (verifies samples, signs its beats) {subscriber:.3f} %')
+    recorder = recorder_check(args.repeats)
+    for rate, r in recorder.items():
+        print(f"recorder at {rate}: CDR -> message -> verify {r['us']:.1f} µs per sample batch (p99 {r['p99_us']:.1f}), "
+              f"{r['cpu_pct']:.3f} % of a core")
     forged = forged_refusal(args.repeats)
     print(f"\nrefusing a forged 10 kHz sample batch: {forged['refuse_us']:.1f} µs (p99 {forged['refuse_p99_us']:.1f}): "
           f"one core refuses {forged['refusals_per_s_one_core']:.0f} forged batches/s")
     if args.json:
         with open(args.json, 'w', encoding='utf-8') as f:
-            json.dump({'rows': rows, 'forged': forged}, f, indent=1)
+            json.dump({'rows': rows, 'recorder': recorder, 'forged': forged}, f, indent=1)
     return 0
 
 

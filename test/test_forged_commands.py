@@ -159,7 +159,7 @@ def test_every_forgery_is_refused_counted_named_and_the_program_completes(suite,
     assert refusals(model['auth_refused_by_channel'])[f'samples on {NS}/samples'] == 20, model
     excitation = diag.get(OWNER)
     assert refusals(excitation['auth_refused_by_channel'])[f'samples on {NS}/samples'] == 20, excitation
-    print_table(refused, on_recorder, excitation, elapsed)
+    print_table(refused, on_recorder, refusals(excitation['auth_refused_by_channel']), elapsed)
 
 
 def refusals(text: str) -> dict:

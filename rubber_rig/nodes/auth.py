@@ -48,19 +48,30 @@ def fields_of(msg, prefix: str = '') -> list[tuple[str, object]]:
     declaration order (what rubber_rig.security.canonical encodes).
     """
     out = []
-    for name, kind in msg.get_fields_and_field_types().items():
-        if name == 'signature' and not prefix:
-            continue
+    for name, nested in _layout(type(msg)):
         value = getattr(msg, name)
-        if hasattr(value, 'get_fields_and_field_types'):
+        if nested == 'message':
             out += fields_of(value, f'{prefix}{name}.')
-        elif '/' in kind and kind.startswith('sequence<'):
+        elif nested == 'sequence':
             out.append((f'{prefix}{name}.len', len(value)))
             for i, item in enumerate(value):
                 out += fields_of(item, f'{prefix}{name}[{i}].')
         else:
             out.append((prefix + name, value))
     return out
+
+
+_LAYOUTS: dict[type, list[tuple[str, str]]] = {}
+
+
+def _layout(cls) -> list[tuple[str, str]]:
+    """(field, 'message' | 'sequence' | '') of a message class, its signature left out (kept per class)."""
+    layout = _LAYOUTS.get(cls)
+    if layout is None:
+        layout = _LAYOUTS[cls] = [
+            (name, 'sequence' if kind.startswith('sequence<') and '/' in kind else 'message' if '/' in kind else '')
+            for name, kind in cls.get_fields_and_field_types().items() if name != 'signature']
+    return layout
 
 
 class NodeAuth:

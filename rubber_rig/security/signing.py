@@ -30,10 +30,12 @@ cannot hide), and the latest is kept with its reason, for /diagnostics.
 """
 from __future__ import annotations
 
+import array
 import hashlib
 import hmac
 import math
 import struct
+import sys
 import threading
 import time
 from dataclasses import dataclass
@@ -54,6 +56,8 @@ def _text(value: str) -> bytes:
 
 def _value(value) -> bytes:
     """One field value, type-tagged and length-prefixed (no two different values encode alike)."""
+    if type(value) is array.array and value.typecode == 'd' and sys.byteorder == 'little':
+        return b'F' + struct.pack('<I', len(value)) + value.tobytes()     # rclpy's float64[]: no copy through numpy
     if isinstance(value, (bool, np.bool_)):
         return b'b' + (b'\x01' if value else b'\x00')
     if isinstance(value, (int, np.integer)):
@@ -67,11 +71,11 @@ def _value(value) -> bytes:
         return b'y' + struct.pack('<I', len(raw)) + raw
     if isinstance(value, (list, tuple)) and any(isinstance(v, str) for v in value):
         return b'S' + struct.pack('<I', len(value)) + b''.join(_text(str(v)) for v in value)
-    array = np.asarray(value)
-    kind = {'f': ('F', '<f8'), 'u': ('U', '<u8'), 'i': ('I', '<i8'), 'b': ('B', '|u1')}.get(array.dtype.kind)
-    if kind is None or array.ndim != 1:
-        raise TypeError(f'cannot sign a value of type {type(value).__name__} ({array.dtype}, {array.ndim}-d)')
-    return kind[0].encode() + struct.pack('<I', array.size) + np.ascontiguousarray(array, kind[1]).tobytes()
+    values = np.asarray(value)
+    kind = {'f': ('F', '<f8'), 'u': ('U', '<u8'), 'i': ('I', '<i8'), 'b': ('B', '|u1')}.get(values.dtype.kind)
+    if kind is None or values.ndim != 1:
+        raise TypeError(f'cannot sign a value of type {type(value).__name__} ({values.dtype}, {values.ndim}-d)')
+    return kind[0].encode() + struct.pack('<I', values.size) + np.ascontiguousarray(values, kind[1]).tobytes()
 
 
 def canonical(purpose: str, link: str, counter: int, fields: Iterable[tuple[str, object]]) -> bytes:
