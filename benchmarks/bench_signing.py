@@ -97,6 +97,10 @@ def forged_refusal(repeats: int) -> dict:
     return {'refuse_us': med, 'refuse_p99_us': p99, 'refusals_per_s_one_core': 1e6 / med}
 
 
+def _check_cdr(recorder: NodeAuth, data, cls) -> str:
+    return recorder.verify(deserialize_message(next(data), cls), SAMPLES, '/bench')
+
+
 def recorder_check(repeats: int) -> dict:
     """µs the recorder spends on one sample batch before writing it: CDR bytes -> message -> verify."""
     out = {}
@@ -104,9 +108,9 @@ def recorder_check(repeats: int) -> dict:
         signer, recorder = NodeAuth('/rig/rig_driver', KEY, True, '-'), NodeAuth('/rig/recorder', KEY, True, '-')
         msg = messages(rate)[0][1]
         data = iter([serialize_message(signer.sign(copy.deepcopy(msg), SAMPLES)) for _ in range(repeats)])
-        cost = time_per_call(lambda d=data, cls=type(msg): recorder.verify(deserialize_message(next(d), cls), SAMPLES,
-                                                                           '/bench'), repeats)
-        out[f'{rate / 1000:g} kHz'] = {'us': cost[0], 'p99_us': cost[1], 'cpu_pct': cost[0] * 1e-4 / SAMPLE_BATCH_PERIOD}
+        check = functools.partial(_check_cdr, recorder, data, type(msg))
+        us, p99 = time_per_call(check, repeats)
+        out[f'{rate / 1000:g} kHz'] = {'us': us, 'p99_us': p99, 'cpu_pct': us * 1e-4 / SAMPLE_BATCH_PERIOD}
     return out
 
 
@@ -131,8 +135,8 @@ def main(argv=None) -> int:
               f'core; each sample subscriber (verifies samples, signs its beats) {subscriber:.3f} %')
     recorder = recorder_check(args.repeats)
     for rate, r in recorder.items():
-        print(f"recorder at {rate}: CDR -> message -> verify {r['us']:.1f} µs per sample batch (p99 {r['p99_us']:.1f}), "
-              f"{r['cpu_pct']:.3f} % of a core")
+        print(f"recorder at {rate}: CDR -> message -> verify {r['us']:.1f} µs per sample batch "
+              f"(p99 {r['p99_us']:.1f}), {r['cpu_pct']:.3f} % of a core")
     forged = forged_refusal(args.repeats)
     print(f"\nrefusing a forged 10 kHz sample batch: {forged['refuse_us']:.1f} µs (p99 {forged['refuse_p99_us']:.1f}): "
           f"one core refuses {forged['refusals_per_s_one_core']:.0f} forged batches/s")
