@@ -73,11 +73,12 @@ class Peers:
         self.last: dict[str, tuple[float, Heartbeat]] = {}
         self.restarts: dict[str, int] = {}
         self.auth = auth     # NodeAuth: beats without a valid signature are refused (counted in its verifier)
-        self._topic = node.resolve_topic_name(topics.HEARTBEAT)
+        self._node, self._topic = node, node.resolve_topic_name(topics.HEARTBEAT)
         node.create_subscription(Heartbeat, topics.HEARTBEAT, self.on_beat, topics.HEARTBEAT_QOS)
 
     def on_beat(self, msg: Heartbeat) -> None:
-        if self.auth is not None and self.auth.verify(msg, HEARTBEAT, f'{self._topic} (beat of {msg.node})'):
+        where = f'{self._topic} (beat of {msg.node})'
+        if self.auth is not None and self.auth.refuse(self._node, msg, HEARTBEAT, where):
             return     # a forged beat must not keep a frozen stream owner alive
         old = self.last.get(msg.node)
         if old is not None and old[1].pid != msg.pid:
