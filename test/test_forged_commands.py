@@ -167,7 +167,6 @@ def test_every_forgery_is_refused_counted_named_and_the_program_completes(suite,
                 refusals(model['auth_refused_by_channel']), elapsed)
 
 
-
 def test_forged_heartbeats_do_not_keep_a_frozen_owners_hold(suite, tmp_path):
     """The excitation holds the rig and is frozen (SIGSTOP); a stranger beats in its name (unsigned, and signed with
     another key) 10 times a second. Before: the hold lived on for 5 s and more. Now rig_driver takes only signed
