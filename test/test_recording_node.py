@@ -256,7 +256,7 @@ def test_unwritable_output_dir_is_reported_not_fatal(context, tmp_path):
         assert rec.core.recording and rec.core.current_file.parent == tmp_path / 'elsewhere'
 
 
-def test_a_forged_sample_batch_is_refused_counted_and_never_recorded(context, tmp_path):
+def test_a_forged_sample_batch_is_refused_counted_and_never_recorded(context, tmp_path, capsys):
     """Issue 35: a batch without the rig key's signature (a stranger's, sequence +1e6) or signed with another key is
     not written: the recorder counts it in its diagnostics (named with the topic) and in the file's close record,
     and the recording holds the driver's batches only, without a gap."""
@@ -291,6 +291,9 @@ def test_a_forged_sample_batch_is_refused_counted_and_never_recorded(context, tm
     assert list(r.sequence) == list(range(2 * BATCH)) and r.samples_lost == 0
     assert r.closing[0]['messages_refused'] == 2
     assert r.closing[0]['messages_refused_by_topic'] == f'{ns}/samples: 2'
+    assert cli(['info', str(out)]) == 0
+    assert f'refused:    2 messages without the rig key\'s signature, not recorded ({ns}/samples: 2)' \
+        in capsys.readouterr().out
 
 
 def test_a_recorder_records_its_own_suite_not_another_on_the_domain(context, tmp_path):
