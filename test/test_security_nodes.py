@@ -27,7 +27,7 @@ from rclpy.parameter import Parameter
 from rclpy.serialization import deserialize_message, serialize_message
 
 from msg_defs.action import RunProgram
-from msg_defs.msg import Heartbeat
+from msg_defs.msg import Heartbeat, RigStatus
 from msg_defs.srv import OpenStream, RecorderControl, StopStream
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes.auth import (
@@ -43,10 +43,14 @@ from rubber_rig.nodes.auth import (
     declare_auth,
     fields_of,
 )
+from rubber_rig.nodes.launcher import InProcessLauncher
 from rubber_rig.nodes.params import ParameterError
+from rubber_rig.nodes.rig_driver_node import RigDriverNode
 from rubber_rig.security import init_key
+from rubber_rig.testing.operator import Operator
 
 from support.ros import ros_context
+from support.suite import CONFIG, domain_id
 
 KEY = bytes(range(32))
 
@@ -126,3 +130,42 @@ def test_a_node_without_a_usable_key_refuses_to_start_unless_in_development_mode
         assert status.level == DiagnosticStatus.WARN
         assert status.message.startswith('1 unauthenticated messages refused (heartbeat on /auth_test/heartbeat')
         node.destroy_node()
+
+
+@pytest.mark.ros
+def test_rig_driver_takes_commands_only_signed_with_the_rig_key():
+    """Wiring, in one process (no program on the wall clock): a stranger's open_stream is refused, the operator's
+    signed one granted; on the granted channel an unsigned batch is refused and counted, a signed one queued; a
+    stranger's stop_stream is refused, the owner's signed one ramps. The refusals are named with their channel."""
+    ns = '/sectest'
+    with InProcessLauncher([CONFIG], namespace=ns, domain_id=domain_id()) as launcher:
+        driver = launcher.start(RigDriverNode)
+        op, stranger = Operator(ns, domain_id()), Operator(ns, domain_id(), name='stranger', signs=False)
+        try:
+            assert op.wait_status(lambda s: s.state == RigStatus.STATE_IDLE, 30.0), 'rig_driver not idle'
+            refused = stranger.call('rig_driver/open_stream', OpenStream,
+                                    OpenStream.Request(owner=f'{ns}/stranger', lead_time=0.5))
+            assert refused is not None and not refused.success and refused.message.startswith('refused: unsigned')
+            owner = f'{ns}/operator'
+            grant = op.call('rig_driver/open_stream', OpenStream, OpenStream.Request(owner=owner, lead_time=2.0))
+            assert grant is not None and grant.success, grant
+            assert launcher.wait_for(lambda: op.pub_setpoints['command'].get_subscription_count() >= 1, 10.0)
+            x = np.full(500, grant.position)
+            unsigned = conv.setpoint_batch_msg(grant.first_sequence, 1e-3, x, 0, stream_id=grant.stream_id,
+                                               source=owner)
+            op.pub_setpoints['command'].publish(unsigned)
+            assert launcher.wait_for(lambda: driver.rig.driver.status.extra['setpoints_refused'] >= 500, 5.0)
+            op.pub_setpoints['command'].publish(op.sign(copy.deepcopy(unsigned), SETPOINT_STREAM))
+            assert launcher.wait_for(lambda: driver.rig.driver.status.extra['next_sequence']
+                                     >= grant.first_sequence + 500, 5.0), driver.rig.driver.status.extra
+            stop = StopStream.Request(stream_id=grant.stream_id, action=StopStream.Request.ACTION_ABORT, target=0.0)
+            refused = stranger.call('rig_driver/stop_stream', StopStream, copy.deepcopy(stop))
+            assert refused is not None and not refused.success and 'unsigned' in refused.message
+            assert op.call('rig_driver/stop_stream', StopStream, stop).success
+            lines = driver.auth.lines()
+            assert lines['auth_refused_by_channel'] == (
+                f'open_stream on {ns}/rig_driver/open_stream: 1, setpoint_stream on '
+                f'rig_driver/setpoint_stream/{owner[1:]}: 1, stop_stream on {ns}/rig_driver/stop_stream: 1')
+        finally:
+            stranger.close()
+            op.close()
