@@ -241,7 +241,9 @@ def test_a_killed_excitation_leaves_the_graph_and_the_first_goal_after_its_resta
         assert procs.wait_started('excitation', 30.0), procs.log('excitation')[-2000:]
         assert client.wait_for_server(timeout_sec=20.0)
         t0 = time.monotonic()
-        future = client.send_goal_async(RunProgram.Goal(program_yaml=RUNNING.replace('cycles: 40', 'cycles: 4')))
+        goal = signed(RunProgram.Goal(program_yaml=RUNNING.replace('cycles: 40', 'cycles: 4')), RUN_PROGRAM,
+                      node.get_fully_qualified_name())     # an operator's client: it holds the rig key
+        future = client.send_goal_async(goal)
         executor.spin_until_future_complete(future, timeout_sec=15.0)
         assert future.done(), 'the first goal after the restart got no response in 15 s:\n' + \
             procs.log('excitation')[-2000:]
