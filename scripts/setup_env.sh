@@ -97,3 +97,13 @@ if ! up_to_date package "$PKG_HASH"; then
     || { cat "$ROOT/build/pip-install.log" >&2; exit 1; }
   mark package "$PKG_HASH"
 fi
+
+# 5. the rig's secret key (authenticated commands and samples, README "Who may move the rig"): created once, so
+# that `make bench` and the shipped configuration work out of the box; an existing key is kept ---------------------
+if ! "$VENV/bin/rubber-rig" keys check >/dev/null 2>&1; then
+  if "$VENV/bin/python" -c 'import sys; from rubber_rig.security import default_key_path; sys.exit(default_key_path().exists())'; then
+    "$VENV/bin/rubber-rig" keys init >&2
+  else
+    log "warning: the rig key is not usable: $("$VENV/bin/rubber-rig" keys check 2>&1 | tail -1)"
+  fi
+fi

@@ -27,6 +27,18 @@ for _threads in ('OPENBLAS_NUM_THREADS', 'OMP_NUM_THREADS', 'MKL_NUM_THREADS'):
 if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
+# The rig key of this test session (README "Who may move the rig"): a fresh one in a private directory, never the
+# user's; the node processes and the clients (the test operator, rubber-rig bench) the tests start inherit its path.
+# Set at import, before any node starts; a caller's RUBBER_RIG_KEY_FILE is kept.
+if not os.environ.get('RUBBER_RIG_KEY_FILE'):
+    import atexit  # noqa: E402
+    import shutil  # noqa: E402
+    import tempfile  # noqa: E402
+
+    from rubber_rig.security import init_key  # noqa: E402
+    _key_dir = tempfile.mkdtemp(prefix='rubber_rig_test_key_')
+    os.environ['RUBBER_RIG_KEY_FILE'] = str(init_key(os.path.join(_key_dir, 'rig.key')))
+    atexit.register(shutil.rmtree, _key_dir, True)
 
 import pytest  # noqa: E402
 

@@ -37,6 +37,7 @@ ALLOWED = {
     'versions': set(),
     'paths': set(),
     'dds': {'paths'},
+    'security': set(),
     'analysis': set(),
     'safety': {'settings'},
     'models': {'analysis', 'units'},
@@ -46,10 +47,10 @@ ALLOWED = {
     'session': {'excitation', 'online', 'recording', 'rig', 'safety'},
     'online': {'analysis', 'excitation', 'models'},
     'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig', 'session', 'units'},
-    'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'session',
-              'settings', 'versions'},
+    'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'security',
+              'session', 'settings', 'versions'},
     'cli': {'__init__', 'analysis', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording', 'rig',
-            'safety', 'session', 'settings', 'units'},
+            'safety', 'security', 'session', 'settings', 'units'},
     'testing': {'dds', 'nodes'},
 }
 OPTIONAL_HEAVY = {'matplotlib'}

@@ -43,6 +43,7 @@ from rcl_interfaces.srv import SetParameters
 
 from msg_defs.msg import RecorderStatus, RigStatus
 from msg_defs.srv import LoadProgram
+from rubber_rig.nodes.auth import SAMPLES
 from rubber_rig.recording import load_recording
 from rubber_rig.testing.operator import Operator
 from rubber_rig.testing.processes import SuiteProcesses
@@ -563,7 +564,7 @@ def test_nan_batches_and_bad_parameters_do_not_take_nodes_down(suite):
                          displacement=[math.nan] * 50, force=[math.nan] * 50, setpoint=[math.nan] * 50)
     wait_for(lambda: pub.get_subscription_count() >= 3, 5.0,
              'three of the nodes to subscribe to the test\'s samples publisher')
-    pub.publish(bad)
+    pub.publish(op.sign(bad, SAMPLES))   # from the rig's own driver (signed): bad data, not a forgery
     r = op.call('element_model/set_parameters', SetParameters, SetParameters.Request(parameters=[ParameterMsg(
         name='parameter_set', value=ParameterValue(type=ParameterType.PARAMETER_STRING,
                                                    string_value='/nonexistent.yaml:fit_20C'))]))

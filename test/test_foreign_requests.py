@@ -40,6 +40,7 @@ from rclpy.signals import SignalHandlerOptions
 from msg_defs.action import RunProgram
 from msg_defs.msg import RigStatus
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.auth import RUN_PROGRAM, signed
 from rubber_rig.testing.operator import Operator
 from rubber_rig.testing.processes import SuiteProcesses
 
@@ -118,7 +119,12 @@ class Crowd:
         futures, queued = [], threading.Event()
 
         def send_all():
-            futures.extend(c.send_goal_async(goal) for c in self.clients for _ in range(per_client))
+            # the rig's operators: each goal signed anew
+            for node, client in zip(self.nodes, self.clients, strict=True):
+                futures.extend(client.send_goal_async(signed(RunProgram.Goal(
+                    program_path=goal.program_path, program_yaml=goal.program_yaml,
+                    amplitude_control=goal.amplitude_control), RUN_PROGRAM, node.get_fully_qualified_name()))
+                    for _ in range(per_client))
             queued.set()
         self.executor.create_task(send_all)
         assert queued.wait(30.0), 'the goals were not sent'
@@ -235,7 +241,9 @@ def test_a_killed_excitation_leaves_the_graph_and_the_first_goal_after_its_resta
         assert procs.wait_started('excitation', 30.0), procs.log('excitation')[-2000:]
         assert client.wait_for_server(timeout_sec=20.0)
         t0 = time.monotonic()
-        future = client.send_goal_async(RunProgram.Goal(program_yaml=RUNNING.replace('cycles: 40', 'cycles: 4')))
+        goal = signed(RunProgram.Goal(program_yaml=RUNNING.replace('cycles: 40', 'cycles: 4')), RUN_PROGRAM,
+                      node.get_fully_qualified_name())     # an operator's client: it holds the rig key
+        future = client.send_goal_async(goal)
         executor.spin_until_future_complete(future, timeout_sec=15.0)
         assert future.done(), 'the first goal after the restart got no response in 15 s:\n' + \
             procs.log('excitation')[-2000:]

@@ -122,6 +122,7 @@ def context():
 
 @pytest.fixture
 def node(context):
+    # the tests feed take_samples, the data path behind the signature check of on_samples (test_security_nodes)
     n = ElementModelNode(context=context, parameter_overrides=[Parameter('cycle_metrics', value=True)])
     n.published, n.metrics = [], []
     n.pub_prediction.publish = n.published.append
@@ -161,7 +162,7 @@ def test_bad_parameter_changes_are_refused_with_a_reason_and_the_model_keeps_run
     assert node.set_parameters_atomically([Parameter('parameter_set', value=good)]).successful
     (tmp_path / 'good.yaml').unlink()
     assert node.predictor.params.k0 == 1.1e7 and node.predictor.parameter_set == good
-    node.on_samples(conv.sample_batch_msg(0, 0.0, DT, sine(BATCH), np.zeros(BATCH), sine(BATCH), 20.0, 0, 0))
+    node.take_samples(conv.sample_batch_msg(0, 0.0, DT, sine(BATCH), np.zeros(BATCH), sine(BATCH), 20.0, 0, 0))
     assert np.all(np.isfinite(node.published[-1].predicted_force))
 
 
@@ -177,7 +178,7 @@ def stream(node, x, force, skip=(), first=0):
         if lo + first in skip:
             continue
         s = slice(lo, lo + BATCH)
-        node.on_samples(conv.sample_batch_msg(first + lo, (first + lo) * DT, DT, x[s], force[s], x[s], 20.0, 0, 0))
+        node.take_samples(conv.sample_batch_msg(first + lo, (first + lo) * DT, DT, x[s], force[s], x[s], 20.0, 0, 0))
 
 
 @pytest.mark.ros
@@ -206,10 +207,10 @@ def test_nan_batches_and_nan_forces_neither_crash_nor_poison_the_node(node):
 def test_malformed_batches_are_dropped_and_a_restarted_driver_restarts_the_model(node):
     x = sine(1000)
     f = np.zeros(1000)
-    node.on_samples(conv.sample_batch_msg(0, 0.0, DT, x[:10], f[:9], x[:10], 20.0, 0, 0))
-    node.on_samples(conv.sample_batch_msg(0, 0.0, 0.0, x[:10], f[:10], x[:10], 20.0, 0, 0))
-    node.on_samples(conv.sample_batch_msg(0, 0.0, -DT, x[:10], f[:10], x[:10], 20.0, 0, 0))
-    node.on_samples(conv.sample_batch_msg(0, 0.0, math.nan, x[:10], f[:10], x[:10], 20.0, 0, 0))
+    node.take_samples(conv.sample_batch_msg(0, 0.0, DT, x[:10], f[:9], x[:10], 20.0, 0, 0))
+    node.take_samples(conv.sample_batch_msg(0, 0.0, 0.0, x[:10], f[:10], x[:10], 20.0, 0, 0))
+    node.take_samples(conv.sample_batch_msg(0, 0.0, -DT, x[:10], f[:10], x[:10], 20.0, 0, 0))
+    node.take_samples(conv.sample_batch_msg(0, 0.0, math.nan, x[:10], f[:10], x[:10], 20.0, 0, 0))
     assert node.batches_dropped == 4 and node.published == []
     stream(node, x, f)
     stream(node, x[:200], f[:200])                 # sequence back to 0: a new run
@@ -225,7 +226,7 @@ def test_a_stale_or_foreign_batch_that_goes_back_does_not_restart_the_model(node
     x = sine(1000)
     f = np.zeros(1000)
     stream(node, x[:500], f[:500])
-    node.on_samples(conv.sample_batch_msg(100, 0.1, DT, x[:BATCH], f[:BATCH], x[:BATCH], 20.0, 0, 0))
+    node.take_samples(conv.sample_batch_msg(100, 0.1, DT, x[:BATCH], f[:BATCH], x[:BATCH], 20.0, 0, 0))
     stream(node, x[500:], f[500:], first=500)
     assert node.predictor.restarts == 0 and node.stray_batches == 1
     pred = np.concatenate([np.asarray(m.predicted_force) for m in node.published])

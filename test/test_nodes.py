@@ -33,6 +33,7 @@ from rubber_rig.excitation import Program
 from rubber_rig.models import load_parameter_set, parameters_at_temperature, steady_state_properties
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.auth import SAMPLES
 from rubber_rig.recording import load_recording
 
 from support.suite import (
@@ -312,7 +313,8 @@ def test_element_model_runs_a_model_file_and_refuses_a_bad_one_at_run_time(tmp_p
         def send(lo, hi):
             for i in range(lo, hi, size):
                 xb = x[i:i + size]
-                pub.publish(conv.sample_batch_msg(i, i * dt, dt, xb, np.zeros(xb.size), xb, 20.0, 0, 0))
+                pub.publish(op.sign(conv.sample_batch_msg(i, i * dt, dt, xb, np.zeros(xb.size), xb, 20.0, 0, 0),
+                                    SAMPLES))   # as the rig's driver: signed with the rig's key
 
         def predicted_up_to(n):
             return lambda: preds and preds[-1].first_sequence + len(preds[-1].predicted_force) >= n

@@ -38,6 +38,7 @@ from msg_defs.msg import RecorderStatus, RigSampleBatch
 from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.auth import RECORDER_CONTROL, signed
 from rubber_rig.nodes.recorder_node import RecorderNode
 from rubber_rig.recording import GapTracker, load_recording, recover
 
@@ -84,7 +85,8 @@ class Client:
 
     def call(self, executor, command, path=''):
         assert self.control.wait_for_service(timeout_sec=20)
-        future = self.control.call_async(RecorderControl.Request(command=command, path=path))
+        future = self.control.call_async(signed(RecorderControl.Request(command=command, path=path),
+                                                RECORDER_CONTROL))
         assert spin_until(executor, future.done)
         return future.result()
 

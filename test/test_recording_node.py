@@ -31,10 +31,13 @@ from rosbags.typesys import Stores, get_typestore
 from msg_defs.msg import RigSampleBatch, RigStatus
 from msg_defs.srv import RecorderControl
 from rubber_rig.cli.main import main as cli
+from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.auth import RECORDER_CONTROL, SAMPLES, client_auth, signed
 from rubber_rig.nodes.recorder_node import RecorderNode
 from rubber_rig.recording import load_recording
 from rubber_rig.recording.qos import parse_offered_qos
+from rubber_rig.security import init_key
 
 from support.ros import ros_context, sample_batch, spin_until, spinning
 
@@ -54,7 +57,7 @@ def context():
 def control_caller(executor, control):
     """call(command, path='') -> RecorderControl response, spinning ``executor`` until it arrives."""
     def call(command, path=''):
-        future = control.call_async(RecorderControl.Request(command=command, path=path))
+        future = control.call_async(signed(RecorderControl.Request(command=command, path=path), RECORDER_CONTROL))
         assert spin_until(executor, future.done)
         return future.result()
     return call
@@ -247,10 +250,50 @@ def test_unwritable_output_dir_is_reported_not_fatal(context, tmp_path):
         assert level == DiagnosticStatus.ERROR and 'cannot create recording directory' in message
         control = client_node.create_client(RecorderControl, '/unwritable/recorder/control')
         assert control.wait_for_service(timeout_sec=10)
-        future = control.call_async(RecorderControl.Request(command=RecorderControl.Request.START,
-                                                            path=str(tmp_path / 'elsewhere')))
+        future = control.call_async(signed(RecorderControl.Request(command=RecorderControl.Request.START,
+                                                                   path=str(tmp_path / 'elsewhere')), RECORDER_CONTROL))
         assert spin_until(executor, future.done) and future.result().success
         assert rec.core.recording and rec.core.current_file.parent == tmp_path / 'elsewhere'
+
+
+def test_a_forged_sample_batch_is_refused_counted_and_never_recorded(context, tmp_path, capsys):
+    """Issue 35: a batch without the rig key's signature (a stranger's, sequence +1e6) or signed with another key is
+    not written: the recorder counts it in its diagnostics (named with the topic) and in the file's close record,
+    and the recording holds the driver's batches only, without a gap."""
+    ns = '/forgetest'
+    pub_node = Node('fake_rig', namespace=ns, context=context)
+    rec = RecorderNode(namespace=ns, context=context, parameter_overrides=[
+        Parameter('output_dir', value=str(tmp_path)), Parameter('autostart', value=False),
+        Parameter('discovery_period', value=0.1), Parameter('diagnostics_period', value=0.2)])
+    client_node = Node('client', context=context)
+    other_key = client_auth('/forgetest/rig_driver', init_key(tmp_path / 'other.key'))
+    with spinning(context, pub_node, rec, client_node) as executor:
+        samples = pub_node.create_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
+        control = client_node.create_client(RecorderControl, f'{ns}/recorder/control')
+        assert control.wait_for_service(timeout_sec=10)
+        call = control_caller(executor, control)
+        out = tmp_path / 'run'
+        assert call(RecorderControl.Request.START, str(out)).success
+        assert spin_until(executor, lambda: len(rec._subs) == 1)
+        forged = conv.sample_batch_msg(10**6, 0.0, PERIOD, np.zeros(BATCH), np.zeros(BATCH), np.zeros(BATCH), 23.0,
+                                       0, 0)
+        for msg in (batch(0), forged, other_key.sign(conv.sample_batch_msg(
+                BATCH, 0.0, PERIOD, np.ones(BATCH), np.ones(BATCH), np.ones(BATCH), 23.0, 0, 0), SAMPLES), batch(1)):
+            samples.publish(msg)
+            executor.spin_once(timeout_sec=0)
+        assert spin_until(executor, lambda: rec.core.stats()['messages_refused'] == 2
+                          and rec.core.writer.messages_by_topic.get(f'{ns}/samples', 0) == 2)
+        rec.publish_diagnostics()
+        assert rec.auth.verifier.refused == {('samples', f'{ns}/samples'): 2}
+        assert 'bad signature' in rec.auth.verifier.last_refusal.why
+        assert call(RecorderControl.Request.STOP).success
+    r = load_recording(sorted(out.glob('*.mcap'))[0])
+    assert list(r.sequence) == list(range(2 * BATCH)) and r.samples_lost == 0
+    assert r.closing[0]['messages_refused'] == 2
+    assert r.closing[0]['messages_refused_by_topic'] == f'{ns}/samples: 2'
+    assert cli(['info', str(out)]) == 0
+    assert f'refused:    2 messages without the rig key\'s signature, not recorded ({ns}/samples: 2)' \
+        in capsys.readouterr().out
 
 
 def test_a_recorder_records_its_own_suite_not_another_on_the_domain(context, tmp_path):

@@ -39,12 +39,15 @@ from rubber_rig.excitation import load_program, read_program
 from rubber_rig.excitation.program import OverrideError, with_overrides
 from rubber_rig.online.summary import BlockTable, write_summary
 from rubber_rig.paths import find_config
+from rubber_rig.security import KEY_ENV, default_key_path, init_key, load_key
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument('--program', default='dynamic_stiffness_grid',
                         help='shipped program name or YAML file (default: dynamic_stiffness_grid, sine 0.5-14 Hz '
                              'x 0.5 and 1 mm at 20 degC)')
+    parser.add_argument('--key-file', help='the rig\'s secret key (default: $RUBBER_RIG_KEY_FILE, else '
+                        '~/.config/rubber_rig/rig.key, created if missing: rubber-rig keys init)')
     parser.add_argument('--config', default='rig_sim.yaml', help='ROS parameter file of the nodes '
                         '(default: the shipped config/rig_sim.yaml, as used by rig_sim.launch.py)')
     parser.add_argument('--rate', type=float, help='rig sample rate [Hz] (default: from the config, 1000)')
@@ -124,6 +127,20 @@ def save_summary(mcap: Path, summary: dict) -> tuple:
         return None, None, f'cannot write the summary next to {mcap}: {exc.strerror or exc}'
 
 
+def ensure_key(key_file: str | None) -> str:
+    """Make the rig's key known to the nodes and clients the bench starts (RUBBER_RIG_KEY_FILE) and create it when
+    there is none yet, so that the shipped configuration works out of the box. Returns a line to show, or ''.
+    """
+    if key_file:
+        os.environ[KEY_ENV] = str(Path(key_file).expanduser().absolute())
+    path = default_key_path()
+    if path.exists():
+        load_key(path)      # a key others can read is refused here, before any node starts (KeyFileError names it)
+        return ''
+    init_key(path)
+    return f'created the rig key {path} (mode 0600; rubber-rig keys init)'
+
+
 def run(args) -> int:
     os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
     from rubber_rig.cli.bench_session import BenchSession  # rclpy is loaded only when the bench runs
@@ -131,6 +148,7 @@ def run(args) -> int:
 
     config = find_config(args.config)
     program, program_yaml = build_program(args)
+    key_note = ensure_key(args.key_file)          # before any node starts: each reads the key at start
     out_dir = Path(args.output_dir).absolute()     # created by the recorder, which reports if it cannot
     term = Terminal(args.quiet)
     table = BlockTable(program)
@@ -141,7 +159,7 @@ def run(args) -> int:
     with InProcessLauncher([config], namespace=args.namespace, domain_id=args.domain_id) as launcher:
         refuse_if_another_suite_runs(launcher, args.namespace)
         session = BenchSession(launcher, args, program_yaml, out_dir)
-        for line in session.describe(program):
+        for line in ([key_note] if key_note else []) + list(session.describe(program)):
             term.line(line)
         term.line(f'recording to {session.wait_ready()}')
         term.line(BlockTable.COLUMNS[0])

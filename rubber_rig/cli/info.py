@@ -83,6 +83,10 @@ def run(args) -> int:
         print(f'parts:      {line}')
     for gap in rec.gaps[:20]:
         print(f'  expected {gap["expected"]}, got {gap["received"]} ({gap["lost"]} lost)')
+    refused = [c for c in rec.closing if int(c.get('messages_refused') or 0)]
+    if refused:    # forged or unsigned batches the recorder did not write (README "Who may move the rig")
+        print(f'refused:    {sum(int(c["messages_refused"]) for c in refused)} messages without the rig key\'s '
+              f'signature, not recorded ({"; ".join(c.get("messages_refused_by_topic", "") for c in refused)})')
     if rec.metadata:
         print('metadata:')
         for key, value in rec.metadata.items():

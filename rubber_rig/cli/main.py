@@ -43,6 +43,7 @@ COMMANDS = {
     'canlog': 'rubber_rig.cli.canlog',
     'simulate': 'rubber_rig.cli.simulate',
     'conformance': 'rubber_rig.cli.conformance',
+    'keys': 'rubber_rig.cli.keys',
 }
 
 

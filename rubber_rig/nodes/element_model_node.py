@@ -14,7 +14,8 @@
 
 """element_model: predicts the element force online from the measured displacement.
 
-Subscribes:  samples (msg_defs/RigSampleBatch), setpoints (msg_defs/SetpointBatch, only for block indices)
+Subscribes:  samples (msg_defs/RigSampleBatch), setpoints (msg_defs/SetpointBatch, only for block indices), both
+             only with the rig key's signature (nodes/auth.py: refusals in /diagnostics, status ``<node>/auth``)
 Publishes:   prediction (msg_defs/ModelPrediction: prediction, residual, branch forces per batch)
              cycle_metrics (msg_defs/CycleMetrics: measured and model K_dyn, loss angle, D, C_eq, energy)
              model_parameters (msg_defs/ModelParameters, latched)
@@ -69,6 +70,7 @@ from msg_defs.msg import CycleMetrics, ModelParameters, ModelPrediction, RigSamp
 from rubber_rig.models import load_parameter_set
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.auth import SAMPLES, SETPOINTS, declare_auth, start_auth_diagnostics
 from rubber_rig.nodes.heartbeat import start_heartbeat
 from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.nodes.spin import spin_node
@@ -141,8 +143,12 @@ class ElementModelNode(Node):
         self.pub_prediction = self.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
         self.pub_metrics = self.create_publisher(CycleMetrics, topics.CYCLE_METRICS, topics.EVENT_QOS)
         self.pub_params = self.create_publisher(ModelParameters, topics.MODEL_PARAMETERS, topics.LATCHED_QOS)
-        self.create_subscription(RigSampleBatch, topics.SAMPLES, self.on_samples, topics.STREAM_QOS)
-        self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints, topics.STREAM_QOS)
+        self.auth = declare_auth(self)   # samples and setpoints must carry the rig key's signature (nodes/auth.py)
+        self.samples_topic = self.create_subscription(RigSampleBatch, topics.SAMPLES, self.on_samples,
+                                                      topics.STREAM_QOS).topic_name
+        self.setpoints_topic = self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints,
+                                                        topics.STREAM_QOS).topic_name
+        start_auth_diagnostics(self, self.auth)
         self._published_params = None
         self.publish_parameters()
         start_heartbeat(self, lambda: self.predictor.model_name)
@@ -152,10 +158,19 @@ class ElementModelNode(Node):
 
     # -- data path --------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
+        if self.auth.refuse(self, msg, SETPOINTS, self.setpoints_topic):
+            return
         self.cutter.setpoints(msg.first_sequence, len(msg.displacement), msg.block_index, msg.end_of_stream)
         self.process_cycles()
 
     def on_samples(self, msg: RigSampleBatch) -> None:
+        """A batch with a valid signature goes to the model; a forged one is refused (counted, named in
+        /diagnostics): it neither enters the prediction nor makes a cycle the detectors judge.
+        """
+        if not self.auth.refuse(self, msg, SAMPLES, self.samples_topic):
+            self.take_samples(msg)
+
+    def take_samples(self, msg: RigSampleBatch) -> None:
         x, f, _ = conv.batch_arrays(msg)
         problem = batch_problem(msg.first_sequence, msg.sample_period, len(x), len(f))
         if problem is not None:
@@ -176,7 +191,7 @@ class ElementModelNode(Node):
                                    'afresh')
             self.predictor.restart()
             self.cutter.restart()
-            self.on_samples(held)
+            self.take_samples(held)
         elif verdict is not None:
             self.stray_batches += 1
             self.get_logger().warning(f'sample batch at sequence {verdict[1].first_sequence} ignored: it went back '

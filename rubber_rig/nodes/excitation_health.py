@@ -24,6 +24,7 @@ from msg_defs.action import RunProgram
 from msg_defs.msg import DetectorEvent, Heartbeat
 from rubber_rig.nodes import awaitables, topics
 from rubber_rig.nodes import conversions as conv
+from rubber_rig.nodes.auth import HEARTBEAT, annotate
 from rubber_rig.nodes.heartbeat import PERIOD, SILENT
 from rubber_rig.session.observed import BeatLog, ProgramWitness, StallWatch
 
@@ -45,7 +46,8 @@ class ProgramHealth:
         self.me = node.get_fully_qualified_name()
         self.stall = StallWatch(SILENT)   # the node's own executor: a stall of its own is no silence of the others
         self.beats = BeatLog(SILENT, PERIOD)
-        node.create_subscription(Heartbeat, topics.HEARTBEAT, self.on_beat, topics.HEARTBEAT_QOS)
+        self.beat_topic = node.create_subscription(Heartbeat, topics.HEARTBEAT, self.on_beat,
+                                                   topics.HEARTBEAT_QOS).topic_name
         self.witness = ProgramWitness(self.me, 0.0)
         self.silent_now: dict[str, float] = {}
         self.pub_diagnostics = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
@@ -60,7 +62,8 @@ class ProgramHealth:
     def on_beat(self, msg: Heartbeat) -> None:
         now = self.node.clock()
         self.stall.tick(now)
-        if msg.node != self.me:
+        # only signed beats (nodes/auth.py): a forged one must not hide a silent peer
+        if msg.node != self.me and not self.node.auth.refuse(self.node, msg, HEARTBEAT, self.beat_topic):
             self.beats.beat(msg.node, msg.pid, msg.count, conv.to_seconds(msg.header.stamp), now)
 
     def start_program(self) -> None:
@@ -119,10 +122,10 @@ class ProgramHealth:
                    lost, last.message if last is not None and last.action != 'record' else '']
         msg = DiagnosticArray()
         msg.header.stamp = node.get_clock().now().to_msg()
-        msg.status.append(DiagnosticStatus(
+        msg.status.append(annotate(DiagnosticStatus(   # + what it refused unsigned or forged (samples, goals, beats)
             level=level, name=node.get_fully_qualified_name(), hardware_id='rubber_rig',
             message=next((x for x in reasons if x), f'program {node.state}'),
-            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]))
+            values=[KeyValue(key=k, value=str(v)) for k, v in values.items()]), node.auth))
         self.pub_diagnostics.publish(msg)
 
     def watch_peers(self) -> None:

@@ -27,6 +27,8 @@ Subscribes:  samples (msg_defs/RigSampleBatch: amplitude control, progress), sta
 Publishes:   setpoints (msg_defs/SetpointBatch), program (std_msgs/String, latched: YAML of the running program),
              events (msg_defs/DetectorEvent: every detector trip), /diagnostics (program state, detector events)
 Calls:       <rig_driver>/open_stream, <rig_driver>/stop_stream
+Signatures:  its setpoints, stream requests and heartbeats carry the rig key's signature; it takes only signed
+             goals and sample batches (nodes/auth.py; refusals counted and named in /diagnostics)
 
 A program starts only on a stream the driver grants (one owner at a time), from wherever the rig holds (an
 approach ramp leads to the program's start). Setpoints are generated from the sample index by a
@@ -58,6 +60,16 @@ from rubber_rig.excitation import Program, read_program, strongest, with_default
 from rubber_rig.nodes import awaitables, topics
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import excitation_readiness as readiness
+from rubber_rig.nodes import excitation_services as services
+from rubber_rig.nodes.auth import (
+    OPEN_STREAM,
+    RUN_PROGRAM,
+    SAMPLES,
+    SETPOINT_STREAM,
+    SETPOINTS,
+    STOP_STREAM,
+    declare_auth,
+)
 from rubber_rig.nodes.excitation_health import ProgramHealth
 from rubber_rig.nodes.excitation_params import declare_excitation_parameters
 from rubber_rig.nodes.excitation_recording import RecordingWatch
@@ -72,6 +84,7 @@ class ExcitationNode(Node):
         super().__init__(node_name, **kwargs)
         self.clock = clock              # [s] the one clock of this node and its helpers (injected: a test's own)
         declare_excitation_parameters(self)   # the parameters become attributes (lead_time, batch_size, ...)
+        self.auth = declare_auth(self)        # signs its commands, verifies samples and goals (nodes/auth.py)
         self.status, self.status_wall = None, 0.0   # the latest rig status, received at status_wall (monotonic)
         self.driver_wall = 0.0          # the latest status or sample batch: the driver is alive
         self.recording = RecordingWatch(self, self.require_recording, self.recorder_timeout)
@@ -98,8 +111,8 @@ class ExcitationNode(Node):
                                  topics.LATCHED_QOS)
         self.open_client = self.create_client(OpenStream, f'{self.rig_driver}/open_stream')
         self.stop_client = self.create_client(StopStream, f'{self.rig_driver}/stop_stream')
-        self.create_service(Trigger, '~/abort', self.on_abort)
-        self.create_service(SetBool, '~/hold', self.on_hold)
+        self.create_service(Trigger, '~/abort', lambda req, res: services.on_abort(self, req, res))
+        self.create_service(SetBool, '~/hold', lambda req, res: services.on_hold(self, req, res))
         self.create_service(LoadProgram, '~/load_program', lambda req, res: readiness.load_program(self, req, res))
         self.admission = GoalAdmission()   # one goal at a time; the others rejected at once, counted
         self.action = ActionServer(self, RunProgram, 'run_program', execute_callback=self.execute,
@@ -134,6 +147,8 @@ class ExcitationNode(Node):
             self.abort_program(why)
 
     def on_samples(self, msg: RigSampleBatch) -> None:
+        if self.auth.refuse(self, msg, SAMPLES, self.sub_samples.topic_name):
+            return     # a forged batch neither proves the driver alive nor ends a program (detectors never see it)
         # samples prove the driver alive as well as its status does: one late status message (DDS can hold a
         # topic back for a second when a subscriber process dies) must not stop a running program
         self.driver_wall = self.clock()
@@ -181,8 +196,8 @@ class ExcitationNode(Node):
         """Ask the driver for the stream (new program or resume); the grant, or None if it did not answer."""
         self.opening = True
         try:
-            return await awaitables.call(self, self.open_client, OpenStream.Request(
-                owner=self.get_fully_qualified_name(), lead_time=self.lead_time), 2.0)
+            return await awaitables.call(self, self.open_client, self.auth.sign(OpenStream.Request(
+                owner=self.get_fully_qualified_name(), lead_time=self.lead_time), OPEN_STREAM), 2.0)
         finally:
             self.opening = False
 
@@ -255,8 +270,8 @@ class ExcitationNode(Node):
         msg = conv.setpoint_batch_msg(first, dt, x, block, t=self.rig_time.of(first, dt, now),
                                       stream_id=self.session.stream_id, source=self.get_fully_qualified_name(),
                                       end_of_stream=end)
-        self.pub_stream.publish(msg)
-        self.pub_setpoints.publish(msg)
+        self.pub_stream.publish(self.auth.sign(msg, SETPOINT_STREAM))
+        self.pub_setpoints.publish(self.auth.sign(msg, SETPOINTS))   # signed again: a copy cannot command the rig
 
     # -- ending programs --------------------------------------------------------------------------------------------
     def abort_program(self, reason: str, success: bool = False) -> bool:
@@ -290,11 +305,13 @@ class ExcitationNode(Node):
             self.get_logger().error(f'{self.rig_driver}/stop_stream is not available: the rig ramps to rest on '
                                     f'the driver\'s stream_timeout instead of at once ({reason})')
             return
-        self.stop_client.call_async(StopStream.Request(stream_id=self.session.stream_id, action=action,
-                                                       target=float(target), reason=reason))
+        self.stop_client.call_async(self.auth.sign(StopStream.Request(
+            stream_id=self.session.stream_id, action=action, target=float(target), reason=reason), STOP_STREAM))
 
     # -- action -------------------------------------------------------------------------------------------------------
     def admit_goal(self, goal) -> GoalResponse:
+        if self.auth.refuse(self, goal, RUN_PROGRAM, f'{self.get_fully_qualified_name()}/run_program'):
+            return GoalResponse.REJECT     # unsigned or forged: a stranger cannot run a program (counted, named)
         why = self.admission.reject(self.session.runner.program.name if self.session is not None else '')
         if why:
             self.get_logger().warning(f'goal rejected, {why} ({self.admission.rejected} rejected so far)',
@@ -345,29 +362,6 @@ class ExcitationNode(Node):
         else:
             goal_handle.abort()
         return result
-
-    # -- services ---------------------------------------------------------------------------------------------
-    def on_abort(self, request, response):
-        if self.abort_program('operator abort (excitation/abort)'):
-            response.success, response.message = True, 'the rig ramps to the rest position'
-        else:
-            response.success, response.message = False, 'no program running'
-        return response
-
-    def on_hold(self, request, response):
-        s = self.session
-        if s is None:
-            response.success, response.message = False, 'no program running'
-        elif request.data:
-            why = self.hold_program('operator hold (excitation/hold)')
-            response.success = not why
-            response.message = why or f'holding at {s.runner.hold_target * 1e3:.4f} mm (the block mean)'
-        elif not s.held:
-            response.success, response.message = False, 'not holding'
-        else:
-            self.executor.create_task(self._resume())
-            response.success, response.message = True, 'resuming the held block with the cycles it has not run'
-        return response
 
     def hold_program(self, reason: str) -> str:
         """Hold the running program at its block mean (the driver keeps the stream for us). '' or why not."""

@@ -33,16 +33,22 @@ from rubber_rig.session import liveness
 from rubber_rig.session.liveness import PERIOD, SILENT, OwnerWatch  # noqa: F401 - the nodes' names for them
 
 from . import topics
+from .auth import HEARTBEAT
 
 
 def start_heartbeat(node: Node, state: Callable[[], str] = lambda: '') -> None:
-    """Beat every PERIOD on the node's relative ``heartbeat`` topic, with `state()` as the state text."""
+    """Beat every PERIOD on the node's relative ``heartbeat`` topic, with `state()` as the state text; signed when
+    the node has an ``auth`` (NodeAuth): a forged beat in its name is refused by a Peers that verifies.
+    """
     pub = node.create_publisher(Heartbeat, topics.HEARTBEAT, topics.HEARTBEAT_QOS)
+    auth = getattr(node, 'auth', None)     # signed with the rig's key when the node has one (nodes/auth.py)
     name, pid, count = node.get_fully_qualified_name(), os.getpid(), [0]
 
     def beat():
         msg = Heartbeat(node=name, pid=pid, count=count[0], state=str(state()))
         msg.header.stamp = node.get_clock().now().to_msg()
+        if auth is not None:
+            auth.sign(msg, HEARTBEAT)
         pub.publish(msg)
         count[0] += 1
     node.create_timer(PERIOD, beat)
@@ -50,12 +56,22 @@ def start_heartbeat(node: Node, state: Callable[[], str] = lambda: '') -> None:
 
 
 class Peers(liveness.Peers):
-    """liveness.Peers fed by `node`'s subscription to the suite's ``heartbeat`` topic."""
+    """liveness.Peers fed by `node`'s subscription to the suite's ``heartbeat`` topic. With `auth` (NodeAuth) only
+    beats with a valid signature count: a forged beat must not keep a frozen stream owner alive.
+    """
 
     def __init__(self, node: Node, expected: list[str] | None = None, silent: float = SILENT,
-                 clock: Callable[[], float] = time.monotonic):
+                 clock: Callable[[], float] = time.monotonic, auth=None):
         super().__init__(expected, silent, clock)
+        self.auth = auth     # NodeAuth: beats without a valid signature are refused (counted in its verifier)
+        self._node, self._topic = node, node.resolve_topic_name(topics.HEARTBEAT)
         node.create_subscription(Heartbeat, topics.HEARTBEAT, self.on_beat, topics.HEARTBEAT_QOS)
+
+    def on_beat(self, msg: Heartbeat) -> None:
+        where = f'{self._topic} (beat of {msg.node})'
+        if self.auth is not None and self.auth.refuse(self._node, msg, HEARTBEAT, where):
+            return
+        super().on_beat(msg)
 
 
 class OwnerSilence:

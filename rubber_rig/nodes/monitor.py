@@ -44,6 +44,7 @@ from msg_defs.msg import (
 from msg_defs.srv import RecorderControl
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.auth import RECORDER_CONTROL, RUN_PROGRAM, client_auth
 from rubber_rig.nodes.heartbeat import Peers
 
 
@@ -97,6 +98,7 @@ class SuiteMonitor(Node):
         sub(ModelParameters, topics.MODEL_PARAMETERS, self._on_parameters, topics.LATCHED_QOS)
         sub(String, topics.PROGRAM, self._on_program, topics.LATCHED_QOS)
         sub(RecorderStatus, topics.RECORDER_STATUS, self._on_recorder_status, topics.LATCHED_QOS)
+        self.auth = client_auth(self.get_fully_qualified_name())   # the rig's key (RUBBER_RIG_KEY_FILE, --key-file)
         self.peers = Peers(self)          # the suite's heartbeats: peers.silent() names a node stuck or gone
         self.action = ActionClient(self, RunProgram, 'run_program', **topics.ACTION_SERVICES_QOS)
         self.recorder_control = self.create_client(RecorderControl, f'{recorder}/control')
@@ -149,11 +151,13 @@ class SuiteMonitor(Node):
         """Send a RunProgram goal; returns the goal-handle future (feedback lands in ``self.feedback``)."""
         goal = RunProgram.Goal(program_path=program_path, program_yaml=program_yaml,
                                amplitude_control=amplitude_control)
+        self.auth.sign(goal, RUN_PROGRAM)     # a rig takes goals only with its key's signature
         return self.action.send_goal_async(goal, feedback_callback=lambda m: self.feedback.append(m.feedback))
 
     def recorder(self, command: int, path: str = ''):
         """Call the recorder's ~/control (RecorderControl.Request.START/STOP/SPLIT/SNAPSHOT); returns a future."""
-        return self.recorder_control.call_async(RecorderControl.Request(command=command, path=path))
+        return self.recorder_control.call_async(self.auth.sign(RecorderControl.Request(command=command, path=path),
+                                                               RECORDER_CONTROL))
 
     def recorder_subscribed(self, *names: str) -> bool:
         """True when the recorder node subscribes to every one of the given topics."""

@@ -22,7 +22,8 @@ splitting, snapshots and loss accounting are rubber_rig.recording.Recorder's.
   transient-local, as rosbag2 adapts its requests), and a deep history.
 - Topics: the ``topics`` parameter (relative names resolve in the node's namespace), or, if empty,
   every topic under the node's namespace; discovery repeats every ``discovery_period`` seconds.
-- ``~/control`` (msg_defs/srv/RecorderControl): START [path], STOP, SPLIT, SNAPSHOT [path].
+- ``~/control`` (msg_defs/srv/RecorderControl, signed): START [path], STOP, SPLIT, SNAPSHOT [path]. Sample and
+  setpoint batches without the rig key's signature are refused, never written (``messages_refused``; nodes/auth.py).
 - ``recorder_status`` (msg_defs/msg/RecorderStatus, latched): IDLE / RECORDING / ERROR with the file, the
   error, the topics subscribed and matched with a publisher, messages written and samples known lost;
   published at once on a change of state, file, error, topics or loss (a failed write is reported by the
@@ -46,11 +47,13 @@ from rclpy.exceptions import ParameterUninitializedException
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.serialization import deserialize_message
 from std_msgs.msg import String
 
-from msg_defs.msg import RecorderStatus
+from msg_defs.msg import RecorderStatus, RigSampleBatch, SetpointBatch
 from msg_defs.srv import RecorderControl
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.auth import RECORDER_CONTROL, SAMPLES, SETPOINTS, annotate, declare_auth
 from rubber_rig.nodes.heartbeat import start_heartbeat
 from rubber_rig.nodes.params import declare
 from rubber_rig.nodes.spin import spin_node
@@ -60,6 +63,9 @@ from rubber_rig.recording.qos import qos_entry
 
 UNSUPPORTED_SEQUENCE = 2**63   # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED is UINT64_MAX
 IGNORED_TOPICS = ('/rosout', '/parameter_events')
+# types whose messages are recorded only with a valid signature of the rig's key (nodes/auth.py)
+SIGNED_TYPES = {'msg_defs/msg/RigSampleBatch': (SAMPLES, RigSampleBatch),
+                'msg_defs/msg/SetpointBatch': (SETPOINTS, SetpointBatch)}
 METADATA_FIELDS = {  # parameter metadata.<name> -> description (all strings; YAML/JSON where structured)
     'specimen': 'specimen id / description',
     'temperature': 'specimen temperature [degC] as text (e.g. "23.0")',
@@ -94,6 +100,7 @@ def offered_qos(info) -> dict:
 class RecorderNode(Node):
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
+        self.auth = declare_auth(self)     # samples and setpoints recorded only when signed; control requests too
         self.output_dir = declare(self, 'output_dir', 'recordings', 'directory for recordings')
         self.declare_parameter('topics', Parameter.Type.STRING_ARRAY, ParameterDescriptor(
             description='topics to record (relative names resolve in the namespace); '
@@ -239,9 +246,14 @@ class RecorderNode(Node):
 
     def _callback(self, topic, type_name):
         write, clock = self.core.write, self.get_clock()
+        signed = SIGNED_TYPES.get(type_name)     # (purpose, class) of a type whose messages must verify
 
         def on_message(data, info):
             try:
+                if signed is not None and self.auth.refuse(self, deserialize_message(data, signed[1]), signed[0],
+                                                           topic):
+                    self.core.refuse(topic)      # a forgery never enters a recording: counted, named, not written
+                    return
                 log_ns = info.get('received_timestamp') or clock.now().nanoseconds
                 seq = info.get('publication_sequence_number')
                 if seq is None or seq >= UNSUPPORTED_SEQUENCE:   # rmw without sequence numbers
@@ -260,6 +272,8 @@ class RecorderNode(Node):
     def _on_control(self, request, response):
         cmd = request.command
         try:
+            if self.auth.refuse(self, request, RECORDER_CONTROL, f'{self.get_fully_qualified_name()}/control'):
+                raise RecordingError(f'refused: {self.auth.verifier.last_refusal.why}')
             if cmd == RecorderControl.Request.START:
                 response.file = str(self.start_recording(request.path or None) or '')
                 if not self.core.recording:
@@ -353,6 +367,7 @@ class RecorderNode(Node):
             d.level = DiagnosticStatus.OK
             d.message = 'recording' if stats['recording'] else 'idle'
         d.values = [KeyValue(key=k, value=str(v)) for k, v in stats.items()]
+        annotate(d, self.auth)     # forged samples and control requests refused: how many, from where
         arr = DiagnosticArray(status=[d])
         arr.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(arr)

@@ -22,17 +22,17 @@ the node configures and activates itself (what ``ros2 launch`` users expect from
 Parameters: rubber_rig/nodes/rig_driver_params.py (what a bad value or a rate the bus cannot carry does).
 
 Subscribes:  ~/setpoint_stream/<owner> (msg_defs/SetpointBatch): each owner's command channel; only the open
-             stream's owner commands the rig (batches on other channels are refused and counted). The public
+             stream's owner commands the rig, with batches signed by the rig key (nodes/auth.py; others are
+             refused and counted, named in /diagnostics with their channel). The public
              ``setpoints`` is not read: traffic there (a script, a replayed recording) never moves the rig, and
-             no traffic delays the owner's batches (topics.py)
-Publishes:   samples (msg_defs/RigSampleBatch, at least ``batch_size`` samples per message)
+             no traffic delays the owner's batches (topics.py). heartbeat: the owner's, signed only
+Publishes:   samples (msg_defs/RigSampleBatch, signed, at least ``batch_size`` samples per message)
              status (msg_defs/RigStatus, latched, on change and every ``status_period``)
              /diagnostics (diagnostic_msgs/DiagnosticArray, every ``diagnostics_period``)
-Services:    ~/open_stream (msg_defs/OpenStream): the right to command the rig; one owner at a time
-             ~/stop_stream (msg_defs/StopStream): the owner stops now: abort (ramp to rest) or hold
+Services:    ~/open_stream (msg_defs/OpenStream, signed): the right to command the rig; one owner at a time
+             ~/stop_stream (msg_defs/StopStream, signed): the owner stops now: abort (ramp to rest) or hold
              ~/abort (std_srvs/Trigger): safe ramp to rest now, whoever streams
-             ~/reset (std_srvs/Trigger): acknowledge and clear faults once the rig is at rest
-QoS: see rubber_rig/nodes/topics.py.
+             ~/reset (std_srvs/Trigger): acknowledge and clear faults once the rig is at rest. QoS: topics.py
 
 The driver is the one safety authority: the watchdog, the limits (changeable at run time: applied at once),
 stream ownership and stream-loss detection, fault detection and the safe ramp are the core driver's
@@ -51,6 +51,7 @@ from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import OpenStream, StopStream
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.auth import OPEN_STREAM, SAMPLES, SETPOINT_STREAM, STOP_STREAM, annotate, declare_auth
 from rubber_rig.nodes.heartbeat import OwnerSilence, OwnerWatch, Peers, start_heartbeat
 from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles
 from rubber_rig.nodes.rclpy_compat import lifecycle_state
@@ -77,6 +78,7 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
     def __init__(self, node_name: str = 'rig_driver', **kwargs):
         super().__init__(node_name, **kwargs)
         self._declare_parameters()
+        self.auth = declare_auth(self)     # the rig's key: every command must carry its signature (nodes/auth.py)
         try:   # checked now: a bad value fails at start, naming the parameter (spin_node: one line, exit 2) ...
             self.config: RigConfig | None = self.rig_config()
         except BusCapacityError as exc:   # ... except a rate the bus cannot carry: configure fails, node stays up
@@ -104,9 +106,9 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self.create_timer(1.0, self.find_channels)
         self._poll_timer = None
         start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig is not None else 'unconfigured')
-        peers = Peers(self, silent=self.owner_timeout)
-        self.owner_watch = OwnerWatch(peers)      # the rule: an owner silent for owner_timeout loses its stream
-        self.owner_silence = OwnerSilence(peers)  # the latest owner while silent, for /diagnostics
+        peers = Peers(self, silent=self.owner_timeout, auth=self.auth)
+        # the rule (an owner silent for owner_timeout loses its stream); the latest silent owner, for /diagnostics
+        self.owner_watch, self.owner_silence = OwnerWatch(peers), OwnerSilence(peers)
         self.create_timer(self.status_period, self.publish_status)
         self.create_timer(self.diagnostics_period, self.publish_diagnostics)
         self.publish_status()
@@ -232,6 +234,10 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         """
         if self.rig is None or self._poll_timer is None:   # only an active driver moves the rig
             return
+        if channel == getattr(self.rig.driver.stream, 'owner', None) and self.auth.refuse(
+                self, msg, SETPOINT_STREAM, topics.setpoint_stream_topic(self.get_name(), channel)):
+            self.rig.driver.refuse(len(msg.displacement), self.auth.verifier.last_refusal.describe())
+            return   # unsigned/forged/replayed on the owner's channel: counted (other channels: the gate's to refuse)
         verdict = self.gate.offer(channel, msg.source, msg.first_sequence, conv.as_array(msg.displacement),
                                   msg.stream_id, msg.end_of_stream)
         if verdict.action == 'mute':
@@ -264,9 +270,9 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
 
     def _publish_batch(self, b) -> None:
         if b is not None:
-            self.pub_samples.publish(conv.sample_batch_msg(b.first_sequence, b.t0, b.sample_period, b.displacement,
-                                                           b.force, b.setpoint, b.temperature, b.status_flags,
-                                                           b.frames_lost))
+            self.pub_samples.publish(self.auth.sign(conv.sample_batch_msg(
+                b.first_sequence, b.t0, b.sample_period, b.displacement, b.force, b.setpoint, b.temperature,
+                b.status_flags, b.frames_lost), SAMPLES))
 
     # -- status --------------------------------------------------------------------------------------------------
     def status_message(self) -> RigStatus:
@@ -298,8 +304,10 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         backend = self.config.backend if self.config is not None else self.get_parameter('backend').value
         channel = self.config.channel if self.config is not None else self.get_parameter('can.channel').value
         hw = f'{backend}:{channel or self.get_fully_qualified_name()}'
-        self.pub_diag.publish(self.owner_silence.annotate(conv.diagnostics_msg(
-            status, hw, self.bus_diagnostics(), name=self.get_fully_qualified_name())))
+        msg = self.owner_silence.annotate(conv.diagnostics_msg(
+            status, hw, self.bus_diagnostics(), name=self.get_fully_qualified_name()))
+        annotate(msg.status[0], self.auth)     # refused commands, named with their channel
+        self.pub_diag.publish(msg)
 
     def bus_diagnostics(self) -> dict:
         """The bus's lines of /diagnostics: the load the protocol needs at this rate (worst-case stuffing), the
@@ -338,6 +346,8 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
             response.success, response.message = False, f'rig_driver is {self.lifecycle_state}, not active'
             return response
         driver = self.rig.driver
+        if self.auth.refuse_request(self, request, OPEN_STREAM, response):   # a stranger cannot take the rig
+            return response
         why = self.listen_to(request.owner)   # (found in the graph already, unless the owner has just started)
         if why:
             response.success, response.message = False, why
@@ -358,6 +368,8 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
     def on_stop_stream(self, request, response):
         if self.rig is None:
             response.success, response.message = False, 'rig not configured'
+            return response
+        if self.auth.refuse_request(self, request, STOP_STREAM, response):   # nor park it where it likes
             return response
         why = self.rig.driver.stop_stream(request.stream_id, request.target, request.reason or 'stop requested',
                                           hold=request.action == StopStream.Request.ACTION_HOLD)

@@ -31,7 +31,8 @@ when the owner opens a stream) and takes commands only from the channel of the o
 channel is refused and counted; however much of either arrives, it cannot delay the owner's batches, which
 wait in a queue of their own (the executor serves each subscription in turn). The recorder leaves the channels
 out by default, so replaying a recording cannot command a rig. A process that publishes on the owner's own
-channel impersonates the owner; keeping it out is DDS security's job (SROS2 access control), not a topic name's.
+channel claims to be the owner; what keeps it out is the signature every batch carries (nodes/auth.py, README "Who
+may move the rig"), not the topic name.
 """
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 

@@ -101,6 +101,7 @@ class Recorder:
         self.parts = []                      # per closed part: index, file, samples, first/last sample, closed
         self._samples_before = 0             # samples of the sample stream in the parts closed so far
         self._previous_last = None           # sequence of the last sample of the part before
+        self.refused: dict[str, int] = {}    # topic -> messages refused unrecorded (a forged signature: refuse())
 
     # -- state -------------------------------------------------------------------------------
     @property
@@ -138,8 +139,15 @@ class Recorder:
             'bytes_current_file': w.size_estimate if w else 0,
             'error': str(self.error) if self.error else '',
             'warnings': '; '.join(self.warnings),
+            'messages_refused': sum(self.refused.values()),
             **self.gaps.summary(),
         }
+
+    def refuse(self, topic: str) -> None:
+        """Count a message on `topic` that was refused (not written: its signature did not verify, so it is not the
+        data it claims to be). The count goes into /diagnostics and each file's close record (messages_refused).
+        """
+        self.refused[topic] = self.refused.get(topic, 0) + 1
 
     # -- control -----------------------------------------------------------------------------
     def start(self, path=None) -> Path:
@@ -193,7 +201,8 @@ class Recorder:
         index = self._index - 1
         next_part = f'{self._base.name}_{self._index}.mcap' if continues else ''
         extra = dict(part, recording_id=self.recording_id, part_index=index, next_part=next_part,
-                     final_part=not continues)
+                     final_part=not continues, messages_refused=sum(self.refused.values()),
+                     messages_refused_by_topic=', '.join(f'{k}: {n}' for k, n in sorted(self.refused.items())))
         try:
             self.reports.append(w.close(extra))
         except RecordingWriteError as exc:

@@ -48,6 +48,7 @@ from msg_defs.msg import (
 from ..dds import configure_dds
 from ..nodes import conversions as conv
 from ..nodes import topics
+from ..nodes.auth import RUN_PROGRAM, SERVICE_PURPOSES, client_auth
 
 
 def new_goal_id():
@@ -66,13 +67,17 @@ class Operator:
 
     RETRY = 2.0      # [s] an unanswered goal or service request is sent again after this long
 
-    def __init__(self, namespace: str, domain_id: int, name: str = 'operator'):
+    def __init__(self, namespace: str, domain_id: int, name: str = 'operator', key_file: str | None = None,
+                 signs: bool = True):
         self.ns = namespace.rstrip('/')
         self.context = Context()
         configure_dds()
         rclpy.init(args=[], context=self.context, domain_id=int(domain_id),
                    signal_handler_options=SignalHandlerOptions.NO)
         self.node = Node(name, namespace=namespace, context=self.context)
+        # the rig's operator signs its goals and requests with the rig's key (RUBBER_RIG_KEY_FILE, or `key_file`);
+        # signs=False: a stranger without the key (or with another key file: a stranger with the wrong key)
+        self.auth = client_auth(self.node.get_fully_qualified_name(), key_file) if signs else None
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.lock = threading.Lock()
@@ -239,7 +244,7 @@ class Operator:
         goal_id = new_goal_id()
         resent = False
         while True:
-            fut = client.send_goal_async(goal, goal_uuid=goal_id)
+            fut = client.send_goal_async(self.sign(goal, RUN_PROGRAM), goal_uuid=goal_id)   # each send signed anew
             if self.wait_for(fut.done, min(self.RETRY, max(0.0, deadline - time.monotonic()))):
                 response = fut.result()
                 if response.accepted or not resent:
@@ -283,11 +288,18 @@ class Operator:
         if not client.wait_for_service(timeout_sec=timeout):
             return None
         while True:   # resend a lost request, as send_goal does
-            fut = client.call_async(request if request is not None else srv_type.Request())
+            request = request if request is not None else srv_type.Request()
+            if hasattr(request, 'signature'):    # signed anew for each attempt: a resend is not a replay
+                self.sign(request, SERVICE_PURPOSES.get(service.rsplit('/', 1)[-1], ''))
+            fut = client.call_async(request)
             if self.wait_for(fut.done, min(self.RETRY, max(0.0, deadline - time.monotonic()))):
                 return fut.result()
             if time.monotonic() >= deadline:
                 return None
+
+    def sign(self, msg, purpose: str):
+        """`msg` signed for `purpose` with the operator's key (unchanged for a stranger: signs=False)."""
+        return self.auth.sign(msg, purpose) if self.auth is not None else msg
 
     def trigger(self, service: str, timeout: float = 5.0):
         return self.call(service, Trigger, Trigger.Request(), timeout)

@@ -20,6 +20,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
 from msg_defs.msg import RigSampleBatch
+from rubber_rig.nodes.auth import SAMPLES, signed
 
 from support.waiting import poll_until, wait_for
 
@@ -69,7 +70,8 @@ def spin_until(executor, condition, timeout=20.0, what=None):
 def sample_batch(first: int, n: int, *, period: float = 1e-3, frames_lost: int = 0, temperature: float = 23.0,
                  status_flags: int = 0) -> RigSampleBatch:
     """A RigSampleBatch of samples first..first+n-1 with deterministic signals (a function of the sequence
-    only, so a recording can be compared value by value) and the stamp of its first sample."""
+    only, so a recording can be compared value by value) and the stamp of its first sample; signed as the rig's
+    driver signs its batches (publish in the order made: the receiver refuses a counter below one it took)."""
     m = RigSampleBatch()
     m.first_sequence = first
     m.sample_period = period
@@ -81,4 +83,4 @@ def sample_batch(first: int, n: int, *, period: float = 1e-3, frames_lost: int =
     m.temperature = temperature
     m.status_flags = status_flags
     m.frames_lost = frames_lost
-    return m
+    return signed(m, SAMPLES, '/test_fake_rig')   # signed with the session's rig key (conftest), as a driver signs
