@@ -106,8 +106,7 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self.create_timer(1.0, self.find_channels)
         self._poll_timer = None
         start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig is not None else 'unconfigured')
-        peers = Peers(self, silent=self.owner_timeout, auth=self.auth)
-        # the rule (an owner silent for owner_timeout loses its stream); the latest silent owner, for /diagnostics
+        peers = Peers(self, silent=self.owner_timeout, auth=self.auth)   # owner silent: stream lost; diagnostics
         self.owner_watch, self.owner_silence = OwnerWatch(peers), OwnerSilence(peers)
         self.create_timer(self.status_period, self.publish_status)
         self.create_timer(self.diagnostics_period, self.publish_diagnostics)
