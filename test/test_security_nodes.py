@@ -28,7 +28,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 
 from msg_defs.action import RunProgram
 from msg_defs.msg import Heartbeat, RigStatus
-from msg_defs.srv import OpenStream, RecorderControl, StopStream
+from msg_defs.srv import HoldProgram, OpenStream, RecorderControl, StopStream
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes.auth import (
     HEARTBEAT,
@@ -43,6 +43,7 @@ from rubber_rig.nodes.auth import (
     declare_auth,
     fields_of,
 )
+from rubber_rig.nodes.excitation_node import ExcitationNode
 from rubber_rig.nodes.launcher import InProcessLauncher
 from rubber_rig.nodes.params import ParameterError
 from rubber_rig.nodes.rig_driver_node import RigDriverNode
@@ -166,6 +167,29 @@ def test_rig_driver_takes_commands_only_signed_with_the_rig_key():
             assert lines['auth_refused_by_channel'] == (
                 f'open_stream on {ns}/rig_driver/open_stream: 1, setpoint_stream on '
                 f'rig_driver/setpoint_stream/{owner[1:]}: 1, stop_stream on {ns}/rig_driver/stop_stream: 1')
+        finally:
+            stranger.close()
+            op.close()
+
+
+@pytest.mark.ros
+def test_anyone_may_hold_a_program_but_only_a_signed_request_resumes_one():
+    """A hold stops the rig inside its limits (like an abort: open to all); a resume moves it. The stranger's
+    resume is refused before anything else is looked at; the operator's signed one gets through to the program
+    check (here: no program runs), as does anyone's hold."""
+    ns = '/holdtest'
+    with InProcessLauncher([CONFIG], namespace=ns, domain_id=domain_id()) as launcher:
+        excitation = launcher.start(ExcitationNode)
+        op, stranger = Operator(ns, domain_id()), Operator(ns, domain_id(), name='stranger', signs=False)
+        try:
+            refused = stranger.call('excitation/hold', HoldProgram, HoldProgram.Request(data=False), 10.0)
+            assert refused is not None and not refused.success and refused.message.startswith('refused: unsigned')
+            hold = stranger.call('excitation/hold', HoldProgram, HoldProgram.Request(data=True))
+            assert hold is not None and hold.message == 'no program running'
+            resume = op.hold(False)
+            assert resume is not None and resume.message == 'no program running', resume
+            lines = excitation.auth.lines()
+            assert lines['auth_refused_by_channel'] == f'hold_program on {ns}/excitation/hold_program: 1', lines
         finally:
             stranger.close()
             op.close()

@@ -76,10 +76,9 @@ class BenchSession:
                                f'{self.recorder.core.error or "recorder not recording"}')
         self.model = launcher.start(ElementModelNode)
         self.excitation = launcher.start(ExcitationNode, excitation_overrides(args))
-        self._hold_help = (f'the rig holds at rest; resume: ros2 service call '
-                           f'{self.excitation.get_fully_qualified_name()}/hold '
-                           f'std_srvs/srv/SetBool "{{data: false}}", Ctrl-C ends the program, and it ends by '
-                           f'itself after {self.excitation.hold_timeout:g} s (--hold-timeout)')
+        self._hold_help = (f'the rig holds at rest; resume: rubber-rig hold --resume --namespace '
+                           f'{self.excitation.get_namespace()} (signed with the rig key), Ctrl-C ends the program, '
+                           f'and it ends by itself after {self.excitation.hold_timeout:g} s (--hold-timeout)')
         self.driver = launcher.start(RigDriverNode, driver_overrides(args))
         if self.driver.lifecycle_state != 'active':
             raise CommandError(f'rig_driver did not come up (lifecycle state {self.driver.lifecycle_state}); '

@@ -44,6 +44,7 @@ COMMANDS = {
     'simulate': 'rubber_rig.cli.simulate',
     'conformance': 'rubber_rig.cli.conformance',
     'keys': 'rubber_rig.cli.keys',
+    'hold': 'rubber_rig.cli.hold',
 }
 
 

@@ -39,8 +39,9 @@ from .topics import DIAGNOSTICS
 
 SETPOINT_STREAM, SETPOINTS, SAMPLES, HEARTBEAT = 'setpoint_stream', 'setpoints', 'samples', 'heartbeat'
 OPEN_STREAM, STOP_STREAM = 'open_stream', 'stop_stream'
-RECORDER_CONTROL, RUN_PROGRAM = 'recorder_control', 'run_program'
-SERVICE_PURPOSES = {'open_stream': OPEN_STREAM, 'stop_stream': STOP_STREAM, 'control': RECORDER_CONTROL}  # by name
+RECORDER_CONTROL, RUN_PROGRAM, HOLD_PROGRAM = 'recorder_control', 'run_program', 'hold_program'
+SERVICE_PURPOSES = {'open_stream': OPEN_STREAM, 'stop_stream': STOP_STREAM, 'control': RECORDER_CONTROL,  # by name
+                    'hold': HOLD_PROGRAM}
 
 
 def fields_of(msg, prefix: str = '') -> list[tuple[str, object]]:

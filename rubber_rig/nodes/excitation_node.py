@@ -18,7 +18,8 @@ Action:      run_program (msg_defs/action/RunProgram; feedback: block, cycle, ac
              per-block summaries and why it ended). A goal that arrives while one runs is rejected at once
              (session.admission: the reason and the count in the log and the diagnostics); every other goal
              either runs or ends at once with the reason it cannot (rig not ready, invalid program, no recording).
-Services:    ~/abort (std_srvs/Trigger: ramp to rest now), ~/hold (std_srvs/SetBool: true = hold, false = resume),
+Services:    ~/abort (std_srvs/Trigger: ramp to rest now), ~/hold (msg_defs/HoldProgram: true = hold, false = resume,
+             signed),
              ~/load_program (msg_defs/srv/LoadProgram: validate without running)
 Subscribes:  samples (msg_defs/RigSampleBatch: amplitude control, progress), status (msg_defs/RigStatus,
              latched: sample rate, limits, faults, who owns the stream), recorder_status (msg_defs/RecorderStatus,
@@ -51,11 +52,11 @@ from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.node import Node
 from rclpy.task import Future
 from std_msgs.msg import String
-from std_srvs.srv import SetBool, Trigger
+from std_srvs.srv import Trigger
 
 from msg_defs.action import RunProgram
 from msg_defs.msg import CycleMetrics, DetectorEvent, RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
-from msg_defs.srv import LoadProgram, OpenStream, StopStream
+from msg_defs.srv import HoldProgram, LoadProgram, OpenStream, StopStream
 from rubber_rig.excitation import Program, read_program, strongest, with_defaults
 from rubber_rig.nodes import awaitables, topics
 from rubber_rig.nodes import conversions as conv
@@ -112,7 +113,7 @@ class ExcitationNode(Node):
         self.open_client = self.create_client(OpenStream, f'{self.rig_driver}/open_stream')
         self.stop_client = self.create_client(StopStream, f'{self.rig_driver}/stop_stream')
         self.create_service(Trigger, '~/abort', lambda req, res: services.on_abort(self, req, res))
-        self.create_service(SetBool, '~/hold', lambda req, res: services.on_hold(self, req, res))
+        self.create_service(HoldProgram, '~/hold', lambda req, res: services.on_hold(self, req, res))
         self.create_service(LoadProgram, '~/load_program', lambda req, res: readiness.load_program(self, req, res))
         self.admission = GoalAdmission()   # one goal at a time; the others rejected at once, counted
         self.action = ActionServer(self, RunProgram, 'run_program', execute_callback=self.execute,

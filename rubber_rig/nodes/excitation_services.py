@@ -13,6 +13,7 @@
 # limitations under the License.
 
 """The excitation node's services ~/abort and ~/hold (`node`: the ExcitationNode), apart from its module."""
+from rubber_rig.nodes.auth import HOLD_PROGRAM
 
 
 def on_abort(node, request, response):
@@ -25,8 +26,12 @@ def on_abort(node, request, response):
 
 
 def on_hold(node, request, response):
-    """~/hold (std_srvs/SetBool): true holds the running program at its block mean, false resumes it."""
+    """~/hold (msg_defs/HoldProgram): true holds the running program at its block mean, false resumes it. A hold is
+    taken from anyone (it stops the rig inside its limits); a resume moves the rig: only a signed one is taken.
+    """
     s = node.session
+    if not request.data and node.auth.refuse_request(node, request, HOLD_PROGRAM, response):
+        return response
     if s is None:
         response.success, response.message = False, 'no program running'
     elif request.data:

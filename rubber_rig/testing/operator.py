@@ -32,7 +32,7 @@ from rclpy.context import Context
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
-from std_srvs.srv import SetBool, Trigger
+from std_srvs.srv import Trigger
 
 from msg_defs.action import RunProgram
 from msg_defs.msg import (
@@ -44,6 +44,7 @@ from msg_defs.msg import (
     RigStatus,
     SetpointBatch,
 )
+from msg_defs.srv import HoldProgram
 
 from ..dds import configure_dds
 from ..nodes import conversions as conv
@@ -305,7 +306,7 @@ class Operator:
         return self.call(service, Trigger, Trigger.Request(), timeout)
 
     def hold(self, on: bool, timeout: float = 5.0):
-        return self.call('excitation/hold', SetBool, SetBool.Request(data=on), timeout)
+        return self.call('excitation/hold', HoldProgram, HoldProgram.Request(data=on), timeout)
 
     def publish_setpoints(self, first_sequence: int, x, stream_id: int = 0, source: str = '/intruder',
                           block_index: int = 0, sample_period: float = 1e-3, topic: str = 'command'):
