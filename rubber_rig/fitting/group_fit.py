@@ -209,13 +209,17 @@ def _time_solution(spec, items, search, points_per_block, known, estimate_delay,
 
 def mark_extrapolations(fitted, values: dict, blocks, unc: dict) -> dict:
     """Record in ``unc`` (name -> result) each limit parameter's extrapolation beyond the measured band
-    (fitting.extrapolation); returns the band.
+    (fitting.extrapolation); returns the band (with 'no_limit': the sides where the model's stiffness has no finite
+    limit, so no parameter there is a limit value).
     """
     found = band_extrapolation(fitted, values, blocks, unc)
     for name, x in found.items():
         if name in unc:
             unc[name]['extrapolation'] = x
-    return found['_band']
+    band = found['_band']
+    if found.get('_unbounded'):
+        band = {**band, 'no_limit': found['_unbounded']}    # sides where the model's K grows without end
+    return band
 
 
 def diagnose(fit, runs: dict) -> dict:
