@@ -141,6 +141,21 @@ def band_extrapolation(spec, values: dict, blocks, uncertainty: dict) -> dict:
     return out
 
 
+def mark_extrapolations(fitted, values: dict, blocks, unc: dict) -> dict:
+    """Record in ``unc`` (name -> result) each limit parameter's extrapolation beyond the measured band
+    (fitting.extrapolation); returns the band (with 'no_limit': the sides where the model's stiffness has no finite
+    limit, so no parameter there is a limit value).
+    """
+    found = band_extrapolation(fitted, values, blocks, unc)
+    for name, x in found.items():
+        if name in unc:
+            unc[name]['extrapolation'] = x
+    band = found['_band']
+    if found.get('_unbounded'):
+        band = {**band, 'no_limit': found['_unbounded']}    # sides where the model's K grows without end
+    return band
+
+
 def extrapolation_sentence(name: str, x: dict, unit_value: str) -> str:
     """The 'extrapolation' warning's sentence for parameter ``name``."""
     low = x['side'] == 'low'

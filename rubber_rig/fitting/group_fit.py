@@ -29,8 +29,9 @@ from rubber_rig.models.modelfile import ModelSpec, named_model, parse_model
 
 from .budget import add_budget, linearised_shift
 from .calibration import corrected_force
-from .diagnoses import drift_across_blocks, flat_tops, outlier_test
-from .extrapolation import band_extrapolation
+from .diagnoses import drift_within_blocks, flat_tops, outlier_test
+from .extrapolation import mark_extrapolations
+from .inputnoise import input_noise_bias
 from .metrics import window_properties
 from .misfit import misfit_test
 from .modelfit import ModelFit, TimeProblem, covariance, fit_time_model, jacobian, physical_uncertainty
@@ -146,6 +147,7 @@ class _Solution:
 
     def __init__(self, **kw):
         self.limited, self.delay_shift, self.delay_check, self.predicted, self.messages = [], None, None, None, []
+        self.input_noise_bias = {}
         self.__dict__.update(kw)
 
 
@@ -200,33 +202,20 @@ def _time_solution(spec, items, search, points_per_block, known, estimate_delay,
     predicted = problem.predict(values)     # the fitted model over every recording, once
     sol = _Solution(coords=coords, z=z, values=values, unc=unc, corr=corr, chi2=chi2, dof=dof, n_points=problem.m,
                     delay=float(values.get(DELAY, 0.0)), misfit=time_misfit(problem, values, r, dof, predicted),
-                    problem=problem, predicted=predicted, limited=_at_bounds(coords, z, lo, hi), messages=messages)
+                    problem=problem, predicted=predicted, limited=_at_bounds(coords, z, lo, hi), messages=messages,
+                    input_noise_bias=input_noise_bias(problem, coords, z, jac, values, predicted))
     if DELAY not in coords.names:
         sol.delay_shift, sol.delay_check = delay_sensitivity(problem, coords, z, jac, r, chi2 / max(dof, 1),
                                                              predicted)
     return sol
 
 
-def mark_extrapolations(fitted, values: dict, blocks, unc: dict) -> dict:
-    """Record in ``unc`` (name -> result) each limit parameter's extrapolation beyond the measured band
-    (fitting.extrapolation); returns the band (with 'no_limit': the sides where the model's stiffness has no finite
-    limit, so no parameter there is a limit value).
-    """
-    found = band_extrapolation(fitted, values, blocks, unc)
-    for name, x in found.items():
-        if name in unc:
-            unc[name]['extrapolation'] = x
-    band = found['_band']
-    if found.get('_unbounded'):
-        band = {**band, 'no_limit': found['_unbounded']}    # sides where the model's K grows without end
-    return band
-
-
-def diagnose(fit, runs: dict) -> dict:
-    """The fit's named diagnoses (fitting.diagnoses): {'drift': drift across blocks, 'outliers': {recording:
+def diagnose(fit, runs: dict, forces: dict) -> dict:
+    """The fit's named diagnoses (fitting.diagnoses): {'drift': drift inside the blocks, 'outliers': {recording:
     {channel: test}}, 'saturation': {recording: {channel: flat tops}}} (only what was found, besides drift).
+    ``forces``: recording name -> the fitted model's force over its displacement.
     """
-    out = {'drift': drift_across_blocks(fit.quality, fit.blocks), 'outliers': {}, 'saturation': {}}
+    out = {'drift': drift_within_blocks(fit.blocks, runs, forces, fit.noise), 'outliers': {}, 'saturation': {}}
     for name, run in runs.items():
         for channel in ('force', 'displacement'):
             test = outlier_test((fit.noise_estimates.get(name) or {}).get(channel) or {})
@@ -257,7 +246,8 @@ def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, meth
                delay_shift=(None if sol.delay_shift is None
                             else {rename.get(k, k): v for k, v in sol.delay_shift.items()}),
                delay_estimated=DELAY in coords.names,
-               units={rename.get(n, n): spec.param_spec(n).unit for n in coords.names if n != DELAY})
+               units={rename.get(n, n): spec.param_spec(n).unit for n in coords.names if n != DELAY},
+               input_noise={rename.get(k, k): b['shift'] for k, b in sol.input_noise_bias.items()})
     band = mark_extrapolations(fitted, {n: v for n, v in params.items() if n != DELAY}, blocks, unc)
     forces = dict(zip(runs, sol.predicted, strict=True))
     # with an estimated delay the blocks are compared as the specimen behaved: the measured force corrected
@@ -284,7 +274,7 @@ def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, meth
     fit.model_temperature = spec.meta.get('temperature')
     free = {n for n, _, _ in spec.free()}
     fit.fixed = [n for n in spec.values() if n not in free]
-    fit.diagnoses = diagnose(fit, runs)
+    fit.diagnoses = diagnose(fit, runs, forces)
     fit.warnings = verdict(fit, coords)
     fit.notes = notes(fit)
     return fit
