@@ -54,25 +54,10 @@ FLAT_RUNS = 2          # separate places (cycles) where it happens
 EDGE_QUANTA = 3        # a clip is entered and left by more than this many resolution steps
 
 
-def drift_within_blocks(blocks, runs: dict, forces: dict, noise: dict) -> dict:
-    """The specimen's change in time, measured inside the blocks, where frequency and amplitude are constant.
-
-    blocks: the fit's BlockResults; runs: recording name -> RunData; forces: recording name -> the fitted model's
-    force over that recording's measured displacement (what the fit compared with); noise: recording name ->
-    load-cell noise sigma [N]. Each analysed cycle of a block gets its relative errors e = model / measured - 1 of
-    K_dyn and C_eq (seed 000 Eq. 28, one cycle at a time); a block's own mean is removed (whatever the model gets
-    wrong at that frequency and amplitude: a missing branch, a missing nonlinearity, is the same in every cycle of
-    the block), and the slope of e against time is fitted over all blocks together, each cycle weighted by its
-    first-harmonic noise (``blocks.harmonic_sigma``: samples per cycle, force amplitude), the residual scatter
-    scaling its standard error. Returns {'K_dyn': {'change', 'se', 'drift'}, 'C_eq': {...}, 'blocks': B,
-    'duration': T [s]} with change = slope x T, the change over the blocks' span T; {} with fewer than
-    ``MIN_DRIFT_BLOCKS`` blocks of at least ``MIN_DRIFT_CYCLES`` cycles.
-
-    Why inside the blocks: regressed across blocks on time with ln f and the amplitude, the per-block error of a
-    model that misses a branch (the Maxwell specimen fitted with zener_berg) or a cubic term is curved in ln f, and
-    on a grid whose amplitudes are swept one after the other the block time is a smooth function of frequency and
-    amplitude: the curvature passed for a drift of 44 % in C_eq. Inside a block the model's error is constant for a
-    stationary specimen and grows for a heating one.
+def _cycle_errors(blocks, runs: dict, forces: dict, noise: dict) -> tuple:
+    """(columns, blocks used, first and last cycle time [s]) for :func:`drift_within_blocks`: per analysed cycle
+    of each block with at least ``MIN_DRIFT_CYCLES`` cycles, e_k and e_c (model / measured - 1), its time, its
+    weights (inverse first-harmonic noise variance of e_k, e_c) and its block's number.
     """
     cols = {'e_k': [], 'e_c': [], 't': [], 'w_k': [], 'w_c': [], 'block': []}
     used, t_first, t_last, offset = 0, None, None, 0.0
@@ -113,6 +98,30 @@ def drift_within_blocks(blocks, runs: dict, forces: dict, noise: dict) -> dict:
         else:
             for key in cols:
                 del cols[key][len(cols[key]) - rows:]
+    return cols, used, t_first, t_last
+
+
+def drift_within_blocks(blocks, runs: dict, forces: dict, noise: dict) -> dict:
+    """The specimen's change in time, measured inside the blocks, where frequency and amplitude are constant.
+
+    blocks: the fit's BlockResults; runs: recording name -> RunData; forces: recording name -> the fitted model's
+    force over that recording's measured displacement (what the fit compared with); noise: recording name ->
+    load-cell noise sigma [N]. Each analysed cycle of a block gets its relative errors e = model / measured - 1 of
+    K_dyn and C_eq (seed 000 Eq. 28, one cycle at a time); a block's own mean is removed (whatever the model gets
+    wrong at that frequency and amplitude: a missing branch, a missing nonlinearity, is the same in every cycle of
+    the block), and the slope of e against time is fitted over all blocks together, each cycle weighted by its
+    first-harmonic noise (``blocks.harmonic_sigma``: samples per cycle, force amplitude), the residual scatter
+    scaling its standard error. Returns {'K_dyn': {'change', 'se', 'drift'}, 'C_eq': {...}, 'blocks': B,
+    'duration': T [s]} with change = slope x T, the change over the blocks' span T; {} with fewer than
+    ``MIN_DRIFT_BLOCKS`` blocks of at least ``MIN_DRIFT_CYCLES`` cycles.
+
+    Why inside the blocks: regressed across blocks on time with ln f and the amplitude, the per-block error of a
+    model that misses a branch (the Maxwell specimen fitted with zener_berg) or a cubic term is curved in ln f, and
+    on a grid whose amplitudes are swept one after the other the block time is a smooth function of frequency and
+    amplitude: the curvature passed for a drift of 44 % in C_eq. Inside a block the model's error is constant for a
+    stationary specimen and grows for a heating one.
+    """
+    cols, used, t_first, t_last = _cycle_errors(blocks, runs, forces, noise)
     if used < MIN_DRIFT_BLOCKS:
         return {}
     block = np.asarray(cols['block'])
