@@ -31,7 +31,7 @@ from .budget import add_budget, linearised_shift
 from .calibration import corrected_force
 from .diagnoses import drift_within_blocks, flat_tops, outlier_test
 from .extrapolation import mark_extrapolations
-from .inputnoise import input_noise_bias
+from .inputnoise import berg_input_noise
 from .metrics import window_properties
 from .misfit import misfit_test
 from .modelfit import ModelFit, TimeProblem, covariance, fit_time_model, jacobian, physical_uncertainty
@@ -147,7 +147,7 @@ class _Solution:
 
     def __init__(self, **kw):
         self.limited, self.delay_shift, self.delay_check, self.predicted, self.messages = [], None, None, None, []
-        self.input_noise_bias = {}
+
         self.__dict__.update(kw)
 
 
@@ -202,8 +202,7 @@ def _time_solution(spec, items, search, points_per_block, known, estimate_delay,
     predicted = problem.predict(values)     # the fitted model over every recording, once
     sol = _Solution(coords=coords, z=z, values=values, unc=unc, corr=corr, chi2=chi2, dof=dof, n_points=problem.m,
                     delay=float(values.get(DELAY, 0.0)), misfit=time_misfit(problem, values, r, dof, predicted),
-                    problem=problem, predicted=predicted, limited=_at_bounds(coords, z, lo, hi), messages=messages,
-                    input_noise_bias=input_noise_bias(problem, coords, z, jac, values, predicted))
+                    problem=problem, predicted=predicted, limited=_at_bounds(coords, z, lo, hi), messages=messages)
     if DELAY not in coords.names:
         sol.delay_shift, sol.delay_check = delay_sensitivity(problem, coords, z, jac, r, chi2 / max(dof, 1),
                                                              predicted)
@@ -247,7 +246,8 @@ def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, meth
                             else {rename.get(k, k): v for k, v in sol.delay_shift.items()}),
                delay_estimated=DELAY in coords.names,
                units={rename.get(n, n): spec.param_spec(n).unit for n in coords.names if n != DELAY},
-               input_noise={rename.get(k, k): b['shift'] for k, b in sol.input_noise_bias.items()})
+               input_noise=(berg_input_noise(fitted, params, _displacement_noise(estimates)) if method == 'time'
+                            else None))
     band = mark_extrapolations(fitted, {n: v for n, v in params.items() if n != DELAY}, blocks, unc)
     forces = dict(zip(runs, sol.predicted, strict=True))
     # with an estimated delay the blocks are compared as the specimen behaved: the measured force corrected
@@ -278,6 +278,11 @@ def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, meth
     fit.warnings = verdict(fit, coords)
     fit.notes = notes(fit)
     return fit
+
+
+def _displacement_noise(estimates: dict) -> float:
+    """The largest displacement noise sigma [m] of the fit's recordings (noise.run_noise), 0 if none."""
+    return max((float(e['displacement'].sigma) for e in estimates.values() if e.get('displacement')), default=0.0)
 
 
 def _load_cell_record(cal: dict, params: dict, unc: dict, delay_check) -> dict:

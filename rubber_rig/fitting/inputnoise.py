@@ -12,74 +12,55 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The bias the displacement noise leaves in the parameters (errors in variables), sized per fit: a Type B term.
+"""The bias the displacement noise leaves in Berg's friction parameters (errors in variables): a Type B term.
 
 The time-domain fit runs its model over the *measured* displacement (fitting.timefit: low-passed, with Berg's
-reversal deadband at the measured noise). That noise reaches the model force through the model itself, and not
-only as scatter (``TimeProblem.input_noise``, the misfit test's share): Berg's element turns at the extremes of
-the noisy samples and its branches start from them, so the friction parameters come out shifted on average.
-Measured on a stiff, low-alpha specimen (seed 000 at 20 degC, K x 3, alpha 0.35, F_fmax x 0.3; 1 kHz, 0.2 um,
-20 N, dynamic_stiffness_grid; 12 seeds, each recorded with and without displacement noise, the same force noise):
-x2 +1.0 +- 0.3 % and F_fmax +1.1 +- 0.4 % from the displacement noise (paired differences; a quarter of their
-stated sigma), which the intervals did not carry. The rest of the friction error (+0.8 +- 1.6 % without
-displacement noise) is consistent with zero (docs/benchmarks/identification_notes.md).
+reversal deadband at the measured noise). Berg's element turns at the extremes of those noisy samples, and its
+branches start there, a little beyond where the specimen turned; to match the loops the fit makes x2 and F_fmax
+larger. Measured on a stiff, low-alpha specimen (seed 000 at 20 degC, K x 3, alpha 0.35, F_fmax x 0.3;
+dynamic_stiffness_grid, 1 kHz, 20 N load-cell noise; docs/benchmarks/identification_notes.md):
 
-:func:`input_noise_bias` sizes the effect on each fit by the first step of SIMEX (simulation-extrapolation, Cook &
-Stefanski 1994): the whole input path is run again with the displacement noise variance doubled (the measured
-displacement plus white noise of its own measured level, the deadband at the doubled level), and the fit's
-response to that, one Gauss-Newton step at the optimum (budget.linearised_shift), is the bias the noise already in
-the record caused (a bias that grows with the noise variance: b(2 s^2) - b(s^2) = b(s^2)). Averaged over
-``REPEATS`` realisations. The budget (fitting.budget) carries its size as the Type B term ``displacement_noise``:
-a systematic effect estimated and not corrected, so it widens the interval instead of moving the value.
+* the cause is the displacement record alone: the same force record fitted with the noisy and with the noise-free
+  displacement differs by the full shift, and fitting the noisy record's blocks with the noise-free displacement as
+  the model's input gives the noise-free result exactly (not the deadband: 0.2 or 1 um on a clean input give the
+  same fit; not the low-pass or the start of the search);
+* it grows in proportion to the noise: x2 +0.45, +0.9, +1.8 % for 0.1, 0.2, 0.4 um added to a noise-free record
+  (two realisations each, +-0.5 % between them); 12 seeds recorded with and without 0.2 um of noise (same force
+  noise): x2 +1.0 +- 0.3 %, F_fmax +1.1 +- 0.4 % (paired differences);
+* a per-fit estimate by simulation (adding noise once more and refitting linearly, the first step of SIMEX) is
+  right in each realisation (one Gauss-Newton step reproduced a refit's +2.50 % against +2.56 %) but the
+  realisations scatter by 1.2 % each, so eight of them size a 1 % effect no better than +-0.4 %: not used.
+
+So the budget (fitting.budget, ``displacement_noise``) carries the measured effect as a Type B term, scaled with
+the mechanism's two lengths, the displacement noise sigma_x (noise.band_noise of the record) and x2:
+u(x2) / x2 = ``X2_PER_NOISE`` sigma_x / x2 and u(F_fmax) / F_fmax = ``FMAX_PER_NOISE`` sigma_x / x2 (70 and 78:
+1.0 % and 1.1 % at 0.2 um on x2 = 1.41 mm). A systematic effect estimated and not corrected: its full size is the
+standard uncertainty; it widens the interval and leaves the value alone. Its scaling beyond that specimen class
+(other x2, amplitudes, sampling rates) is a model, not a measurement.
 """
 from __future__ import annotations
 
-import math
-
-import numpy as np
-
-from .budget import linearised_shift
-from .search import DELAY
-from .timefit import model_input
-
-REPEATS = 6      # realisations of the doubled noise (each one model run per recording)
+X2_PER_NOISE = 70.0       # relative shift of x2 per (sigma_x / x2): 1.0 % at 0.2 um on x2 = 1.41 mm
+FMAX_PER_NOISE = 78.0     # relative shift of F_fmax per (sigma_x / x2): 1.1 % at 0.2 um on x2 = 1.41 mm
 
 
-def input_noise_bias(problem, coords, z, jac, values: dict, predictions: list, repeats: int = REPEATS,
-                     seed: int = 1) -> dict:
-    """Per free parameter (search-coordinate names): {'shift': the bias the displacement noise causes [unit],
-    'se': its standard error over the realisations}; {} when no recording has a displacement noise.
-
-    ``problem``: the fit's TimeProblem; ``coords``, ``z``, ``jac``: its coordinates, optimum and the Jacobian of
-    the residuals there; ``values``: the fitted values; ``predictions``: TimeProblem.predict(values).
+def berg_input_noise(spec, values: dict, sigma_x: float) -> dict:
+    """Type B standard uncertainties [SI] of the Berg elements' free x2 and F_fmax in ``values`` (name -> value)
+    for the displacement noise ``sigma_x`` [m] of the record(s) the model ran over: {name: u}; {} without noise.
     """
-    rng = np.random.default_rng(seed)
-    delay = float(values.get(DELAY, 0.0))
-    base = problem.residuals_from(predictions, delay)
-    noisy = [est['displacement'].sigma > 0 for est in problem.noise_estimates]
-    if not any(noisy):
+    if not sigma_x or sigma_x <= 0:
         return {}
-    shifts = []
-    for _ in range(repeats):
-        preds = []
-        items = zip(problem.items, problem.f_max, predictions, problem.noise_estimates, noisy, strict=True)
-        for (run, _x, _h, force, _w, _s), f_max, pred, est, has in items:
-            if not has:
-                preds.append(pred)
-                continue
-            sx = est['displacement'].sigma
-            raw = np.asarray(run.displacement[:force.size], float)
-            # the record's noise variance doubled: the input path (low-pass, deadband at the noise level) as a
-            # record with sqrt(2) x the noise would have had it
-            x2, h2 = model_input(raw + rng.normal(0.0, sx, raw.size), run.dt, f_max, math.sqrt(2.0) * sx)
-            try:
-                preds.append(problem.model(values, run.dt, h2).run(x2))
-            except ValueError:
-                return {}
-        shift, _ = linearised_shift(coords, z, jac, problem.residuals_from(preds, delay) - base)
-        shifts.append(shift)
     out = {}
-    for name in coords.names:
-        s = np.array([sh[name] for sh in shifts])
-        out[name] = {'shift': float(s.mean()), 'se': float(s.std(ddof=1) / math.sqrt(s.size)) if s.size > 1 else 0.0}
+    for index, element in enumerate(spec.elements):
+        if element.type != 'berg':
+            continue
+        names = {p: n for n, i, p in spec.parameters() if i == index}
+        x2 = values.get(names.get('x2'), element.values.get('x2'))
+        if not x2 or x2 <= 0:
+            continue
+        ratio = sigma_x / x2
+        if names.get('x2') in values:
+            out[names['x2']] = X2_PER_NOISE * ratio * abs(values[names['x2']])
+        if names.get('f_fmax') in values:
+            out[names['f_fmax']] = FMAX_PER_NOISE * ratio * abs(values[names['f_fmax']])
     return out
