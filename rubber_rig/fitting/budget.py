@@ -32,8 +32,8 @@ Contributions (standard uncertainties, in the parameter's unit):
 
 * ``displacement_noise`` (Type B): the bias the displacement transducer's noise leaves in Berg's x2 and F_fmax
   through the model's input (errors in variables: the element turns at the noisy extremes), as measured and scaled
-  in fitting.inputnoise (x2 and F_fmax +1.0 % and +1.1 % at 0.2 um of noise on x2 = 1.41 mm); estimated, not
-  corrected, so its full size is the standard uncertainty.
+  in fitting.inputnoise (x2 and F_fmax +1.0 % and +1.14 % per 0.2 um of noise, the larger of two specimens
+  measured); estimated, not corrected, so its full size is the standard uncertainty.
 
 The total is the root sum of squares (contributions uncorrelated). A contribution that was not declared is
 None, and the fit's warnings say so (code ``calibration_undeclared``) with what a typical class would add.
