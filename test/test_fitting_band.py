@@ -60,8 +60,8 @@ def test_no_limit_where_the_models_stiffness_grows_without_end():
     'extrapolation' for c1 and beta, '75 % of the limit', before); a Zener relaxes to K_inf however slowly it gets
     there (alpha 0.3), and a dashpot grows without end too.
     """
-    tight = {k: {'relative_sigma': 0.002} for k in ('k3', 'k1', 'k2', 'c1', 'c2', 'alpha', 'beta', 'x2', 'f_fmax',
-                                                     'k0', 'k_inf', 'tau')}
+    names = ('k3', 'k1', 'k2', 'c1', 'c2', 'alpha', 'beta', 'x2', 'f_fmax', 'k0', 'k_inf', 'tau')
+    tight = {k: {'relative_sigma': 0.002} for k in names}
     s003 = named_model('seed003')
     x = band_extrapolation(s003, s003.values(), _blocks((1, 2, 5, 10, 20, 30, 40, 50), (0.2e-3, 0.3e-3, 0.5e-3)),
                            tight)

@@ -77,8 +77,8 @@ def test_clean_record_has_none_of_the_named_diagnoses(record):
     x2 = fit.parameters['x2']
     budget = {k: fit.uncertainty[k]['budget'] for k in fit.parameters}
     assert budget['x2']['displacement_noise'] == pytest.approx(5.0e4 * sigma_x * x2, rel=1e-9)
-    assert budget['f_fmax']['displacement_noise'] == pytest.approx(5.7e4 * sigma_x * fit.parameters['f_fmax'],
-                                                                    rel=1e-9)
+    f_fmax = fit.parameters['f_fmax']
+    assert budget['f_fmax']['displacement_noise'] == pytest.approx(5.7e4 * sigma_x * f_fmax, rel=1e-9)
     assert all('displacement_noise' not in budget[k] for k in ('k0', 'k_inf', 'tau', 'alpha'))
     total = math.sqrt(sum(v ** 2 for v in budget['x2'].values() if v is not None))
     assert fit.uncertainty['x2']['sigma'] == pytest.approx(total, rel=1e-12)

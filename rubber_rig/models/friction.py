@@ -149,8 +149,6 @@ def check_reversal_threshold(d: float, given, name: str = 'reversal_threshold') 
     return d
 
 
-
-
 class BergFriction:
     """Berg's smooth friction element (2 parameters: f_fmax [N], x2 [m]); branch 'friction'.
 
