@@ -106,12 +106,12 @@ def deadband_schedule(x: np.ndarray, thr: float, direction: int, x_ext: float, x
         s, xe = -s, float(x[i])
         width, start = 2 * (i - start), i
         i += 1
-    candidate = np.flatnonzero(inside)
+    candidate = np.flatnonzero(inside).astype(np.int32)
     return DeadbandSchedule(segment, candidate, extreme[candidate], refs, s, xe)
 
 
 _SCHEDULES: OrderedDict = OrderedDict()
-_SCHEDULE_CACHE = 64         # schedules kept (a fit's recordings in ParallelModel chunks, with room to spare)
+_SCHEDULE_CACHE = 32         # schedules kept (a fit's recordings in ParallelModel chunks: 4 per 100 s at 1 kHz)
 _SCHEDULE_MIN = 1024         # shorter calls (streaming) are not worth a key
 
 
