@@ -327,3 +327,29 @@ def test_reversal_threshold_through_build_model_and_validation():
     assert e.get_state() == (1e-4, 1, 0.0, 0.0, 2000.0, 1e-4, 2000.0)
     with pytest.raises(ValueError, match='7 values'):
         e.set_state((1e-4, 1, 0.0, 0.0, 2000.0))
+
+
+@pytest.mark.parametrize('kind', ['noisy_sine', 'noise_above_band', 'high_frequency'])
+def test_deadband_schedule_is_reused_across_parameters_bit_for_bit(kind):
+    """A fit runs the element hundreds of times over one displacement with other (f_fmax, x2): the accepted
+    reversals are found once (deadband.cached_schedule) and every later run equals the sample-by-sample
+    element exactly, whatever the parameters.
+    """
+    from rubber_rig.models import deadband
+    rng = np.random.default_rng(5)
+    d = 5 * NOISE
+    t = np.arange(8000) * 1e-3
+    if kind == 'noisy_sine':
+        x = noisy_sine(cycles=4)[1]
+    elif kind == 'noise_above_band':      # stretches of a few samples
+        x = rng.normal(size=t.size) * 5 * d + 2e-5 * np.sin(2 * np.pi * 2 * t)
+    else:                                 # 40 Hz at 1 kHz: 12 samples a half cycle, the sample-by-sample path
+        x = 2e-4 * np.sin(2 * np.pi * 40 * t) + rng.normal(size=t.size) * NOISE
+    deadband._SCHEDULES.clear()
+    for fm, x2 in ((FM, X2), (0.3 * FM, 2 * X2), (3 * FM, 0.5 * X2)):
+        batch = BergFriction(fm, x2, 1e-3, reversal_threshold=d)
+        got = batch.run(x)[0]
+        stream = BergFriction(fm, x2, 1e-3, reversal_threshold=d)
+        assert np.array_equal(got, np.array([stream.step(v)[0] for v in x]))
+        assert batch.get_state() == stream.get_state()
+    assert len(deadband._SCHEDULES) == 1      # one schedule served all three parameter sets

@@ -253,10 +253,12 @@ def _per_block(args, runs, messages):
 
 
 def run(args) -> int:
+    from rubber_rig.fitting.blas import set_blas_threads
     from rubber_rig.fitting.fitwarnings import warning_dict
     from rubber_rig.fitting.identification import compare_models, fit_model
     from rubber_rig.fitting.progress import ProgressBar
     from rubber_rig.fitting.table import fit_table
+    set_blas_threads()     # one thread unless OPENBLAS_NUM_THREADS says otherwise (numpy may be loaded already)
     models = args.model or ['zener_berg']
     delay = None if args.load_cell_delay is None else to_si(args.load_cell_delay, 'time')
     delay_u = None if args.load_cell_delay_u is None else to_si(args.load_cell_delay_u, 'time')

@@ -30,6 +30,11 @@ Contributions (standard uncertainties, in the parameter's unit):
   out (1 + e)^L x too large (a stiffness N/m: L = -1, k3 in N/m^3: -3, Berg's x2 in m: +1; times, orders and
   forces: 0), so u = |L| |value| u_x (:func:`length_exponent`).
 
+* ``displacement_noise`` (Type B): the bias the displacement transducer's noise leaves in Berg's x2 and F_fmax
+  through the model's input (errors in variables: the element turns at the noisy extremes), as measured and scaled
+  in fitting.inputnoise (x2 and F_fmax +1.0 % and +1.14 % per 0.2 um of noise, the larger of two specimens
+  measured); estimated, not corrected, so its full size is the standard uncertainty.
+
 The total is the root sum of squares (contributions uncorrelated). A contribution that was not declared is
 None, and the fit's warnings say so (code ``calibration_undeclared``) with what a typical class would add.
 
@@ -114,14 +119,15 @@ def length_exponent(unit: str) -> int:
 
 
 def add_budget(unc: dict, kinds: dict, scales: dict, calibration: dict, delay_shift: dict | None = None,
-               delay_estimated: bool = False, units: dict | None = None) -> None:
+               delay_estimated: bool = False, units: dict | None = None, input_noise: dict | None = None) -> None:
     """Extend ``unc`` (name -> {value, sigma, interval_95, ...}) in place with each parameter's budget.
 
     ``kinds``: name -> coordinate kind; ``scales``: name -> scale kind of the model's parameter (FORCE_SCALES);
     ``calibration``: {'gain', 'gain_u', 'delay_u', 'displacement_gain_u'} (None: not declared); ``delay_shift``:
     name -> the parameter's change for a 1 s change of the declared delay (None when the delay was estimated by
     the fit: its uncertainty is then part of Type A); ``units``: name -> the parameter's unit (for the
-    displacement gain's contribution; None: no such contribution).
+    displacement gain's contribution; None: no such contribution); ``input_noise``: name -> the standard
+    uncertainty of the bias the displacement noise leaves in it (fitting.inputnoise: ``displacement_noise``).
     """
     gain, gain_u, delay_u = calibration.get('gain', 1.0), calibration.get('gain_u'), calibration.get('delay_u')
     x_u = calibration.get('displacement_gain_u')
@@ -136,6 +142,8 @@ def add_budget(unc: dict, kinds: dict, scales: dict, calibration: dict, delay_sh
         power = length_exponent(units[name]) if units and name in units else 0
         if power:
             contributions['displacement_gain'] = None if x_u is None else abs(power * value) * x_u
+        if input_noise and name in input_noise:
+            contributions['displacement_noise'] = float(input_noise[name])
         total = math.sqrt(sum(c ** 2 for c in contributions.values() if c is not None))
         method = interval_method(kinds.get(name, 'lin'), value)
         u.update({'budget': contributions, 'sigma_type_a': a, 'sigma': total,

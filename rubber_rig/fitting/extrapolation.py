@@ -49,6 +49,7 @@ LIMIT_FACTOR = 1e3       # the limits are this far outside the band (a decade be
 ACTS = 0.05              # |d ln|K| / d ln p| at the limit above which p acts on that limit
 SHARE = 0.1              # the band edge sees less of p than the limit by this share of its limit sensitivity
 MIN_SHARE = 0.05         # the shape supplies at least this share of the limit value before it is warned about
+UNBOUNDED_GROWTH = 2.0   # |K| growing by more than this over three decades far beyond the band: no limit there
 
 
 def measured_band(blocks) -> dict:
@@ -71,11 +72,35 @@ def _sensitivity(spec, values: dict, name: str, f, a: float, mean: float, h: flo
     return (np.asarray(up) - np.asarray(down)) / (2 * step) * (abs(v) if v else 1.0)
 
 
+def has_limit(spec, factor: float, f_edge: float, amplitude: float, mean: float) -> bool:
+    """Whether the model's first-harmonic stiffness tends to a finite limit beyond the band edge ``f_edge`` [Hz]
+    on the side ``factor`` points to (> 1: high frequencies, < 1: low): False when |K| still grows by more than
+    ``UNBOUNDED_GROWTH`` over the three decades after ``factor^2`` x f_edge.
+
+    A Zener (seed 000 Eq. 11) or a Maxwell branch relaxes to a value, however slowly (K - K_inf ~ (w tau)^-alpha:
+    with alpha 0.3 still 15 % off at w tau = 500, so comparing two nearby frequencies would call it unbounded);
+    a dashpot (K ~ j w c) or seed 003's fractional branch c (j w)^beta grows as a power of the frequency without
+    end (10^(3 beta) over three decades, 58 x for beta 0.59). There is then no limit value whose share could be
+    data or shape: every parameter acting there acts on the model's stiffness at every frequency beyond the band,
+    which the band's K_dyn and C_eq already state; no extrapolation is recorded on that side.
+    """
+    f_far = f_edge * factor ** 2
+    f_further = f_far * (1e3 if factor > 1 else 1e-3)
+    try:
+        k = np.abs(np.asarray(spec.first_harmonic(np.array([f_far, f_further]), amplitude, mean), complex).ravel())
+    except (ValueError, FloatingPointError):
+        return True
+    if not np.all(np.isfinite(k)):
+        return False
+    return bool(k[1] <= UNBOUNDED_GROWTH * k[0])
+
+
 def band_extrapolation(spec, values: dict, blocks, uncertainty: dict) -> dict:
     """Per free parameter of the fitted ``spec`` with ``values`` (free parameter name -> SI value) measured on
     ``blocks``: {'side': 'low'/'high', 'share': E, 'band_hz': [f_min, f_max], 'limit_hz': f, 'warn': bool} for
     limit parameters (module docstring); ``uncertainty``: name -> {'relative_sigma', ...}. Also returns the band
-    under the key '_band'.
+    under the key '_band', and under '_unbounded' the sides where the model's stiffness has no finite limit
+    (:func:`has_limit`), if any.
     """
     band = measured_band(blocks)
     f_min, f_max = band['frequency']
@@ -96,6 +121,9 @@ def band_extrapolation(spec, values: dict, blocks, uncertainty: dict) -> dict:
             continue
         if not (math.isfinite(abs(k_limit)) and abs(k_limit) > 0):
             continue
+        if not has_limit(fitted, f_limit / f_edge, f_edge, a, mean):
+            out['_unbounded'] = [*out.get('_unbounded', []), side]
+            continue
         share = abs(k_limit - k_edge) / abs(k_limit)
         for name in values:
             if name in out:
@@ -111,6 +139,21 @@ def band_extrapolation(spec, values: dict, blocks, uncertainty: dict) -> dict:
             out[name] = {'side': side, 'share': float(share), 'band_hz': [f_min, f_max], 'limit_hz': float(f_limit),
                          'warn': bool(share > MIN_SHARE and share > 3 * rel)}
     return out
+
+
+def mark_extrapolations(fitted, values: dict, blocks, unc: dict) -> dict:
+    """Record in ``unc`` (name -> result) each limit parameter's extrapolation beyond the measured band
+    (fitting.extrapolation); returns the band (with 'no_limit': the sides where the model's stiffness has no finite
+    limit, so no parameter there is a limit value).
+    """
+    found = band_extrapolation(fitted, values, blocks, unc)
+    for name, x in found.items():
+        if name in unc:
+            unc[name]['extrapolation'] = x
+    band = found['_band']
+    if found.get('_unbounded'):
+        band = {**band, 'no_limit': found['_unbounded']}    # sides where the model's K grows without end
+    return band
 
 
 def extrapolation_sentence(name: str, x: dict, unit_value: str) -> str:

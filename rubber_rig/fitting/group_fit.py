@@ -29,8 +29,9 @@ from rubber_rig.models.modelfile import ModelSpec, named_model, parse_model
 
 from .budget import add_budget, linearised_shift
 from .calibration import corrected_force
-from .diagnoses import drift_across_blocks, flat_tops, outlier_test
-from .extrapolation import band_extrapolation
+from .diagnoses import drift_within_blocks, flat_tops, outlier_test
+from .extrapolation import mark_extrapolations
+from .inputnoise import berg_input_noise
 from .metrics import window_properties
 from .misfit import misfit_test
 from .modelfit import ModelFit, TimeProblem, covariance, fit_time_model, jacobian, physical_uncertainty
@@ -146,6 +147,7 @@ class _Solution:
 
     def __init__(self, **kw):
         self.limited, self.delay_shift, self.delay_check, self.predicted, self.messages = [], None, None, None, []
+
         self.__dict__.update(kw)
 
 
@@ -207,22 +209,12 @@ def _time_solution(spec, items, search, points_per_block, known, estimate_delay,
     return sol
 
 
-def mark_extrapolations(fitted, values: dict, blocks, unc: dict) -> dict:
-    """Record in ``unc`` (name -> result) each limit parameter's extrapolation beyond the measured band
-    (fitting.extrapolation); returns the band.
-    """
-    found = band_extrapolation(fitted, values, blocks, unc)
-    for name, x in found.items():
-        if name in unc:
-            unc[name]['extrapolation'] = x
-    return found['_band']
-
-
-def diagnose(fit, runs: dict) -> dict:
-    """The fit's named diagnoses (fitting.diagnoses): {'drift': drift across blocks, 'outliers': {recording:
+def diagnose(fit, runs: dict, forces: dict) -> dict:
+    """The fit's named diagnoses (fitting.diagnoses): {'drift': drift inside the blocks, 'outliers': {recording:
     {channel: test}}, 'saturation': {recording: {channel: flat tops}}} (only what was found, besides drift).
+    ``forces``: recording name -> the fitted model's force over its displacement.
     """
-    out = {'drift': drift_across_blocks(fit.quality, fit.blocks), 'outliers': {}, 'saturation': {}}
+    out = {'drift': drift_within_blocks(fit.blocks, runs, forces, fit.noise), 'outliers': {}, 'saturation': {}}
     for name, run in runs.items():
         for channel in ('force', 'displacement'):
             test = outlier_test((fit.noise_estimates.get(name) or {}).get(channel) or {})
@@ -253,7 +245,9 @@ def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, meth
                delay_shift=(None if sol.delay_shift is None
                             else {rename.get(k, k): v for k, v in sol.delay_shift.items()}),
                delay_estimated=DELAY in coords.names,
-               units={rename.get(n, n): spec.param_spec(n).unit for n in coords.names if n != DELAY})
+               units={rename.get(n, n): spec.param_spec(n).unit for n in coords.names if n != DELAY},
+               input_noise=(berg_input_noise(fitted, params, _displacement_noise(estimates)) if method == 'time'
+                            else None))
     band = mark_extrapolations(fitted, {n: v for n, v in params.items() if n != DELAY}, blocks, unc)
     forces = dict(zip(runs, sol.predicted, strict=True))
     # with an estimated delay the blocks are compared as the specimen behaved: the measured force corrected
@@ -280,10 +274,15 @@ def _assemble(spec, sol, items, blocks, targets, noise, known, temperature, meth
     fit.model_temperature = spec.meta.get('temperature')
     free = {n for n, _, _ in spec.free()}
     fit.fixed = [n for n in spec.values() if n not in free]
-    fit.diagnoses = diagnose(fit, runs)
+    fit.diagnoses = diagnose(fit, runs, forces)
     fit.warnings = verdict(fit, coords)
     fit.notes = notes(fit)
     return fit
+
+
+def _displacement_noise(estimates: dict) -> float:
+    """The largest displacement noise sigma [m] of the fit's recordings (noise.run_noise), 0 if none."""
+    return max((float(e['displacement'].sigma) for e in estimates.values() if e.get('displacement')), default=0.0)
 
 
 def _load_cell_record(cal: dict, params: dict, unc: dict, delay_check) -> dict:

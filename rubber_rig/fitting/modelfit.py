@@ -46,6 +46,7 @@ coordinates (delta method); 95 % intervals are +-t sigma, t from Student's t wit
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -60,9 +61,11 @@ from .fitwarnings import warning_dict
 from .misfit import misfit_sentence
 from .noise import run_noise
 from .search import DELAY, Coordinates
+from .stopping import stall_stop
 from .timefit import model_input, run_input
 
 Z95 = 1.959964
+ELEMENT_CACHE = 3      # element forces kept per item and element (a Jacobian's base run outlives its columns)
 
 
 # ---- time-domain objective -------------------------------------------------------------------------
@@ -109,6 +112,7 @@ class TimeProblem:
             self.item_rows.append(slice(first_row, row))
             self.base_delay.append(float((delays or {}).get(run.name, 0.0)))
         self.m = row
+        self._element_forces = OrderedDict()    # (item, element, its values) -> its force over the item [N]
 
     @property
     def noise(self) -> dict:
@@ -119,7 +123,30 @@ class TimeProblem:
         return ParallelModel(spec.build_elements(run_dt, h), run_dt, spec.name, spec)
 
     def predict(self, values) -> list:
-        return [self.model(values, run.dt, h).run(x) for run, x, h, _, _, _ in self.items]
+        """The model force [N] over each item's model input, for parameter ``values`` (name -> SI value).
+
+        The elements act in parallel, so each one's force over an item depends on its own parameters alone: it is
+        kept (``ELEMENT_CACHE`` of them) and a Jacobian column that moves one element's parameter runs only that
+        element (a load-cell delay, none). The sum is the ParallelModel's to round-off.
+        """
+        spec = self.spec.with_values({k: v for k, v in values.items() if k != DELAY})
+        out = []
+        for item, (run, x, h, _, _, _) in enumerate(self.items):
+            total = None
+            for index, element in enumerate(spec.elements):
+                key = (item, index, element.type, repr(sorted(element.values.items())),
+                       repr(sorted(element.options.items())))
+                force = self._element_forces.get(key)
+                if force is None:
+                    model = ParallelModel([spec.build_element(index, run.dt, h)], run.dt, spec.name, spec)
+                    force = self._element_forces[key] = model.run(x)
+                    if len(self._element_forces) > ELEMENT_CACHE * len(self.items) * len(spec.elements):
+                        self._element_forces.popitem(last=False)
+                else:
+                    self._element_forces.move_to_end(key)
+                total = force.copy() if total is None else total + force
+            out.append(total)
+        return out
 
     def residuals_from(self, predictions, delay=0.0):
         out = []
@@ -197,7 +224,7 @@ def fit_time_model(problem: TimeProblem, coords: Coordinates, start_z, span=1.0,
         return problem.residuals(coords.values(z))
 
     ls = least_squares(fun, z0, bounds=(lo, hi), method='trf', diff_step=1e-4, xtol=1e-10, ftol=1e-10,
-                       gtol=1e-10, max_nfev=max_nfev)
+                       gtol=1e-10, max_nfev=max_nfev, callback=stall_stop())
     return ls, (lo, hi)
 
 

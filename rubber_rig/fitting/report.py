@@ -136,7 +136,7 @@ def budget_text(result: dict, value: float) -> str:
     if not budget or not value:
         return ''
     label = {'type_a': 'Type A', 'load_cell_gain': 'load-cell gain', 'load_cell_delay': 'load-cell delay',
-             'displacement_gain': 'displacement gain'}
+             'displacement_gain': 'displacement gain', 'displacement_noise': 'displacement noise'}
     return ', '.join(f'{label.get(k, k)} ' + ('undeclared' if v is None else f'{_g(100 * v / abs(value), ".2g")}')
                      for k, v in budget.items())
 

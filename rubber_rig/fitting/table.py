@@ -44,7 +44,8 @@ from rubber_rig.units import to_si
 
 from .blocks import BlockResult
 from .budget import add_budget, linearised_shift
-from .group_fit import block_quality, harmonic_uncertainty, mark_extrapolations
+from .extrapolation import mark_extrapolations
+from .group_fit import block_quality, harmonic_uncertainty
 from .misfit import misfit_test
 from .modelfit import ModelFit
 from .search import BlockTargets, coordinates, fit_harmonic_model, harmonic_residuals

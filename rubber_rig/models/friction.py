@@ -52,6 +52,7 @@ import math
 
 import numpy as np
 
+from .deadband import cached_schedule
 from .elements import VelocityElement
 
 
@@ -146,11 +147,6 @@ def check_reversal_threshold(d: float, given, name: str = 'reversal_threshold') 
     if not (math.isfinite(d) and d >= 0.0):
         raise ValueError(f'parameter {name} must be a finite displacement >= 0 [m], got {given!r}')
     return d
-
-
-# batch: after a stretch between accepted reversals shorter than _DENSE/2 samples, the next one runs sample by
-# sample (cheaper than numpy calls on a few samples)
-_DENSE = 96
 
 
 class BergFriction:
@@ -267,53 +263,45 @@ class BergFriction:
         return f[None, :]
 
     def _run_deadband(self, x: np.ndarray) -> np.ndarray:
-        """Batch form of ``_step_deadband``, same arithmetic per sample. Between accepted reversals the
-        extreme is a running max (min), taken over a window sized from the previous stretch (doubled
-        until the next reversal shows up); the force is Eq. 16 from (x_s, F_fs) at new extremes and from
-        the candidate reference (x_ext, F(x_ext)) inside the band. Stretches shorter than a few samples
-        (noise larger than d) are cheaper sample by sample, so they go through ``_step_deadband``.
+        """Batch form of ``_step_deadband``, the same arithmetic per sample, in two parts.
+
+        Which reversals are accepted, and which reference each sample follows, depends on the displacement
+        and d alone, never on f_fmax or x2 (``deadband.deadband_schedule``); a fit runs the element hundreds of
+        times over the same measured displacement with other parameters, so the schedule is kept
+        (``deadband.cached_schedule``) and each run is then one scalar step per accepted reversal (the reference
+        forces, Eq. 16 at each accepted extreme) and one vectorised Eq. 16 over all samples.
         """
-        fm, x2, thr = self.f_fmax, self.x2, self.reversal_threshold
-        n = x.size
-        f = np.empty(n)
-        i, start, width = 0, 0, 64    # next sample, first sample of the current stretch, window length
-        while i < n:
-            if self.direction == 0 or width <= _DENSE:
-                # sample by sample until the next accepted reversal, or _DENSE samples without one
-                step, s0 = self._step_deadband, self.direction
-                for v in x[i:i + _DENSE].tolist():
-                    f[i] = step(v)
-                    i += 1
-                    if self.direction != s0:    # this sample started a new stretch
-                        width, start = 2 * (i - start), i - 1
-                        break
-                else:
-                    width = 4 * _DENSE
-                continue
-            s, x_s, f_s, xe, fe = self.direction, self.x_s, self.f_s, self.x_ext, self.f_ext
-            w = x[i:i + width]
-            sw = s * w                                          # exact sign flip: work as if rising
-            m = np.maximum.accumulate(np.maximum(sw, s * xe))   # extreme so far (in s-space)
-            back = m - sw > thr
-            k = int(back.argmax()) if back.any() else w.size   # first sample more than d back
-            if k:
-                mk = m[:k]
-                ext = s * mk
-                at_ext = sw[:k] >= mk
-                f_ext = np.where(ext == xe, fe, berg_force(ext, x_s, f_s, fm, x2))   # carried extreme keeps its force
-                f[i:i + k] = berg_force(w[:k], np.where(at_ext, x_s, ext), np.where(at_ext, f_s, f_ext), fm, x2)
-                self.x_ext, self.f_ext = float(ext[-1]), float(f_ext[-1])
-            i += k
-            if k == w.size:
-                width *= 2
-                continue
-            # reversal accepted at the extreme; sample i starts the new branch
-            self.x_s, self.f_s, self.direction = self.x_ext, self.f_ext, -s
-            v = float(x[i])
-            f[i] = self.f_ext = _berg_scalar(v, self.x_s, self.f_s, fm, x2)
-            self.x_ext = v
-            width, start = 2 * (i - start), i
-            i += 1
+        fm, x2, was = self.f_fmax, self.x2, self.direction
+        sched = cached_schedule(x, self.reversal_threshold, was, self.x_ext, self.x_s)
+        xe0, fe0 = self.x_ext, self.f_ext
+        refs = sched.refs
+        xs = np.empty(len(refs) + 1)
+        fs = np.empty(len(refs) + 1)
+        xs[0], fs[0] = self.x_s, self.f_s
+        for k, xk in enumerate(refs, start=1):
+            # the reference force is F at the accepted extreme on the previous branch; an extreme carried in
+            # from the last call keeps its stored force
+            carried = k == 1 and was != 0 and xk == xe0
+            fs[k] = fe0 if carried else _berg_scalar(xk, xs[k - 1], fs[k - 1], fm, x2)
+            xs[k] = xk
+        seg, cand = sched.segment, sched.candidate
+        ref_x, ref_f = xs[seg], fs[seg]
+        if cand.size:
+            ext, cseg = sched.extreme, seg[cand]
+            f_ext = berg_force(ext, xs[cseg], fs[cseg], fm, x2)
+            if was != 0:
+                f_ext = np.where((cseg == 0) & (ext == xe0), fe0, f_ext)   # a carried extreme keeps its force
+            ref_x[cand], ref_f[cand] = ext, f_ext
+        f = berg_force(x, ref_x, ref_f, fm, x2)
+        self.direction = sched.direction
+        self.x_s, self.f_s = float(xs[-1]), float(fs[-1])
+        if sched.direction != 0:
+            last_seg = len(refs)
+            if was != 0 and sched.x_ext == xe0 and last_seg == 0:
+                self.f_ext = fe0
+            else:
+                self.f_ext = _berg_scalar(sched.x_ext, self.x_s, self.f_s, fm, x2)
+            self.x_ext = sched.x_ext
         self.x_prev, self.f_prev = float(x[-1]), float(f[-1])
         return f
 

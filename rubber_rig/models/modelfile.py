@@ -146,18 +146,19 @@ class ModelSpec:
         """Streaming/batch element objects at sample period ``dt`` [s]. ``reversal_threshold`` [m] and the
         fractional operator ``scheme``, when given, apply to every element that has the option and sets none.
         """
-        out = []
-        for e in self.elements:
-            if not e.fittable:
-                out.append(build_operating_point_spring(e.values, dt))
-                continue
-            t = element_type(e.type)
-            opts = dict(e.options)
-            for option, value in (('reversal_threshold', reversal_threshold), ('scheme', scheme)):
-                if value is not None and option in t.options:
-                    opts.setdefault(option, value)
-            out.append(t.build(e.values, float(dt), opts))
-        return out
+        return [self.build_element(i, dt, reversal_threshold, scheme) for i in range(len(self.elements))]
+
+    def build_element(self, index: int, dt: float, reversal_threshold: float | None = None, scheme=None):
+        """The element object of ``elements[index]`` (as :meth:`build_elements` builds each)."""
+        e = self.elements[index]
+        if not e.fittable:
+            return build_operating_point_spring(e.values, dt)
+        t = element_type(e.type)
+        opts = dict(e.options)
+        for option, value in (('reversal_threshold', reversal_threshold), ('scheme', scheme)):
+            if value is not None and option in t.options:
+                opts.setdefault(option, value)
+        return t.build(e.values, float(dt), opts)
 
     def first_harmonic(self, frequency, amplitude, mean=0.0, values: dict | None = None):
         """Complex first-harmonic stiffness [N/m] of the whole model under x = mean + A sin(2 pi f t)
