@@ -73,12 +73,34 @@ class StreamScenarios(ConformanceLink):
                   for f in first if f.name == 'ControllerStatus'}
         faults = [f for f in first if f.name == 'ControllerStatus' and int(f.signals['ST_Faults'])]
         ticking = [f for f in first if f.samples is not None]
+        taken, probe_states = self._unannounced_setpoints()
         ok = (bool(ident) and int(ident[0].signals['CI_Protocol']) == PROTOCOL_VERSION and bool(states)
               and states <= {'idle', 'unconfigured'} and not faults and not ticking)
-        self.results.put('CTRL-PWR-1', PASS if ok else FAIL,
+        self.results.put('CTRL-PWR-1', PASS if ok and not taken else FAIL,
                          f'first second after power-up: {len(ident)} ControllerIdentity, states {sorted(states)}, '
-                         f'{len(faults)} status frames with faults, {len(ticking)} feedback frames',
-                         '' if ok else 'at power-up the controller must identify itself, idle, at rest, unfaulted')
+                         f'{len(faults)} status frames with faults, {len(ticking)} feedback frames; setpoints '
+                         f'without HostStreamStart: {taken} samples taken, states {sorted(probe_states)}',
+                         '' if ok and not taken else 'at power-up the controller must identify itself, idle, at rest, '
+                         'unfaulted, and take no setpoint before a HostStreamStart')
+
+    def _unannounced_setpoints(self) -> tuple[int, set]:
+        """CTRL-PWR-1: setpoints at the rest position 0 m (HostLimits the envelope, heartbeat on) for sequences
+        from 0, with no HostStreamStart since power-up: (samples the controller took, states it reported) within
+        0.3 s. A controller that takes them is brought back to rest.
+        """
+        self.limits(self.env.lower, self.env.upper)
+        self.heartbeat = True
+        t = time.time()
+        per = self.frames.setpoints_per_frame
+        for k in range(0, 10 * per, per):
+            self.send_setpoints(k, [0.0] * per, record=False)
+        self._sleep(0.3)
+        taken = len(self._samples_since(t))
+        states = {s[1] for s in self._states_since(t)}
+        if taken or self.state in ('running', 'holding', 'ramping_down'):
+            self.to_rest(0.0)
+        self.heartbeat = False
+        return taken, states
 
     @judges()
     def s_listen(self):
@@ -151,7 +173,12 @@ class StreamScenarios(ConformanceLink):
         a = 0.4 * self.env.half
         first, p0 = 1000, self.position
         t0 = time.time()
-        end = self.stream(first, self.smooth(p0, a), 2.0)
+        # setpoints below HS_FirstSequence, after it was announced: never the start of the stream (CTRL-STREAM-1)
+        self.send('HostStreamStart', {'HS_FirstSequence': first})
+        per = self.frames.setpoints_per_frame
+        for k in range(first - 3 * per, first, per):
+            self.send_setpoints(k, [p0] * per, record=False)
+        end = self.stream(first, self.smooth(p0, a), 2.0, start=False)
         self._sleep(LEAD + 0.3)                       # underrun: the controller holds
         t_hold = time.time()
         self._sleep(0.3)
@@ -161,8 +188,10 @@ class StreamScenarios(ConformanceLink):
         starts = [s for s in self._samples_since(t0)]
         ok = bool(starts) and starts[0].seq == first and abs(starts[0].u - self.sent[first]) <= 1.5 * LSB
         self.results.put('CTRL-STREAM-1', PASS if ok else FAIL,
-                         f'first sample {starts[0].seq if starts else None} (stream start {first})',
-                         '' if ok else 'the first applied sample must be the first setpoint of the stream')
+                         f'first sample {starts[0].seq if starts else None} (stream start {first}; setpoints from '
+                         f'{first - 3 * per} sent after HostStreamStart)',
+                         '' if ok else 'the first applied sample must be the first setpoint of the stream: none below '
+                         'HS_FirstSequence')
         self._judge_applied(samples, first, end, 'stream')
         self._judge_buffer(t0, t_hold)
         # CTRL-STREAM-3: held the last command without a fault
