@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from rubber_rig.rig.can.codec import crc8
-from rubber_rig.rig.can.protocol import Protocol
+from rubber_rig.rig.can.protocol import Protocol, temperature_reading
 from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.reference_run import run_against_reference
 from rubber_rig.rig.conformance.reference_specimen import (
@@ -150,15 +150,23 @@ def test_a_stream_starts_at_hs_first_sequence_on_the_next_tick(host):
     assert len(fb) <= 2
 
 
-def test_host_silence_ramps_whatever_other_nodes_send_and_the_defect_does_not(host):
-    host.send('HostStreamStart', HS_FirstSequence=0)
-    host.setpoints(0, [1e-5] * 19)
-    host.run(0.1)
-    assert host.ctrl.state == 'holding'
-    for _ in range(700):                                       # another node every ms; no HostHeartbeat
-        host.bus.send(can.Message(arbitration_id=0x7FE, data=bytes(8), is_extended_id=False))
-        host.run(0.001, heartbeat=False)
-    assert host.ctrl.state == 'fault' and host.ctrl.faults == 1 and host.ctrl.u == 0.0
+@pytest.mark.parametrize('defects, ramps', [((), True), (('watchdog_rearmed_by_any_frame',), False)])
+def test_host_silence_ramps_whatever_other_nodes_send_and_the_defect_does_not(defects, ramps):
+    host = Host(f'ref_silence_{len(defects)}', defects=defects)
+    try:
+        host.send('HostStreamStart', HS_FirstSequence=0)
+        host.setpoints(0, [1e-5] * 19)
+        host.run(0.1)
+        assert host.ctrl.state == 'holding'
+        for _ in range(700):                                       # another node every ms; no HostHeartbeat
+            host.bus.send(can.Message(arbitration_id=0x7FE, data=bytes(8), is_extended_id=False))
+            host.run(0.001, heartbeat=False)
+        if ramps:                   # 0.5 s after the last heartbeat: ramped to rest, watchdog bit
+            assert host.ctrl.state == 'fault' and host.ctrl.faults == 1 and host.ctrl.u == 0.0
+        else:
+            assert host.ctrl.state == 'holding' and host.ctrl.u == pytest.approx(1e-5)
+    finally:
+        host.close()
 
 
 def test_tighter_host_limits_refuse_the_setpoints_already_queued_and_min_above_max_is_discarded(host):
@@ -194,6 +202,8 @@ def test_a_missing_temperature_is_sent_as_the_lowest_raw_value():
         h.run(0.15)
         temps = [sig['TEMP_Specimen'] for _, name, sig in h.seen if name == 'Temperature']
         assert temps and all(t == pytest.approx(-327.68) for t in temps)
+        assert all(math.isnan(temperature_reading(t)) for t in temps)       # the host: no temperature
+        assert temperature_reading(23.45) == 23.45
     finally:
         h.close()
 
@@ -304,3 +314,32 @@ def test_each_reference_defect_fails_exactly_its_requirements_in_a_whole_run(def
     expected = set(REFERENCE_DEFECTS[defect][0])
     run, results, failed = _run_expecting(expected, (defect,))
     assert failed == expected, [(r.id, r.measured, r.detail) for r in results.ordered() if r.status == 'fail']
+
+
+# ---- the command line ----------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize('argv, why', [
+    (['--sim', '--envelope', '1mm', '--reference-defect', 'force_in_kN'], 'is for the reference controller'),
+    (['--log', 'x.log', '--reference-spring', '10kN/mm'], 'for an online run'),
+    (['--reference', '--reference-spring=-3kN/mm±1%'], 'must be > 0'),
+    (['--reference', '--ambient', '23degC±-1K'], 'must be > 0'),
+])
+def test_the_command_line_refuses_what_cannot_be_judged(argv, why, capsys):
+    from rubber_rig.cli.main import main
+    with pytest.raises(SystemExit) as exc:
+        main(['conformance', *argv])
+    assert exc.value.code == 2 and why in capsys.readouterr().err
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(300)
+def test_the_command_line_runs_the_reference_controller_and_names_a_force_in_kilonewton(tmp_path, capsys):
+    from rubber_rig.cli.main import main
+    report = tmp_path / 'report.md'
+    code = main(['conformance', '--reference', '--reference-defect', 'force_in_kN', '--reference-spring',
+                 '10kN/mm±1%', '--ambient', '23.45degC±2K', '--markdown', str(report)])
+    text = report.read_text()
+    assert code == 1, text
+    assert '| CTRL-MEAS-1 |' in text and 'force sent in kN' in text
+    assert 'the reference controller, rubber_rig.rig.reference, on a 10 kN/mm +- 1 % (k = 2) spring' in text
+    assert 'measured values judged against: the reference spring 10 kN/mm' in text
