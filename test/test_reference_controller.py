@@ -24,6 +24,7 @@ import can
 import numpy as np
 import pytest
 
+from rubber_rig.cli.conformance import parse_ambient, parse_reference_spring
 from rubber_rig.rig.can.codec import crc8
 from rubber_rig.rig.can.protocol import Protocol, temperature_reading
 from rubber_rig.rig.conformance.active import ConformanceRun
@@ -33,8 +34,6 @@ from rubber_rig.rig.conformance.reference_specimen import (
     fit_spring,
     judge_delay,
     judge_stiffness,
-    parse_ambient,
-    parse_reference_spring,
 )
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
 from rubber_rig.rig.reference import REFERENCE_DEFECTS, ReferenceController

@@ -33,6 +33,7 @@ import datetime
 import hashlib
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -51,7 +52,7 @@ from rubber_rig.rig.conformance.host_timing import LATE_MIN, SIM_LATE_MIN
 from rubber_rig.rig.conformance.link import Aborted, Envelope
 from rubber_rig.rig.conformance.log_segments import check_log
 from rubber_rig.rig.conformance.reference_run import REFERENCE_AMBIENT, REFERENCE_SPRING, run_against_reference
-from rubber_rig.rig.conformance.reference_specimen import parse_ambient, parse_reference_spring
+from rubber_rig.rig.conformance.reference_specimen import Ambient, ReferenceSpring
 from rubber_rig.rig.conformance.report import NOT_TESTED, to_junit, to_markdown
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
 from rubber_rig.rig.conformance.trace import read_log
@@ -100,6 +101,38 @@ def add_arguments(parser):
     parser.add_argument('--markdown', help='write the report as Markdown to this file')
     parser.add_argument('--junit', help='write the report as JUnit XML to this file')
     parser.add_argument('--can-log', help='online: also write every frame of the run to this raw CAN log')
+
+
+def _split(text: str) -> tuple[str, str | None]:
+    parts = re.split(r'\s*(?:±|\+-|\+/-)\s*', text.strip())
+    if len(parts) > 2:
+        raise ValueError(f'{text!r}: one value and at most one +- tolerance')
+    return parts[0], (parts[1] if len(parts) == 2 else None)
+
+
+def parse_reference_spring(text: str) -> ReferenceSpring:
+    """'10kN/mm±1%' (or '+-1%', or an absolute '+-0.1kN/mm') -> ReferenceSpring; ValueError naming what is
+    wrong. Without a tolerance: 1 %.
+    """
+    value, tol = _split(text)
+    k = to_si(value, 'stiffness')
+    if tol is None:
+        u = 0.01
+    elif tol.endswith('%'):
+        u = float(tol[:-1]) / 100.0
+    else:
+        u = to_si(tol, 'stiffness') / k
+    return ReferenceSpring(k, u)
+
+
+def parse_ambient(text: str) -> Ambient:
+    """'23degC±2K' -> Ambient (tolerance in K; default 5 K); ValueError naming what is wrong."""
+    value, tol = _split(text)
+    t = to_si(value, 'temperature')
+    if tol is None:
+        return Ambient(t)
+    tol_k = float(tol[:-1]) if tol.endswith('K') else to_si(tol, 'temperature') - to_si('0degC', 'temperature')
+    return Ambient(t, tol_k)
 
 
 def check_arguments(args):

@@ -32,6 +32,7 @@ import can
 
 from ..can.protocol import CMD_ABORT
 from .active_faults import FaultScenarios
+from .active_power import PowerUpScenarios
 from .active_stream import StreamScenarios
 from .link import Aborted
 from .passive import check_offline
@@ -40,7 +41,7 @@ from .report import FAIL, NOT_TESTED, Results
 from .requirements import REQUIREMENTS
 
 
-class ConformanceRun(StreamScenarios, MeasureScenarios, FaultScenarios):
+class ConformanceRun(PowerUpScenarios, StreamScenarios, MeasureScenarios, FaultScenarios):
     """One conformance run of the controller on `bus` (any python-can Bus) at sample_rate [Hz] with frame
     `profile`, inside `envelope`. run() returns the Results of every CTRL requirement.
     """

@@ -21,12 +21,10 @@ force and displacement of one sample (CTRL-MEAS-2) and, against a declared ambie
 from __future__ import annotations
 
 import math
-import re
 from dataclasses import dataclass
 
 import numpy as np
 
-from ...units import to_si
 from .link import LEAD, ConformanceLink, judges
 from .report import FAIL, NOT_TESTED, PASS
 
@@ -68,38 +66,6 @@ class Ambient:
             raise ValueError(f'ambient {self.temperature!r} degC: must be -60 .. 200 degC')
         if not (math.isfinite(self.tolerance) and self.tolerance > 0):
             raise ValueError(f'ambient tolerance {self.tolerance!r} K: must be > 0')
-
-
-def _split(text: str) -> tuple[str, str | None]:
-    parts = re.split(r'\s*(?:±|\+-|\+/-)\s*', text.strip())
-    if len(parts) > 2:
-        raise ValueError(f'{text!r}: one value and at most one +- tolerance')
-    return parts[0], (parts[1] if len(parts) == 2 else None)
-
-
-def parse_reference_spring(text: str) -> ReferenceSpring:
-    """'10kN/mm±1%' (or '+-1%', or an absolute '+-0.1kN/mm') -> ReferenceSpring; ValueError naming what is
-    wrong. Without a tolerance: 1 %.
-    """
-    value, tol = _split(text)
-    k = to_si(value, 'stiffness')
-    if tol is None:
-        u = 0.01
-    elif tol.endswith('%'):
-        u = float(tol[:-1]) / 100.0
-    else:
-        u = to_si(tol, 'stiffness') / k
-    return ReferenceSpring(k, u)
-
-
-def parse_ambient(text: str) -> Ambient:
-    """'23degC±2K' -> Ambient (tolerance in K; default 5 K); ValueError naming what is wrong."""
-    value, tol = _split(text)
-    t = to_si(value, 'temperature')
-    if tol is None:
-        return Ambient(t)
-    tol_k = float(tol[:-1]) if tol.endswith('K') else to_si(tol, 'temperature') - to_si('0degC', 'temperature')
-    return Ambient(t, tol_k)
 
 
 @dataclass
