@@ -207,6 +207,67 @@ def test_a_missing_temperature_is_sent_as_the_lowest_raw_value():
         h.close()
 
 
+# ---- the host's driver against a controller it did not grow up with -------------------------------------------
+
+def _driver_and_reference(channel, **options):
+    from rubber_rig.rig.can.driver import RigDriver
+    from rubber_rig.rig.config import RigConfig
+    clock = [100.0]
+    ctrl_bus = can.Bus(interface='virtual', channel=channel, receive_own_messages=False)
+    bus = can.Bus(interface='virtual', channel=channel, receive_own_messages=False)
+    ctrl = ReferenceController(ctrl_bus, FS, **options)
+    drv = RigDriver(bus, RigConfig.from_dict({'paced': True}), clock=lambda: clock[0])
+
+    def run(seconds, blocks=None):
+        for _ in range(int(round(seconds / 0.001))):
+            clock[0] += 0.001
+            ctrl.poll(clock[0])
+            block = drv.poll()
+            if block is not None and blocks is not None:
+                blocks.append(block)
+    return drv, ctrl, run, (bus, ctrl_bus)
+
+
+def test_the_driver_streams_to_the_reference_controller_and_reads_its_spring_and_temperature():
+    """The driver (on simulated time) and a controller written from the specification alone: it identifies,
+    streams a 5 Hz sine of 0.2 mm, and every sample comes back with the command applied, the spring's force and
+    the temperature; nothing faults.
+    """
+    drv, ctrl, run, buses = _driver_and_reference('ref_driver_ok')
+    try:
+        run(0.2)
+        assert drv.why_not_ready() == ''
+        grant = drv.open_stream('test')
+        x = 0.2e-3 * np.sin(2 * np.pi * 5 * np.arange(1000) / FS)
+        assert drv.queue_setpoints(grant.first_sequence, x, grant.stream_id)
+        drv.end_stream(grant.stream_id)       # the program ends: the controller holds its last command
+        blocks = []
+        run(1.2, blocks)
+        d = np.concatenate([b.displacement for b in blocks])
+        f = np.concatenate([b.force for b in blocks])
+        u = np.concatenate([b.setpoint for b in blocks])
+        assert not drv.faults, drv.fault_messages
+        assert len(u) >= 1000 and np.allclose(u[:1000], x, atol=1e-7)
+        assert np.polyfit(d, f, 1)[0] == pytest.approx(1e7, rel=1e-3)            # 10 kN/mm, in N/m
+        assert blocks[-1].temperature == pytest.approx(23.45)
+    finally:
+        for bus in buses:
+            bus.shutdown()
+
+
+def test_the_driver_refuses_the_reference_controller_without_heartbeat_and_faults_from_its_first_word():
+    from rubber_rig.rig.can.protocol import FAULT_WATCHDOG
+    drv, ctrl, run, buses = _driver_and_reference('ref_driver_no_hb', defects=('no_heartbeat',))
+    try:
+        run(0.05)
+        assert 'ControllerHeartbeat' in drv.why_not_ready()
+        run(0.1)
+        assert drv.faults & FAULT_WATCHDOG
+    finally:
+        for bus in buses:
+            bus.shutdown()
+
+
 # ---- the reference specimen's judgement on synthetic feedback ---------------------------------------------
 
 def _spring_samples(k=1e7, delay_samples=0, gain=1.0, force_scale=1.0, n=4000):
