@@ -34,6 +34,8 @@ from .reference_specimen import Ambient, ReferenceSpring
 # what the reference controller's rig is declared as when the caller declares nothing: its spring and its ambient
 REFERENCE_SPRING = ReferenceSpring(1.0e7, 0.01)     # 10 kN/mm +- 1 %
 REFERENCE_AMBIENT = Ambient(23.45, 5.0)             # [degC], [K]
+LATE_MIN = 0.001      # [s] a tick the in-process controller takes this late is this host's lateness (half the
+#                       2 ms of feedback jitter CTRL-FB-2 allows: its thread shares the interpreter with the run's)
 _channels = itertools.count()
 
 
@@ -54,7 +56,7 @@ def run_against_reference(defects=(), sample_rate: float = 1000.0, envelope: Env
     sys.setswitchinterval(min(interval, 5e-4))
     try:
         run = ConformanceRun(host_bus, sample_rate, envelope, profile, log=log, power_up=lambda: box['c'].start(
-            late=run.host_timing.add), reference=reference, ambient=ambient,
+            late=run.host_timing.add, late_min=LATE_MIN), reference=reference, ambient=ambient,
             only=None if only is None else set(only) | {'s_power_up'})
         box['c'] = ReferenceController(ctrl_bus, sample_rate, profile, defects,
                                        stiffness=reference.stiffness if reference else 1.0e7,

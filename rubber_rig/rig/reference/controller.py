@@ -107,14 +107,19 @@ class ReferenceController:
             self._thread.join(timeout=5.0)
 
     def _run(self, clock, late, late_min):
+        woken = None          # when this thread asked to be back: later than that is this host's lateness
         while not self._stop.is_set():
-            now, ticking = clock(), self.state in TICKING
-            due = self._t0 + (self._n + 1) / self.fs if self._t0 is not None else now
+            now = clock()
             self.poll(now)
-            if late is not None and ticking and now - due >= late_min:
+            # late from when it asked to be back (or, woken by a frame, from when it began) until what it owed
+            # is sent: a wake-up past its time, or a poll the thread was descheduled in
+            start = woken if woken is not None and woken < now else now
+            done = clock()
+            if late is not None and done - start >= late_min:
                 wall = time.time()
-                late(wall - (clock() - due), wall)
+                late(wall - (done - start), wall)
             wait = min(0.001, max(0.0, self._t0 + (self._n + 1) / self.fs - clock()))
+            woken = clock() + wait
             msg = self.bus.recv(timeout=wait)
             if msg is not None:
                 self.receive(msg, clock())
