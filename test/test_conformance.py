@@ -75,6 +75,9 @@ def _conformance(tmp_path, *args):
     return proc, (_junit(junit) if junit.exists() else {})
 
 
+# the simulated rig gets the declared reference spring and ambient: measured values are judged (CTRL-MEAS-1..3)
+MEASURED = ('--reference-spring', '10kN/mm±1%', '--ambient', '20degC±5K')
+
 # requirements judged on the wall-clock timing of this host's processes: a shared CI host that stalls the
 # simulator's process for tens of ms can fail them; such a run is repeated once (a controller that really
 # breaks one fails it by a wide margin every time: 80 ms heartbeats, 0-8 ms jitter)
@@ -147,7 +150,7 @@ REAL_TIME = TIMING | {'CTRL-FB-1', 'CTRL-SEQ-1', 'CTRL-STREAM-4', 'CTRL-ST-2', '
 @inside
 def test_correct_simulator_passes_every_requirement_apart_from_timing(tmp_path):
     assert in_private_netns()
-    proc, online = _conformance(tmp_path, '--sim', '--power-up', '--envelope', '1mm')
+    proc, online = _conformance(tmp_path, '--sim', '--power-up', '--envelope', '1mm', *MEASURED)
     assert set(online) == CTRL, proc.stdout[-3000:] + proc.stderr[-2000:]
     assert {k for k, v in online.items() if v != 'pass'} <= REAL_TIME, proc.stdout[-3000:]
     assert len(CTRL - REAL_TIME) >= 15       # the wiring: frames, limits, ramps, faults, reset, power-up, identity
@@ -157,7 +160,7 @@ def test_correct_simulator_passes_every_requirement_apart_from_timing(tmp_path):
 def test_correct_simulator_passes_and_offline_agrees(tmp_path):
     assert in_private_netns()
     log = tmp_path / 'run.blf'
-    proc, online = _conformance_expecting(tmp_path, set(), '--sim', '--power-up', '--envelope', '1mm',
+    proc, online = _conformance_expecting(tmp_path, set(), '--sim', '--power-up', '--envelope', '1mm', *MEASURED,
                                           '--can-log', str(log))
     assert set(online) == CTRL
     # every requirement passes, or is not judged because this host was late (then the run is incomplete)
@@ -180,7 +183,7 @@ def test_correct_simulator_passes_and_offline_agrees(tmp_path):
 def test_each_broken_simulator_fails_exactly_its_requirements(tmp_path, defect):
     assert in_private_netns()
     proc, online = _conformance_expecting(tmp_path, set(DEFECTS[defect][0]), '--sim', '--power-up', '--envelope',
-                                          '1mm', '--defect', defect)
+                                          '1mm', *MEASURED, '--defect', defect)
     assert proc.returncode == 1, proc.stdout[-3000:] + proc.stderr[-2000:]
     failed = {k for k, v in online.items() if v == 'fail'}
     assert failed == set(DEFECTS[defect][0]), proc.stdout[-3000:]

@@ -28,6 +28,7 @@ from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.passive import TRANSITIONS
 from rubber_rig.rig.conformance.requirements import BY_ID, REQUIREMENTS
 from rubber_rig.rig.conformance.spec_doc import DOC, GENERATORS, generated_blocks
+from rubber_rig.rig.reference import REFERENCE_DEFECTS
 
 ROOT = Path(__file__).resolve().parents[1]
 TEXT = DOC.read_text(encoding='utf-8')
@@ -115,6 +116,20 @@ def test_defects_break_specified_requirements():
         assert broken and set(broken) <= set(BY_ID), name
         assert what, name
     assert '## Deliberate defects of the simulator' in TEXT
+
+
+def test_reference_controller_defects_break_specified_requirements():
+    """The second controller's defects (rig/reference/defects.py) name requirements that exist, and the document
+    says what that controller is and answers the questions a controller written from it had to guess (issue 36).
+    """
+    for name, (broken, what) in REFERENCE_DEFECTS.items():
+        assert broken and set(broken) <= set(BY_ID), name
+        assert what, name
+    assert '## A second controller written from this text' in TEXT
+    for answer in ('**`CMD_RampVelocity` for HOLD.**', '**Minimum not below maximum.**',
+                   '**Tighter limits with setpoints queued.**', '**A missing temperature.**', '**The first tick.**',
+                   '**Sign of force and displacement.**'):
+        assert answer in TEXT, answer
 
 
 def test_the_document_states_the_protocol_version_of_the_dbc():

@@ -284,3 +284,39 @@ def test_rig_config_settings_describe_every_parameter_once():
     # the parameter defaults, read back through the settings, give the dataclass defaults
     cfg = RigConfig.from_dict(nest({s.path: s.value(s.default) for s in settings}))
     assert cfg == RigConfig()
+
+
+def test_tighter_host_limits_refuse_the_setpoints_already_queued_and_min_above_max_is_discarded():
+    """docs/protocol.md "Envelope": HostLimits that tighten while setpoints are queued bind those too (flush, ramp
+    to rest, displacement_limit); a HostLimits with min >= max is discarded whole (counted), the limits unchanged.
+    """
+    import can
+
+    from rubber_rig.rig.can.frames import SampleFrames
+    from rubber_rig.rig.can.protocol import FAULT_DISPLACEMENT_LIMIT, Protocol
+    proto = Protocol()
+    with can.Bus(interface='virtual', channel='sim_tighter_limits', receive_own_messages=False) as sim_bus, \
+            can.Bus(interface='virtual', channel='sim_tighter_limits', receive_own_messages=False) as bus:
+        rig = SimController(sim_bus, 1000.0, SimOptions(), paced=False)
+        frames = SampleFrames('packed', proto.db, 1000.0)
+
+        def receive():      # the receive side alone (no tick): the setpoints stay queued
+            msg = sim_bus.recv(0)
+            while msg is not None:
+                rig._handle(msg)
+                msg = sim_bus.recv(0)
+        bus.send(proto.encode('HostStreamStart', {'HS_FirstSequence': 0}))
+        for msg in frames.encode_setpoints(0, [2e-6 * k for k in range(200)]):
+            bus.send(msg)
+        bus.send(proto.encode('HostLimits', {'HL_DisplacementMin': 1e-3, 'HL_DisplacementMax': -1e-3,
+                                             'HL_Deceleration': 100}))
+        receive()
+        assert rig.state == 'running' and rig.counters['frames_bad'] == 1
+        assert (rig.lower, rig.upper) == (-math.inf, math.inf)
+        queued_max = max(rig.buffer.values())
+        assert queued_max > 1e-4
+        bus.send(proto.encode('HostLimits', {'HL_DisplacementMin': -1e-3, 'HL_DisplacementMax': 1e-4,
+                                             'HL_Deceleration': 100}))
+        receive()
+        assert rig.fault_bits == FAULT_DISPLACEMENT_LIMIT and not rig.buffer
+        assert rig.state in ('ramping_down', 'fault')

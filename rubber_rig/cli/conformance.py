@@ -18,6 +18,10 @@ Online, against a controller on a python-can bus, with small motion inside the e
   rubber-rig conformance --interface socketcan --channel can0 --envelope 1mm --markdown report.md --junit report.xml
   rubber-rig conformance --sim --envelope 1mm              # the simulated controller, in a process of its own
   rubber-rig conformance --sim --defect heartbeat_80ms     # ... with a deliberate defect (see docs/protocol.md)
+  rubber-rig conformance --reference --reference-defect force_in_kN   # the second controller, written from the spec
+Measured values (CTRL-MEAS-1..3) need the reference spring on the rig and the ambient declared:
+  rubber-rig conformance --interface socketcan --channel can0 --envelope 1mm --reference-spring 10kN/mm±1% \
+      --ambient 23degC±5K
 Offline, from a raw CAN log recorded on a rig (what a log can show: periods, counters, CRCs, feedback rate,
 timing, continuity, sequence width, the host's duties):
   rubber-rig conformance --log run.blf --rate 1000Hz
@@ -29,6 +33,7 @@ import datetime
 import hashlib
 import json
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -46,9 +51,12 @@ from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.host_timing import LATE_MIN, SIM_LATE_MIN
 from rubber_rig.rig.conformance.link import Aborted, Envelope
 from rubber_rig.rig.conformance.log_segments import check_log
+from rubber_rig.rig.conformance.reference_run import REFERENCE_AMBIENT, REFERENCE_SPRING, run_against_reference
+from rubber_rig.rig.conformance.reference_specimen import Ambient, ReferenceSpring
 from rubber_rig.rig.conformance.report import NOT_TESTED, to_junit, to_markdown
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
 from rubber_rig.rig.conformance.trace import read_log
+from rubber_rig.rig.reference import REFERENCE_DEFECTS
 from rubber_rig.settings import describe_violation, described
 from rubber_rig.units import to_si
 
@@ -63,6 +71,9 @@ def add_arguments(parser):
                      'vector, kvaser, udp_multicast, ...)')
     src.add_argument('--sim', action='store_true', help='test the simulated controller, started as a process of '
                      'its own on a udp_multicast bus that stays on this host')
+    src.add_argument('--reference', action='store_true', help='test the reference controller (a second controller '
+                     'written from the specification alone, rubber_rig.rig.reference) in this process on a virtual '
+                     'bus; with --reference-defect it breaks a duty on purpose')
     src.add_argument('--log', help='offline: check a raw CAN log (.blf, .asc, candump .log) recorded on a rig')
     parser.add_argument('--channel', help='python-can channel (e.g. can0)')
     parser.add_argument('--bitrate', type=int, default=1_000_000, help='CAN bit rate [bit/s] (default %(default)d)')
@@ -80,9 +91,48 @@ def add_arguments(parser):
     parser.add_argument('--yes', action='store_true', help='the operator confirms the envelope without a prompt')
     parser.add_argument('--defect', action='append', default=[], choices=sorted(DEFECTS),
                         help='with --sim: a deliberate protocol defect of the simulated controller (repeatable)')
+    parser.add_argument('--reference-defect', action='append', default=[], choices=sorted(REFERENCE_DEFECTS),
+                        help='with --reference: a deliberate defect of the reference controller (repeatable)')
+    parser.add_argument('--reference-spring', help='online: the reference spring on the rig and its expanded '
+                        'uncertainty (k = 2), e.g. 10kN/mm±1%% (or +-1%%): the run judges stiffness, force sign, '
+                        'unit, scale and delay against it (CTRL-MEAS-1/2); --sim and --reference put it on their rig')
+    parser.add_argument('--ambient', help='online: the specimen temperature and the tolerance of a reading, e.g. '
+                        '23degC±5K (default tolerance 5 K): judges the temperature (CTRL-MEAS-3)')
     parser.add_argument('--markdown', help='write the report as Markdown to this file')
     parser.add_argument('--junit', help='write the report as JUnit XML to this file')
     parser.add_argument('--can-log', help='online: also write every frame of the run to this raw CAN log')
+
+
+def _split(text: str) -> tuple[str, str | None]:
+    parts = re.split(r'\s*(?:±|\+-|\+/-)\s*', text.strip())
+    if len(parts) > 2:
+        raise ValueError(f'{text!r}: one value and at most one +- tolerance')
+    return parts[0], (parts[1] if len(parts) == 2 else None)
+
+
+def parse_reference_spring(text: str) -> ReferenceSpring:
+    """'10kN/mm±1%' (or '+-1%', or an absolute '+-0.1kN/mm') -> ReferenceSpring; ValueError naming what is
+    wrong. Without a tolerance: 1 %.
+    """
+    value, tol = _split(text)
+    k = to_si(value, 'stiffness')
+    if tol is None:
+        u = 0.01
+    elif tol.endswith('%'):
+        u = float(tol[:-1]) / 100.0
+    else:
+        u = to_si(tol, 'stiffness') / k
+    return ReferenceSpring(k, u)
+
+
+def parse_ambient(text: str) -> Ambient:
+    """'23degC±2K' -> Ambient (tolerance in K; default 5 K); ValueError naming what is wrong."""
+    value, tol = _split(text)
+    t = to_si(value, 'temperature')
+    if tol is None:
+        return Ambient(t)
+    tol_k = float(tol[:-1]) if tol.endswith('K') else to_si(tol, 'temperature') - to_si('0degC', 'temperature')
+    return Ambient(t, tol_k)
 
 
 def check_arguments(args):
@@ -97,10 +147,21 @@ def check_arguments(args):
     why = describe_violation(rate.range, None, rate.units, args.rate_hz)
     if why:
         return f'argument --rate: {why}'
+    try:
+        args.reference_spring_declared = (parse_reference_spring(args.reference_spring) if args.reference_spring
+                                          else None)
+        args.ambient_declared = parse_ambient(args.ambient) if args.ambient else None
+    except ValueError as exc:
+        return f'argument --reference-spring/--ambient: {exc}'
+    if args.reference_defect and not args.reference:
+        return '--reference-defect is for the reference controller (--reference)'
     if args.log:
-        if args.envelope or args.defect or args.can_log:
-            return '--log checks a recording: --envelope, --defect and --can-log are for an online run'
+        if args.envelope or args.defect or args.can_log or args.reference_spring or args.ambient:
+            return ('--log checks a recording: --envelope, --defect, --can-log, --reference-spring and --ambient are '
+                    'for an online run')
         return None
+    if args.reference and args.upper is None:
+        args.upper = 1e-3           # the reference controller's rig is virtual: +-1 mm unless stated
     if args.upper is None:
         return ('an online run moves the actuator: state the displacement envelope it may use with --envelope '
                 '(e.g. --envelope 1mm), inside what the specimen and fixture allow')
@@ -163,6 +224,11 @@ def _config(args) -> RigConfig:
         data['channel'] = data['channel'] or '239.74.163.7'
         data['bus_options'] = {'port': port, **data['bus_options']}
         data['sim'] = {'defects': list(args.defect)}
+        if args.reference_spring_declared:     # the declared reference spring is the simulated specimen
+            data['sim']['specimen'] = {'model': 'linear', 'stiffness': args.reference_spring_declared.stiffness,
+                                       'damping': 0.0}
+        if args.ambient_declared:
+            data['sim']['temperature'] = args.ambient_declared.temperature
     return RigConfig.from_dict(data)
 
 
@@ -178,6 +244,8 @@ def _confirm(args) -> bool:
 def run(args) -> int:
     if args.log:
         return _offline(args)
+    if args.reference:
+        return _reference(args)
     try:
         cfg = _config(args)
     except (ConfigError, ValueError) as exc:
@@ -210,7 +278,8 @@ def run(args) -> int:
     try:
         conf = ConformanceRun(bus, cfg.sample_rate, Envelope(args.lower, args.upper), cfg.frame_profile,
                               log=lambda text: print(text, file=sys.stderr, flush=True), power_up=power_up,
-                              host_timing_files=timing_files)
+                              host_timing_files=timing_files, reference=args.reference_spring_declared,
+                              ambient=args.ambient_declared)
         results = conf.run()
         if args.can_log:
             conf.trace_to_log(args.can_log)
@@ -224,15 +293,49 @@ def run(args) -> int:
             box['process'].wait(timeout=10)
         if timing_dir is not None:
             timing_dir.cleanup()
+    simulated = f" (simulated, defects: {', '.join(args.defect) or 'none'})" if args.sim else ''
+    return _online_report(args, conf, results, f'bus {cfg.backend} {cfg.channel or ""}, {cfg.frame_profile} '
+                          f'frames, {cfg.sample_rate:g} Hz', simulated, t0)
+
+
+def _reference(args) -> int:
+    """The reference controller in this process on a virtual bus (power-up included)."""
+    t0 = time.monotonic()
+    profile = args.profile or ('classic' if args.classic else 'packed')
+    reference = args.reference_spring_declared or REFERENCE_SPRING
+    ambient = args.ambient_declared or REFERENCE_AMBIENT
+    args.power_up = True
+    try:
+        conf, results = run_against_reference(args.reference_defect, args.rate_hz, Envelope(args.lower, args.upper),
+                                              profile, reference, ambient,
+                                              log=lambda text: print(text, file=sys.stderr, flush=True))
+        if args.can_log:
+            conf.trace_to_log(args.can_log)
+    except Aborted as exc:
+        print(f'rubber-rig conformance: aborted: {exc}', file=sys.stderr)
+        return EXIT_ABORTED
+    what = (f" (the reference controller, rubber_rig.rig.reference, on a {reference.describe()} spring at "
+            f"{ambient.temperature:g} degC; defects: {', '.join(args.reference_defect) or 'none'})")
+    return _online_report(args, conf, results, f'virtual bus in this process, {profile} frames, '
+                          f'{args.rate_hz:g} Hz', what, t0)
+
+
+def _online_report(args, conf, results, bus: str, controller: str, t0: float) -> int:
+    """Facts, report and exit status of an online run."""
     ident = conf.identity[1] if conf.identity else None
-    facts = [f'bus {cfg.backend} {cfg.channel or ""}, {cfg.frame_profile} frames, {cfg.sample_rate:g} Hz',
-             f'envelope {args.lower * 1e3:g} .. {args.upper * 1e3:g} mm (stated by the operator)',
+    facts = [bus, f'envelope {args.lower * 1e3:g} .. {args.upper * 1e3:g} mm (stated by the operator)',
              'controller: ' + (f"device 0x{int(ident['CI_Device']):04x}, firmware {int(ident['CI_Firmware'])}, "
                                f"protocol {int(ident['CI_Protocol'])}" if ident else 'did not identify itself')
-             + (f" (simulated, defects: {', '.join(args.defect) or 'none'})" if args.sim else ''),
+             + controller,
+             'measured values judged against: ' + ', '.join(
+                 ([f'the reference spring {conf.reference.describe()}'] if conf.reference else
+                  ['no reference spring declared']) +
+                 ([f'the ambient {conf.ambient.temperature:g} degC +- {conf.ambient.tolerance:g} K']
+                  if conf.ambient else ['no ambient declared'])),
              'host requirements (HOST-*) are checked offline on a log written by the driver']
     late = [b - a for a, b in conf.host_timing.windows]
-    sim_late = f', the simulator it ran by {SIM_LATE_MIN * 1e3:g} ms or more' if args.sim else ''
+    sim_late = (f', the simulator it ran by {SIM_LATE_MIN * 1e3:g} ms or more' if args.sim else
+                f', the reference controller it ran by {SIM_LATE_MIN * 1e3:g} ms or more' if args.reference else '')
     facts.append(f'host timing: this host ran late {len(late)} times (the run\'s receive loop and heartbeat by '
                  f'{LATE_MIN * 1e3:g} ms or more' + sim_late + ')'
                  + (f', longest {max(late) * 1e3:.0f} ms, {sum(late):.3f} s in all' if late else '')

@@ -15,6 +15,7 @@
 """The rig's CAN protocol: the DBC shipped with the package, encode/decode with cantools, CRC-8 and
 sequence-number unwrapping. Both ends (driver and simulated controller) use this module.
 """
+import math
 from pathlib import Path
 
 import can
@@ -72,6 +73,17 @@ PROTOCOL_VERSION = int(str(_DBC.version).rsplit(' ', 1)[-1])
 # ST_LastSequence (status); the packed frames have their own (rubber_rig.rig.can.frames)
 SEQ_MOD = 1 << _DBC.get_message_by_name('Setpoint').get_signal_by_name('SP_Sequence').length
 STATUS_SEQ_MOD = 1 << _DBC.get_message_by_name('ControllerStatus').get_signal_by_name('ST_LastSequence').length
+
+
+# a Temperature frame without a reading (docs/protocol.md "Feedback"): TEMP_Specimen's lowest raw value, below
+# absolute zero (-327.68 degC); the host reads it as no temperature (NaN)
+_TEMP = _DBC.get_message_by_name('Temperature').get_signal_by_name('TEMP_Specimen')
+TEMPERATURE_NOT_AVAILABLE = -(1 << (_TEMP.length - 1)) * _TEMP.scale + _TEMP.offset
+
+
+def temperature_reading(value: float) -> float:
+    """TEMP_Specimen [degC] as read, NaN for TEMPERATURE_NOT_AVAILABLE (no reading)."""
+    return math.nan if value <= TEMPERATURE_NOT_AVAILABLE + 0.5 * _TEMP.scale else float(value)
 
 
 def fault_names(mask: int) -> list[str]:

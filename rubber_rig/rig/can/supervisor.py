@@ -35,6 +35,7 @@ from .protocol import (
     STATES,
     STATUS_SEQ_MOD,
     fault_names,
+    temperature_reading,
     unwrap,
 )
 from .sensor_check import SensorCheck
@@ -247,7 +248,7 @@ class Supervisor:
                 f"{ident['velocity_max']:g} m/s"), headline=bool(why))
 
     def _on_temperature(self, sig):
-        self.temperature = float(sig['TEMP_Specimen'])
+        self.temperature = temperature_reading(float(sig['TEMP_Specimen']))     # NaN: the controller has none
 
     # ---- feedback checks (FrameIO listener)
     def bad_frames(self, n: int):

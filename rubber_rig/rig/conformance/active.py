@@ -32,24 +32,27 @@ import can
 
 from ..can.protocol import CMD_ABORT
 from .active_faults import FaultScenarios
+from .active_power import PowerUpScenarios
 from .active_stream import StreamScenarios
 from .link import Aborted
 from .passive import check_offline
+from .reference_specimen import MeasureScenarios
 from .report import FAIL, NOT_TESTED, Results
 from .requirements import REQUIREMENTS
 
 
-class ConformanceRun(StreamScenarios, FaultScenarios):
+class ConformanceRun(PowerUpScenarios, StreamScenarios, MeasureScenarios, FaultScenarios):
     """One conformance run of the controller on `bus` (any python-can Bus) at sample_rate [Hz] with frame
     `profile`, inside `envelope`. run() returns the Results of every CTRL requirement.
     """
 
     def scenarios(self) -> tuple:
         """The scenarios in the order they run (each a method marked with the requirements it judges)."""
-        return ((self.s_power_up,) if self.power_up else ()) + (
-            self.s_listen, self.s_identify, self.s_stream, self.s_stale, self.s_hold, self.s_reset_moving,
-            self.s_bad_frames, self.s_host_limits, self.s_out_of_limits, self.s_too_fast, self.s_host_silence,
-            self.s_wrap)
+        every = ((self.s_power_up,) if self.power_up else ()) + (
+            self.s_listen, self.s_identify, self.s_stream, self.s_stale, self.s_reference, self.s_hold,
+            self.s_reset_moving, self.s_bad_frames, self.s_host_limits, self.s_out_of_limits, self.s_too_fast,
+            self.s_host_silence, self.s_wrap)
+        return every if self.only is None else tuple(s for s in every if s.__name__ in self.only)
 
     def run(self) -> Results:
         """Every scenario in order; the offline-checkable requirements from the whole trace at the end.
@@ -84,6 +87,7 @@ class ConformanceRun(StreamScenarios, FaultScenarios):
                 if rid.startswith('CTRL'):
                     self.results.put(rid, r.status, r.measured, r.detail)
         why = (f'run aborted: {self.deviation}' if self.deviation else
+               f'a short run of {", ".join(sorted(self.only))} only' if self.only is not None else
                'needs the controller switched on during the run (--power-up)')
         return self.results.complete({r.id for r in REQUIREMENTS if r.id.startswith('CTRL')}, why)
 

@@ -308,6 +308,7 @@ class FaultScenarios(ConformanceLink):
         first = self.next_sequence() + 1000
         self.stream(first, self.smooth(p0, -a if p0 > 0 else a), 0.6)
         self.heartbeat = False
+        self.foreign_traffic = True     # another node goes on talking: it must not keep the watchdog quiet
         self._sleep(0.01)
         with self.lock:   # the controller's host watchdog runs on HostHeartbeat
             t_silent = max(f.t for f in self.trace.frames if f.name == 'HostHeartbeat')

@@ -28,7 +28,6 @@ from ..can.protocol import (
     CMD_IDENTIFY,
     CMD_RESET,
     PROTOCOL_VERSION,
-    STATES,
     unwrap,
 )
 from .host_timing import explains, not_judged
@@ -56,29 +55,6 @@ COMMAND = {CMD_ABORT: 'ABORT', CMD_DISABLE: 'DISABLE'}
 
 class StreamScenarios(ConformanceLink):
     """The scenarios of normal operation and its commands."""
-
-    @judges('CTRL-PWR-1')
-    def s_power_up(self):
-        """Power-up (CTRL-PWR-1)."""
-        self.power_up()
-        if not self._wait(lambda: any(f.host is False for f in self.trace.frames), 60.0):
-            raise Aborted('the controller sent nothing within 60 s of power-up')
-        with self.lock:
-            t0 = next(f.t for f in self.trace.frames if f.host is False)
-        self._sleep(1.5)
-        with self.lock:
-            first = [f for f in self.trace.frames if f.host is False and f.t <= t0 + 1.0 and not f.malformed]
-        ident = [f for f in first if f.name == 'ControllerIdentity']
-        states = {STATES[int(f.signals['ST_State'])] if int(f.signals['ST_State']) < len(STATES) else '?'
-                  for f in first if f.name == 'ControllerStatus'}
-        faults = [f for f in first if f.name == 'ControllerStatus' and int(f.signals['ST_Faults'])]
-        ticking = [f for f in first if f.samples is not None]
-        ok = (bool(ident) and int(ident[0].signals['CI_Protocol']) == PROTOCOL_VERSION and bool(states)
-              and states <= {'idle', 'unconfigured'} and not faults and not ticking)
-        self.results.put('CTRL-PWR-1', PASS if ok else FAIL,
-                         f'first second after power-up: {len(ident)} ControllerIdentity, states {sorted(states)}, '
-                         f'{len(faults)} status frames with faults, {len(ticking)} feedback frames',
-                         '' if ok else 'at power-up the controller must identify itself, idle, at rest, unfaulted')
 
     @judges()
     def s_listen(self):
@@ -151,7 +127,12 @@ class StreamScenarios(ConformanceLink):
         a = 0.4 * self.env.half
         first, p0 = 1000, self.position
         t0 = time.time()
-        end = self.stream(first, self.smooth(p0, a), 2.0)
+        # setpoints below HS_FirstSequence, after it was announced: never the start of the stream (CTRL-STREAM-1)
+        self.send('HostStreamStart', {'HS_FirstSequence': first})
+        per = self.frames.setpoints_per_frame
+        for k in range(first - 3 * per, first, per):
+            self.send_setpoints(k, [p0] * per, record=False)
+        end = self.stream(first, self.smooth(p0, a), 2.0, start=False)
         self._sleep(LEAD + 0.3)                       # underrun: the controller holds
         t_hold = time.time()
         self._sleep(0.3)
@@ -161,8 +142,10 @@ class StreamScenarios(ConformanceLink):
         starts = [s for s in self._samples_since(t0)]
         ok = bool(starts) and starts[0].seq == first and abs(starts[0].u - self.sent[first]) <= 1.5 * LSB
         self.results.put('CTRL-STREAM-1', PASS if ok else FAIL,
-                         f'first sample {starts[0].seq if starts else None} (stream start {first})',
-                         '' if ok else 'the first applied sample must be the first setpoint of the stream')
+                         f'first sample {starts[0].seq if starts else None} (stream start {first}; setpoints from '
+                         f'{first - 3 * per} sent after HostStreamStart)',
+                         '' if ok else 'the first applied sample must be the first setpoint of the stream: none below '
+                         'HS_FirstSequence')
         self._judge_applied(samples, first, end, 'stream')
         self._judge_buffer(t0, t_hold)
         # CTRL-STREAM-3: held the last command without a fault

@@ -49,6 +49,13 @@ class HostTiming:
             with self._lock:
                 self.windows.append((float(t_due), float(t_now)))
 
+    def add(self, t0: float, t1: float) -> None:
+        """A window [t0, t1] a process of this host recorded at its own threshold (the in-process reference
+        controller's late ticks).
+        """
+        with self._lock:
+            self.windows.append((float(t0), float(t1)))
+
     def add_from_file(self, path) -> int:
         """Merge the windows written one per line as 'start end' (the simulator's missed deadlines, at its own
         threshold: it misses the feedback timing by less than LATE_MIN) since the last call for this path; returns

@@ -55,6 +55,8 @@ BUFFER_OUTLIERS = 0.02      # share of status frames whose level may be off (a c
 REST_TIMEOUT = 15.0         # [s] longest wait for the controller to come to rest
 TOO_FAST_FACTOR = 1.5       # CTRL-LIM-3 steps at this multiple of the rated velocity in one sample
 LATCH_TIME = 3.0            # [s] a fault must stay latched this long without RESET (CTRL-FAULT-2)
+FOREIGN_ID = 0x7FE          # an identifier the DBC does not define: another node's traffic
+FOREIGN_PERIOD = 0.01       # [s] of that traffic while the host is silent (CTRL-WD-1)
 PLAUSIBLE_VELOCITY = 1.0    # [m/s] default bound of a plausible rated velocity (Envelope.velocity_max)
 
 
@@ -107,6 +109,7 @@ class Sample:
     x: float
     u: float
     state: str
+    force: float = math.nan     # [N] measured force (CTRL-MEAS-1, CTRL-MEAS-2)
 
 
 class ConformanceLink:
@@ -115,8 +118,13 @@ class ConformanceLink:
     """
 
     def __init__(self, bus: can.BusABC, sample_rate: float, envelope: Envelope, profile: str = 'packed',
-                 log=print, power_up=None, host_timing_files=()):
+                 log=print, power_up=None, host_timing_files=(), reference=None, ambient=None, only=None):
         self.bus, self.fs, self.env, self.log = bus, float(sample_rate), envelope, log
+        # the declared reference specimen (reference_specimen.ReferenceSpring) and ambient temperature
+        # (reference_specimen.Ambient) the measured values are judged against (CTRL-MEAS-1..3); None: not declared
+        self.reference, self.ambient = reference, ambient
+        # names of the scenarios to run (a short run of a few; None: all): the run is then incomplete
+        self.only = None if only is None else frozenset(only)
         # power_up: callable that switches the controller on (or asks the operator to) once the run listens;
         # None: the controller is already on and CTRL-PWR-1 is not tested
         self.power_up = power_up
@@ -139,6 +147,10 @@ class ConformanceLink:
         self.deviation = ''
         self.tracking_allowance = 0.0   # [m] tracking error tolerated beyond a third of the envelope (a test step)
         self.heartbeat = False
+        # another node on the bus: while set, the receive loop sends a frame of an identifier the DBC does not
+        # define every FOREIGN_PERIOD (CTRL-WD-1: only HostHeartbeat may keep a controller's watchdog quiet)
+        self.foreign_traffic = False
+        self._next_foreign = 0.0
         self._fb_ref = 0
         self._hb_counter = 0
         self._next_hb = 0.0
@@ -200,6 +212,9 @@ class ConformanceLink:
                 self._heartbeat()
                 self._next_hb = max(self._next_hb + period, now)
             beating = self.heartbeat
+            if self.foreign_traffic and now >= self._next_foreign:
+                self._tx(can.Message(arbitration_id=FOREIGN_ID, data=bytes(8), is_extended_id=False))
+                self._next_foreign = now + FOREIGN_PERIOD
             if msg is None:
                 continue
             with self.lock:
@@ -219,11 +234,11 @@ class ConformanceLink:
                     self.identity = (fr.t, dict(fr.signals))
 
     def _on_feedback(self, fr):
-        raw, xs, _, us = fr.samples
+        raw, xs, fs, us = fr.samples
         first = unwrap(int(raw), self._fb_ref, self.trace.modulus[fr.name])
         self._fb_ref = first + len(xs)
-        for i, (x, u) in enumerate(zip(xs, us, strict=False)):
-            self.samples.append(Sample(fr.t, first + i, float(x), float(u), self.state))
+        for i, (x, f, u) in enumerate(zip(xs, fs, us, strict=False)):
+            self.samples.append(Sample(fr.t, first + i, float(x), float(u), self.state, float(f)))
             self.position = float(u)
             self._watch(float(x), float(u), first + i)
 
@@ -310,7 +325,7 @@ class ConformanceLink:
 
     def to_rest(self, target: float = 0.0):
         """Bring the controller to rest at target (ABORT if it ticks), clear faults (RESET), wait for idle."""
-        self.heartbeat = True
+        self.heartbeat, self.foreign_traffic = True, False
         end = time.monotonic() + REST_TIMEOUT
         while True:
             # ABORT again every second while the controller still ticks: a frame lost on a loaded host (a full

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..can.protocol import FAULT_NAMES, STATES, STATUS_SEQ_MOD, cycle_time
+from ..can.protocol import CMD_IDENTIFY, FAULT_NAMES, STATES, STATUS_SEQ_MOD, cycle_time
 
 # (the feedback tolerances, with the others of a trace, are read from this module: spec_doc, docs/protocol.md)
 from .feedback import JITTER_MAX, RATE_TOLERANCE, STALL_MAX, STATE_TICKING, check_feedback  # noqa: F401
@@ -41,6 +41,8 @@ STATUS_LEAD = 0.01        # [s] how far ST_LastSequence may be ahead of the feed
 TRANSITIONS = {('unconfigured', 'idle'), ('idle', 'running'), ('running', 'holding'), ('holding', 'running'),
                ('running', 'ramping_down'), ('holding', 'ramping_down'), ('ramping_down', 'idle'),
                ('ramping_down', 'fault'), ('idle', 'fault'), ('fault', 'idle'), ('unconfigured', 'fault')}
+IDENTIFY_ANSWER = 0.1     # [s] a ControllerIdentity this soon after an IDENTIFY is its answer (CTRL-ID-1), not
+#                           one of the periodic frames CTRL-ID-2 times
 ABSENT_PERIODS = 5        # a trace of the controller this many periods long must hold its periodic frames
 
 
@@ -67,7 +69,7 @@ def check_periodic(trace: Trace, results: Results):
     """
     for name, rid in PERIODIC.items():
         period = cycle_time(name)
-        t = np.array([f.t for f in trace.valid(name) if f.host is False])
+        t = np.array(_periodic_times(trace, name))
         if t.size < 5:
             absent = _absent(trace, name, t.size)
             results.put(rid, FAIL if absent else NOT_TESTED, f'{t.size} frames',
@@ -88,6 +90,23 @@ def check_periodic(trace: Trace, results: Results):
                             not_judged(float(late.max()), why))
                 continue
         results.put(rid, FAIL if why else PASS, measured, why)
+
+
+def _periodic_times(trace: Trace, name: str) -> list:
+    """Arrival times [s] of the controller's periodic `name` frames: for ControllerIdentity without the first one
+    within IDENTIFY_ANSWER of each IDENTIFY the host sent (an answer on demand, not the periodic frame: five
+    answers in a short trace would make the median period look like 0.3 s).
+    """
+    times = [f.t for f in trace.valid(name) if f.host is False]
+    if name != 'ControllerIdentity':
+        return times
+    asked = sorted(f.t for f in trace.valid('HostCommand') if f.host and int(f.signals['CMD_Code']) == CMD_IDENTIFY)
+    answers = set()
+    for t_ask in asked:
+        answer = next((t for t in times if t_ask <= t <= t_ask + IDENTIFY_ANSWER and t not in answers), None)
+        if answer is not None:
+            answers.add(answer)
+    return [t for t in times if t not in answers]
 
 
 def _period_violation(dt, period: float, name: str) -> str:

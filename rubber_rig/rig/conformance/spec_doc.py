@@ -33,6 +33,7 @@ from pathlib import Path
 
 from ..can.frames import FEEDBACK_FRAMES, PROFILES, SETPOINT_FRAMES
 from ..can.protocol import DBC_PATH, PROTOCOL_VERSION, Protocol
+from ..reference.defects import REFERENCE_DEFECTS
 from . import passive
 from .defects import DEFECTS
 
@@ -179,8 +180,16 @@ def defects_table() -> str:
     return '\n'.join(out) + '\n'
 
 
+def reference_defects_table() -> str:
+    """The reference controller's deliberate defects (rig/reference/defects.py) and the requirements each breaks."""
+    out = ['| defect | what the reference controller then does | requirements it breaks |', '| --- | --- | --- |']
+    out += [f'| `{name}` | {_cell(what)} | {", ".join(broken)} |'
+            for name, (broken, what) in REFERENCE_DEFECTS.items()]
+    return '\n'.join(out) + '\n'
+
+
 GENERATORS = {'frames': frame_table, 'states': states_table, 'faults': faults_table,
-              'tolerances': tolerances_table, 'defects': defects_table}
+              'tolerances': tolerances_table, 'defects': defects_table, 'reference_defects': reference_defects_table}
 
 
 def generated_blocks(text: str) -> dict:

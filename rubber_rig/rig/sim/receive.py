@@ -61,6 +61,9 @@ class ControllerReceive:
                 self.lower = -math.inf if 'ignore_lower_limit' in self.defects else lo
                 self.upper = hi
                 self.decel_max = float(sig['HL_Deceleration']) or DECEL_MAX
+                self._refuse_queued()
+            else:                # min >= max: discarded whole, the limits stay as they were
+                self.counters['frames_bad'] += 1
         elif name == 'HostCommand':
             code = int(sig['CMD_Code'])
             if code == CMD_DISABLE and 'ignore_disable' in self.defects:
@@ -136,6 +139,15 @@ class ControllerReceive:
             buffer = self.buffer
             for i in range(late, len(values)):
                 buffer[seq + i] = values[i]
+
+    def _refuse_queued(self):
+        """CTRL-LIM-2: HostLimits that tighten while setpoints are queued bind those too: one outside the new limits
+        is refused as if it had just arrived (flush, ramp to rest, displacement_limit).
+        """
+        tol = LSB + 1e-12
+        if self.state in ('running', 'holding') and any(
+                not self.lower - tol <= v <= self.upper + tol for v in self.buffer.values()):
+            self.abort(0.0, FAULT_DISPLACEMENT_LIMIT)
 
     def _refuse_setpoints(self, seq: int, late: int, values) -> bool:
         """CTRL-LIM-2 / CTRL-LIM-3: a setpoint outside the host's limits, or one that steps faster than the rated
