@@ -28,12 +28,16 @@ of each sample and setpoint batch into a message before it checks it (timed too)
 """
 from __future__ import annotations
 
-import argparse
-import copy
-import functools
-import json
-import sys
-import time
+import os
+
+if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
+import argparse  # noqa: E402
+import copy  # noqa: E402
+import functools  # noqa: E402
+import json  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
 
 import numpy as np
 from rclpy.serialization import deserialize_message, serialize_message

@@ -28,7 +28,7 @@ import numpy as np
 from rclpy.action import ActionClient
 from rclpy.node import Node
 from std_msgs.msg import String
-from std_srvs.srv import SetBool, Trigger
+from std_srvs.srv import Trigger
 
 from msg_defs.action import RunProgram
 from msg_defs.msg import (
@@ -103,7 +103,6 @@ class SuiteMonitor(Node):
         self.action = ActionClient(self, RunProgram, 'run_program', **topics.ACTION_SERVICES_QOS)
         self.recorder_control = self.create_client(RecorderControl, f'{recorder}/control')
         self.excitation_abort = self.create_client(Trigger, f'{excitation}/abort')
-        self.excitation_hold = self.create_client(SetBool, f'{excitation}/hold')
 
     # -- callbacks (executor thread) -------------------------------------------------------------------------
     def _on_samples(self, msg: RigSampleBatch) -> None:
