@@ -53,8 +53,8 @@ class Field:
 
     def pack(self, value: float) -> int:
         raw = int(round((value - self.offset) / self.scale))
-        lo, hi = (-(1 << (self.length - 1)), (1 << (self.length - 1)) - 1) if self.signed else (0, (1 << self.length)
-                                                                                                  - 1)
+        top = 1 << (self.length - 1)
+        lo, hi = (-top, top - 1) if self.signed else (0, 2 * top - 1)
         raw = min(max(raw, lo), hi)
         return (raw & ((1 << self.length) - 1)) << self.start
 
