@@ -129,6 +129,17 @@ def test_recover_of_a_directory_recovers_the_unclosed_part_and_lists_the_parts(t
     assert info['files'][-1].endswith('r_3.recovered.mcap')
 
 
+def test_a_part_just_opened_whose_header_is_not_on_disk_yet_is_not_missing(tmp_path):
+    """A live recording right after a split: the recorder has created r_3.mcap but not flushed its first records.
+    It is the recording's part in progress (CI once caught `info` calling it MISSING between the two)."""
+    _, files = split_recording(tmp_path)
+    files[3].write_bytes(b'')
+    (files[0].parent / 'metadata.yaml').unlink()     # a live recording's directory: no final metadata.yaml yet
+    report = survey(files[0].parent)
+    assert report.missing == [] and [p.index for p in report.present] == [0, 1, 2, 3]
+    assert report.present[-1].closed is False
+
+
 def test_a_part_of_another_recording_in_the_directory_is_not_taken_for_one(tmp_path):
     _, files = split_recording(tmp_path, 'a')
     _, other = split_recording(tmp_path, 'b')

@@ -208,7 +208,7 @@ def survey(path) -> PartsReport:
     """The parts of the recording that ``path`` (its directory, or any one of its files) belongs to."""
     path = Path(path)
     files = _siblings(path)
-    parts = [read_part(f) for f in files]
+    parts = _adopt_unheaded([read_part(f) for f in files])
     if path.is_file():
         own = read_part(path)
         key = own.recording_id or own.recording
@@ -225,6 +225,19 @@ def survey(path) -> PartsReport:
         except (ValueError, TypeError, KeyError):
             listed = {}
     return assess(parts, listed)
+
+
+def _adopt_unheaded(parts: list) -> list:
+    """A part the recorder has just opened has no header on disk yet (it is written with the first flush): one
+    whose file name continues a recording's (``<name>_<n>.mcap``) is that recording's part in progress, not a
+    stranger, so a survey of a live recording does not call it missing.
+    """
+    named = {Path(p.file).name.removesuffix('.mcap').rsplit('_', 1)[0]: p for p in parts if p.recording_id}
+    for p in parts:
+        owner = named.get(Path(p.file).name.removesuffix('.mcap').rsplit('_', 1)[0])
+        if not (p.recording_id or p.recording) and owner is not None and p.index is not None:
+            p.recording_id, p.recording, p.closed = owner.recording_id, owner.recording, False
+    return parts
 
 
 def assess(parts: list, listed: dict = None) -> PartsReport:
