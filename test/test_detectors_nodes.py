@@ -296,7 +296,13 @@ def motion_cycles(seq, u, split):
     return moving[:cut].sum() / FS * F, moving[cut:].sum() / FS * F, int(full.size - seq.size)
 
 
+@system
 def test_held_durability_block_resumes_with_the_cycles_it_had_not_run(suite):
+    # In the system tier since 2026-11-27: a fresh-clone CI run on a quiet machine saw the rig run 51.79 cycles of
+    # motion where at least 52.95 are due (before 25.83, after 25.96 with 24 owed: about 1.2 cycles counted as run
+    # that the applied command does not show), once in five runs; it passed 3 of 3 right after. Not explained yet
+    # (issue 34, open). The exact count at seven hold phases, with the driver, controller and session on simulated
+    # time, is test_scenario.py's; this test is the same through the node processes on the wall clock.
     procs, op = suite
     restart_rig(procs, op, {'damage': '[]'})
     program = """name: resume
