@@ -105,7 +105,7 @@ class Scenario:
         self.program = program if isinstance(program, Program) else load_program(program)
         self.fs = self.cfg.sample_rate
         self.lead, self.batch = math.ceil(lead_time * self.fs), int(batch_size)
-        self.periods = {'excitation': float(stream_period), 'driver': float(poll_period), 'controller': 0.0}
+        self.stream_period = float(stream_period)    # the excitation's timer (the driver polls every rig step)
         self.owner_timeout, self.amplitude_control = float(owner_timeout), amplitude_control
         clock = self.clock
         self.controller, self.driver = self.rig.controller, self.rig.driver
@@ -134,7 +134,7 @@ class Scenario:
         self.batches = deque()          # setpoint batches on their way to the driver
         self.measured = []              # every block the driver measured (what a recorder would record)
         self.ended, self.completed, self.started_at, self._measured_from = '', False, None, 0
-        self._due = {name: self.now for name in COMPONENTS}
+        self._excitation_due = self.now
         self._next_beat = self.now
 
     @property
@@ -257,7 +257,7 @@ class Scenario:
             self._wake_driver()
         if not self._stalled('element_model'):
             self._wake_model()
-        if self.session is not None and self.now >= self._due['excitation'] and not self._stalled('excitation'):
+        if self.session is not None and self.now >= self._excitation_due and not self._stalled('excitation'):
             self._wake_excitation()
 
     def _wake_driver(self) -> None:
@@ -322,7 +322,7 @@ class Scenario:
 
     def _wake_excitation(self) -> None:
         """The excitation node's timer and callbacks: samples in, setpoints out, a heartbeat when one is due."""
-        self._due['excitation'] = self.now + self.periods['excitation']
+        self._excitation_due = self.now + self.stream_period
         if self.now >= self._next_beat:
             self.peers.on_beat(Beat(self.OWNER, 1))
             self._next_beat = self.now + PERIOD
