@@ -105,8 +105,8 @@ def start_processes(args, rate, batch, out_dir, domain):
 def run_once(args, rate: float, out_dir: Path) -> dict:
     from msg_defs.srv import RecorderControl
     from rubber_rig.excitation import Program
+    from rubber_rig.launching.inprocess import InProcessLauncher
     from rubber_rig.nodes.excitation_readiness import READY_STATES
-    from rubber_rig.nodes.launcher import InProcessLauncher
     from rubber_rig.nodes.monitor import SuiteMonitor
     from rubber_rig.nodes.rig_driver_node import BATCH_PERIOD
     from rubber_rig.recording import load_recording

@@ -79,7 +79,7 @@ def test_main_job_end_to_end(tmp_path, capsys):
 def test_bench_refuses_to_start_beside_another_suite_on_the_same_domain():
     # two excitations on one rig's topics would both command it: a second suite must not start
     from rubber_rig.cli.main import CommandError
-    from rubber_rig.nodes.launcher import InProcessLauncher
+    from rubber_rig.launching.inprocess import InProcessLauncher
     from rubber_rig.nodes.rig_driver_node import RigDriverNode
 
     from support.suite import CONFIG

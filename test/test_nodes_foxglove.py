@@ -29,10 +29,10 @@ from rclpy.node import Node
 
 from msg_defs.msg import DetectorEvent, ModelPrediction
 from rubber_rig.excitation.detectors import Event
+from rubber_rig.launching.inprocess import InProcessLauncher
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.foxglove_view_node import LAYOUT_FILE, FoxgloveViewNode, build_layout
-from rubber_rig.nodes.launcher import InProcessLauncher
 
 from support.suite import domain_id
 

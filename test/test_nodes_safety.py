@@ -20,9 +20,9 @@ import pytest
 from rclpy.parameter import Parameter
 
 from msg_defs.msg import RigStatus
+from rubber_rig.launching.inprocess import InProcessLauncher
 from rubber_rig.nodes.element_model_node import ElementModelNode
 from rubber_rig.nodes.excitation_node import ExcitationNode
-from rubber_rig.nodes.launcher import InProcessLauncher
 from rubber_rig.nodes.params import ParameterError, undeclared_overrides
 from rubber_rig.nodes.recorder_node import RecorderNode
 from rubber_rig.nodes.rig_driver_node import RigDriverNode

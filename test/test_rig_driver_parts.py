@@ -21,7 +21,7 @@ from rubber_rig.rig import open_rig
 from rubber_rig.rig.can.batcher import SampleBatcher
 from rubber_rig.rig.can.stream import GrantedStream, SampleBlock, StreamGrant
 from rubber_rig.rig.config import RigConfig
-from rubber_rig.rig.live import LIVE_SETTINGS, apply_live, weakening
+from rubber_rig.rig.live import LIVE_SETTINGS, apply_live, review_change, weakening
 
 from support.rig import FAST
 
@@ -126,3 +126,21 @@ def test_protective_settings_are_made_stricter_by_anyone_and_relaxed_only_to_the
             assert why.startswith(f'{name}: {value:g} is beyond the configured') and 'restart rig_driver' in why
     # settings that protect nothing are not judged here
     assert weakening({'batch_size': 10, 'stream_loss_action': 'hold'}, configured, configured, True) == ''
+
+
+def test_a_run_time_change_is_judged_as_a_whole_before_the_node_applies_it():
+    """rig_driver's on_set_parameters takes review_change's verdict (the node applies it, test_nodes_safety.py)."""
+    config = RigConfig.from_dict({})
+    configured = {'limits.displacement_max': config.limits.displacement_max, 'owner_timeout': 1.0}
+    live = LIVE_SETTINGS | {'batch_size', 'owner_timeout'}
+    relax = review_change({'owner_timeout': 5.0}, configured, configured, False, True, config, live)
+    assert relax.weakening and relax.why.startswith('owner_timeout: 5 is beyond the configured')
+    fixed = review_change({'sample_rate': 500.0, 'batch_size': 5}, configured, configured, False, True, config, live)
+    assert not fixed.weakening and fixed.why == \
+        'sample_rate: applied at configure; the rig is configured (deactivate and clean up first)'
+    assert review_change({'sample_rate': 500.0}, configured, configured, False, False, None, live).why == ''
+    tighter = config.limits.displacement_max / 2
+    taken = review_change({'limits.displacement_max': tighter}, configured, configured, True, True, config, live)
+    assert taken.why == '' and taken.limits.displacement_max == tighter == config.limits.displacement_max
+    bad = review_change({'rest_position': 1.0}, configured, configured, False, True, config, live)
+    assert (bad.why, bad.weakening, bad.limits) == ('rest_position 1 m outside the displacement limits', False, None)

@@ -29,6 +29,7 @@ from rclpy.serialization import deserialize_message, serialize_message
 from msg_defs.action import RunProgram
 from msg_defs.msg import Heartbeat, RigStatus
 from msg_defs.srv import HoldProgram, OpenStream, RecorderControl, StopStream
+from rubber_rig.launching.inprocess import InProcessLauncher
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes.auth import (
     HEARTBEAT,
@@ -44,7 +45,6 @@ from rubber_rig.nodes.auth import (
     fields_of,
 )
 from rubber_rig.nodes.excitation_node import ExcitationNode
-from rubber_rig.nodes.launcher import InProcessLauncher
 from rubber_rig.nodes.params import ParameterError
 from rubber_rig.nodes.rig_driver_node import RigDriverNode
 from rubber_rig.security import init_key

@@ -144,7 +144,7 @@ def ensure_key(key_file: str | None) -> str:
 def run(args) -> int:
     os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
     from rubber_rig.cli.bench_session import BenchSession  # rclpy is loaded only when the bench runs
-    from rubber_rig.nodes.launcher import InProcessLauncher
+    from rubber_rig.launching.inprocess import InProcessLauncher
 
     config = find_config(args.config)
     program, program_yaml = build_program(args)

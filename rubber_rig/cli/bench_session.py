@@ -234,7 +234,7 @@ class BenchSession:
             return False
         if self._rest_since is None:
             self._rest_since = time.monotonic()
-        settled = time.monotonic() - self._rest_since >= 2 * self.driver.max_batch_delay
+        settled = time.monotonic() - self._rest_since >= 2 * self.driver.params.max_batch_delay
         samples_topic = self.monitor.resolve_topic_name('samples')
         recorded = self.recorder_failed() or mon.next is None \
             or self.recorder.core.gaps.next_expected.get(samples_topic, -1) >= mon.next
@@ -273,7 +273,7 @@ class BenchSession:
             'program': program.name, 'recording': str(mcap), 'wall_time_s': run.wall_time,
             'interrupted': run.interrupted,
             'rig': {'backend': cfg.backend, 'sample_rate': cfg.sample_rate, 'paced': cfg.paced,
-                    'specimen': cfg.sim.specimen, 'batch_size': self.driver.batch_size},
+                    'specimen': cfg.sim.specimen, 'batch_size': self.driver.params.batch_size},
             'model': {'source': p.choice.source, 'parameter_set': p.parameter_set, 'temperature': p.temperature,
                       'values': p.params.as_dict()},
             'result': {'success': bool(result.success) if result else False,

@@ -27,8 +27,8 @@ import rclpy
 from rclpy.node import Node
 
 from msg_defs.srv import HoldProgram
+from rubber_rig.launching.inprocess import InProcessLauncher
 from rubber_rig.nodes.auth import HOLD_PROGRAM, signed
-from rubber_rig.nodes.launcher import InProcessLauncher
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

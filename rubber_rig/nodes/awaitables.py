@@ -13,21 +13,22 @@
 # limitations under the License.
 
 """Awaitables for a node's async callbacks (an action's execute, a task): a bounded service call and a sleep,
-both on the node's own timers, so the executor keeps serving the node's other callbacks while they wait.
+both on the node's own timers and clock (simulated time with use_sim_time), so the executor keeps serving the
+node's other callbacks while they wait.
 """
 from __future__ import annotations
 
-import time
-
+from rclpy.duration import Duration
 from rclpy.node import Node
 from rclpy.task import Future
 
 
 async def call(node: Node, client, request, timeout: float):
     """Await a service response, or None after `timeout` seconds (or if the service is not there)."""
-    deadline = time.monotonic() + timeout
+    clock = node.get_clock()
+    deadline = clock.now() + Duration(nanoseconds=int(timeout * 1e9))
     while not client.service_is_ready():
-        if time.monotonic() >= deadline:
+        if clock.now() >= deadline:
             return None
         await sleep(node, 0.05)
     done = Future()

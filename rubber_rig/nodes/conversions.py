@@ -175,6 +175,17 @@ def status_msg(snapshot: Any, limits: Any, sample_rate: float, t: float) -> RigS
     return msg
 
 
+def bus_lines(driver: Any, frame_profile: str) -> dict:
+    """The bus's lines of rig_driver's /diagnostics: the load the protocol needs at this rate (worst-case stuffing),
+    the load measured on the simulated bus (when it has bit timing) and the frame profile.
+    """
+    lines = {'bus_load_pct': f'{driver.bus_load * 100:.1f}', 'can_profile': frame_profile}
+    measured = driver.status.extra['bus_load_measured']
+    if measured is not None:
+        lines['bus_load_measured_pct'] = f'{measured * 100:.1f}'
+    return lines
+
+
 def diagnostics_msg(status: RigStatus, hardware_id: str, extra: Mapping[str, Any] | None = None,
                     name: str = 'rig_driver') -> DiagnosticArray:
     """RigStatus -> diagnostic_msgs/DiagnosticArray (OK running/idle, WARN frame loss, ERROR fault)."""

@@ -19,33 +19,30 @@ Action:      run_program (msg_defs/action/RunProgram; feedback: block, cycle, ac
              (session.admission: the reason and the count in the log and the diagnostics); every other goal
              either runs or ends at once with the reason it cannot (rig not ready, invalid program, no recording).
 Services:    ~/abort (std_srvs/Trigger: ramp to rest now), ~/hold (msg_defs/HoldProgram: true = hold, false = resume,
-             signed),
-             ~/load_program (msg_defs/srv/LoadProgram: validate without running)
-Subscribes:  samples (msg_defs/RigSampleBatch: amplitude control, progress), status (msg_defs/RigStatus,
-             latched: sample rate, limits, faults, who owns the stream), recorder_status (msg_defs/RecorderStatus,
-             with require_recording), cycle_metrics (msg_defs/CycleMetrics from element_model: what the detectors
-             judge)
+             signed), ~/load_program (msg_defs/srv/LoadProgram: validate without running)
+Subscribes:  samples (msg_defs/RigSampleBatch: amplitude control, progress), status (msg_defs/RigStatus, latched:
+             sample rate, limits, faults, who owns the stream), recorder_status (msg_defs/RecorderStatus, with
+             require_recording), cycle_metrics (msg_defs/CycleMetrics from element_model: what the detectors judge)
 Publishes:   setpoints (msg_defs/SetpointBatch), program (std_msgs/String, latched: YAML of the running program),
              events (msg_defs/DetectorEvent: every detector trip), /diagnostics (program state, detector events)
 Calls:       <rig_driver>/open_stream, <rig_driver>/stop_stream
 Signatures:  its setpoints, stream requests and heartbeats carry the rig key's signature; it takes only signed
              goals and sample batches (nodes/auth.py; refusals counted and named in /diagnostics)
 
-A program starts only on a stream the driver grants (one owner at a time), from wherever the rig holds (an
-approach ramp leads to the program's start). Setpoints are generated from the sample index by a
-rubber_rig.session.ProgramSession (never from wall-clock time) and published ``lead_time`` ahead of the
-latest measured sample. Abort, cancel and hold go to the driver directly (its controller ramps at once,
-instead of after the queued lead); a rig that stops the stream, faults or goes silent ends the goal with the
-reason. No callback lets an exception take the node down: it ends the running program and logs.
-
-Detectors (rubber_rig.excitation.detectors, README "Detectors") judge every steady cycle the element model
-measures; a trip's action (record, warn, hold, end) takes the operator's own hold and abort paths. A held
-program resumes (``~/hold`` false) with the full cycles its block had not yet run.
+A program starts only on a stream the driver grants (one owner at a time), from wherever the rig holds (an approach
+ramp leads to the program's start). Setpoints are generated from the sample index by a rubber_rig.session.
+ProgramSession (never from wall-clock time) and published ``lead_time`` ahead of the latest measured sample. Abort,
+cancel and hold go to the driver directly (its controller ramps at once, instead of after the queued lead); a rig
+that stops the stream, faults or goes silent ends the goal with the reason. When a program may start and when it
+must stop is decided by the ROS-free session.program_watch, session.recorder_watch and session.peer_watch on the
+node's clock; this node converts messages, feeds them and acts. No callback lets an exception take the node down.
+Detectors (rubber_rig.excitation.detectors, README "Detectors") judge every steady cycle the element model measures;
+a trip's action (record, warn, hold, end) takes the operator's own hold and abort paths. A held program resumes
+(``~/hold`` false) with the full cycles its block had not yet run.
 """
 from __future__ import annotations
 
 import math
-import time
 import traceback
 
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
@@ -57,7 +54,7 @@ from std_srvs.srv import Trigger
 from msg_defs.action import RunProgram
 from msg_defs.msg import CycleMetrics, DetectorEvent, RecorderStatus, RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import HoldProgram, LoadProgram, OpenStream, StopStream
-from rubber_rig.excitation import Program, read_program, strongest, with_defaults
+from rubber_rig.excitation import Program, read_program, with_defaults
 from rubber_rig.nodes import awaitables, topics
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import excitation_readiness as readiness
@@ -73,29 +70,36 @@ from rubber_rig.nodes.auth import (
 )
 from rubber_rig.nodes.excitation_health import ProgramHealth
 from rubber_rig.nodes.excitation_params import declare_excitation_parameters
-from rubber_rig.nodes.excitation_recording import RecordingWatch
+from rubber_rig.nodes.excitation_recording import recorder_name, recorder_topic, recorder_view, samples_topic
 from rubber_rig.nodes.heartbeat import start_heartbeat
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.session import GoalAdmission, ProgramSession, RigTime
+from rubber_rig.session.program_watch import ProgramWatch, detector_action, why_rig_stopped
+from rubber_rig.session.recorder_watch import RecorderWatch
 
 
 class ExcitationNode(Node):
 
-    def __init__(self, node_name: str = 'excitation', clock=time.monotonic, **kwargs):
+    def __init__(self, node_name: str = 'excitation', clock=None, **kwargs):
         super().__init__(node_name, **kwargs)
-        self.clock = clock              # [s] the one clock of this node and its helpers (injected: a test's own)
+        # [s] the clock of the node's rules: its ROS clock (simulated with use_sim_time, as its timers) or a test's
+        self.clock = clock or (lambda: self.get_clock().now().nanoseconds * 1e-9)
         declare_excitation_parameters(self)   # the parameters become attributes (lead_time, batch_size, ...)
         self.auth = declare_auth(self)        # signs its commands, verifies samples and goals (nodes/auth.py)
-        self.status, self.status_wall = None, 0.0   # the latest rig status, received at status_wall (monotonic)
-        self.driver_wall = 0.0          # the latest status or sample batch: the driver is alive
-        self.recording = RecordingWatch(self, self.require_recording, self.recorder_timeout)
+        self.status = None              # the latest rig status (msg_defs/RigStatus)
+        self.health = ProgramHealth(self)   # events, silent peers, blind detectors: diagnostics and the result
+        # the start and stop rules (session.program_watch, session.recorder_watch) on self.clock
+        self.watch = ProgramWatch(self.status_timeout, self.hold_timeout, self.start_timeout, self.health.stall,
+                                  self.rig_driver)
+        self.recording = RecorderWatch(self.require_recording, self.recorder_timeout, samples_topic(self),
+                                       recorder_topic(self), self.health.stall)
+        self.recorder_node = ''         # who publishes the recorder status (its heartbeat confirms a recording)
         self.rig_time = RigTime()       # the rig clock of a sequence, from the latest sample batch's stamp
         self.session: ProgramSession | None = None         # the running program on its stream
         self.opening = False            # an open_stream request is under way
         self.goal_handle = None
         self._done: Future | None = None
         self.result: RunProgram.Result | None = None   # result of the last run (also for program runs)
-        self.held_wall = 0.0            # clock() of the hold (hold_timeout)
 
         # commands to the driver's private channel, the same batches to `setpoints` for observers (topics.py)
         self.pub_stream = self.create_publisher(
@@ -121,7 +125,6 @@ class ExcitationNode(Node):
                                    cancel_callback=lambda _: CancelResponse.ACCEPT, **topics.ACTION_SERVICES_QOS)
         self.create_timer(self.stream_period, self.stream)
         start_heartbeat(self, lambda: self.state)
-        self.health = ProgramHealth(self)   # events, silent peers, blind detectors: diagnostics and the result
 
     @property
     def state(self) -> str:
@@ -131,28 +134,29 @@ class ExcitationNode(Node):
 
     # -- inputs -----------------------------------------------------------------------------------------------
     def on_status(self, msg: RigStatus) -> None:
-        self.status, self.status_wall = msg, self.clock()
-        self.driver_wall = self.status_wall
+        rig = readiness.rig_view(msg)
+        self.status = msg
+        self.watch.on_rig_status(rig, self.clock())
         s = self.session
         if s is None or not s.stream_id or self.opening:
             return
-        if msg.state == RigStatus.STATE_FAULT or msg.faults:   # (ramping_down while the fault's ramp runs)
-            self._end('rig fault: ' + '; '.join(msg.fault_messages or conv.fault_names(msg.faults)))
-        elif msg.stream_id != s.stream_id and s.end_sequence is None:
-            # the driver took the stream away (rig_driver/abort, deactivate, a limit change): say what it did
-            self._end(f'the rig stopped the program: {msg.last_event or msg.state_name}')
+        if why := why_rig_stopped(rig, s.stream_id, s.end_sequence is not None):
+            self._end(why)
 
     def on_recorder_status(self, msg: RecorderStatus) -> None:
-        why = self.recording.on_status(msg, self.session)
+        self.recorder_node = recorder_name(self) or self.recorder_node
+        s = self.session     # (the sample it expects next, and whether it measured one, while a program runs)
+        why, lost = self.recording.on_status(recorder_view(msg), self.clock(), s and s.measured_sequence,
+                                             s is not None and s.next_sample is not None)
+        if lost:
+            self.get_logger().error(lost)
         if why:
             self.abort_program(why)
 
     def on_samples(self, msg: RigSampleBatch) -> None:
         if self.auth.refuse(self, msg, SAMPLES, self.sub_samples.topic_name):
             return     # a forged batch neither proves the driver alive nor ends a program (detectors never see it)
-        # samples prove the driver alive as well as its status does: one late status message (DDS can hold a
-        # topic back for a second when a subscriber process dies) must not stop a running program
-        self.driver_wall = self.clock()
+        self.watch.on_samples(self.clock())   # the driver is alive as much as its status says
         s = self.session
         if s is not None and s.before_stream(msg.first_sequence, len(msg.displacement)):
             return                       # from before this program's stream
@@ -179,19 +183,18 @@ class ExcitationNode(Node):
         if not events or self.session is None:
             return
         self.health.publish_events(events, self.session.runner.program, self.pub_events)
-        top = strongest(events)
-        if top.action == 'end':
-            trigger = top.kind in ('cycle_count', 'elapsed_time')
-            self.abort_program(f'ended by detector: {top.message}', success=trigger)
-        elif top.action == 'hold' and not self.session.held:
-            why = self.hold_program(f'detector {top.detector}')
-            if why:
-                self.abort_program(f'detector {top.detector} asked for a hold, which failed ({why}): {top.message}')
+        action = detector_action(events, self.session.held)   # end, hold, or None: published, nothing else
+        if action is not None and action.kind == 'end':
+            self.abort_program(action.reason, success=action.success)
+        elif action is not None and (why := self.hold_program(action.reason)):
+            self.abort_program(action.failed(why))
 
     # -- starting programs ------------------------------------------------------------------------------------------
     def rig_ready(self) -> str:
-        """'' when a program can start, else why not (excitation_readiness)."""
-        return readiness.rig_ready(self)
+        """'' when a program can start, else why not (session.program_watch, with the graph's facts)."""
+        now = self.clock()
+        return self.watch.why_not_start(now, self.get_fully_qualified_name(), self.session is not None or self.opening,
+                                        readiness.links(self), readiness.recording_ready(self, now))
 
     async def _open_stream(self):
         """Ask the driver for the stream (new program or resume); the grant, or None if it did not answer."""
@@ -226,7 +229,7 @@ class ExcitationNode(Node):
         except ValueError as exc:
             return str(exc)
         self.result = None
-        self.recording.start_program()
+        self.recording.start_program(self.clock())
         self.health.start_program()
         self.pub_program.publish(String(data=text))
         self.get_logger().info(self.session.describe())
@@ -255,14 +258,17 @@ class ExcitationNode(Node):
                 self.pending_program = None
                 self.executor.create_task(self._start_pending(program, text))
             return
-        if why := readiness.why_stop(self):
+        now = self.clock()
+        if not s.held and s.stream_id and (lost := self.recording.check(now, s.measured_sequence)):
+            self.get_logger().error(lost)   # said once; with require_recording why_stop ends the program
+        if why := self.watch.why_stop(now, s.held, bool(s.stream_id), self.recording.why_stop(now)):
             self.abort_program(why)
             return
         if s.held or not s.stream_id:
             return
         s.stream(self._publish)
         if self.goal_handle is not None:
-            self.health.publish_feedback(self.goal_handle, s.runner.progress, self.get_clock().now().nanoseconds)
+            self.health.publish_feedback(self.goal_handle, s.runner.progress)
         if s.measured_to_end:
             self._finish(success=not s.runner.aborted)   # measured to the end: the summaries are complete
 
@@ -276,9 +282,8 @@ class ExcitationNode(Node):
 
     # -- ending programs --------------------------------------------------------------------------------------------
     def abort_program(self, reason: str, success: bool = False) -> bool:
-        """Stop the running program now: the driver's controller ramps to the program's rest position at once
-        (not after the queued lead); the goal ends with `reason` (a success only for an end-of-test trigger).
-        False if nothing runs.
+        """Stop the running program now: the driver's controller ramps to its rest position at once (not after the
+        queued lead); the goal ends with `reason` (a success only for an end-of-test trigger). False if none runs.
         """
         if self.session is None:
             return False
@@ -371,7 +376,7 @@ class ExcitationNode(Node):
             return why
         self._stop_stream(StopStream.Request.ACTION_HOLD, reason, s.runner.hold_target)
         s.hold()
-        self.held_wall = self.clock()
+        self.watch.on_hold(self.clock())
         self.get_logger().warning(f'program held at {s.runner.hold_target * 1e3:.4f} mm: {reason}')
         return ''
 

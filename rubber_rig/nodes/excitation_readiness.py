@@ -12,12 +12,9 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""When the excitation node may start a program: a fresh rig status in a state that takes a stream nobody else
-owns, our topics matched by DDS, (with require_recording) a recorder recording this namespace's samples, and a
-program within the rig's limits. And when a running program must stop: held too long, the driver or (with
-require_recording) the recorder gone.
-
-Each check returns '' or why not, which is what a refused goal or a stopped program says.
+"""The excitation node's side of its start rules (rubber_rig.session.program_watch.ProgramWatch decides): the
+graph's facts about its topics as plain values, the check of a program against the rig's limits, the wait for
+fresh statuses of a goal that arrives right after a launch, and the ~/load_program service.
 """
 from __future__ import annotations
 
@@ -29,55 +26,42 @@ from rubber_rig.excitation import read_program
 from rubber_rig.excitation.limits import check_program
 from rubber_rig.nodes import awaitables
 from rubber_rig.nodes import conversions as conv
+from rubber_rig.nodes.excitation_recording import publishers, recorder_topic, samples_topic
+from rubber_rig.session.program_watch import RigView, links_verdict
 
 NOW = Duration(seconds=0)    # wait_for_all_acked: ask, do not wait
-READY_STATES = (RigStatus.STATE_IDLE, RigStatus.STATE_RUNNING, RigStatus.STATE_HOLDING)
+READY_STATES = (RigStatus.STATE_IDLE, RigStatus.STATE_RUNNING, RigStatus.STATE_HOLDING)   # program_watch's, as codes
 
 
-def rig_ready(node: Node) -> str:
-    """'' when the excitation ``node`` can start a program, else why not."""
-    status, age = node.status, node.clock() - node.status_wall
-    if status is None:
-        return "no rig status received on 'status' yet (is rig_driver active?)"
-    if age > node.status_timeout * 3:
-        return f'the rig status is {age:.1f} s old (is rig_driver running?)'
-    if status.state not in READY_STATES:
-        why = '; '.join(status.fault_messages[-2:])
-        return f'rig is {status.state_name}' + (f': {why} (rig_driver/reset to acknowledge)' if why else '')
-    if status.stream_owner and status.stream_owner != node.get_fully_qualified_name():
-        return f'the rig is streaming for {status.stream_owner}'
-    if node.session is not None or node.opening:
-        return 'a program is already running'
-    return links_ready(node) or node.recording.ready()
+def rig_view(msg: RigStatus) -> RigView:
+    """msg_defs/RigStatus -> the RigView the start and stop rules read."""
+    faulted = msg.state == RigStatus.STATE_FAULT or bool(msg.faults)
+    return RigView(conv.STATE_NAMES.get(msg.state, msg.state_name), faulted,
+                   list(msg.fault_messages or (conv.fault_names(msg.faults) if msg.faults else [])),
+                   msg.stream_owner, int(msg.stream_id), msg.last_event)
 
 
-def links_ready(node: Node) -> str:
-    """'' once the node's setpoints publishers and samples subscription are matched with every endpoint the graph
-    shows on those topics (the driver's among them). Right after a launch or a driver restart the status can
-    arrive before they are: a stream opened then would run dry (no samples pace it) or send to nobody.
+def links(node: Node) -> str:
+    """The graph's facts on the node's samples subscription and setpoint publishers (matched / shown endpoints, and
+    whether the driver acknowledged what was sent) judged by program_watch.links_verdict.
     """
-    for what, matched, known in (
-            ('samples subscription', node.sub_samples.get_publisher_count(),
-             node.count_publishers(node.recording.samples_topic)),
-            ('setpoint stream publisher', node.pub_stream.get_subscription_count(),
-             node.count_subscribers(node.pub_stream.topic_name)),
-            ('setpoints publisher', node.pub_setpoints.get_subscription_count(),
-             node.count_subscribers(node.pub_setpoints.topic_name))):
-        if matched < max(known, 1):
-            return f'waiting for discovery: our {what} is matched with {matched} of {max(known, 1)} endpoints'
-    # a reliable reader delivers in order: batches of an earlier stream that a broken network link lost are repaired
-    # before anything newer, so a stream opened before that would reach the driver late and run dry
-    if not node.pub_stream.wait_for_all_acked(NOW):
-        return 'waiting for rig_driver to acknowledge the setpoints sent before (a network link came back?)'
-    return ''
+    return links_verdict((
+        ('samples subscription', node.sub_samples.get_publisher_count(), node.count_publishers(samples_topic(node))),
+        ('setpoint stream publisher', node.pub_stream.get_subscription_count(),
+         node.count_subscribers(node.pub_stream.topic_name)),
+        ('setpoints publisher', node.pub_setpoints.get_subscription_count(),
+         node.count_subscribers(node.pub_setpoints.topic_name))), node.pub_stream.wait_for_all_acked(NOW))
 
 
-def statuses_fresh(node: Node, since: float) -> bool:
-    """The rig status, the recorder status (with require_recording) and the node's topics are ready to judge a
-    goal that arrived at ``since`` (node clock [s]).
-    """
-    rig = node.status is not None and node.clock() - node.status_wall <= node.status_timeout
-    return rig and node.recording.fresh(since) and not links_ready(node)
+def recording_ready(node: Node, now: float) -> str:
+    """The recorder watch's verdict on a start, with the graph's publishers of the recorder status and samples."""
+    return node.recording.why_not_start(now, publishers(node, recorder_topic(node)),
+                                        publishers(node, samples_topic(node)))
+
+
+def recording_fresh(node: Node, since: float, now: float) -> bool:
+    return node.recording.fresh(since, now, publishers(node, recorder_topic(node)),
+                                publishers(node, samples_topic(node)))
 
 
 def check_fits(node: Node, program) -> None:
@@ -89,36 +73,14 @@ def check_fits(node: Node, program) -> None:
     check_program(limits, program, node.status.sample_rate)
 
 
-def why_stop(node: Node) -> str:
-    """Why the node's running program must stop now ('' if it runs on). Notes a lost recording first (the
-    result of a program stopped for it says since when).
-    """
-    s = node.session
-    if s.held:
-        if node.clock() - node.held_wall > node.hold_timeout:
-            return f'held for {node.hold_timeout:g} s without a resume (hold_timeout): ramp to rest'
-        return ''
-    if not s.stream_id:
-        return ''
-    node.recording.check(s.measured_sequence)
-    # ages count only the time this node ran (StallWatch): after a stall of its own, the driver and the recorder get
-    # their full timeout to be heard again before they are called silent
-    if node.require_recording and node.recording.age > node.recorder_timeout:
-        return f'recording lost: no recorder status for {node.recording.age:.1f} s (the recorder is gone)'
-    silent = node.health.stall.since(node.driver_wall, node.clock())
-    if silent > node.status_timeout:
-        return (f'{node.rig_driver} silent for {silent:.1f} s (no status, no samples): the rig controller ramps '
-                'to rest on its own host watchdog')
-    return ''
-
-
 async def wait_for_statuses(node: Node) -> None:
     """A goal sent right after launch (or a restart of the driver or recorder) may arrive before their latched
     statuses: wait for them (and for DDS to match our topics), at most the node's start_timeout.
     """
     since = node.clock()
-    deadline = since + node.start_timeout
-    while not statuses_fresh(node, since) and node.clock() < deadline:
+    deadline = node.watch.start_deadline(since)
+    while node.clock() < deadline and not node.watch.statuses_fresh(
+            node.clock(), recording_fresh(node, since, node.clock()), links(node)):
         await awaitables.sleep(node, 0.05)
 
 

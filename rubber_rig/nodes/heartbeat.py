@@ -30,7 +30,7 @@ from rclpy.node import Node
 
 from msg_defs.msg import Heartbeat
 from rubber_rig.session import liveness
-from rubber_rig.session.liveness import PERIOD, SILENT, OwnerWatch  # noqa: F401 - the nodes' names for them
+from rubber_rig.session.liveness import PERIOD, SILENT, OwnerSilence, OwnerWatch  # noqa: F401 - the nodes' names
 
 from . import topics
 from .auth import HEARTBEAT
@@ -74,64 +74,14 @@ class Peers(liveness.Peers):
         super().on_beat(msg)
 
 
-class OwnerSilence:
-    """rig_driver's latest stream owner while it is silent (no beat for SILENT s, at most the owner watch's limit
-    ``peers.silent_after``: rig_driver's owner_timeout), whatever ended its stream (the owner watch, the stream
-    timeout, the rig running out of setpoints): named in /diagnostics, how long, until it beats again
-    (rqt_robot_monitor and Foxglove show the message; the fault names alone do not say who froze).
+def annotate_owner_silence(msg: DiagnosticArray, silence: OwnerSilence) -> DiagnosticArray:
+    """The driver's /diagnostics ``msg`` with the silent stream owner's lines (session.liveness.OwnerSilence), the
+    silent owner said first in its message (at least WARN), where an operator looks (rqt_robot_monitor, Foxglove).
     """
-
-    def __init__(self, peers: Peers):
-        self.peers = peers
-        self.owner = ''        # the latest stream owner
-        self.silent = ''       # the owner while it is silent
-        self._said = None      # (state, faults, silent) of the latest /diagnostics
-
-    def limit(self) -> float:
-        return min(self.peers.silent_after, SILENT)
-
-    def update(self, status, publish: Callable[[], None]) -> None:
-        """Note the stream owner of the RigStatus ``status``; ``publish()`` /diagnostics now if they have news (a
-        fault, or the owner fell silent or beats again), not at their next period.
-        """
-        if status.stream_owner:
-            self.owner = status.stream_owner
-        key = (status.state, status.faults, self.is_silent())
-        if key != self._said:
-            self._said = key
-            publish()
-
-    def _age(self):
-        owner = self.silent or self.owner
-        return owner, (self.peers.age(owner) if owner else None)
-
-    def is_silent(self) -> bool:
-        _, age = self._age()
-        return age is not None and age > self.limit()
-
-    def lines(self) -> dict:
-        """The /diagnostics values: ``silent_stream_owner`` and for how long, or that it beats again ({} if nothing
-        to say).
-        """
-        owner, age = self._age()
-        if age is None:
-            return {}
-        if age > self.limit():
-            self.silent = owner
-            return {'silent_stream_owner': owner, 'silent_stream_owner_for_s': f'{age:.2f}'}
-        if self.silent:
-            self.silent = ''
-            return {'silent_stream_owner': '', 'last_silent_stream_owner': f'{owner} (beats again)'}
-        return {}
-
-    def annotate(self, msg: DiagnosticArray) -> DiagnosticArray:
-        """The driver's /diagnostics ``msg`` with the owner's lines, the silent owner said first in its message (at
-        least WARN), where an operator looks.
-        """
-        status, lines = msg.status[0], self.lines()
-        status.values.extend(KeyValue(key=k, value=str(v)) for k, v in lines.items())
-        if lines.get('silent_stream_owner'):
-            status.message = (f"stream owner {lines['silent_stream_owner']} silent for "
-                              f"{lines['silent_stream_owner_for_s']} s (no heartbeat); {status.message}")
-            status.level = max(status.level, DiagnosticStatus.WARN)
-        return msg
+    status, lines = msg.status[0], silence.lines()
+    status.values.extend(KeyValue(key=k, value=str(v)) for k, v in lines.items())
+    if lines.get('silent_stream_owner'):
+        status.message = (f"stream owner {lines['silent_stream_owner']} silent for "
+                          f"{lines['silent_stream_owner_for_s']} s (no heartbeat); {status.message}")
+        status.level = max(status.level, DiagnosticStatus.WARN)
+    return msg

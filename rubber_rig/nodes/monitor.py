@@ -21,7 +21,6 @@ here, and wraps the two clients the main job needs: the excitation's ``run_progr
 """
 from __future__ import annotations
 
-import time
 from collections import defaultdict
 
 import numpy as np
@@ -112,7 +111,7 @@ class SuiteMonitor(Node):
             self.messages['samples'].append(msg)
 
     def _on_prediction(self, msg: ModelPrediction) -> None:
-        now = time.time()
+        now = self.get_clock().now().nanoseconds * 1e-9   # ROS time: system time, as the bus stamps the samples
         n = len(msg.displacement)
         self.stats['prediction'].observe(msg.first_sequence, n)
         t0 = conv.to_seconds(msg.header.stamp)

@@ -38,7 +38,6 @@ splitting, snapshots and loss accounting are rubber_rig.recording.Recorder's.
   programs), ERROR when the recording stopped on an error.
 """
 import importlib
-import time
 from pathlib import Path
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
@@ -60,6 +59,7 @@ from rubber_rig.nodes.spin import spin_node
 from rubber_rig.recording import Recorder, RecordingError, full_definition
 from rubber_rig.recording.metadata import BOOKKEEPING_TOPIC, bookkeeping_text, bookkeeping_topic
 from rubber_rig.recording.qos import qos_entry
+from rubber_rig.recording.status_cadence import StatusCadence
 
 UNSUPPORTED_SEQUENCE = 2**63   # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED is UINT64_MAX
 IGNORED_TOPICS = ('/rosout', '/parameter_events')
@@ -145,8 +145,7 @@ class RecorderNode(Node):
         self._unrecordable = {}               # topic -> reason
         self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         self._status_pub = self.create_publisher(RecorderStatus, topics.RECORDER_STATUS, topics.LATCHED_QOS)
-        self._status_key = None
-        self._status_time = 0.0
+        self.status_cadence = StatusCadence(self.status_period)   # on a change, and at least every status_period
         self._callback_errors = 0
         self.create_service(RecorderControl, '~/control', self._on_control)
         self.create_timer(discovery_period, self._guarded(self.discover))
@@ -259,8 +258,8 @@ class RecorderNode(Node):
                 if seq is None or seq >= UNSUPPORTED_SEQUENCE:   # rmw without sequence numbers
                     seq = None                                    # -> the core counts per channel
                 if not write(topic, type_name, data, log_ns, info.get('source_timestamp') or log_ns, seq) \
-                        and self.core.error is not None and self._status_key is not None \
-                        and self._status_key[0] != RecorderStatus.STATE_ERROR:
+                        and self.core.error is not None and self.status_cadence.key is not None \
+                        and self.status_cadence.key[0] != RecorderStatus.STATE_ERROR:
                     self.update_status()                          # ERROR at once, not at the next tick
             except Exception as exc:  # noqa: BLE001 - a bad message must not take the recorder down
                 self._callback_errors += 1
@@ -338,12 +337,11 @@ class RecorderNode(Node):
         """Publish recorder_status if anything but the counters changed, or status_period passed."""
         msg = self.status_message()
         key = (msg.state, msg.path, msg.error, tuple(msg.topics), tuple(msg.topic_publishers), msg.samples_lost)
-        now = time.monotonic()
-        if not force and key == self._status_key and now - self._status_time < self.status_period:
+        said = self.status_cadence.key or (None,) * 3
+        if not self.status_cadence.due(key, self.get_clock().now().nanoseconds * 1e-9, force):
             return
-        if key[:3] != (self._status_key or (None,) * 3)[:3] and msg.state == RecorderStatus.STATE_ERROR:
+        if key[:3] != said[:3] and msg.state == RecorderStatus.STATE_ERROR:
             self.get_logger().error(f'recorder status: error: {msg.error}')
-        self._status_key, self._status_time = key, now
         self._status_pub.publish(msg)
 
     # -- diagnostics -------------------------------------------------------------------------

@@ -14,12 +14,13 @@
 
 """rig_driver: lifecycle (managed) node between the CAN bus of the rig and the ROS graph.
 
-Lifecycle: configure = validate parameters and open the bus chosen by them (``backend: sim`` = the simulated
-rig on python-can's virtual bus, or any python-can interface/channel/bitrate); activate = stream samples and
-accept setpoints; deactivate = safe ramp to rest, stop streaming; cleanup = close the bus. With ``autostart``
-the node configures and activates itself (what ``ros2 launch`` users expect from a simulated rig).
-
-Parameters: rubber_rig/nodes/rig_driver_params.py (what a bad value or a rate the bus cannot carry does).
+Lifecycle (as the ros2/demos lifecycle talker): configure = validate parameters, open the bus they choose (``backend:
+sim`` = the simulated rig on python-can's virtual bus, or any python-can interface) and create what works on it (the
+samples publisher, the poll timer, the owners' command channels); activate = start the timer: stream samples, accept
+setpoints; deactivate = safe ramp to rest, stop the timer; cleanup = ramp, close the bus, destroy what configure
+created. Status, diagnostics, heartbeat and services report the state in every state. With ``autostart`` the node
+configures and activates itself (what ``ros2 launch`` users expect from a simulated rig). Parameters:
+nodes/rig_driver_params.py (what a bad value or a rate the bus cannot carry does), held as ``self.params``.
 
 Subscribes:  ~/setpoint_stream/<owner> (msg_defs/SetpointBatch): each owner's command channel; only the open
              stream's owner commands the rig, with batches signed by the rig key (nodes/auth.py; others are
@@ -43,6 +44,7 @@ from __future__ import annotations
 import math
 
 from diagnostic_msgs.msg import DiagnosticArray
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
@@ -52,42 +54,51 @@ from msg_defs.srv import OpenStream, StopStream
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.auth import OPEN_STREAM, SAMPLES, SETPOINT_STREAM, STOP_STREAM, annotate, declare_auth
-from rubber_rig.nodes.heartbeat import OwnerSilence, OwnerWatch, Peers, start_heartbeat
+from rubber_rig.nodes.heartbeat import OwnerSilence, OwnerWatch, Peers, annotate_owner_silence, start_heartbeat
 from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles
 from rubber_rig.nodes.rclpy_compat import lifecycle_state
+from rubber_rig.nodes.rig_driver_channels import CommandChannels
 from rubber_rig.nodes.rig_driver_params import (  # noqa: F401 - also imported from here
     BATCH_PERIOD,
     LIVE_PARAMETERS,
     RIG_SETTINGS,
     BusCapacityError,
-    RigDriverParameters,
+    asked_limits,
+    declare_rig_driver_parameters,
+    protective_values,
+    rig_config,
 )
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.rig.can.batcher import SampleBatcher
 from rubber_rig.rig.can.driver import StreamRefused
-from rubber_rig.rig.can.gate import MUTE_AFTER, MUTE_FOR, StreamGate
+from rubber_rig.rig.can.gate import StreamGate
 from rubber_rig.rig.config import RigConfig, configuration_text
 from rubber_rig.rig.interface import open_rig
+from rubber_rig.rig.live import review_change
 from rubber_rig.rig.shutdown import ramp_to_rest
 
-MAX_CHANNELS = 16   # owners' command channels the driver listens to at once
 
-
-class RigDriverNode(RigDriverParameters, LifecycleNode):
+class RigDriverNode(LifecycleNode):
 
     def __init__(self, node_name: str = 'rig_driver', **kwargs):
         super().__init__(node_name, **kwargs)
-        self._declare_parameters()
+        self.params = declare_rig_driver_parameters(self)   # the node's own parameters (RigConfig holds the rig's)
+        self.refused_weakening = 0         # run-time parameter changes refused by rig.live.weakening (diagnostics)
         self.auth = declare_auth(self)     # the rig's key: every command must carry its signature (nodes/auth.py)
         try:   # checked now: a bad value fails at start, naming the parameter (spin_node: one line, exit 2) ...
-            self.config: RigConfig | None = self.rig_config()
+            self.config: RigConfig | None = rig_config(self)
         except BusCapacityError as exc:   # ... except a rate the bus cannot carry: configure fails, node stays up
             self.config = None
-            if not self.autostart:
+            if not self.params.autostart:
                 self.get_logger().error(f'{exc}; configure will fail until the parameter is changed')
+        # created by configure, destroyed by cleanup
         self.rig = None
+        self.gate = None                   # StreamGate of the open rig: who may stream (rig.can.gate)
         self.pub_samples = None
+        self._poll_timer = None            # runs while active
+        self.channels: CommandChannels | None = None   # the owners' command channels
         self.batcher = SampleBatcher()     # the driver's sample blocks -> RigSampleBatch messages
+        self.active = False                # streaming samples and accepting setpoints
         self._last_status = None
         self._status_key = None
         self.pub_status = self.create_publisher(RigStatus, topics.STATUS, topics.LATCHED_QOS)
@@ -101,17 +112,14 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         self.create_service(StopStream, '~/stop_stream', self.on_stop_stream)
         accept_integers_for_doubles(self)
         self.add_on_set_parameters_callback(self.on_set_parameters)
-        self._channels: dict[str, object] = {}   # owner -> subscription to its command channel
-        self.gate = None                          # StreamGate of the open rig: who may stream (rig.can.gate)
-        self.create_timer(1.0, self.find_channels)
-        self._poll_timer = None
+        self.create_timer(1.0, lambda: self.channels is not None and self.channels.find())
         start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig is not None else 'unconfigured')
-        peers = Peers(self, silent=self.owner_timeout, auth=self.auth)   # owner silent: stream lost; diagnostics
+        peers = Peers(self, silent=self.params.owner_timeout, auth=self.auth)   # owner silent: stream lost
         self.owner_watch, self.owner_silence = OwnerWatch(peers), OwnerSilence(peers)
-        self.create_timer(self.status_period, self.publish_status)
-        self.create_timer(self.diagnostics_period, self.publish_diagnostics)
+        self.create_timer(self.params.status_period, self.publish_status)
+        self.create_timer(self.params.diagnostics_period, self.publish_diagnostics)
         self.publish_status()
-        if self.autostart and self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
+        if self.params.autostart and self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
             self.trigger_activate()
             self.publish_status()   # the latched status says at once what autostart reached, not 'unconfigured'
 
@@ -122,7 +130,7 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
 
     def on_configure(self, state: LifecycleState) -> TransitionCallbackReturn:
         try:
-            self.config = self.rig_config()
+            self.config = rig_config(self)
         except ParameterError as exc:   # parameters that do not work together: stay unconfigured, say why
             self.config = None
             self.get_logger().error(f'configure failed, {self.get_name()} stays unconfigured (set the parameter and '
@@ -131,13 +139,17 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         try:
             self.rig = open_rig(self.config)
             self.gate = StreamGate(self.rig.driver)
+            self.channels = CommandChannels(self, self.gate, self.rig.driver, self.on_setpoints)
         except Exception as exc:  # bus not available: stay unconfigured, say why
             self.get_logger().error(f'configure failed, {self.get_name()} stays unconfigured: {exc}')
             return TransitionCallbackReturn.FAILURE
+        self.batcher = SampleBatcher()
         self.pub_samples = self.create_lifecycle_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
+        self._poll_timer = self.create_timer(self.params.poll_period, self.poll)
+        self._poll_timer.cancel()          # activate starts it
         self.pub_configuration.publish(String(data=configuration_text(self.config)))
         self.get_logger().info(f'rig open: backend {self.config.backend}, {self.config.sample_rate:g} Hz, '
-                               f'{self.samples_per_batch} samples per batch')
+                               f'{self.params.samples_per_batch(self.config.sample_rate)} samples per batch')
         return TransitionCallbackReturn.SUCCESS
 
     def on_activate(self, state: LifecycleState) -> TransitionCallbackReturn:
@@ -147,7 +159,8 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
             if why:
                 self.get_logger().error(f'activate refused: {why}')
                 return TransitionCallbackReturn.FAILURE
-        self._poll_timer = self.create_timer(self.get_parameter('poll_period').value, self.poll)
+        self._poll_timer.reset()
+        self.active = True
         self.get_logger().info('active: streaming samples, accepting a setpoint stream')
         return super().on_activate(state)
 
@@ -167,10 +180,17 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         return TransitionCallbackReturn.SUCCESS
 
     def close(self) -> None:
-        """Ramp to rest, then close the bus (also called by the in-process launcher at shutdown): the wait is
-        rubber_rig.rig.shutdown.ramp_to_rest's (at most RAMP_WAIT s; not for a silent controller; none when idle).
+        """Ramp to rest, close the bus and destroy what configure created (also called by the in-process launcher at
+        shutdown): the wait is rubber_rig.rig.shutdown.ramp_to_rest's (at most RAMP_WAIT s; not for a silent
+        controller; none when idle).
         """
         self._stop_polling()
+        if self._poll_timer is not None:
+            self.destroy_timer(self._poll_timer)
+            self._poll_timer = None
+        if self.channels is not None:
+            self.channels.close()
+            self.channels = None
         if self.rig is not None:
             rig, self.rig, self.gate = self.rig, None, None
             driver = rig.driver
@@ -186,52 +206,16 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
             self.pub_samples = None
 
     def _stop_polling(self) -> None:
+        self.active = False
         if self._poll_timer is not None:
-            self.destroy_timer(self._poll_timer)
-            self._poll_timer = None
-
-    def find_channels(self) -> None:
-        """Subscribe to every owner's command channel the graph shows (so a program's first batch finds us)."""
-        prefix = topics.setpoint_stream_topic(self.get_fully_qualified_name(), '')
-        for name, _ in self.get_topic_names_and_types():
-            owner = '/' + name[len(prefix):]
-            if name.startswith(prefix) and len(name) > len(prefix) and not (self.gate and self.gate.muted(owner)):
-                self.listen_to(owner)
-
-    def mute(self, channel: str) -> None:
-        """Stop listening to a flooding channel the gate muted (DDS then drops what it sends, at no cost here)."""
-        sub = self._channels.pop(channel, None)
-        if sub is not None:
-            self.destroy_subscription(sub)
-        self.get_logger().warning(f'more than {MUTE_AFTER} batches from {channel} refused within 1 s: its channel '
-                                  f'is muted for {MUTE_FOR:g} s (what it sends meanwhile is dropped uncounted)')
-
-    def listen_to(self, owner: str) -> str:
-        """Subscribe to `owner`'s command channel if not yet done; '' or why it cannot be."""
-        if self.gate is not None:
-            self.gate.unmute(owner)    # (an owner that asks for a stream is heard again at once)
-        if owner in self._channels:
-            return ''
-        if len(self._channels) >= MAX_CHANNELS:    # the oldest channel that is not the open stream's makes room
-            current = self.rig.driver.stream.owner if self.rig is not None and self.rig.driver.stream else None
-            old = next((o for o in self._channels if o != current), None)
-            if old is not None:
-                self.destroy_subscription(self._channels.pop(old))
-        topic = topics.setpoint_stream_topic(self.get_fully_qualified_name(), owner)
-        try:
-            self._channels[owner] = self.create_subscription(
-                SetpointBatch, topic, lambda msg: self.on_setpoints(msg, owner), topics.STREAM_QOS)
-        except Exception as exc:   # noqa: BLE001 - rclpy raises several types for a name it cannot take
-            return f'owner {owner!r} gives no valid topic name ({exc})'
-        self.get_logger().info(f'listening for setpoints of {owner} on {topic}')
-        return ''
+            self._poll_timer.cancel()
 
     def on_setpoints(self, msg: SetpointBatch, channel: str) -> None:
         """Queue setpoints that arrived on `channel`'s command channel on the bus - only the open stream's owner's,
         exactly continuing it (the core refuses the rest and counts them; the first refusal per second is logged
         with the sender).
         """
-        if self.rig is None or self._poll_timer is None:   # only an active driver moves the rig
+        if self.rig is None or not self.active:   # only an active driver moves the rig
             return
         if channel == getattr(self.rig.driver.stream, 'owner', None) and self.auth.refuse(
                 self, msg, SETPOINT_STREAM, topics.setpoint_stream_topic(self.get_name(), channel)):
@@ -240,7 +224,7 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         verdict = self.gate.offer(channel, msg.source, msg.first_sequence, conv.as_array(msg.displacement),
                                   msg.stream_id, msg.end_of_stream)
         if verdict.action == 'mute':
-            self.mute(channel)
+            self.channels.mute(channel)
         elif verdict.action == 'refused':
             self.get_logger().warning(f'setpoints from {msg.source or "an unnamed sender"} refused: {verdict.why}',
                                       throttle_duration_sec=1.0)
@@ -255,9 +239,9 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
             block = driver.poll()
             if block is None:
                 break
-            for batch in self.batcher.add(block, self.samples_per_batch):
+            for batch in self.batcher.add(block, self.params.samples_per_batch(self.config.sample_rate)):
                 self._publish_batch(batch)
-        self._publish_batch(self.batcher.due(self.max_batch_delay))   # the stream paused: what waits goes now
+        self._publish_batch(self.batcher.due(self.params.max_batch_delay))   # the stream paused: what waits goes now
         if driver is None:
             return
         self._log_events(driver)
@@ -280,21 +264,23 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         if self.config is not None:
             limits, rate = self.config.limits, self.config.sample_rate
         else:   # parameters that make no configuration (configure says why): what they ask for
-            limits, rate = self.asked_limits(), self.get_parameter('sample_rate').value
+            limits, rate = asked_limits(self), self.get_parameter('sample_rate').value
         return conv.status_msg(snapshot, limits, rate, now)
 
     def publish_status(self) -> None:
         self.watch_owner()
         self._last_status = self.status_message()
         self.pub_status.publish(self._last_status)
-        self.owner_silence.update(self._last_status, self.publish_diagnostics)   # news: /diagnostics at once
+        status = self._last_status
+        if self.owner_silence.update(status.stream_owner, status.state, status.faults):
+            self.publish_diagnostics()    # news (a fault, the owner silent or beating again): /diagnostics at once
 
     def watch_owner(self) -> None:
         """A stream owner that beat and then went silent for owner_timeout (OwnerWatch) loses its stream."""
-        grant = self.rig.driver.stream if self.rig is not None and self._poll_timer is not None else None
+        grant = self.rig.driver.stream if self.rig is not None and self.active else None
         if grant is None or not grant.owner:
             return
-        why = self.owner_watch.lost(grant, self.owner_timeout)
+        why = self.owner_watch.lost(grant, self.params.owner_timeout)
         if why and self.rig.driver.owner_lost(why):
             self._log_events()
 
@@ -303,22 +289,36 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         backend = self.config.backend if self.config is not None else self.get_parameter('backend').value
         channel = self.config.channel if self.config is not None else self.get_parameter('can.channel').value
         hw = f'{backend}:{channel or self.get_fully_qualified_name()}'
-        msg = self.owner_silence.annotate(conv.diagnostics_msg(
-            status, hw, self.bus_diagnostics(), name=self.get_fully_qualified_name()))
+        extra = {'parameter_changes_refused': self.refused_weakening}
+        if self.rig is not None:
+            extra.update(conv.bus_lines(self.rig.driver, self.config.frame_profile))
+        msg = annotate_owner_silence(conv.diagnostics_msg(status, hw, extra, name=self.get_fully_qualified_name()),
+                                     self.owner_silence)
         annotate(msg.status[0], self.auth)     # refused commands, named with their channel
         self.pub_diag.publish(msg)
 
-    def bus_diagnostics(self) -> dict:
-        """The bus's lines of /diagnostics: the load the protocol needs at this rate (worst-case stuffing), the
-        load measured on the simulated bus (when it has bit timing) and the frame profile.
+    # -- parameters at run time -------------------------------------------------------------------------------
+    def on_set_parameters(self, params) -> SetParametersResult:
+        """Limits and stream settings apply at once (tighter limits: the rig ramps into them if it must); everything
+        else needs configure, so it is refused while the rig is configured, with the reason (rig.live.review_change).
         """
-        if self.rig is None:
-            return {}
-        extra = {'bus_load_pct': f'{self.rig.driver.bus_load * 100:.1f}', 'can_profile': self.config.frame_profile}
-        measured = self.rig.driver.status.extra['bus_load_measured']
-        if measured is not None:
-            extra['bus_load_measured_pct'] = f'{measured * 100:.1f}'
-        return extra
+        changed = {p.name: p.value for p in params}
+        stream_open = self.rig is not None and bool(self.rig.driver.status.extra.get('stream_owner'))
+        verdict = review_change(changed, protective_values(self), self.params.configured_protection, stream_open,
+                                self.rig is not None, self.config, LIVE_PARAMETERS)
+        if verdict.weakening:
+            self.refused_weakening += 1
+            self.get_logger().warning(f'parameter change refused: {verdict.why}')
+        if verdict.why:
+            return SetParametersResult(successful=False, reason=verdict.why)
+        self.params.apply(changed)
+        self.owner_watch.peers.silent_after = self.params.owner_timeout
+        if verdict.limits is not None:
+            if self.rig is not None:
+                self.rig.driver.set_limits(verdict.limits)
+                self._log_events()
+            self.publish_status()
+        return SetParametersResult(successful=True)
 
     def on_reset(self, request, response):
         if self.rig is None:
@@ -341,13 +341,13 @@ class RigDriverNode(RigDriverParameters, LifecycleNode):
         return response
 
     def on_open_stream(self, request, response):
-        if self.rig is None or self._poll_timer is None:
+        if self.rig is None or not self.active:
             response.success, response.message = False, f'rig_driver is {self.lifecycle_state}, not active'
             return response
         driver = self.rig.driver
         if self.auth.refuse_request(self, request, OPEN_STREAM, response):   # a stranger cannot take the rig
             return response
-        why = self.listen_to(request.owner)   # (found in the graph already, unless the owner has just started)
+        why = self.channels.listen_to(request.owner)   # (found in the graph already, unless the owner has just started)
         if why:
             response.success, response.message = False, why
             return response

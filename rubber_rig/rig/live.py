@@ -19,6 +19,9 @@ A change is checked as a whole before any of it applies: new limits must be cons
 inside the displacement limits that will be in force, and a value must be one of its setting's choices (ranges
 are the parameter descriptors' to check).
 """
+from dataclasses import dataclass
+from typing import Optional
+
 from ..safety import LimitError, Limits
 from ..settings import describe_violation, settings_of
 from .config import RigConfig
@@ -95,3 +98,37 @@ def weakening(changed: dict, current: dict, configured: dict, stream_open: bool)
             return (f'{name}: {new:g} would relax the {now:g} in force while a stream is open; relax it back '
                     'towards the configured value when no program runs')
     return ''
+
+
+@dataclass
+class ChangeVerdict:
+    """What becomes of a run-time parameter change: refused (``why``; ``weakening``: by the rule that protection
+    relaxes only back to the configured values) or taken, with the ``limits`` the driver is to take at once (None:
+    unchanged).
+    """
+
+    why: str = ''
+    weakening: bool = False
+    limits: Optional[Limits] = None
+
+
+def review_change(changed: dict, current: dict, configured: dict, stream_open: bool, rig_configured: bool,
+                  config: Optional[RigConfig], live=LIVE_SETTINGS) -> ChangeVerdict:
+    """Judge a run-time change ``changed`` (name -> value) of rig_driver's parameters (``live``: those that apply
+    while the rig is configured, the node's own among them): limits and stream settings
+    apply at once (tighter limits: the rig ramps into them if it must; ``config`` takes them), everything else needs
+    configure, so it is refused while the rig is configured (``rig_configured``). ``current``, ``configured``: the
+    protective settings now and as started; ``stream_open``: a stream runs (rig.live.weakening). ``config`` None:
+    no configuration in force (configure checks all parameters together).
+    """
+    why = weakening(changed, current, configured, stream_open)
+    if why:
+        return ChangeVerdict(why, weakening=True)
+    fixed = sorted(n for n in changed if n not in live)
+    if fixed and rig_configured:
+        return ChangeVerdict(f"{', '.join(fixed)}: applied at configure; the rig is configured (deactivate and clean "
+                             'up first)')
+    if config is None:
+        return ChangeVerdict()
+    why, limits = apply_live(config, changed)
+    return ChangeVerdict(why, limits=limits)

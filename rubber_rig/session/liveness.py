@@ -101,3 +101,55 @@ class OwnerWatch:
         if age is None or age <= owner_timeout:
             return ''
         return f'{grant.owner} silent for {age:.2f} s (no heartbeat; alive but stuck, or gone)'
+
+
+class OwnerSilence:
+    """rig_driver's latest stream owner while it is silent (no beat for SILENT s, at most the owner watch's limit
+    ``peers.silent_after``: rig_driver's owner_timeout), whatever ended its stream (the owner watch, the stream
+    timeout, the rig running out of setpoints): for /diagnostics, how long, until it beats again (the fault names
+    alone do not say who froze).
+    """
+
+    def __init__(self, peers: Peers):
+        self.peers = peers
+        self.owner = ''        # the latest stream owner
+        self.silent = ''       # the owner while it is silent
+        self._said = None      # (state, faults, silent) of the latest news
+
+    def limit(self) -> float:
+        return min(self.peers.silent_after, SILENT)
+
+    def update(self, stream_owner: str, state, faults) -> bool:
+        """Note the stream owner of a rig status in ``state`` with ``faults``; True if there is news for /diagnostics
+        (a fault, or the owner fell silent or beats again) that should go out now, not at their next period.
+        """
+        if stream_owner:
+            self.owner = stream_owner
+        key = (state, faults, self.is_silent())
+        if key != self._said:
+            self._said = key
+            return True
+        return False
+
+    def _age(self):
+        owner = self.silent or self.owner
+        return owner, (self.peers.age(owner) if owner else None)
+
+    def is_silent(self) -> bool:
+        _, age = self._age()
+        return age is not None and age > self.limit()
+
+    def lines(self) -> dict:
+        """The /diagnostics values: ``silent_stream_owner`` and for how long, or that it beats again ({} if nothing
+        to say).
+        """
+        owner, age = self._age()
+        if age is None:
+            return {}
+        if age > self.limit():
+            self.silent = owner
+            return {'silent_stream_owner': owner, 'silent_stream_owner_for_s': f'{age:.2f}'}
+        if self.silent:
+            self.silent = ''
+            return {'silent_stream_owner': '', 'last_silent_stream_owner': f'{owner} (beats again)'}
+        return {}

@@ -44,7 +44,6 @@ from typing import Optional
 import numpy as np
 
 from ..excitation.detector_specs import DEFAULTS, parse_detectors, with_defaults
-from ..excitation.detectors import strongest
 from ..excitation.program import Program, load_program
 from ..online import ModelChoice, OnlinePredictor, cycle_properties
 from ..online.cutter import CycleCutter
@@ -55,6 +54,7 @@ from ..rig.can.stream import StreamRefused
 from ..rig.stepped import SteppedRig
 from .liveness import PERIOD, OwnerWatch, Peers
 from .program_session import LEAD_TIME, ProgramSession
+from .program_watch import RigView, detector_action, why_rig_stopped
 from .scenario_outcome import Outcome, sample_batch_record, setpoint_batch_record
 
 #: the names components are stalled by
@@ -302,23 +302,25 @@ class Scenario:
         self.model_inbox.append(batch)
 
     def _act(self, events) -> None:
-        """The strongest action among the detector events, as the excitation node takes it."""
+        """The strongest action among the detector events, as the excitation node takes it (program_watch)."""
         if not events or self.session is None:
             return
         self.events.extend((self.now - self.started_at, e) for e in events)
-        top, s = strongest(events), self.session
-        if top.action == 'end':
-            self.driver.stop_stream(s.stream_id, self.program.rest_position, f'detector {top.detector}')
-            s.runner.abort(f'ended by detector: {top.message}')
-            self._end(f'ended by detector: {top.message}', completed=top.kind in ('cycle_count', 'elapsed_time'))
-        elif top.action == 'hold' and not s.held:
-            why = s.why_not_hold() or self.driver.stop_stream(s.stream_id, s.runner.hold_target,
-                                                              f'detector {top.detector}', hold=True)
-            if why:
-                self._end(f'detector {top.detector} asked for a hold, which failed ({why})')
-                return
-            s.hold()
-            self._end(f'held by detector {top.detector}: {top.message}')
+        s = self.session
+        action = detector_action(events, s.held)
+        if action is None:
+            return
+        if action.kind == 'end':
+            self.driver.stop_stream(s.stream_id, self.program.rest_position, f'detector {action.detector}')
+            s.runner.abort(action.reason)
+            self._end(action.reason, completed=action.success)
+            return
+        why = s.why_not_hold() or self.driver.stop_stream(s.stream_id, s.runner.hold_target, action.reason, hold=True)
+        if why:
+            self._end(action.failed(why))
+            return
+        s.hold()
+        self._end(f'held by {action.reason}: {action.message}')
 
     def _wake_excitation(self) -> None:
         """The excitation node's timer and callbacks: samples in, setpoints out, a heartbeat when one is due."""
@@ -342,11 +344,11 @@ class Scenario:
                 return
         self._operator(s)
         status = self.driver.status
-        if status.faults:
-            self._end('rig fault: ' + '; '.join(status.fault_messages))
-            return
-        if self.driver.stream is None and s.end_sequence is None:
-            self._end(f'the rig stopped the program: {status.extra.get("last_event", "")}')
+        rig = RigView(status.state, status.state == 'fault' or bool(status.faults), list(status.fault_messages),
+                      stream_id=self.driver.stream.stream_id if self.driver.stream is not None else 0,
+                      last_event=status.extra.get('last_event', ''))
+        if why := why_rig_stopped(rig, s.stream_id, s.end_sequence is not None):
+            self._end(why)
             return
         if s.held:
             return

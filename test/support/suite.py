@@ -17,10 +17,10 @@ import os
 
 import numpy as np
 
+from rubber_rig.launching.inprocess import InProcessLauncher
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes.element_model_node import ElementModelNode
 from rubber_rig.nodes.excitation_node import ExcitationNode
-from rubber_rig.nodes.launcher import InProcessLauncher
 from rubber_rig.nodes.monitor import SuiteMonitor
 from rubber_rig.nodes.recorder_node import RecorderNode
 from rubber_rig.nodes.rig_driver_node import RigDriverNode

@@ -37,7 +37,7 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from ..dds import configure_dds
-from .params import undeclared_overrides
+from ..nodes.params import undeclared_overrides
 
 
 def _as_parameters(overrides: dict | None) -> list[Parameter]:
