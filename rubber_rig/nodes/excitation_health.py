@@ -40,7 +40,7 @@ class ProgramHealth:
         self.node = node
         self.events: list[DetectorEvent] = []   # detector events of the running (or last) program
         self.blind = ''                  # why the detectors were blind during the running program
-        self.feedback_due = Throttle(node.feedback_period)
+        self.feedback_due = Throttle(node.params.feedback_period)
         self.me = node.get_fully_qualified_name()
         self.peers = PeerWatch(self.me)   # the others' silences from their own beats; this node's own stalls
         self.beat_topic = node.create_subscription(Heartbeat, topics.HEARTBEAT, self.on_beat,

@@ -84,14 +84,14 @@ class ExcitationNode(Node):
         super().__init__(node_name, **kwargs)
         # [s] the clock of the node's rules: its ROS clock (simulated with use_sim_time, as its timers) or a test's
         self.clock = clock or (lambda: self.get_clock().now().nanoseconds * 1e-9)
-        declare_excitation_parameters(self)   # the parameters become attributes (lead_time, batch_size, ...)
+        self.params = declare_excitation_parameters(self)   # lead_time, batch_size, timeouts, ... (checked)
+        self.pending_program = self.params.program   # (Program, YAML) of the program parameter, run once ready
         self.auth = declare_auth(self)        # signs its commands, verifies samples and goals (nodes/auth.py)
         self.status = None              # the latest rig status (msg_defs/RigStatus)
         self.health = ProgramHealth(self)   # events, silent peers, blind detectors: diagnostics and the result
-        # the start and stop rules (session.program_watch, session.recorder_watch) on self.clock
-        self.watch = ProgramWatch(self.status_timeout, self.hold_timeout, self.start_timeout, self.health.stall,
-                                  self.rig_driver)
-        self.recording = RecorderWatch(self.require_recording, self.recorder_timeout, samples_topic(self),
+        p = self.params     # the start and stop rules (session.program_watch, session.recorder_watch) on self.clock
+        self.watch = ProgramWatch(p.status_timeout, p.hold_timeout, p.start_timeout, self.health.stall, p.rig_driver)
+        self.recording = RecorderWatch(p.require_recording, p.recorder_timeout, samples_topic(self),
                                        recorder_topic(self), self.health.stall)
         self.recorder_node = ''         # who publishes the recorder status (its heartbeat confirms a recording)
         self.rig_time = RigTime()       # the rig clock of a sequence, from the latest sample batch's stamp
@@ -103,7 +103,7 @@ class ExcitationNode(Node):
 
         # commands to the driver's private channel, the same batches to `setpoints` for observers (topics.py)
         self.pub_stream = self.create_publisher(
-            SetpointBatch, topics.setpoint_stream_topic(self.rig_driver, self.get_fully_qualified_name()),
+            SetpointBatch, topics.setpoint_stream_topic(self.params.rig_driver, self.get_fully_qualified_name()),
             topics.STREAM_QOS)
         self.pub_setpoints = self.create_publisher(SetpointBatch, topics.SETPOINTS, topics.STREAM_QOS)
         self.pub_program = self.create_publisher(String, topics.PROGRAM, topics.LATCHED_QOS)
@@ -114,8 +114,8 @@ class ExcitationNode(Node):
         self.create_subscription(RigStatus, topics.STATUS, self.on_status, topics.LATCHED_QOS)
         self.create_subscription(RecorderStatus, topics.RECORDER_STATUS, self.on_recorder_status,
                                  topics.LATCHED_QOS)
-        self.open_client = self.create_client(OpenStream, f'{self.rig_driver}/open_stream')
-        self.stop_client = self.create_client(StopStream, f'{self.rig_driver}/stop_stream')
+        self.open_client = self.create_client(OpenStream, f'{self.params.rig_driver}/open_stream')
+        self.stop_client = self.create_client(StopStream, f'{self.params.rig_driver}/stop_stream')
         self.create_service(Trigger, '~/abort', lambda req, res: services.on_abort(self, req, res))
         self.create_service(HoldProgram, '~/hold', lambda req, res: services.on_hold(self, req, res))
         self.create_service(LoadProgram, '~/load_program', lambda req, res: readiness.load_program(self, req, res))
@@ -123,7 +123,7 @@ class ExcitationNode(Node):
         self.action = ActionServer(self, RunProgram, 'run_program', execute_callback=self.execute,
                                    goal_callback=self.admit_goal,
                                    cancel_callback=lambda _: CancelResponse.ACCEPT, **topics.ACTION_SERVICES_QOS)
-        self.create_timer(self.stream_period, self.stream)
+        self.create_timer(self.params.stream_period, self.stream)
         start_heartbeat(self, lambda: self.state)
 
     @property
@@ -201,7 +201,7 @@ class ExcitationNode(Node):
         self.opening = True
         try:
             return await awaitables.call(self, self.open_client, self.auth.sign(OpenStream.Request(
-                owner=self.get_fully_qualified_name(), lead_time=self.lead_time), OPEN_STREAM), 2.0)
+                owner=self.get_fully_qualified_name(), lead_time=self.params.lead_time), OPEN_STREAM), 2.0)
         finally:
             self.opening = False
 
@@ -215,7 +215,7 @@ class ExcitationNode(Node):
             return str(exc)
         grant = await self._open_stream()
         if grant is None:
-            return f'{self.rig_driver}/open_stream did not answer within 2 s'
+            return f'{self.params.rig_driver}/open_stream did not answer within 2 s'
         if not grant.success:
             return f'the rig refused the stream: {grant.message}'
         fs = self.status.sample_rate
@@ -223,9 +223,9 @@ class ExcitationNode(Node):
             # check_fits() checked the program against these limits (and the force model) before the stream was
             # asked for; from the grant on, every moment before the first batch counts against the driver
             self.session = ProgramSession.on_grant(
-                program, fs, conv.limits_from_msg(self.status.limits), grant, math.ceil(self.lead_time * fs),
-                self.batch_size, amplitude_control, self.compensation_memory,
-                detectors=with_defaults(program.all_detectors(), self.default_detectors))
+                program, fs, conv.limits_from_msg(self.status.limits), grant, math.ceil(self.params.lead_time * fs),
+                self.params.batch_size, amplitude_control, self.params.compensation_memory,
+                detectors=with_defaults(program.all_detectors(), self.params.default_detectors))
         except ValueError as exc:
             return str(exc)
         self.result = None
@@ -237,7 +237,7 @@ class ExcitationNode(Node):
         return ''
 
     async def _start_pending(self, program, text):
-        why = await self.open_and_start(program, text, self.amplitude_control)
+        why = await self.open_and_start(program, text, self.params.amplitude_control)
         if why:
             self.get_logger().error(f"program '{program.name}' not started: {why}")
 
@@ -308,8 +308,8 @@ class ExcitationNode(Node):
             return
         if not self.stop_client.service_is_ready():
             # the stream still ends (no more setpoints): the driver faults it after stream_timeout and ramps
-            self.get_logger().error(f'{self.rig_driver}/stop_stream is not available: the rig ramps to rest on '
-                                    f'the driver\'s stream_timeout instead of at once ({reason})')
+            self.get_logger().error(f'{self.params.rig_driver}/stop_stream is not available: the rig ramps to rest '
+                                    f'on the driver\'s stream_timeout instead of at once ({reason})')
             return
         self.stop_client.call_async(self.auth.sign(StopStream.Request(
             stream_id=self.session.stream_id, action=action, target=float(target), reason=reason), STOP_STREAM))

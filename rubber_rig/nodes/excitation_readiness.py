@@ -69,7 +69,7 @@ def check_fits(node: Node, program) -> None:
     driver; ValueError names the block and field.
     """
     limits = conv.limits_from_msg(node.status.limits)
-    limits.force_model = node.force_model
+    limits.force_model = node.params.force_model
     check_program(limits, program, node.status.sample_rate)
 
 
