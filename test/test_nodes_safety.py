@@ -204,6 +204,6 @@ blocks:
     with launcher:
         result = run_program(launcher, nodes['monitor'], program, amplitude_control=True)
         assert result.success, result.message
-        assert nodes['excitation'].compensation_memory is False
+        assert nodes['excitation'].params.compensation_memory is False
         for block, target in zip(result.blocks, (0.5e-3, 0.3e-3), strict=False):
             assert block.achieved_amplitude == pytest.approx(target, rel=0.01), block.name

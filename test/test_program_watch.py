@@ -78,7 +78,7 @@ def test_a_goal_waits_for_a_status_at_most_one_status_timeout_old_and_the_links(
     assert w.statuses_fresh(T0 + 0.5, True, '')                      # exactly status_timeout old
     assert not w.statuses_fresh(T0 + 0.5 + 1 / 1024, True, '')
     assert not w.statuses_fresh(T0, False, '') and not w.statuses_fresh(T0, True, 'waiting for discovery')
-    assert w.start_deadline(T0) == T0 + 2.0
+    assert not w.start_wait_over(T0, T0 + 2.0 - 1 / 1024) and w.start_wait_over(T0, T0 + 2.0)   # start_timeout 2 s
 
 
 def test_a_held_program_ends_after_exactly_hold_timeout():

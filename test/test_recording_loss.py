@@ -44,6 +44,7 @@ from rubber_rig.recording.gaps import (
     STRAY,
     LossLedger,
     StrayOrRestart,
+    StreamOrder,
     sample_topic,
     stray_or_restart,
 )
@@ -371,6 +372,20 @@ def test_stray_or_restart_is_told_by_the_batch_after_the_one_that_went_back(next
     rule.went_back(100, 20, 500, payload='held batch')
     assert rule.judge(next_first) == (verdict, 'held batch')
     assert rule.judge(next_first) is None                 # judged once
+
+
+def test_a_live_consumer_holds_a_batch_that_went_back_until_the_next_one_says_restart_or_stray():
+    """StreamOrder, as the element model takes its sample batches: expected next 500; a 20-sample batch at 100."""
+    order = StreamOrder()
+    assert order.arrive(480, 20, 480, 'a') == (None, True)           # in order: taken
+    assert order.arrive(100, 20, 500, 'b') == (None, False)          # went back: held
+    assert order.arrive(500, 20, 500, 'c') == ((STRAY, 'b'), True)   # the stream went on: 'b' was a stray
+    assert order.strays == 1
+    assert order.arrive(0, 20, 520, 'd') == (None, False)            # a restarted driver numbering from 0 ...
+    # ... continued by its own next batch: a restart; the consumer starts afresh from 'd', then takes 'e'
+    assert order.arrive(20, 20, 520, 'e') == ((RESTART, 'd'), True)
+    assert order.strays == 1
+    assert order.arrive(10, 20, 40, 'f') == (None, False)            # judged against where the restart went on
 
 
 def test_a_stray_followed_by_a_gap_of_the_old_stream_is_a_stray_and_the_gap_counts():

@@ -18,19 +18,22 @@ node's other callbacks while they wait.
 """
 from __future__ import annotations
 
-from rclpy.duration import Duration
+import math
+
 from rclpy.node import Node
 from rclpy.task import Future
+
+SERVICE_POLL = 0.05    # [s] how often a call looks for its service while it is not there
 
 
 async def call(node: Node, client, request, timeout: float):
     """Await a service response, or None after `timeout` seconds (or if the service is not there)."""
-    clock = node.get_clock()
-    deadline = clock.now() + Duration(nanoseconds=int(timeout * 1e9))
-    while not client.service_is_ready():
-        if clock.now() >= deadline:
-            return None
-        await sleep(node, 0.05)
+    for _ in range(math.ceil(timeout / SERVICE_POLL)):    # the waits are the node's timers: its clock
+        if client.service_is_ready():
+            break
+        await sleep(node, SERVICE_POLL)
+    else:
+        return None
     done = Future()
     future = client.call_async(request)
     future.add_done_callback(lambda f: done.done() or done.set_result(f.result()))

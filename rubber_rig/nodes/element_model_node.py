@@ -83,7 +83,7 @@ from rubber_rig.online import (
     batch_problem,
 )
 from rubber_rig.online.cutter import CycleCutter
-from rubber_rig.recording.gaps import RESTART, StrayOrRestart
+from rubber_rig.recording.gaps import RESTART, StreamOrder
 
 VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
 VALUE_UNITS = {'k0': 'N/m', 'k_inf': 'N/m', 'tau': 's', 'alpha': '-', 'x2': 'm', 'f_fmax': 'N'}
@@ -138,8 +138,7 @@ class ElementModelNode(Node):
         self.cutter = CycleCutter(min_amplitude)   # cycles block by block, once their setpoints are known
         self._validated = None           # (choice, resolved) of the parameter change being set
         self.batches_dropped = 0         # sample batches refused (batch_problem)
-        self.stray_batches = 0           # batches that went back and were not followed: stale or foreign
-        self.went_back = StrayOrRestart()   # a batch that went back, until the next one says restart or stray
+        self.order = StreamOrder()       # a batch that went back is held until the next says restart or stray
         self.pub_prediction = self.create_publisher(ModelPrediction, topics.PREDICTION, topics.STREAM_QOS)
         self.pub_metrics = self.create_publisher(CycleMetrics, topics.CYCLE_METRICS, topics.EVENT_QOS)
         self.pub_params = self.create_publisher(ModelParameters, topics.MODEL_PARAMETERS, topics.LATCHED_QOS)
@@ -155,6 +154,11 @@ class ElementModelNode(Node):
         choice = self.predictor.choice
         self.get_logger().info(f'model {self.predictor.model_name} from {choice.source}: {self.predictor.params}, '
                                f'friction reversal threshold {choice.friction_reversal_threshold:g} m')
+
+    @property
+    def stray_batches(self) -> int:
+        """Batches that went back and were not followed: stale or foreign."""
+        return self.order.strays
 
     # -- data path --------------------------------------------------------------------------------------------
     def on_setpoints(self, msg: SetpointBatch) -> None:
@@ -180,26 +184,23 @@ class ElementModelNode(Node):
             return
         if len(x) == 0:
             return
-        # one batch going back is not yet a restart: the next one says (rubber_rig.recording.gaps, the rule the
+        # one batch going back is not yet a restart: the next one says (recording.gaps.StreamOrder, the rule the
         # recorder's loss ledger follows): a restarted driver's batch is followed by its own next, a stale or
         # foreign one (another publisher, a copy replayed late) by the stream it interrupted
-        verdict = self.went_back.judge(msg.first_sequence)
+        verdict, take = self.order.arrive(msg.first_sequence, len(x), self.predictor.next_sequence, msg)
         if verdict is not None and verdict[0] == RESTART:
-            held = verdict[1]
             self.get_logger().info(f'sample sequence went back from {self.predictor.next_sequence} to '
-                                   f'{held.first_sequence} (driver restarted?): model and cycle detection start '
-                                   'afresh')
+                                   f'{verdict[1].first_sequence} (driver restarted?): model and cycle detection '
+                                   'start afresh')
             self.predictor.restart()
             self.cutter.restart()
-            self.take_samples(held)
+            self.take_samples(verdict[1])
         elif verdict is not None:
-            self.stray_batches += 1
             self.get_logger().warning(f'sample batch at sequence {verdict[1].first_sequence} ignored: it went back '
                                       f'from {self.predictor.next_sequence} and the stream went on where it was '
                                       f'(stale or foreign; {self.stray_batches} so far)',
                                       throttle_duration_sec=WARN_EVERY)
-        if self.predictor.goes_back(msg.first_sequence):
-            self.went_back.went_back(msg.first_sequence, len(x), self.predictor.next_sequence, msg)
+        if not take:
             return
         bad = self.predictor.nonfinite_samples
         predicted, branches = self.predictor.process(msg.first_sequence, msg.sample_period, x, msg.temperature)

@@ -78,8 +78,7 @@ async def wait_for_statuses(node: Node) -> None:
     statuses: wait for them (and for DDS to match our topics), at most the node's start_timeout.
     """
     since = node.clock()
-    deadline = node.watch.start_deadline(since)
-    while node.clock() < deadline and not node.watch.statuses_fresh(
+    while not node.watch.start_wait_over(since, node.clock()) and not node.watch.statuses_fresh(
             node.clock(), recording_fresh(node, since, node.clock()), links(node)):
         await awaitables.sleep(node, 0.05)
 

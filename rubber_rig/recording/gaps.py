@@ -157,6 +157,37 @@ class StrayOrRestart:
         return stray_or_restart(first, count, expected, next_first), payload
 
 
+class StreamOrder:
+    """What a live consumer of a sample stream (the element model) does with each batch, by the one rule of
+    :func:`stray_or_restart`: a batch that goes back from the sequence ``expected`` next is held (not taken) until the
+    next batch says whether it was a restart (then the consumer starts afresh from the held batch) or a stray (stale
+    or foreign: dropped and counted in ``strays``).
+    """
+
+    def __init__(self):
+        self.held = StrayOrRestart()
+        self.strays = 0
+
+    def arrive(self, first: int, count: int, expected, payload=None):
+        """A batch of ``count`` samples from ``first`` while the consumer expects ``expected`` next (None: nothing
+        yet). Returns (verdict, take): verdict on the batch held before, None or (RESTART | STRAY, its payload) - on
+        a restart the consumer restarts and takes that payload first -, and whether to take this batch now (False:
+        it went back and is held).
+        """
+        verdict = self.held.judge(first)
+        if verdict is not None:
+            kind, (held_first, held_count, held_payload) = verdict
+            if kind == RESTART:
+                expected = held_first + held_count     # the consumer goes on from the restarted stream's batch
+            else:
+                self.strays += 1
+            verdict = (kind, held_payload)
+        if expected is not None and first < expected:
+            self.held.went_back(first, count, expected, (first, count, payload))
+            return verdict, False
+        return verdict, True
+
+
 @dataclass
 class GapTracker:
     """Per-topic continuity of sequence numbers across messages (and across split files)."""

@@ -198,9 +198,9 @@ class ProgramWatch:
         """
         return self.rig is not None and self.rig_age(now) <= self.status_timeout and recording_fresh and not links
 
-    def start_deadline(self, since: float) -> float:
-        """[s] until when a goal that arrived at ``since`` waits for fresh statuses."""
-        return since + self.start_timeout
+    def start_wait_over(self, since: float, now: float) -> bool:
+        """A goal that arrived at ``since`` has waited start_timeout for fresh statuses by ``now``: judge it now."""
+        return now - since >= self.start_timeout
 
     # -- stopping ---------------------------------------------------------------------------------------------
     def driver_silent(self, now: float) -> float:
