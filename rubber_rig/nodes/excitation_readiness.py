@@ -27,10 +27,11 @@ from rubber_rig.excitation.limits import check_program
 from rubber_rig.nodes import awaitables
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes.excitation_recording import publishers, recorder_topic, samples_topic
+from rubber_rig.session import program_watch
 from rubber_rig.session.program_watch import RigView, links_verdict
 
 NOW = Duration(seconds=0)    # wait_for_all_acked: ask, do not wait
-READY_STATES = (RigStatus.STATE_IDLE, RigStatus.STATE_RUNNING, RigStatus.STATE_HOLDING)   # program_watch's, as codes
+READY_STATES = tuple(conv.STATE_BY_NAME[name] for name in program_watch.READY_STATES)   # as RigStatus.STATE_* codes
 
 
 def rig_view(msg: RigStatus) -> RigView:
