@@ -78,7 +78,7 @@ class BenchSession:
         self.excitation = launcher.start(ExcitationNode, excitation_overrides(args))
         self._hold_help = (f'the rig holds at rest; resume: rubber-rig hold --resume --namespace '
                            f'{self.excitation.get_namespace()} (signed with the rig key), Ctrl-C ends the program, '
-                           f'and it ends by itself after {self.excitation.hold_timeout:g} s (--hold-timeout)')
+                           f'and it ends by itself after {self.excitation.params.hold_timeout:g} s (--hold-timeout)')
         self.driver = launcher.start(RigDriverNode, driver_overrides(args))
         if self.driver.lifecycle_state != 'active':
             raise CommandError(f'rig_driver did not come up (lifecycle state {self.driver.lifecycle_state}); '

@@ -59,10 +59,10 @@ from rubber_rig.nodes.spin import spin_node
 from rubber_rig.recording import Recorder, RecordingError, full_definition
 from rubber_rig.recording.metadata import BOOKKEEPING_TOPIC, bookkeeping_text, bookkeeping_topic
 from rubber_rig.recording.qos import qos_entry
+from rubber_rig.recording.selection import recorded_publishers, recorded_topics, subscription_qos
 from rubber_rig.recording.status_cadence import StatusCadence
 
 UNSUPPORTED_SEQUENCE = 2**63   # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED is UINT64_MAX
-IGNORED_TOPICS = ('/rosout', '/parameter_events')
 # types whose messages are recorded only with a valid signature of the rig's key (nodes/auth.py)
 SIGNED_TYPES = {'msg_defs/msg/RigSampleBatch': (SAMPLES, RigSampleBatch),
                 'msg_defs/msg/SetpointBatch': (SETPOINTS, SetpointBatch)}
@@ -199,27 +199,17 @@ class RecorderNode(Node):
             return []
 
     def wanted_topics(self, graph):
-        configured = self.configured_topics()
-        if configured:
-            names = {self.resolve_topic_name(t) for t in configured if t}
-            return [(n, t) for n, t in graph if n in names]
-        ns = self.get_namespace().rstrip('/') + '/'
-        # a driver's command channel is left out: `ros2 bag play` of the recording must not command a rig (the
-        # same batches are recorded on `setpoints`)
-        return [(n, t) for n, t in graph if n.startswith(ns) and n not in IGNORED_TOPICS
-                and topics.SETPOINT_STREAM not in n.split('/')
-                and (self.include_hidden or not any(part.startswith('_') for part in n.split('/')))]
+        """The (topic, types) of ``graph`` to record (recording.selection)."""
+        return recorded_topics(graph, self.get_namespace(), [self.resolve_topic_name(t) for t in
+                                                             self.configured_topics()], self.include_hidden)
 
     def discover(self):
         for name, types in self.wanted_topics(self.get_topic_names_and_types()):
             if name in self._subs or name in self._unrecordable:
                 continue
-            publishers = [p for p in self.get_publishers_info_by_topic(name)
-                          if p.node_name != self.get_name() or p.node_namespace != self.get_namespace()]
-            if not self.configured_topics():
-                # by default a suite's recorder records its suite: topics published by nodes of its namespace
-                # (a recorder in the root namespace would otherwise record every other suite on the domain)
-                publishers = [p for p in publishers if p.node_namespace == self.get_namespace()]
+            publishers = recorded_publishers(self.get_publishers_info_by_topic(name),
+                                             (self.get_name(), self.get_namespace()), self.get_namespace(),
+                                             bool(self.configured_topics()))
             if not publishers:
                 continue                      # QoS is matched to publishers: wait for one
             type_name = types[0]
@@ -230,13 +220,12 @@ class RecorderNode(Node):
                 self._unrecordable[name] = f'type {type_name} cannot be recorded: {exc}'
                 self.get_logger().error(f'cannot record {name}: {self._unrecordable[name]}')
                 continue
-            reliable = all(p.qos_profile.reliability == ReliabilityPolicy.RELIABLE for p in publishers)
-            latched = all(p.qos_profile.durability == DurabilityPolicy.TRANSIENT_LOCAL for p in publishers)
-            depth = max([self.history_depth] + [p.qos_profile.depth for p in publishers])
+            offered = [offered_qos(p) for p in publishers]
+            reliable, latched, depth = subscription_qos(offered, self.history_depth)
             qos = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=depth,
                              reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
-            self.core.set_qos(name, [offered_qos(p) for p in publishers])
+            self.core.set_qos(name, offered)
             sub = self.create_subscription(cls, name, self._callback(name, type_name), qos, raw=True)
             self._subs[name] = (sub, type_name)
             self.get_logger().info(f'recording {name} [{type_name}] '

@@ -36,9 +36,11 @@ may move the rig"), not the topic name.
 """
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 
+from rubber_rig.recording.selection import COMMAND_CHANNEL
+
 SAMPLES = 'samples'                  # msg_defs/msg/RigSampleBatch, rig_driver -> all
 SETPOINTS = 'setpoints'              # msg_defs/msg/SetpointBatch, excitation -> observers (model, recorder)
-SETPOINT_STREAM = 'setpoint_stream'  # msg_defs/msg/SetpointBatch, owner -> its driver (setpoint_stream_topic)
+SETPOINT_STREAM = COMMAND_CHANNEL   # msg_defs/msg/SetpointBatch, owner -> its driver (setpoint_stream_topic)
 STATUS = 'status'                    # msg_defs/msg/RigStatus, rig_driver (latched)
 PREDICTION = 'prediction'            # msg_defs/msg/ModelPrediction, element_model
 CYCLE_METRICS = 'cycle_metrics'      # msg_defs/msg/CycleMetrics, element_model
