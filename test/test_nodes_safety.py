@@ -148,15 +148,22 @@ def test_bad_programs_are_refused_before_anything_moves(tmp_path):
 def test_rig_driver_lifecycle(tmp_path):
     with InProcessLauncher([CONFIG], domain_id=domain_id()) as launcher:
         driver = launcher.start(RigDriverNode, {'autostart': False, 'paced': False})
+        samples = driver.resolve_topic_name('samples')
         assert driver.lifecycle_state == 'unconfigured' and driver.rig is None
-        driver.trigger_configure()
-        assert driver.lifecycle_state == 'inactive' and driver.rig is not None
-        driver.trigger_activate()
-        assert driver.lifecycle_state == 'active'
-        driver.trigger_deactivate()
-        assert driver.lifecycle_state == 'inactive'
-        driver.trigger_cleanup()
-        assert driver.lifecycle_state == 'unconfigured' and driver.rig is None
+        assert driver.count_publishers(samples) == 0 and driver.channels is None
+        for _ in range(2):   # as the ros2/demos lifecycle talker: configure creates, cleanup destroys, and again
+            driver.trigger_configure()
+            assert driver.lifecycle_state == 'inactive' and driver.rig is not None
+            assert launcher.wait_for(lambda: driver.count_publishers(samples) == 1, 5.0) and driver.channels is not None
+            assert driver._poll_timer.is_canceled() and not driver.active      # the bus is read only when active
+            driver.trigger_activate()
+            assert driver.lifecycle_state == 'active' and not driver._poll_timer.is_canceled() and driver.active
+            driver.trigger_deactivate()
+            assert driver.lifecycle_state == 'inactive' and driver._poll_timer.is_canceled() and not driver.active
+            driver.trigger_cleanup()
+            assert driver.lifecycle_state == 'unconfigured' and driver.rig is None
+            assert driver.channels is None and driver._poll_timer is None and driver.pub_samples is None
+            assert launcher.wait_for(lambda: driver.count_publishers(samples) == 0, 5.0)   # (the graph learns it)
         # a bus that cannot be opened: configure fails and the node stays unconfigured
         bad = launcher.start(RigDriverNode, {'autostart': False, 'backend': 'socketcan', 'can.channel': 'nocan7'},
                              node_name='rig_driver_bad')
