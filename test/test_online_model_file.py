@@ -210,3 +210,21 @@ def test_a_parameter_set_of_another_model_type_runs_as_its_model_file(name, mode
     x = displacement()
     total, _ = run_batches(p, x)
     np.testing.assert_allclose(total, build_model(name, DT).run(x), rtol=1e-12, atol=1e-8)
+
+
+def test_a_changed_parameter_is_checked_even_when_the_current_source_does_not_use_it():
+    """element_model's run-time check (ModelChoice.checked): a later switch of ``source`` must never meet a bad value,
+    and the error names the parameter."""
+    good = ModelChoice(source='temperature', temperature=10.0)
+    assert good.checked(['temperature'])[2] == 10.0
+    with pytest.raises(ChoiceError) as err:      # not used now (source temperature), refused all the same
+        ModelChoice(source='temperature', parameter_set='no_such_set').checked(['parameter_set'])
+    assert err.value.field == 'parameter_set' and 'no_such_set' in str(err.value)
+    with pytest.raises(ChoiceError) as err:
+        ModelChoice(values={'k0': 1.0}).checked(['values.k0'])
+    assert err.value.field.startswith('values.')
+    with pytest.raises(ChoiceError) as err:
+        ModelChoice(source='wishful').checked(['source'])
+    assert err.value.field == 'source' and "'wishful' is not one of parameter_set" in str(err.value)
+    # a value nobody changed is not judged: the current source's own (parameter_set) is the running model's
+    assert ModelChoice(values={'k0': 1.0}).checked(['temperature'])[1] == 'swing_arm_joint_20C'

@@ -83,6 +83,7 @@ from rubber_rig.online import (
     batch_problem,
 )
 from rubber_rig.online.cutter import CycleCutter
+from rubber_rig.online.predictor import CHOICE_FIELDS
 from rubber_rig.recording.gaps import RESTART, StreamOrder
 
 VALUE_NAMES = ('k0', 'k_inf', 'tau', 'alpha', 'x2', 'f_fmax')
@@ -90,8 +91,7 @@ VALUE_UNITS = {'k0': 'N/m', 'k_inf': 'N/m', 'tau': 's', 'alpha': '-', 'x2': 'm',
 VALUE_RANGES = {'k0': (1e3, 1e11), 'k_inf': (1e3, 1e11), 'tau': (1e-7, 1e4), 'alpha': (1e-3, 1.0),
                 'x2': (1e-8, 1e-1), 'f_fmax': (1e-3, 1e7)}   # wide physical bounds; k_inf >= k0 is checked too
 WARN_EVERY = 5.0      # [s] throttle of the warnings about bad sample batches
-CHOICE_PARAMS = ('source', 'parameter_set', 'temperature', 'friction_reversal_threshold') + tuple(
-    'values.' + n for n in VALUE_NAMES)
+CHOICE_PARAMS = CHOICE_FIELDS + tuple('values.' + n for n in VALUE_NAMES)   # what a model choice is made of
 
 
 class ElementModelNode(Node):
@@ -127,7 +127,7 @@ class ElementModelNode(Node):
 
         try:  # validate the whole choice once at start: the error names the offending parameter
             choice = self._choice()
-            resolved = self._checked(choice, CHOICE_PARAMS)
+            resolved = choice.checked(CHOICE_PARAMS)
         except ChoiceError as exc:   # spin_node logs it as one line and exits with status 2 (see the docstring)
             raise ParameterError(self, exc.field, str(exc)) from None
         self.predictor = OnlinePredictor(choice, self.get_parameter('warmup_time').value,
@@ -246,42 +246,13 @@ class ElementModelNode(Node):
                            values={n: value('values.' + n) for n in VALUE_NAMES},
                            friction_reversal_threshold=value('friction_reversal_threshold'))
 
-    @staticmethod
-    def _validate(choice: ModelChoice, changed) -> tuple:
-        """Check every model parameter that changed, used by the current source or not (a later switch of
-        ``source`` must never meet an invalid value), then the resulting choice; returns ``choice.resolve()``.
-        Raises ValueError (also for a parameter file that is missing or unreadable).
-        """
-        if choice.source not in SOURCES:
-            raise ChoiceError('source', f"source '{choice.source}' is not one of {', '.join(SOURCES)}")
-        if any(name.startswith('values.') for name in changed):
-            ModelChoice(source='values', values=choice.values).resolve()
-        if 'parameter_set' in changed and choice.source != 'parameter_set':
-            ModelChoice(source='parameter_set', parameter_set=choice.parameter_set).resolve()
-        if 'temperature' in changed:
-            ModelChoice(source='temperature', temperature=choice.temperature).resolve()
-        return choice.resolve()
-
-    @classmethod
-    def _checked(cls, choice: ModelChoice, changed) -> tuple:
-        """``_validate`` whose every failure is a ChoiceError naming a parameter: a failure that is not one
-        (which would be a bug in a reader) names the choice parameters that changed, with the exception's type.
-        """
-        try:
-            return cls._validate(choice, changed)
-        except ChoiceError:
-            raise
-        except Exception as exc:   # noqa: BLE001 - whatever goes wrong, refuse the choice with a reason
-            names = ', '.join(sorted(set(changed) & set(CHOICE_PARAMS))) or 'parameter_set'
-            raise ChoiceError(names, f'{type(exc).__name__}: {exc}') from None
-
     def _on_set_parameters(self, params) -> SetParametersResult:
         changed = {p.name: p.value for p in params}
         if not set(changed) & set(CHOICE_PARAMS):
             return SetParametersResult(successful=True)
         try:
             choice = self._choice(changed)
-            self._validated = (choice, self._checked(choice, changed))
+            self._validated = (choice, choice.checked(changed))
         except ChoiceError as exc:
             self._validated = None
             return SetParametersResult(successful=False, reason=f'{exc.field}: {exc}')

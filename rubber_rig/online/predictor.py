@@ -63,6 +63,7 @@ from rubber_rig.models.modelfile import ModelSpec, is_model_file, load_model_fil
 from rubber_rig.models.params import ParameterValueError
 
 SOURCES = ('parameter_set', 'temperature', 'rig_temperature', 'values')
+CHOICE_FIELDS = ('source', 'parameter_set', 'temperature', 'friction_reversal_threshold')   # and 'values.<name>'
 # [m] 10x the simulated rig's default displacement noise (rig.config.SimOptions.displacement_noise = 0.2 um);
 # 5x is too little for quasi-static motion (see rubber_rig.models.friction)
 DEFAULT_REVERSAL_THRESHOLD = 2e-6
@@ -192,6 +193,28 @@ class ModelChoice:
             except ParameterValueError as exc:
                 raise ChoiceError('values.' + exc.parameter, str(exc)) from None
         raise ChoiceError('source', f'source {self.source!r} is not one of {", ".join(SOURCES)}')
+
+    def checked(self, changed) -> tuple:
+        """:meth:`resolve` after checking every field among ``changed`` (element_model parameter names: 'source',
+        'values.k0', ...), used by the current source or not: a later switch of ``source`` must never meet an invalid
+        value. Every failure is a ChoiceError naming a parameter; one that is not (a bug in a reader) names the
+        parameters that changed, with the exception's type.
+        """
+        try:
+            if self.source not in SOURCES:
+                raise ChoiceError('source', f"source '{self.source}' is not one of {', '.join(SOURCES)}")
+            if any(name.startswith('values.') for name in changed):
+                ModelChoice(source='values', values=self.values).resolve()
+            if 'parameter_set' in changed and self.source != 'parameter_set':
+                ModelChoice(source='parameter_set', parameter_set=self.parameter_set).resolve()
+            if 'temperature' in changed:
+                ModelChoice(source='temperature', temperature=self.temperature).resolve()
+            return self.resolve()
+        except ChoiceError:
+            raise
+        except Exception as exc:   # noqa: BLE001 - whatever goes wrong, refuse the choice with a reason
+            names = ', '.join(sorted(n for n in changed if n in CHOICE_FIELDS or n.startswith('values.')))
+            raise ChoiceError(names or 'parameter_set', f'{type(exc).__name__}: {exc}') from None
 
 
 class OnlinePredictor:
