@@ -49,9 +49,9 @@ from rubber_rig.rig.config import ConfigError, RigConfig
 from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.host_timing import LATE_MIN, SIM_LATE_MIN
+from rubber_rig.rig.conformance.in_process import REFERENCE_AMBIENT, REFERENCE_SPRING, run_against_reference
 from rubber_rig.rig.conformance.link import Aborted, Envelope
 from rubber_rig.rig.conformance.log_segments import check_log
-from rubber_rig.rig.conformance.reference_run import REFERENCE_AMBIENT, REFERENCE_SPRING, run_against_reference
 from rubber_rig.rig.conformance.reference_specimen import Ambient, ReferenceSpring
 from rubber_rig.rig.conformance.report import NOT_TESTED, to_junit, to_markdown
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
@@ -73,7 +73,8 @@ def add_arguments(parser):
                      'its own on a udp_multicast bus that stays on this host')
     src.add_argument('--reference', action='store_true', help='test the reference controller (a second controller '
                      'written from the specification alone, rubber_rig.rig.reference) in this process on a virtual '
-                     'bus; with --reference-defect it breaks a duty on purpose')
+                     'bus, on simulated time (deterministic; --wall-clock: in real time, in a thread); with '
+                     '--reference-defect it breaks a duty on purpose')
     src.add_argument('--log', help='offline: check a raw CAN log (.blf, .asc, candump .log) recorded on a rig')
     parser.add_argument('--channel', help='python-can channel (e.g. can0)')
     parser.add_argument('--bitrate', type=int, default=1_000_000, help='CAN bit rate [bit/s] (default %(default)d)')
@@ -91,6 +92,8 @@ def add_arguments(parser):
     parser.add_argument('--yes', action='store_true', help='the operator confirms the envelope without a prompt')
     parser.add_argument('--defect', action='append', default=[], choices=sorted(DEFECTS),
                         help='with --sim: a deliberate protocol defect of the simulated controller (repeatable)')
+    parser.add_argument('--wall-clock', action='store_true', help='with --reference: run the reference controller in '
+                        'real time in a thread of this process, not on simulated time')
     parser.add_argument('--reference-defect', action='append', default=[], choices=sorted(REFERENCE_DEFECTS),
                         help='with --reference: a deliberate defect of the reference controller (repeatable)')
     parser.add_argument('--reference-spring', help='online: the reference spring on the rig and its expanded '
@@ -153,6 +156,8 @@ def check_arguments(args):
         args.ambient_declared = parse_ambient(args.ambient) if args.ambient else None
     except ValueError as exc:
         return f'argument --reference-spring/--ambient: {exc}'
+    if args.wall_clock and not args.reference:
+        return '--wall-clock is for the reference controller (--reference); other runs are in real time'
     if args.reference_defect and not args.reference:
         return '--reference-defect is for the reference controller (--reference)'
     if args.log:
@@ -308,7 +313,8 @@ def _reference(args) -> int:
     try:
         conf, results = run_against_reference(args.reference_defect, args.rate_hz, Envelope(args.lower, args.upper),
                                               profile, reference, ambient,
-                                              log=lambda text: print(text, file=sys.stderr, flush=True))
+                                              log=lambda text: print(text, file=sys.stderr, flush=True),
+                                              wall_clock=args.wall_clock)
         if args.can_log:
             conf.trace_to_log(args.can_log)
     except Aborted as exc:
@@ -316,7 +322,8 @@ def _reference(args) -> int:
         return EXIT_ABORTED
     what = (f" (the reference controller, rubber_rig.rig.reference, on a {reference.describe()} spring at "
             f"{ambient.temperature:g} degC; defects: {', '.join(args.reference_defect) or 'none'})")
-    return _online_report(args, conf, results, f'virtual bus in this process, {profile} frames, '
+    clock = 'in real time' if args.wall_clock else 'on simulated time'
+    return _online_report(args, conf, results, f'virtual bus in this process {clock}, {profile} frames, '
                           f'{args.rate_hz:g} Hz', what, t0)
 
 

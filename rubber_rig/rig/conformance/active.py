@@ -24,7 +24,6 @@ ends the run (Aborted). Motion is slow (a few mm/s) and at most 80 % of the enve
 """
 from __future__ import annotations
 
-import time
 import traceback
 from pathlib import Path
 
@@ -60,7 +59,8 @@ class ConformanceRun(PowerUpScenarios, StreamScenarios, MeasureScenarios, FaultS
         A scenario that fails on its own fails the requirements it had not judged, with the reason, and the run
         goes on from rest; only Aborted (the envelope left, or a controller that will not come to rest) ends it.
         """
-        self._rx.start()
+        if self.simulated is None:
+            self._rx.start()
         try:
             for scenario in self.scenarios():
                 self.log(f'conformance: {scenario.__doc__.splitlines()[0].rstrip(".")}')
@@ -77,9 +77,10 @@ class ConformanceRun(PowerUpScenarios, StreamScenarios, MeasureScenarios, FaultS
             self.deviation = self.deviation or str(exc)
         finally:
             self.heartbeat = False
-            time.sleep(0.1)
+            self._pause(0.1)
             self._stop.set()
-            self._rx.join(timeout=2.0)
+            if self._rx.is_alive():
+                self._rx.join(timeout=2.0)
         self.merge_host_timing()
         if not self.deviation:
             passive = check_offline(self.trace)

@@ -19,7 +19,6 @@ active.ConformanceRun).
 from __future__ import annotations
 
 import math
-import time
 
 import can
 
@@ -68,7 +67,7 @@ class FaultScenarios(ConformanceLink):
             if good is None:
                 return
             if k == int(0.3 * self.fs):
-                phase['frame2'] = time.time()
+                phase['frame2'] = self.now()
                 msg = self.frames.encode_setpoints(seq, [good + wild])[0]
                 data = bytearray(msg.data)
                 data[-1] ^= 0x5A
@@ -85,7 +84,7 @@ class FaultScenarios(ConformanceLink):
                 bad.data[-1] ^= 0xFF
                 self._tx(bad)
             elif k == int(0.7 * self.fs):
-                phase['frame3'] = time.time()
+                phase['frame3'] = self.now()
                 msg = self.frames.encode_setpoints(seq, [good + wild])[0]
                 self._tx(can.Message(arbitration_id=msg.arbitration_id, data=msg.data, is_fd=msg.is_fd,
                                      bitrate_switch=msg.bitrate_switch, is_extended_id=True, check=False))
@@ -98,7 +97,7 @@ class FaultScenarios(ConformanceLink):
                 self._tx(can.Message(arbitration_id=0x7FE, data=bytes(8), is_extended_id=False))
             elif k == int(0.9 * self.fs):
                 # HostLimits that would exclude the motion, with a wrong CRC: applied, it would fault the stream
-                phase['limits_crc'] = time.time()
+                phase['limits_crc'] = self.now()
                 bad = self.proto.encode('HostLimits', {'HL_DisplacementMin': -1e-5, 'HL_DisplacementMax': 1e-5,
                                                        'HL_Deceleration': DECEL_MAX})
                 bad.data = bytearray(bad.data)
@@ -110,12 +109,16 @@ class FaultScenarios(ConformanceLink):
         def wave(k):
             inject(k)
             return base(k)
+        started = self.now()
         end = self.stream(first, wave, 1.1)
         self._sleep(LEAD + 0.05)
         samples = [s for s in self._samples_since(phase.get('frame2', 0.0)) if s.seq < end]
+        # the frames are injected while the stream is sent LEAD ahead, possibly before the controller has taken its
+        # first sample (all at once on simulated time): a status from before it ran is not one that left running
+        running = min((s[0] for s in self._states_since(started) if s[1] == 'running'), default=math.inf)
         for rid, since, until in (('CTRL-FRAME-2', 'frame2', 'frame3'), ('CTRL-FRAME-3', 'frame3', 'limits_crc'),
                                   ('CTRL-FRAME-2', 'limits_crc', None)):
-            t0, t1 = phase.get(since, math.inf), phase.get(until, math.inf) if until else math.inf
+            t0, t1 = max(phase.get(since, math.inf), running), phase.get(until, math.inf) if until else math.inf
             applied_wrong = [seq for seq, who in injected.items() if who == rid and any(
                 s.seq == seq and abs(s.u - self.sent[seq]) > 1.5 * LSB for s in samples)]
             stopped = [s for s in self._states_since(t0) if s[0] < t1 and s[1] != 'running'
@@ -143,7 +146,7 @@ class FaultScenarios(ConformanceLink):
         first = self.next_sequence() + 1000
         self.stream(first, self.ramp_to(self.position, p0, RAMP_VELOCITY), 0.2)
         self._sleep(LEAD + 0.1)
-        t = time.time()
+        t = self.now()
         target = 0.9 * edge
         self.command(CMD_ABORT, target, 5 * RAMP_VELOCITY)
         self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)
@@ -174,7 +177,7 @@ class FaultScenarios(ConformanceLink):
         first = self.next_sequence() + 1000
         target = 0.8 * edge
         p0 = self.position
-        t = time.time()
+        t = self.now()
         try:
             # slow enough that the controller is well on its way (LEAD x this short of the limit) when the first
             # setpoint beyond the limit reaches it: its fault ramp then starts from motion, whose shape is judged
@@ -237,19 +240,19 @@ class FaultScenarios(ConformanceLink):
         """CTRL-FAULT-2: the fault stays for LATCH_TIME without RESET; RESET returns to idle without fault bits."""
         if self.state != 'fault':
             return
-        t = time.time()
+        t = self.now()
         self._sleep(LATCH_TIME)
         states = self._states_since(t)
         cleared = [s for s in states if s[1] != 'fault' or not s[2]]
         latched = bool(states) and not cleared
-        t_reset = time.time()
+        t_reset = self.now()
         self.command(CMD_RESET)
         idle = self._wait(lambda: self.state == 'idle' and not self.faults, 0.2)
         ok = latched and idle
         held = f'{cleared[0][0] - t:.3f} s' if cleared else f'{LATCH_TIME:g} s'
         self.results.put('CTRL-FAULT-2', PASS if ok else FAIL,
                          f'fault held {held} without RESET ({len(states)} status frames); idle without faults '
-                         f'{time.time() - t_reset:.3f} s after RESET: {idle}',
+                         f'{self.now() - t_reset:.3f} s after RESET: {idle}',
                          '' if ok else f'a fault must latch until RESET (checked for {LATCH_TIME:g} s), which '
                          'clears it')
 
@@ -274,7 +277,7 @@ class FaultScenarios(ConformanceLink):
         p0 = self.position
         end_pos = p0 + side * step
         first = self.next_sequence() + 1000
-        t = time.time()
+        t = self.now()
         # a controller that wrongly applies the step lags it for a moment: that is this requirement's FAIL, not a
         # reason to abort the run (the envelope itself still holds every sample)
         self.tracking_allowance = step
@@ -318,7 +321,7 @@ class FaultScenarios(ConformanceLink):
                       None)
         if not ramped:
             self.merge_host_timing()
-            late = explains(self.trace.host_late, t_silent, time.time(), 1.0)
+            late = explains(self.trace.host_late, t_silent, self.now(), 1.0)
             measured = f'still {self.state} {timeout + 1.0:.2f} s after the host fell silent (stated host timeout ' \
                        f'{timeout:g} s)'
             if late:     # the simulator on this host does not count time it was not scheduled

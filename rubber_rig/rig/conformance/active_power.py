@@ -17,8 +17,6 @@ and that it takes no setpoint before a HostStreamStart (mixed into active.Confor
 """
 from __future__ import annotations
 
-import time
-
 from ..can.protocol import PROTOCOL_VERSION, STATES
 from .link import Aborted, ConformanceLink, judges
 from .report import FAIL, PASS
@@ -60,7 +58,7 @@ class PowerUpScenarios(ConformanceLink):
         """
         self.limits(self.env.lower, self.env.upper)
         self.heartbeat = True
-        t = time.time()
+        t = self.now()
         per = self.frames.setpoints_per_frame
         for k in range(0, 10 * per, per):
             self.send_setpoints(k, [0.0] * per, record=False)

@@ -18,7 +18,6 @@ setpoints, hold and reset while moving (mixed into active.ConformanceRun).
 from __future__ import annotations
 
 import math
-import time
 
 from ...safety import DECEL_MAX
 from ..can.protocol import (
@@ -71,7 +70,7 @@ class StreamScenarios(ConformanceLink):
         for k in range(IDENTIFY_REPEATS):
             if k:
                 self._sleep(0.25)
-            t = time.time()
+            t = self.now()
             self.command(CMD_IDENTIFY)
             if not self._wait(lambda t=t: self.identity is not None and self.identity[0] >= t, 1.0):
                 latencies.append(math.inf)
@@ -126,7 +125,7 @@ class StreamScenarios(ConformanceLink):
         self.limits(self.env.lower, self.env.upper)
         a = 0.4 * self.env.half
         first, p0 = 1000, self.position
-        t0 = time.time()
+        t0 = self.now()
         # setpoints below HS_FirstSequence, after it was announced: never the start of the stream (CTRL-STREAM-1)
         self.send('HostStreamStart', {'HS_FirstSequence': first})
         per = self.frames.setpoints_per_frame
@@ -134,7 +133,7 @@ class StreamScenarios(ConformanceLink):
             self.send_setpoints(k, [p0] * per, record=False)
         end = self.stream(first, self.smooth(p0, a), 2.0, start=False)
         self._sleep(LEAD + 0.3)                       # underrun: the controller holds
-        t_hold = time.time()
+        t_hold = self.now()
         self._sleep(0.3)
         held = self._samples_since(t_hold)
         samples = [s for s in self._samples_since(t0) if first <= s.seq < end]
@@ -156,7 +155,7 @@ class StreamScenarios(ConformanceLink):
         ok = bool(still) and 'holding' in states and not faults
         # resume from the held position, after the controller's current tick
         first2 = self.next_sequence()
-        t1 = time.time()
+        t1 = self.now()
         end2 = self.stream(first2, self.smooth(last, -0.5 * a), 0.5, start=False)
         self._sleep(2 * LEAD + 0.2)                   # the resumed stream starts LEAD ahead and is sent LEAD ahead
         resumed = [s for s in self._samples_since(t1) if first2 <= s.seq < end2]
@@ -230,7 +229,7 @@ class StreamScenarios(ConformanceLink):
     def _judge_ramp(self, target: float, code: int = CMD_ABORT):
         """ABORT (or DISABLE, `code`) from holding to target at RAMP_VELOCITY (CTRL-RAMP-1)."""
         p0 = self.position
-        t = time.time()
+        t = self.now()
         self.command(code, target, RAMP_VELOCITY)
         done = self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)
         self._sleep(0.05)
@@ -259,7 +258,7 @@ class StreamScenarios(ConformanceLink):
     @judges('CTRL-STREAM-2')
     def s_stale(self):
         """Setpoints of the old stream after the ramp, without HostStreamStart (CTRL-STREAM-2)."""
-        t = time.time()
+        t = self.now()
         with self.lock:
             last = max(self.sent) if self.sent else 0
         self.heartbeat = True
@@ -285,10 +284,10 @@ class StreamScenarios(ConformanceLink):
 
         def wave(k):
             if k == k_hold and 'hold' not in box:
-                box['hold'] = time.time()
+                box['hold'] = self.now()
                 self.command(CMD_HOLD, 0.0, RAMP_VELOCITY)
             return base(k)
-        t = time.time()
+        t = self.now()
         self.stream(first, wave, k_hold / self.fs + 0.2)          # HOLD goes out at k_hold, mid-stream
         done = self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)
         self._sleep(0.05)
@@ -317,13 +316,13 @@ class StreamScenarios(ConformanceLink):
         a = 0.4 * self.env.half
         p0 = self.position
         first = self.next_sequence() + 1000
-        t = time.time()
+        t = self.now()
         box = {}
         base = self.smooth(p0, -a if p0 > 0 else a)
 
         def wave(k):
             if k == int(0.5 * self.fs) and 'reset' not in box:
-                box['reset'] = time.time()
+                box['reset'] = self.now()
                 self.command(CMD_RESET)
             return base(k)
         end = self.stream(first, wave, 1.2)
@@ -350,13 +349,13 @@ class StreamScenarios(ConformanceLink):
         self.stream(first, lambda k: p0, 0.2)
         self._sleep(LEAD + 0.1)                       # holding
         target = self._ramp_target()
-        t = time.time()
+        t = self.now()
         self.command(CMD_ABORT, target, RAMP_VELOCITY)
         if not self._wait(lambda: self.state == 'ramping_down', 1.0):
             self.to_rest(self.position)               # no ramp: CTRL-RAMP-1's to judge, not this one
             return
         self._sleep(0.05)
-        t_reset = time.time()
+        t_reset = self.now()
         self.command(CMD_RESET)
         self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)
         self._sleep(0.05)

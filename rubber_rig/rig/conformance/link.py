@@ -22,6 +22,7 @@ import math
 import threading
 import time
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import can
 
@@ -38,6 +39,9 @@ from ..can.protocol import (
 from .host_timing import HostTiming
 from .report import Results
 from .trace import Trace
+
+if TYPE_CHECKING:
+    from .in_process import SimulatedTime
 
 LSB = 1e-7                  # [m] displacement resolution of the frames
 LEAD = 0.3                  # [s] setpoints streamed ahead of the controller: covers pauses of this host (a
@@ -118,8 +122,12 @@ class ConformanceLink:
     """
 
     def __init__(self, bus: can.BusABC, sample_rate: float, envelope: Envelope, profile: str = 'packed',
-                 log=print, power_up=None, host_timing_files=(), reference=None, ambient=None, only=None):
+                 log=print, power_up=None, host_timing_files=(), reference=None, ambient=None, only=None,
+                 simulated: SimulatedTime | None = None):
         self.bus, self.fs, self.env, self.log = bus, float(sample_rate), envelope, log
+        # None: the wall clock of this host, a receive thread reading the bus (a controller on a bus of its own);
+        # a SimulatedTime: the controller in this process, stepped with the run (deterministic, faster than real time)
+        self.simulated = simulated
         # the declared reference specimen (reference_specimen.ReferenceSpring) and ambient temperature
         # (reference_specimen.Ambient) the measured values are judged against (CTRL-MEAS-1..3); None: not declared
         self.reference, self.ambient = reference, ambient
@@ -161,7 +169,7 @@ class ConformanceLink:
     # ---- bus
     def _tx(self, msg: can.Message):
         with self.lock:
-            self.trace.add(msg, time.time())
+            self.trace.add(msg, self.now())
         self.bus.send(msg)
 
     def send(self, name: str, signals: dict):
@@ -180,12 +188,12 @@ class ConformanceLink:
             chunk = values[i * per:(i + 1) * per]
             # the frame is on its way from before send() is called: a status received after that may count it,
             # even while this thread still waits for the lock the receive thread holds
-            started = time.time()
+            started = self.now()
             self._tx(msg)
             if record:
                 with self.lock:
-                    self.sent_log.append((started, time.time(), first + i * per, len(chunk)))
-                    now = time.time()
+                    self.sent_log.append((started, self.now(), first + i * per, len(chunk)))
+                    now = self.now()
                     for k, v in enumerate(chunk):
                         self.sent[first + i * per + k] = v
                         self.sent_at[first + i * per + k] = now
@@ -194,44 +202,77 @@ class ConformanceLink:
         self._hb_counter = (self._hb_counter + 1) % 256
         self.send('HostHeartbeat', {'HH_Counter': self._hb_counter})
 
+    def now(self) -> float:
+        """The run's time [s]: this host's wall clock (time.time(), the time base of a CAN log), or simulated."""
+        return self.simulated.t if self.simulated is not None else time.time()
+
+    def _pause(self, seconds: float) -> None:
+        """Let `seconds` pass: sleep (the receive thread reads the bus meanwhile), or on simulated time step the
+        controller and read what it sent, one step at a time.
+        """
+        sim = self.simulated
+        if sim is None:
+            time.sleep(seconds)
+            return
+        for _ in range(max(1, int(round(seconds / sim.step)))):
+            sim.t += sim.step
+            if sim.powered:
+                sim.poll(sim.t)
+            self._send_due(sim.t)
+            msg = self.bus.recv(0)
+            while msg is not None:
+                self._on_frame(msg, msg.timestamp)   # its arrival on the simulated bus, on the simulated clock
+                msg = self.bus.recv(0)
+
+    def _send_due(self, now: float) -> bool:
+        """Send the host heartbeat and the foreign traffic when due at `now`; True when a heartbeat went out."""
+        beat = self.heartbeat and now >= self._next_hb
+        if beat:
+            self._heartbeat()
+            self._next_hb = max(self._next_hb + cycle_time('HostHeartbeat'), now)
+        if self.foreign_traffic and now >= self._next_foreign:
+            self._tx(can.Message(arbitration_id=FOREIGN_ID, data=bytes(8), is_extended_id=False))
+            self._next_foreign = now + FOREIGN_PERIOD
+        return beat
+
     def _receive_loop(self):
-        period = cycle_time('HostHeartbeat')
+        """The receive thread of a run on the wall clock: read the bus, send what is due, and record every time this
+        thread ran late (host_timing: not the controller's lateness).
+        """
         wait, back, beating = 0.005, None, False
         while not self._stop.is_set():
             asked = time.time()
             if back is not None:        # the loop comes round at once after a frame: a pause here is this host's
                 self.host_timing.due(back, asked)
             msg = self.bus.recv(wait)
-            now = time.monotonic()
-            back = time.time()
+            now = back = time.time()
             # back later than the wait asked for: this host did not run this loop (nor read the bus) meanwhile
             self.host_timing.due(asked + wait, back)
-            if self.heartbeat and now >= self._next_hb:
-                if beating:     # due since the last one: a send later than due is this host's lateness
-                    self.host_timing.due(time.time() - (now - self._next_hb), time.time())
-                self._heartbeat()
-                self._next_hb = max(self._next_hb + period, now)
+            due = self._next_hb
+            if self._send_due(now) and beating:
+                # due since the last one: a send later than due is this host's lateness
+                self.host_timing.due(due, now)
             beating = self.heartbeat
-            if self.foreign_traffic and now >= self._next_foreign:
-                self._tx(can.Message(arbitration_id=FOREIGN_ID, data=bytes(8), is_extended_id=False))
-                self._next_foreign = now + FOREIGN_PERIOD
-            if msg is None:
-                continue
-            with self.lock:
-                fr = self.trace.add(msg)
-                if fr.malformed or fr.host is not False:
-                    continue
-                if fr.samples is not None:
-                    self._on_feedback(fr)
-                elif fr.name == 'ControllerStatus':
-                    s = fr.signals
-                    code = int(s['ST_State'])
-                    self.state = STATES[code] if code < len(STATES) else f'state {code}'
-                    self.faults = int(s['ST_Faults'])
-                    self.status_log.append((fr.t, self.state, self.faults, int(s['ST_LastSequence']),
-                                            int(s['ST_BufferLevel'])))
-                elif fr.name == 'ControllerIdentity':
-                    self.identity = (fr.t, dict(fr.signals))
+            if msg is not None:
+                self._on_frame(msg, msg.timestamp or now)
+
+    def _on_frame(self, msg: can.Message, t: float):
+        """One frame the controller sent, seen at `t` [s]: into the trace, and the link's view of the controller."""
+        with self.lock:
+            fr = self.trace.add(msg, t)
+            if fr.malformed or fr.host is not False:
+                return
+            if fr.samples is not None:
+                self._on_feedback(fr)
+            elif fr.name == 'ControllerStatus':
+                s = fr.signals
+                code = int(s['ST_State'])
+                self.state = STATES[code] if code < len(STATES) else f'state {code}'
+                self.faults = int(s['ST_Faults'])
+                self.status_log.append((fr.t, self.state, self.faults, int(s['ST_LastSequence']),
+                                        int(s['ST_BufferLevel'])))
+            elif fr.name == 'ControllerIdentity':
+                self.identity = (fr.t, dict(fr.signals))
 
     def _on_feedback(self, fr):
         raw, xs, fs, us = fr.samples
@@ -269,13 +310,13 @@ class ConformanceLink:
             raise Aborted(self.deviation)
 
     def _wait(self, predicate, timeout: float) -> bool:
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
+        end = self.now() + timeout
+        while self.now() < end:
             self._check()
             with self.lock:
                 if predicate():
                     return True
-            time.sleep(0.002)
+            self._pause(0.002 if self.simulated is None else self.simulated.step)
         return False
 
     def _sleep(self, seconds: float):
@@ -306,15 +347,15 @@ class ConformanceLink:
         self.heartbeat = True
         total = int(round(duration * self.fs))
         per = self.frames.setpoints_per_frame
-        t0, sent = time.monotonic(), first
+        t0, sent = self.now(), first
         while sent < first + total and not (until is not None and until()):
             self._check()
-            due = first + int((time.monotonic() - t0 + LEAD) * self.fs)
+            due = first + int((self.now() - t0 + LEAD) * self.fs)
             while sent < min(due, first + total):
                 n = min(per, first + total - sent)
                 self.send_setpoints(sent, [wave(k - first) for k in range(sent, sent + n)])
                 sent += n
-            time.sleep(0.001)
+            self._pause(0.001)
         return sent
 
     def next_sequence(self, lead: float = LEAD) -> int:
@@ -326,15 +367,15 @@ class ConformanceLink:
     def to_rest(self, target: float = 0.0):
         """Bring the controller to rest at target (ABORT if it ticks), clear faults (RESET), wait for idle."""
         self.heartbeat, self.foreign_traffic = True, False
-        end = time.monotonic() + REST_TIMEOUT
+        end = self.now() + REST_TIMEOUT
         while True:
             # ABORT again every second while the controller still ticks: a frame lost on a loaded host (a full
             # receive queue) must not leave the rig running
             if self.state in ('running', 'holding'):
                 self.command(CMD_ABORT, target)
-            if self._wait(lambda: self.state in ('idle', 'fault'), min(1.0, max(0.0, end - time.monotonic()))):
+            if self._wait(lambda: self.state in ('idle', 'fault'), min(1.0, max(0.0, end - self.now()))):
                 break
-            if time.monotonic() >= end:
+            if self.now() >= end:
                 raise Aborted(f'the controller did not come to rest within {REST_TIMEOUT:g} s (state {self.state})')
         if self.state == 'fault' or self.faults:
             self.command(CMD_RESET)
