@@ -647,7 +647,8 @@ def test_rig_driver_node_reports_the_bus_profile_and_its_measured_load(ros_conte
         assert node.rig.medium.bitrate == 500_000 and not node.rig.medium.fd
         assert node.rig.wait_ready(5.0)
         time.sleep(0.3)
-        diag = node.bus_diagnostics()
+        from rubber_rig.nodes.conversions import bus_lines
+        diag = bus_lines(node.rig.driver, node.config.frame_profile)   # the bus's lines of /diagnostics
         assert diag['can_profile'] == 'classic' and 42.0 < float(diag['bus_load_pct']) < 44.0
         # idle: heartbeats, status and temperature only (about 80 frames/s of 8 bytes: ~2 % at 500 kbit/s)
         assert 0.5 < float(diag['bus_load_measured_pct']) < 12.0

@@ -24,7 +24,7 @@ from ..excitation.runner import BlockResult, ProgramRunner
 from ..rig.can.driver import DriverStatus
 from ..rig.config import RigConfig
 from ..rig.interface import open_rig
-from .program_session import ProgramSession
+from .program_session import LEAD_TIME, ProgramSession
 
 
 @dataclass
@@ -59,7 +59,9 @@ def run_program(program, config, on_progress: Optional[Callable] = None, amplitu
     """Run `program` (Program, YAML path or shipped name) on the rig of `config` (RigConfig or mapping).
 
     The program is validated against the limits before the rig is opened, so nothing is sent on error.
-    Setpoints are streamed `lookahead` seconds ahead of the measurement (default 0.1 s paced, 0.05 s fast), in
+    Setpoints are streamed `lookahead` seconds ahead of the measurement (default paced: LEAD_TIME, the excitation
+    node's lead_time, so a stall of this process up to lead_time - stream_timeout costs latency, not the run;
+    0.05 s fast), in
     chunks of `chunk` setpoints (default: 10 ms paced, which keeps the stream smooth; half the lookahead fast,
     which amortises the per-chunk overhead). on_progress(Progress) is called every progress_period seconds of
     samples. An open `rig` may be passed in (not closed here). compensation_memory: see ProgramRunner (with
@@ -101,7 +103,9 @@ class ProgramRun:
         fs = self.fs = cfg.sample_rate
         self.cfg, self.drv, self.on_progress, self.before_chunk = cfg, drv, on_progress, before_chunk
         if lookahead is None:
-            lookahead = 0.1 if cfg.paced else 0.05
+            # paced: a busy computer stalls this thread for 0.1-0.5 s at times; with 0.1 s ahead (the old default)
+            # a 0.17 s stall was stream loss (test_canlog, under load)
+            lookahead = LEAD_TIME if cfg.paced else 0.05
         ahead = max(2, int(round(lookahead * fs)))
         if chunk is None:
             chunk = max(1, min(ahead // 2, int(round(0.01 * fs)))) if cfg.paced else max(1, ahead // 2)
