@@ -68,7 +68,7 @@ from rubber_rig.nodes.rig_driver_params import (  # noqa: F401 - also imported f
     protective_values,
     rig_config,
 )
-from rubber_rig.nodes.spin import spin_node
+from rubber_rig.nodes.spin import spin_node, with_process_nice
 from rubber_rig.rig.can.batcher import SampleBatcher
 from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.can.gate import StreamGate
@@ -393,7 +393,7 @@ class RigDriverNode(LifecycleNode):
 
 
 def main(args=None):
-    spin_node(RigDriverNode, args)
+    spin_node(with_process_nice(RigDriverNode), args)   # a process of its own: its niceness from parameter nice
 
 
 if __name__ == '__main__':

@@ -64,7 +64,8 @@ class RigDriverParams:
     autostart: configure and activate at start; batch_size: samples per message (0: BATCH_PERIOD of samples);
     max_batch_delay [s]: a partial batch waits at most this long; poll_period [s]: the bus is read this often;
     status_period, diagnostics_period [s]; owner_timeout [s]: the stream owner's heartbeat silent this long is stream
-    loss; configured_protection: the protective settings (limits, timeouts) the node was started with, which run time
+    loss; nice: the niceness of the rig_driver process (rig.priority);
+    configured_protection: the protective settings (limits, timeouts) the node was started with, which run time
     may make stricter and relax back only this far (rig.live.weakening).
     """
 
@@ -76,6 +77,7 @@ class RigDriverParams:
     diagnostics_period: float
     owner_timeout: float
     configured_protection: dict
+    nice: int = 0
 
     def samples_per_batch(self, sample_rate: float) -> int:
         """batch_size, or BATCH_PERIOD of samples at ``sample_rate`` [Hz] when it is 0."""
@@ -119,8 +121,12 @@ def declare_rig_driver_parameters(node: Node) -> RigDriverParams:
     owner_timeout = declare(node, 'owner_timeout', 1.0, "the stream owner's heartbeat silent this long is stream "
                             'loss, also while it holds the rig (an owner that never beat, e.g. a script without one, '
                             'is watched by stream_timeout alone)', range=(0.3, 30.0), units='s')
+    nice = declare(node, 'nice', 0, 'niceness of the rig_driver process, set when it starts as a process of its own '
+                   '(rubber_rig.rig.priority): below 0 its bus reads and setpoints get the CPU before the other '
+                   "programs of this computer (ros2_control's thread_priority, without a real-time kernel); needs "
+                   'root or CAP_SYS_NICE, else a warning and the process keeps its priority', range=(-20, 19))
     return RigDriverParams(autostart, batch_size, max_batch_delay, poll_period, status_period, diagnostics_period,
-                           owner_timeout, protective_values(node))
+                           owner_timeout, protective_values(node), nice)
 
 
 def protective_values(node: Node) -> dict:

@@ -51,6 +51,7 @@ from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
 from ..dds import configure_dds
+from ..rig.priority import set_process_nice
 from .params import ParameterError, undeclared_overrides
 from .rclpy_compat import RCLError
 
@@ -80,6 +81,22 @@ def _spin(executor: SingleThreadedExecutor, errors: list) -> None:
         pass
     except BaseException as exc:   # noqa: BLE001 - handed to the main thread, which cleans up and re-raises
         errors.append(exc)
+
+
+def with_process_nice(node_factory: Callable[[], Node]) -> Callable[[], Node]:
+    """A factory for a node that runs as a process of its own: the node, then the process's niceness set from its
+    parameter (``node.params.nice``, rubber_rig.rig.priority; logged, or a warning saying why not). Not done in the
+    node class: a node started in another process (in-process launch, tests) leaves that process's priority alone.
+    """
+    def create() -> Node:
+        node = node_factory()
+        why = set_process_nice(node.params.nice)
+        if why:
+            node.get_logger().warning(why)
+        elif node.params.nice:
+            node.get_logger().info(f'process niceness {node.params.nice} (parameter nice)')
+        return node
+    return create
 
 
 def spin_node(node_factory: Callable[[], Node], args=None) -> None:

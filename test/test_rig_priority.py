@@ -1,0 +1,100 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The niceness of the rig_driver process (rubber_rig/rig/priority.py, parameter ``nice``): every thread of the
+process gets it, those the middleware started before the node read its parameters included.
+"""
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from rubber_rig.rig.priority import set_process_nice
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def _thread_nices(pid: int) -> list:
+    """The niceness of every thread of process `pid` (field 19 of /proc/<pid>/task/<tid>/stat)."""
+    out = []
+    for tid in os.listdir(f'/proc/{pid}/task'):
+        stat = Path(f'/proc/{pid}/task/{tid}/stat').read_text()
+        out.append(int(stat.rsplit(')', 1)[1].split()[16]))
+    return out
+
+
+def test_every_thread_of_the_process_gets_the_niceness_and_new_threads_inherit_it():
+    code = ('import threading, time, os\n'
+            'from rubber_rig.rig.priority import set_process_nice\n'
+            'ev = threading.Event()\n'
+            'before = [threading.Thread(target=ev.wait) for _ in range(3)]\n'
+            '[t.start() for t in before]\n'
+            'print(repr(set_process_nice(7)))\n'
+            'after = threading.Thread(target=ev.wait); after.start()\n'
+            'print(os.getpid(), flush=True)\n'
+            'time.sleep(3); ev.set()\n')
+    proc = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True, cwd=REPO)
+    try:
+        assert proc.stdout.readline().strip() == "''"
+        pid = int(proc.stdout.readline())
+        nices = _thread_nices(pid)
+        assert len(nices) == 5 and set(nices) == {7}, nices
+    finally:
+        proc.wait(10)
+
+
+def test_a_niceness_outside_the_range_is_refused_and_one_not_permitted_says_why():
+    with pytest.raises(ValueError, match='outside -20..19'):
+        set_process_nice(-21)
+    if os.geteuid() != 0:
+        why = set_process_nice(os.getpriority(os.PRIO_PROCESS, 0) - 1)
+    else:   # root may raise the priority: the refusal is checked in a child that drops to the user nobody
+        read, write = os.pipe()
+        pid = os.fork()
+        if pid == 0:
+            try:
+                os.setgid(65534)
+                os.setuid(65534)
+                os.write(write, set_process_nice(os.getpriority(os.PRIO_PROCESS, 0) - 1).encode())
+            finally:
+                os._exit(0)
+        os.close(write)
+        with os.fdopen(read) as f:
+            why = f.read()
+        os.waitpid(pid, 0)
+    assert 'CAP_SYS_NICE' in why and 'the process keeps' in why, why
+
+
+@pytest.mark.ros
+def test_rig_driver_started_as_a_process_runs_at_the_niceness_of_its_parameter(tmp_path):
+    env = dict(os.environ, ROS_DOMAIN_ID=str(170 + os.getpid() % 10), PYTHONUNBUFFERED='1')
+    log = tmp_path / 'rig_driver.log'
+    with open(log, 'wb') as out:
+        proc = subprocess.Popen([sys.executable, '-m', 'rubber_rig.nodes.rig_driver_node', '--ros-args',
+                                 '-r', '__ns:=/nice_test', '-p', 'nice:=4', '-p', 'autostart:=false'],
+                                env=env, stdout=out, stderr=subprocess.STDOUT, cwd=REPO)
+    try:
+        deadline = time.monotonic() + 60.0
+        while 'ready (pid' not in log.read_text() and proc.poll() is None and time.monotonic() < deadline:
+            time.sleep(0.1)
+        assert 'ready (pid' in log.read_text(), log.read_text()[-2000:]
+        nices = _thread_nices(proc.pid)
+        assert len(nices) > 3 and set(nices) == {4}, nices     # the DDS threads too
+        assert 'process niceness 4' in log.read_text()
+    finally:
+        proc.terminate()
+        proc.wait(20)
