@@ -13,10 +13,12 @@ benchmarks: setup
 	.venv/bin/python benchmarks/run_all.py $(ARGS)
 
 # the everyday tier (<= 5 min on 2 cores): lint, unit and core scenario tests on simulated time, and a few
-# end-to-end tests with the nodes as processes that prove the wiring (pytest marker `system` left out)
+# end-to-end tests with the nodes as processes that prove the wiring (pytest marker `system` left out), on
+# TEST_WORKERS pytest-xdist workers (the end-to-end tests all on one of them, one at a time: test/conftest.py)
+TEST_WORKERS ?= 2
 test: setup
 	.venv/bin/ruff check .
-	.venv/bin/python -m pytest -m "not system" $(PYTEST_ARGS)
+	.venv/bin/python -m pytest -m "not system" -n $(TEST_WORKERS) --dist loadgroup $(PYTEST_ARGS)
 
 # the long runs on the wall clock (real-time fault matrix, detector trip delays, the conformance matrix in a
 # network namespace): logic the simulated-time tests cover, run once more in real time (~10 min)

@@ -49,3 +49,14 @@ def pytest_runtest_makereport(item, call):
     diagnostics to a failure (the fault matrix prints its node logs)."""
     outcome = yield
     setattr(item, f'rep_{call.when}', outcome.get_result())
+
+
+def pytest_collection_modifyitems(config, items):
+    """make test runs on two pytest-xdist workers (--dist loadgroup): the tests of one module stay on one worker
+    (module fixtures are set up once), and every test that runs processes on the wall clock (markers ros and slow:
+    node processes on a DDS domain, a simulator process on a bus) runs on one worker, one after the other, so two of
+    them never share the DDS domains or the cores; the logic tests on simulated time fill the other worker.
+    """
+    for item in items:
+        wall_clock = item.get_closest_marker('ros') or item.get_closest_marker('slow')
+        item.add_marker(pytest.mark.xdist_group('end_to_end' if wall_clock else item.module.__name__))

@@ -32,6 +32,8 @@ pytestmark = pytest.mark.ros
 DOMAIN = 90 + os.getpid() % 10
 
 
+@pytest.mark.system      # "within a second" on the wall clock of a SIGSTOPped process; the rule is
+#                          session.liveness.Peers', judged on simulated time in test_scenario_faults
 def test_a_node_whose_executor_stops_is_named_silent_within_a_second():
     with ros_context(DOMAIN) as ctx:
         beating = Node('beating', namespace='/hb', context=ctx)

@@ -167,6 +167,10 @@ def test_a_frozen_excitation_is_named_where_operators_look_and_blames_only_itsel
     ready_again(op, procs)
 
 
+# System tier: the next two each run a program on the wall clock until the recorder is gone (15-35 s); make test's
+# kill-and-restart is test_fault_matrix (element model and recorder killed mid-program and restarted), and what a
+# result says of a lost recording is the excitation's core (session/), judged on simulated time
+@pytest.mark.system
 def test_a_recorder_killed_mid_program_is_in_the_result(suite):
     """The issue: a recorder killed mid-program; the goal ended and did not mention the lost recording."""
     procs, op, base, _ = suite
@@ -191,6 +195,7 @@ def test_a_recorder_killed_mid_program_is_in_the_result(suite):
     assert recording(op)
 
 
+@pytest.mark.system
 def test_a_recorder_whose_disk_fills_up_is_in_the_result(suite, tmp_path):
     """The issue: on a 600 kB tmpfs the recorder logged 'disk full' 4.5 s in, and the program's result did not
     mention the recording. The recorder runs in a private mount namespace on a small tmpfs (as in

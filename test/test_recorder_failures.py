@@ -150,6 +150,7 @@ def test_uncreatable_output_dir_is_an_error_status_then_start_elsewhere_records(
 
 
 @pytest.mark.ros
+@pytest.mark.system     # a node start of its own; the uncreatable directory (make test) takes the same path
 def test_read_only_output_dir_is_an_error_status_and_a_later_start_works(context, tmp_path):
     why = private_mounts_available()
     if why:
@@ -260,6 +261,7 @@ def test_disk_full_mid_recording_is_an_error_within_half_a_second_and_the_file_s
 
 # -- SIGKILL mid-stream ------------------------------------------------------------------------------------------------
 @pytest.mark.ros
+@pytest.mark.system     # 15 s of stream; a killed recorder is make test's in test_fault_matrix and test_recording_node
 def test_sigkill_mid_stream_loses_at_most_the_flush_period_and_says_the_tail_is_unaccounted(context, tmp_path,
                                                                                             capsys):
     ns = '/killed'
