@@ -263,8 +263,9 @@ def test_happy_path_records_every_sample(suite):
     assert len(offsets) >= 20, f'{len(offsets)} setpoint batches of the program'
     print(f'setpoint stamp - sample time: {np.min(offsets) * 1e3:.2f} .. {np.max(offsets) * 1e3:.2f} ms')
     # estimated from the latest sample batch's stamp (before the first sample: from when the stream opened, 17 ms
-    # early here): off by the bus timestamps' jitter and the stream's start-up, never by the 0.5 s lead
-    assert np.max(np.abs(offsets)) < 0.05, offsets
+    # early here): off by the bus timestamps' jitter, the stream's start-up and how late the excitation's executor
+    # ran (69 ms seen with a load of 8 on two cores), never by the 0.7 s lead the batch was sent ahead
+    assert np.max(np.abs(offsets)) < 0.25, offsets
 
 
 @system
