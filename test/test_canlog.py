@@ -789,3 +789,27 @@ def test_the_log_is_compared_with_the_recording_of_the_run(logged_runs, tmp_path
     out = capsys.readouterr().out
     assert f"WARNING:    the log's time goes backwards 1 times and jumps 0 times (frame {k + 1} (line {k + 1})" in out
     assert 'not the rig\'s clock' in out
+
+
+def test_a_temperature_the_controller_does_not_have_reads_as_none_not_as_absolute_zero(tmp_path):
+    """TEMP_Specimen's lowest raw value (-327.68 degC) says "no reading" (docs/protocol.md): the log reader gives
+    NaN for it, as the driver does (issue 36: it read -327.68 degC as a temperature)."""
+    from rubber_rig.rig.can.protocol import Protocol
+    path, edited = tmp_path / 'run.blf', tmp_path / 'no_temperature.blf'
+    assert run_program(PROG, dict(FAST, can_log=str(path))).completed
+    proto, replaced = Protocol(), 0
+    with can.Logger(str(edited)) as w:
+        for msg in can.LogReader(str(path)):
+            decoded = proto.decode(msg)
+            if decoded and decoded[0] == 'Temperature':
+                signals = dict(decoded[1], TEMP_Specimen=-327.68)
+                new = proto.encode('Temperature', signals)
+                msg = can.Message(timestamp=msg.timestamp, arbitration_id=new.arbitration_id, data=new.data,
+                                  is_extended_id=False, is_rx=msg.is_rx, channel=msg.channel)
+                replaced += 1
+            w.on_message_received(msg)
+    assert replaced >= 1
+    normal, missing = decode_clean(path), decode_clean(edited)
+    assert np.nanmin(normal.temperature) > 0.0
+    assert np.isnan(missing.temperature).all(), np.unique(missing.temperature)
+    np.testing.assert_array_equal(missing.sequence, normal.sequence)

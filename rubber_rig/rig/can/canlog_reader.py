@@ -38,7 +38,17 @@ from .canlog import SUPPORTED_FORMATS, CanLogError, CanLogWarning, log_format
 from .canlog_text import TextLogReader, _asc_start, _integrity, frames_until_damage, text_damage
 from .canlog_time import TimeCheck
 from .frames import PROFILES, SampleFrames
-from .protocol import DBC_PATH, STATES, STATUS_SEQ_MOD, MalformedFrame, Protocol, fault_names, meet, unwrap
+from .protocol import (
+    DBC_PATH,
+    STATES,
+    STATUS_SEQ_MOD,
+    MalformedFrame,
+    Protocol,
+    fault_names,
+    meet,
+    temperature_reading,
+    unwrap,
+)
 from .timing import frame_bits
 
 
@@ -372,7 +382,7 @@ class _Decoder:
             a['heartbeat_state'].append(code)
             self.state = _state_change(out, self.state, code, rel)
         elif name == 'Temperature':
-            self.temperature = float(sig['TEMP_Specimen'])
+            self.temperature = temperature_reading(float(sig['TEMP_Specimen']))   # NaN: the controller has none
         elif name == 'HostCommand':
             code = int(sig['CMD_Code'])
             out.commands.append((rel, self.cmd_names.get(code, str(code)), float(sig['CMD_Argument'])))
