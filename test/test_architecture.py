@@ -36,6 +36,7 @@ ALLOWED = {
     'units': set(),
     'versions': set(),
     'paths': set(),
+    'cpu': set(),
     'dds': {'paths'},
     'security': set(),
     'analysis': set(),
@@ -47,11 +48,11 @@ ALLOWED = {
     'session': {'excitation', 'online', 'recording', 'rig', 'safety'},
     'online': {'analysis', 'excitation', 'models'},
     'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig', 'session', 'units'},
-    'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'security',
+    'nodes': {'analysis', 'cpu', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'security',
               'session', 'settings', 'versions'},
-    'cli': {'__init__', 'analysis', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording', 'rig',
+    'cli': {'__init__', 'analysis', 'cpu', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording', 'rig',
             'safety', 'security', 'session', 'settings', 'units'},
-    'testing': {'dds', 'nodes'},
+    'testing': {'cpu', 'dds', 'nodes'},
 }
 OPTIONAL_HEAVY = {'matplotlib'}
 
