@@ -48,10 +48,10 @@ ALLOWED = {
     'session': {'excitation', 'online', 'recording', 'rig', 'safety'},
     'online': {'analysis', 'excitation', 'models'},
     'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig', 'session', 'units'},
-    'nodes': {'analysis', 'cpu', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'security',
-              'session', 'settings', 'versions'},
-    'cli': {'__init__', 'analysis', 'cpu', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording', 'rig',
-            'safety', 'security', 'session', 'settings', 'units'},
+    'nodes': {'analysis', 'cpu', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety',
+              'security', 'session', 'settings', 'versions'},
+    'cli': {'__init__', 'analysis', 'cpu', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording',
+            'rig', 'safety', 'security', 'session', 'settings', 'units'},
     'testing': {'cpu', 'dds', 'nodes'},
 }
 OPTIONAL_HEAVY = {'matplotlib'}

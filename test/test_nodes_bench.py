@@ -73,6 +73,27 @@ def test_main_job_end_to_end(tmp_path, capsys):
     md = mcap.with_suffix('').with_name(mcap.stem + '.summary.md').read_text()
     assert '| 0 | sine_0.5mm_5Hz |' in md
     assert 'sine_1mm_5Hz' in out     # the live table
+    # each node ran in a process of its own (as ros2 launch starts them), and the bench says what each used
+    procs = summary['cpu']['processes']
+    assert {'rig_driver', 'excitation', 'element_model', 'recorder', 'bench'} <= set(procs)
+    assert len({p['pid'] for p in procs.values()}) == len(procs)
+    assert all(p['cpu_cores'] > 0 for p in procs.values())
+    assert 'machine: ' in out and 'load average (1 min)' in out
+    assert 'latency: not measured with --fast' in out     # rig time runs ahead of the wall clock
+
+
+@pytest.mark.ros
+def test_main_job_in_process(tmp_path, capsys):
+    # --in-process: the same nodes as threads of the bench's own process
+    rc = main(['bench', '--fast', '--in-process', '--blocks', '16', '--cycles', '3', '--output-dir', str(tmp_path),
+               '--domain-id', str(domain_id() - 81), '--quiet'])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    mcap = Path(out.split('MCAP recording:')[1].split()[0])
+    summary = json.loads(mcap.with_suffix('').with_name(mcap.stem + '.summary.json').read_text())
+    assert summary['result']['success'] and summary['loss']['recording']['samples_lost'] == 0
+    assert list(summary['cpu']['processes']) == ['bench+nodes']
+    assert 'one SingleThreadedExecutor thread each' in out
 
 
 @pytest.mark.ros
