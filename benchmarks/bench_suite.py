@@ -25,7 +25,7 @@ rig_driver (simulated rig on the simulated CAN bus with bit timing: CAN FD 1/5 M
 excitation (a 5 Hz, 1 mm sine, open loop),
 element_model and recorder run as threads of one process (one SingleThreadedExecutor thread per node) or, with
 --processes, as separate processes the way ros2 launch and `rubber-rig bench` start them
-(rubber_rig.nodes.processes); --spawn-sim puts the simulated rig in a process of its own too (udp_multicast over
+(rubber_rig.cli.processes); --spawn-sim puts the simulated rig in a process of its own too (udp_multicast over
 loopback, no bit timing), so that the nodes' CPU is measured without it. A monitor node subscribes like any client.
 --nodes-from runs the node processes of another checkout (an older commit) under the same monitor and accounting:
 old and new back to back in one run.
@@ -70,7 +70,7 @@ def program_text(duration: float) -> str:
 
 
 def driver_extra(args, domain: int) -> dict:
-    from rubber_rig.nodes.processes import separate_sim_rig
+    from rubber_rig.cli.processes import separate_sim_rig
     extra = separate_sim_rig(domain) if args.spawn_sim else {}
     if args.poll_period:
         extra['poll_period'] = args.poll_period
@@ -93,10 +93,10 @@ def bus_name(args) -> str:
 
 
 def start_processes(args, rate, batch, out_dir, domain):
-    """Each node in its own process, as ros2 launch starts them (rubber_rig.nodes.processes.SuiteProcesses); with
+    """Each node in its own process, as ros2 launch starts them (rubber_rig.cli.processes.SuiteProcesses); with
     --nodes-from, the nodes of another checkout (its code on PYTHONPATH, its config/rig_sim.yaml).
     """
-    from rubber_rig.nodes.processes import SuiteProcesses
+    from rubber_rig.cli.processes import SuiteProcesses
     config = Path(args.nodes_from) / 'config' / 'rig_sim.yaml' if args.nodes_from else CONFIG
     overrides = {'recorder': {'output_dir': str(out_dir), 'discovery_period': 0.2},
                  'excitation': {'batch_size': batch},
@@ -152,9 +152,9 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
             launcher.start(RecorderNode, {'output_dir': str(out_dir), 'discovery_period': 0.2})
             launcher.start(ElementModelNode)
             launcher.start(ExcitationNode, {'batch_size': batch})
-            driver = launcher.start(RigDriverNode, dict({'sample_rate': float(rate),
-                                                         'batch_size': args.batch_size or 0},
-                                                         **driver_extra(args, domain)))
+            driver_params = dict({'sample_rate': float(rate), 'batch_size': args.batch_size or 0},
+                                 **driver_extra(args, domain))
+            driver = launcher.start(RigDriverNode, driver_params)
         mon = launcher.spin(SuiteMonitor(context=launcher.context))
         # the rig ready, not just any status (the driver's first one, before autostart, says 'unconfigured')
         if not launcher.wait_for(lambda: mon.status is not None and mon.status.state in READY_STATES

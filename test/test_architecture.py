@@ -52,7 +52,7 @@ ALLOWED = {
               'security', 'session', 'settings', 'versions'},
     'cli': {'__init__', 'analysis', 'cpu', 'excitation', 'fitting', 'models', 'nodes', 'online', 'paths', 'recording',
             'rig', 'safety', 'security', 'session', 'settings', 'units'},
-    'testing': {'cpu', 'dds', 'nodes'},
+    'testing': {'cli', 'cpu', 'dds', 'nodes'},
 }
 OPTIONAL_HEAVY = {'matplotlib'}
 

@@ -26,7 +26,7 @@ import pytest
 
 from rubber_rig import cpu
 from rubber_rig.cli.bench_nodes import node_parameters, suite_facts
-from rubber_rig.nodes.processes import separate_sim_rig
+from rubber_rig.cli.processes import separate_sim_rig
 
 from support.suite import CONFIG
 

@@ -15,7 +15,7 @@
 """How ``rubber-rig bench`` starts the suite's nodes, and what it knows of them before they answer.
 
 :class:`NodeProcesses` (the default): each node in a process of its own, started and stopped the way ``ros2 launch
-rubber_rig rig_sim.launch.py`` does (rubber_rig.nodes.processes: same executables, same parameter file, overrides
+rubber_rig rig_sim.launch.py`` does (rubber_rig.cli.processes: same executables, same parameter file, overrides
 in a second file, SIGINT to stop), and the paced simulated rig in a process of its own on a bus that crosses
 processes (python-can udp_multicast over loopback). No interpreter lock is shared: a busy model does not delay the
 driver. :class:`InProcessNodes` (``--in-process``): the same node classes as threads of this process, one
@@ -35,7 +35,7 @@ from pathlib import Path
 import yaml
 
 from rubber_rig.cli.main import CommandError
-from rubber_rig.nodes.processes import SuiteProcesses, separate_sim_rig
+from rubber_rig.cli.processes import SuiteProcesses, separate_sim_rig
 
 STOP_ORDER = ('rig_driver', 'excitation', 'element_model', 'foxglove_view', 'recorder')   # the rig to rest first
 LOG_LINES = 5       # lines of a dead node's log shown with the error

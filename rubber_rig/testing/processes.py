@@ -12,9 +12,9 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The suite as separate processes: :class:`rubber_rig.nodes.processes.SuiteProcesses`, which ``rubber-rig bench``
+"""The suite as separate processes: :class:`rubber_rig.cli.processes.SuiteProcesses`, which ``rubber-rig bench``
 also uses to start its main job (it moved there; the tests and benchmarks import it from here or from there).
 """
-from rubber_rig.nodes.processes import NODES, SuiteProcesses
+from rubber_rig.cli.processes import NODES, SuiteProcesses
 
 __all__ = ['NODES', 'SuiteProcesses']
