@@ -105,6 +105,7 @@ def start_processes(args, rate, batch, out_dir, domain):
     procs = SuiteProcesses(config, '/', domain, out_dir / f'logs_{rate:g}Hz', overrides)
     if args.nodes_from:
         procs.env['PYTHONPATH'] = str(Path(args.nodes_from).resolve())
+        procs.cwd = str(Path(args.nodes_from).resolve())   # python -m puts the working directory first on sys.path
     procs.start_all(('recorder', 'element_model', 'excitation', 'rig_driver'))
     return procs
 

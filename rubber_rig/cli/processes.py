@@ -67,6 +67,9 @@ class SuiteProcesses:
         self._logs = {}
         self.extra_args: dict[str, list[str]] = {}   # more --ros-args per node (remappings)
         self.prefix: dict[str, list[str]] = {}       # a command to run a node under (ip netns exec HOST: another host)
+        # the node processes' working directory (None: this one's). `python -m` puts it first on sys.path, before
+        # PYTHONPATH: nodes of another checkout (bench_suite --nodes-from) must run in that checkout
+        self.cwd = None
         self._log_offset = {}
         self.env = dict(os.environ, ROS_DOMAIN_ID=str(self.domain_id), PYTHONUNBUFFERED='1')
         self.env.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
@@ -92,7 +95,8 @@ class SuiteProcesses:
         self._logs[node] = log
         nice = (lambda: os.nice(self.niceness)) if self.niceness > 0 else None
         self.procs[node] = subprocess.Popen(self.command(node, overrides), env=self.env, stdout=log,
-                                            stderr=subprocess.STDOUT, start_new_session=True, preexec_fn=nice)
+                                            stderr=subprocess.STDOUT, start_new_session=True, preexec_fn=nice,
+                                            cwd=self.cwd)
         return self.procs[node]
 
     def start_all(self, nodes=NODES):
