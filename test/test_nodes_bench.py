@@ -111,3 +111,19 @@ def test_bench_refuses_to_start_beside_another_suite_on_the_same_domain():
             with pytest.raises(CommandError, match=f"domain {domain} in namespace '/' \\(/rig_driver\\)"):
                 bench.refuse_if_another_suite_runs(second, '')
             bench.refuse_if_another_suite_runs(second, 'rig_b', discovery_time=0.5)   # own namespace: fine
+
+
+@pytest.mark.ros
+def test_bench_stops_naming_a_node_process_that_ended(tmp_path, capsys):
+    # a node that refuses its parameters at start ends its process (exit status 2): the bench says which node,
+    # with the end of its log, before anything moved, and stops the processes it started
+    from support.suite import CONFIG
+    config = tmp_path / 'bad.yaml'
+    config.write_text(Path(CONFIG).read_text().replace('\n    parameter_set: swing_arm_joint_20C\n',
+                                                       '\n    parameter_set: /nonexistent/model.yaml\n'))
+    assert config.read_text() != Path(CONFIG).read_text()
+    rc = main(['bench', '--fast', '--config', str(config), '--output-dir', str(tmp_path / 'rec'),
+               '--domain-id', str(domain_id() - 82), '--quiet'])
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert 'element_model ended (exit status 2)' in err and "parameter 'parameter_set'" in err, err
