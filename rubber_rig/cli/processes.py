@@ -31,6 +31,8 @@ from pathlib import Path
 
 import yaml
 
+from rubber_rig.cpu import child_pids
+
 NODES = ('rig_driver', 'excitation', 'element_model', 'recorder')
 
 
@@ -45,6 +47,28 @@ def separate_sim_rig(domain_id: int, namespace: str = '') -> dict:
     key = (int(domain_id) * 131 + sum(namespace.encode())) % 4000
     return {'backend': 'udp_multicast', 'spawn_sim': True, 'can.channel': f'239.74.{165 + key // 250}.{1 + key % 250}',
             'can.bus_options': json.dumps({'port': 46000 + key})}
+
+
+def _end_orphans(pids: list[int], timeout: float = 5.0) -> None:
+    """SIGTERM, then SIGKILL after `timeout` s, to the processes a node had started that outlived it (a node
+    stopped while it was still starting never closes what it opened, e.g. a spawned simulated rig).
+    """
+    alive = [pid for pid in pids if _signal(pid, signal.SIGTERM)]
+    deadline = time.monotonic() + timeout
+    while alive and time.monotonic() < deadline:
+        time.sleep(0.05)
+        alive = [pid for pid in alive if _signal(pid, 0)]
+    for pid in alive:
+        _signal(pid, signal.SIGKILL)
+
+
+def _signal(pid: int, sig: int) -> bool:
+    """Send `sig` to `pid` (0: only ask whether it exists); False when it is gone (or is not ours)."""
+    try:
+        os.kill(pid, sig)
+    except (ProcessLookupError, PermissionError):
+        return False
+    return True
 
 
 class SuiteProcesses:
@@ -135,6 +159,7 @@ class SuiteProcesses:
         p = self.procs.pop(node, None)
         if p is None:
             return None
+        children = child_pids(p.pid)      # e.g. the simulated rig rig_driver started (spawn_sim)
         if p.poll() is None:
             p.send_signal(signal.SIGINT)
             try:
@@ -142,6 +167,7 @@ class SuiteProcesses:
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait(timeout=5)
+        _end_orphans(children)
         log = self._logs.pop(node, None)
         if log is not None:
             log.close()
