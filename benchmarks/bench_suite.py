@@ -23,9 +23,12 @@
 rig_driver (simulated rig on the simulated CAN bus with bit timing: CAN FD 1/5 Mbit/s with packed frames unless
 --bitrate, --data-bitrate, --classic, --profile say otherwise; the bus load measured on it is reported),
 excitation (a 5 Hz, 1 mm sine, open loop),
-element_model and recorder run as the main job runs them (one process, one SingleThreadedExecutor thread per
-node) or, with --processes, as separate processes started from the installed executables like ros2 launch
-does. A monitor node subscribes like any client.
+element_model and recorder run as threads of one process (one SingleThreadedExecutor thread per node) or, with
+--processes, as separate processes the way ros2 launch and `rubber-rig bench` start them
+(rubber_rig.cli.processes); --spawn-sim puts the simulated rig in a process of its own too (udp_multicast over
+loopback, no bit timing), so that the nodes' CPU is measured without it. A monitor node subscribes like any client.
+--nodes-from runs the node processes of another checkout (an older commit) under the same monitor and accounting:
+old and new back to back in one run.
 
 Loss is counted three ways: sequence gaps seen live by the monitor (samples, predictions, setpoints); gaps and
 lost samples in the MCAP recording read back from disk; and "starved" samples, where the command the rig
@@ -33,6 +36,10 @@ applied differs from the program's setpoint (the driver ran out of setpoints). L
 taken to the prediction for it arriving at the monitor, for the first sample of each batch (the bus timestamp of
 its frame: includes waiting for the batch to fill) and for the last one (estimated as first + (n-1)/rate: the
 pipeline delay alone; when the simulated rig catches up late ticks in a burst, this estimate runs early).
+
+CPU, with its conditions (rubber_rig.cpu): per process over the program (utime + stime from /proc as % of one core;
+the executor thread's wake-ups per second and CPU per wake-up), the CPU all other programs used meanwhile and the
+1-minute load average at start and end; a run during which others used more than 0.1 core says MEASURED UNDER LOAD.
 """
 from __future__ import annotations
 
@@ -42,14 +49,14 @@ if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays 
     os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse
 import json
-import resource
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
 import numpy as np
+
+from rubber_rig.cpu import CpuMeter, child_pids
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / 'config' / 'rig_sim.yaml'
@@ -62,8 +69,9 @@ def program_text(duration: float) -> str:
             f'amplitude: {AMPLITUDE}, cycles: {cycles}, taper_cycles: 1}}\n')
 
 
-def driver_extra(args) -> dict:
-    extra = {'backend': 'udp_multicast', 'spawn_sim': True} if args.spawn_sim else {}
+def driver_extra(args, domain: int) -> dict:
+    from rubber_rig.cli.processes import separate_sim_rig
+    extra = separate_sim_rig(domain) if args.spawn_sim else {}
     if args.poll_period:
         extra['poll_period'] = args.poll_period
     for key, value in (('can.profile', args.profile), ('can.bitrate', args.bitrate),
@@ -76,30 +84,45 @@ def driver_extra(args) -> dict:
 
 
 def bus_name(args) -> str:
+    if args.spawn_sim:
+        return 'udp_multicast (no bit timing)'
     bitrate = (args.bitrate or 1_000_000) / 1e6
     if args.classic:
         return f'classic {bitrate:g} Mbit/s'
     return f'CAN FD {bitrate:g}/{(args.data_bitrate or 5_000_000) / 1e6:g} Mbit/s'
 
 
-def cpu_seconds(children: bool = False) -> float:
-    r = resource.getrusage(resource.RUSAGE_CHILDREN if children else resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
-
-
 def start_processes(args, rate, batch, out_dir, domain):
-    """Each node in its own process from the installed console scripts (what ros2 launch does)."""
-    env = dict(os.environ, ROS_DOMAIN_ID=str(domain), RMW_IMPLEMENTATION='rmw_fastrtps_cpp')
-    bindir = Path(sys.executable).parent
-    common = ['--ros-args', '--params-file', str(CONFIG), '--log-level', 'warn']
-    specs = [
-        ('recorder', ['-p', f'output_dir:={out_dir}', '-p', 'discovery_period:=0.2']),
-        ('element_model', []),
-        ('excitation', ['-p', f'batch_size:={batch}']),
-        ('rig_driver', ['-p', f'sample_rate:={rate}', '-p', f'batch_size:={args.batch_size or 0}']
-         + sum((['-p', f'{k}:={v}'] for k, v in driver_extra(args).items()), [])),
-    ]
-    return [subprocess.Popen([str(bindir / exe)] + common + extra, env=env) for exe, extra in specs]
+    """Each node in its own process, as ros2 launch starts them (rubber_rig.cli.processes.SuiteProcesses); with
+    --nodes-from, the nodes of another checkout (its code on PYTHONPATH, its config/rig_sim.yaml).
+    """
+    from rubber_rig.cli.processes import SuiteProcesses
+    config = Path(args.nodes_from) / 'config' / 'rig_sim.yaml' if args.nodes_from else CONFIG
+    overrides = {'recorder': {'output_dir': str(out_dir), 'discovery_period': 0.2},
+                 'excitation': {'batch_size': batch},
+                 'rig_driver': dict({'sample_rate': float(rate), 'batch_size': args.batch_size or 0},
+                                    **driver_extra(args, domain))}
+    procs = SuiteProcesses(config, '/', domain, out_dir / f'logs_{rate:g}Hz', overrides)
+    if args.nodes_from:
+        procs.env['PYTHONPATH'] = str(Path(args.nodes_from).resolve())
+        procs.cwd = str(Path(args.nodes_from).resolve())   # python -m puts the working directory first on sys.path
+    procs.start_all(('recorder', 'element_model', 'excitation', 'rig_driver'))
+    return procs
+
+
+def watched_processes(procs) -> dict:
+    """{name: pid} of the processes whose CPU the run reports: each node process (or this one, holding them all),
+    the simulated rig's process when it has one (a child of rig_driver's), and this benchmark's own (the monitor).
+    """
+    me = os.getpid()
+    if procs is None:
+        watched = {'suite+monitor': me}
+        sims = child_pids(me)
+    else:
+        watched = dict(procs.pids(), monitor=me)
+        sims = child_pids(watched['rig_driver']) if 'rig_driver' in watched else []
+    watched.update({f'sim_rig{i or ""}': pid for i, pid in enumerate(sims)})
+    return watched
 
 
 def run_once(args, rate: float, out_dir: Path) -> dict:
@@ -117,7 +140,7 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
     domain = args.domain_id if args.domain_id is not None else 150 + os.getpid() % 50
     text = program_text(args.duration)
     program = Program.from_yaml_text(text)
-    procs, driver = [], None
+    procs, driver = None, None
     launcher = InProcessLauncher([CONFIG], domain_id=domain)
     try:
         if args.processes:
@@ -130,8 +153,9 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
             launcher.start(RecorderNode, {'output_dir': str(out_dir), 'discovery_period': 0.2})
             launcher.start(ElementModelNode)
             launcher.start(ExcitationNode, {'batch_size': batch})
-            driver = launcher.start(RigDriverNode, dict({'sample_rate': float(rate),
-                                                         'batch_size': args.batch_size or 0}, **driver_extra(args)))
+            driver_params = dict({'sample_rate': float(rate), 'batch_size': args.batch_size or 0},
+                                 **driver_extra(args, domain))
+            driver = launcher.start(RigDriverNode, driver_params)
         mon = launcher.spin(SuiteMonitor(context=launcher.context))
         # the rig ready, not just any status (the driver's first one, before autostart, says 'unconfigured')
         if not launcher.wait_for(lambda: mon.status is not None and mon.status.state in READY_STATES
@@ -143,7 +167,8 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         launcher.wait_for(lambda: False, 2.0 if args.processes else 0.2)
         medium = driver.rig.medium if driver is not None and driver.rig is not None else None
         busy0 = medium.stats['busy_time'] if medium is not None else None
-        cpu0, cpu0c, t0 = cpu_seconds(), cpu_seconds(True), time.monotonic()
+        meter = CpuMeter(watched_processes(procs)).start()
+        t0 = time.monotonic()
         goal = mon.send_program(text, amplitude_control=False)
         if not launcher.wait_for(goal.done, 30.0) or not goal.result().accepted:
             raise RuntimeError('program not accepted')
@@ -155,7 +180,7 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         tx_dropped = (driver.rig.sim.counters.get('tx_dropped', 0) if driver is not None and driver.rig
                       and driver.rig.sim else None)
         launcher.wait_for(lambda: False, 1.0)   # last batches
-        cpu = cpu_seconds() - cpu0
+        cpu = meter.stop()
         stop = mon.recorder(RecorderControl.Request.STOP)
         launcher.wait_for(stop.done, 60.0)
         mcap = Path(stop.result().file)
@@ -164,17 +189,12 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         sim = dict(driver.rig.sim.counters) if driver is not None and driver.rig and driver.rig.sim else {}
         status = mon.status
         message = result.result().result.message if result.done() else 'did not finish'
+        # 'completed' (older nodes) or 'completed (recording complete in <file>)'
+        success = result.done() and bool(result.result().result.success) and message.startswith('completed')
     finally:
         launcher.shutdown()
-        for p in procs:
-            p.terminate()
-        for p in procs:
-            try:
-                p.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                p.kill()
-    if procs:
-        cpu = cpu + cpu_seconds(True) - cpu0c
+        if procs is not None:
+            procs.stop_all()     # SIGINT, as ros2 launch stops its nodes
     rec = load_recording(mcap)
     expected = program.setpoints(rate)
     inside = rec.sequence < len(expected)
@@ -189,10 +209,11 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         ('starved samples', starved > 0), ('program samples not recorded', missing_in_program > 0),
         ('live gaps', any(v['gaps'] for v in live.values())), ('bus frames lost', status.frames_lost > 0),
         ('program samples without prediction', bool(np.any(~np.isfinite(rec.prediction[inside])))),
-        ('program did not complete', message != 'completed')) if bad]
+        ('program did not complete', not success)) if bad]
     pred_gaps = [g for g in rec.gaps if 'prediction' in str(g.get('topic', ''))] if rec.gaps else []
     return {
-        'rate': rate, 'batch_size': sample_batch, 'mode': 'processes' if args.processes else 'one process',
+        'rate': rate, 'batch_size': sample_batch,
+        'mode': ('processes' if args.processes else 'one process') + (', sim rig apart' if args.spawn_sim else ''),
         'duration_s': wall, 'program': message,
         'samples_expected': len(expected), 'samples_recorded': int(len(rec)),
         'recording_samples_lost': int(rec.samples_lost), 'recording_gaps': len(rec.gaps),
@@ -202,7 +223,8 @@ def run_once(args, rate: float, out_dir: Path) -> dict:
         'program_samples_without_prediction': int(np.sum(~np.isfinite(rec.prediction[inside]))),
         'first_sequences_without_prediction': rec.sequence[inside][~np.isfinite(rec.prediction[inside])][:5].tolist(),
         'live': live, 'frames_lost': int(status.frames_lost), 'frames_late': int(status.frames_late),
-        'latency': latency, 'cpu_cores': cpu / wall, 'bus_load': bus_load, 'tx_dropped': tx_dropped,
+        'latency': latency, 'cpu_cores': cpu.watched_cores, 'cpu': cpu.as_dict(), 'cpu_lines': cpu.lines(),
+        'nodes_from': args.nodes_from or str(ROOT), 'bus_load': bus_load, 'tx_dropped': tx_dropped,
         'profile': args.profile or ('classic' if args.classic else 'packed'), 'sim_counters': sim,
         'recording': str(mcap),
         'loss_reasons': reasons,
@@ -226,10 +248,15 @@ def main(argv=None) -> int:
     parser.add_argument('--processes', action='store_true', help='one process per node instead of one thread each')
     parser.add_argument('--spawn-sim', action='store_true', help="simulated rig in a process of its own, on "
                         "python-can's udp_multicast bus over loopback (instead of a thread on the virtual bus)")
+    parser.add_argument('--nodes-from', help='with --processes: run the nodes of this checkout (its code on '
+                        'PYTHONPATH, its config/rig_sim.yaml), e.g. an older commit for a back-to-back comparison '
+                        '(git worktree add /tmp/old COMMIT); the monitor and the loss accounting stay this one')
     parser.add_argument('--output-dir', help='keep the recordings here (default: a temporary directory)')
     parser.add_argument('--domain-id', type=int, help='ROS domain (default: a private one)')
     parser.add_argument('--json', help='also write the results to this JSON file')
     args = parser.parse_args(argv)
+    if args.nodes_from and not args.processes:
+        parser.error('--nodes-from needs --processes')
     os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
     rates = [float(r) for r in args.rate.split(',')]
     results = []
@@ -255,14 +282,17 @@ def main(argv=None) -> int:
                   f"{lat.get('median_ms', float('nan')):.1f}"
                   f" ms, p99 {lat.get('p99_ms', float('nan')):.1f} ms; first sample median "
                   f"{lat1.get('median_ms', float('nan')):.1f} ms, p99 {lat1.get('p99_ms', float('nan')):.1f} ms; "
-                  f"CPU {r['cpu_cores']:.2f} cores; "
+                  f"CPU {r['cpu_cores']:.2f} cores (below); "
                   + (f"bus load {r['bus_load'] * 100:.1f} % (controller frames dropped {r['tx_dropped']}); "
                      if r['bus_load'] is not None else '') +
                   f"{'ZERO LOSS' if r['zero_loss'] else 'LOSS: ' + ', '.join(r['loss_reasons'])}", flush=True)
+            print('    CPU over the run (utime+stime / wall time; wake-ups: the executor thread blocking):', flush=True)
+            for line in r['cpu_lines']:
+                print('  ' + line, flush=True)
     print('\n| rate [Hz] | bus, frames | batch | mode | duration [s] | samples | lost (rec) | gaps (live) | starved | '
           'bus load (measured) | latency first sample median / p99 [ms] | last sample median / p99 [ms] | '
-          'CPU [cores] | zero loss |')
-    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
+          'CPU [cores] | others on the machine [cores] | zero loss |')
+    print('|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|')
     for r in results:
         lat = r['latency'].get('last_sample', {})
         lat1 = r['latency'].get('first_sample', {})
@@ -273,7 +303,8 @@ def main(argv=None) -> int:
               f"{r['recording_samples_lost']} | {gaps} | {r['starved_samples']} | {load} | "
               f"{lat1.get('median_ms', float('nan')):.1f} / {lat1.get('p99_ms', float('nan')):.1f} | "
               f"{lat.get('median_ms', float('nan')):.1f} / {lat.get('p99_ms', float('nan')):.1f} | "
-              f"{r['cpu_cores']:.2f} | {'yes' if r['zero_loss'] else 'NO'} |")
+              f"{r['cpu_cores']:.2f} | {r['cpu']['other_cores_used']:.2f}"
+              f"{' (UNDER LOAD)' if r['cpu']['under_load'] else ''} | {'yes' if r['zero_loss'] else 'NO'} |")
     ok = [r['rate'] for r in results if r['zero_loss']]
     print(f"\nhighest zero-loss rate in this run: {max(ok):g} Hz" if ok else '\nno rate ran without loss')
     if args.json:

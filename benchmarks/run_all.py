@@ -84,6 +84,14 @@ BENCHMARKS = (
               '10 min: loss, latency, CPU', 12, '--json'),
     Benchmark('suite_rates', 'bench_suite.py', ('--rate', '10000', '--duration', '60'), 'the node suite at 10 kHz '
               '(packed CAN FD)', 3, '--json'),
+    Benchmark('suite_processes', 'bench_suite.py', ('--processes', '--spawn-sim', '--rate', '1000', '--duration',
+              '600'), 'each node a process, the sim rig apart, 1 kHz for 10 min: loss, latency, CPU per node', 12,
+              '--json'),
+    Benchmark('suite_processes_10k', 'bench_suite.py', ('--processes', '--rate', '10000', '--duration', '600'),
+              'each node a process at 10 kHz (packed CAN FD) for 10 min: loss, latency, CPU per node', 12, '--json'),
+    Benchmark('main_job', 'bench_main_job.py', ('--runs', '2', '--modes', 'processes,in-process'),
+              '`rubber-rig bench` (make bench) timed from outside: latency, CPU per node process, the load', 10,
+              '--json'),
     Benchmark('identification', 'bench_identification.py', ('--seeds', '20'), 'does every fit tell the truth: '
               '19 cases x 20 noise seeds', 60, '--json'),
     Benchmark('soak', 'bench_soak.py', (), '30 minutes of churn: kills, restarts, clients, a second suite', 32,

@@ -36,6 +36,7 @@ ALLOWED = {
     'units': set(),
     'versions': set(),
     'paths': set(),
+    'cpu': set(),
     'dds': {'paths'},
     'security': set(),
     'analysis': set(),
@@ -47,12 +48,12 @@ ALLOWED = {
     'session': {'excitation', 'online', 'recording', 'rig', 'safety'},
     'online': {'analysis', 'excitation', 'models'},
     'fitting': {'analysis', 'excitation', 'models', 'recording', 'rig', 'session', 'units'},
-    'nodes': {'analysis', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety', 'security',
-              'session', 'settings', 'versions'},
+    'nodes': {'analysis', 'cpu', 'dds', 'excitation', 'models', 'online', 'paths', 'recording', 'rig', 'safety',
+              'security', 'session', 'settings', 'versions'},
     'launching': {'dds', 'nodes'},
-    'cli': {'__init__', 'analysis', 'excitation', 'fitting', 'launching', 'models', 'nodes', 'online', 'paths',
+    'cli': {'__init__', 'analysis', 'cpu', 'excitation', 'fitting', 'launching', 'models', 'nodes', 'online', 'paths',
             'recording', 'rig', 'safety', 'security', 'session', 'settings', 'units'},
-    'testing': {'dds', 'nodes'},
+    'testing': {'cli', 'cpu', 'dds', 'nodes'},
 }
 OPTIONAL_HEAVY = {'matplotlib'}
 

@@ -73,6 +73,27 @@ def test_main_job_end_to_end(tmp_path, capsys):
     md = mcap.with_suffix('').with_name(mcap.stem + '.summary.md').read_text()
     assert '| 0 | sine_0.5mm_5Hz |' in md
     assert 'sine_1mm_5Hz' in out     # the live table
+    # each node ran in a process of its own (as ros2 launch starts them), and the bench says what each used
+    procs = summary['cpu']['processes']
+    assert {'rig_driver', 'excitation', 'element_model', 'recorder', 'bench'} <= set(procs)
+    assert len({p['pid'] for p in procs.values()}) == len(procs)
+    assert all(p['cpu_cores'] > 0 for p in procs.values())
+    assert 'machine: ' in out and 'load average (1 min)' in out
+    assert 'latency: not measured with --fast' in out     # rig time runs ahead of the wall clock
+
+
+@pytest.mark.ros
+def test_main_job_in_process(tmp_path, capsys):
+    # --in-process: the same nodes as threads of the bench's own process
+    rc = main(['bench', '--fast', '--in-process', '--blocks', '16', '--cycles', '3', '--output-dir', str(tmp_path),
+               '--domain-id', str(domain_id() - 81), '--quiet'])
+    out = capsys.readouterr().out
+    assert rc == 0, out
+    mcap = Path(out.split('MCAP recording:')[1].split()[0])
+    summary = json.loads(mcap.with_suffix('').with_name(mcap.stem + '.summary.json').read_text())
+    assert summary['result']['success'] and summary['loss']['recording']['samples_lost'] == 0
+    assert list(summary['cpu']['processes']) == ['bench+nodes']
+    assert 'one SingleThreadedExecutor thread each' in out
 
 
 @pytest.mark.ros
@@ -90,3 +111,39 @@ def test_bench_refuses_to_start_beside_another_suite_on_the_same_domain():
             with pytest.raises(CommandError, match=f"domain {domain} in namespace '/' \\(/rig_driver\\)"):
                 bench.refuse_if_another_suite_runs(second, '')
             bench.refuse_if_another_suite_runs(second, 'rig_b', discovery_time=0.5)   # own namespace: fine
+
+
+@pytest.mark.ros
+def test_bench_stops_naming_a_node_process_that_ended(tmp_path, capsys):
+    # a node that refuses its parameters at start ends its process (exit status 2): the bench says which node,
+    # with the end of its log, before anything moved, and stops the processes it started
+    from support.suite import CONFIG
+    config = tmp_path / 'bad.yaml'
+    config.write_text(Path(CONFIG).read_text().replace('\n    parameter_set: swing_arm_joint_20C\n',
+                                                       '\n    parameter_set: /nonexistent/model.yaml\n'))
+    assert config.read_text() != Path(CONFIG).read_text()
+    rc = main(['bench', '--fast', '--config', str(config), '--output-dir', str(tmp_path / 'rec'),
+               '--domain-id', str(domain_id() - 82), '--quiet'])
+    err = capsys.readouterr().err
+    assert rc == 1
+    assert 'element_model ended (exit status 2)' in err and "parameter 'parameter_set'" in err, err
+
+
+@pytest.mark.ros
+@pytest.mark.slow
+def test_paced_bench_runs_the_simulated_rig_in_a_process_of_its_own(tmp_path, capsys):
+    # paced (make bench), the simulated rig runs in its own process on udp_multicast, a child of rig_driver's; the
+    # bench meters it apart. A busy computer may fault this short program (stream lost): the run still ends with a
+    # summary and a recording, which is all this test asks of it
+    rc = main(['bench', '--blocks', '5', '--cycles', '3', '--output-dir', str(tmp_path),
+               '--domain-id', str(domain_id() - 83), '--quiet'])
+    out = capsys.readouterr().out
+    assert rc in (0, 1), out
+    assert 'simulated rig in a process of its own on udp_multicast' in out
+    mcap = Path(out.split('MCAP recording:')[1].split()[0])
+    summary = json.loads(mcap.with_suffix('').with_name(mcap.stem + '.summary.json').read_text())
+    procs = summary['cpu']['processes']
+    assert {'rig_driver', 'excitation', 'element_model', 'recorder', 'bench', 'sim_rig'} <= set(procs)
+    assert summary['rig']['backend'] == 'udp_multicast' and summary['rig']['paced']
+    assert summary['latency']['first_sample']['count'] == summary['latency']['last_sample']['count'] > 0
+    assert 'latency sample -> prediction: last sample of a batch median' in out

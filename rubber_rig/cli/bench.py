@@ -14,27 +14,36 @@
 
 """Run a test program on the simulated rig through the real ROS 2 nodes, with recording and a live table.
 
-Starts rig_driver, excitation, element_model and recorder (and, with --foxglove, the Foxglove live view) in
-this process, one SingleThreadedExecutor thread per node, with the same node classes and parameter file as
-``ros2 launch rubber_rig rig_sim.launch.py``. The program is sent to the excitation as a RunProgram goal;
-progress comes from the action feedback, the table from the element_model's cycle_metrics. At the end the
-recorder is stopped and a summary (JSON and markdown) is written next to the MCAP file.
+Starts rig_driver, excitation, element_model and recorder (and, with --foxglove, the Foxglove live view) each in a
+process of its own, as ``ros2 launch rubber_rig rig_sim.launch.py`` does (same executables, same parameter file),
+with the paced simulated rig in a process of its own on a bus that crosses processes (cli.bench_nodes); with
+--in-process, as threads of this process (one SingleThreadedExecutor each). This process holds a monitor node.
+The program is sent to the excitation as a RunProgram goal; progress comes from the action feedback, the table
+from the element_model's cycle_metrics. At the end the recorder is stopped and a summary (JSON and markdown) is
+written next to the MCAP file.
 
 Recording is a precondition: the goal is only sent once the recorder reports RECORDING with every suite topic
 subscribed (an unwritable or uncreatable output directory stops the bench before anything moves, exit 1). A
 recorder that turns to ERROR during the run (disk full) stops the program (the excitation aborts; the bench
 also cancels its goal) and the bench reports it. The recorder is stopped only after the rig came to rest and
 the last published sample was recorded, and the summary compares the samples published with those recorded.
+
+The closing lines give the latency from a sample being taken to its prediction arriving here (first and last
+sample of a batch, median and p99) and the CPU each process used while the program ran, with the machine's load
+meanwhile (rubber_rig.cpu): a run on a busy machine says so.
 """
 from __future__ import annotations
 
 import argparse
 import json
 import os
+import signal
+from contextlib import contextmanager
 from pathlib import Path
 
 from rubber_rig.cli.bench_view import Terminal, print_result
 from rubber_rig.cli.main import CommandError
+from rubber_rig.cpu import CpuMeter, child_pids
 from rubber_rig.excitation import load_program, read_program
 from rubber_rig.excitation.program import OverrideError, with_overrides
 from rubber_rig.online.summary import BlockTable, write_summary
@@ -73,6 +82,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         '(layout: config/foxglove_layout.json)')
     parser.add_argument('--foxglove-port', type=int, default=8765)
     parser.add_argument('--quiet', action='store_true', help='no progress line, only the table and the result')
+    parser.add_argument('--in-process', action='store_true', help='run the nodes as threads of this process (one '
+                        'executor thread each, the simulated rig a thread of rig_driver) instead of one process '
+                        'each as ros2 launch starts them')
 
 
 # -- the program ------------------------------------------------------------------------------------------------
@@ -143,6 +155,7 @@ def ensure_key(key_file: str | None) -> str:
 
 def run(args) -> int:
     os.environ.setdefault('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp')
+    from rubber_rig.cli.bench_nodes import InProcessNodes, NodeProcesses, domain_of
     from rubber_rig.cli.bench_session import BenchSession  # rclpy is loaded only when the bench runs
     from rubber_rig.launching.inprocess import InProcessLauncher
 
@@ -152,27 +165,73 @@ def run(args) -> int:
     out_dir = Path(args.output_dir).absolute()     # created by the recorder, which reports if it cannot
     term = Terminal(args.quiet)
     table = BlockTable(program)
+    domain = domain_of(args.domain_id)
 
     def on_cycle(c):                               # a block is complete (printed) once a later one has started
         show_rows(term, table, table.add(c))
 
-    with InProcessLauncher([config], namespace=args.namespace, domain_id=args.domain_id) as launcher:
+    with InProcessLauncher([config], namespace=args.namespace, domain_id=domain) as launcher, \
+            stopped_on_terminate():
         refuse_if_another_suite_runs(launcher, args.namespace)
-        session = BenchSession(launcher, args, program_yaml, out_dir)
-        for line in ([key_note] if key_note else []) + list(session.describe(program)):
-            term.line(line)
-        term.line(f'recording to {session.wait_ready()}')
-        term.line(BlockTable.COLUMNS[0])
-        term.line(BlockTable.COLUMNS[1])
-        outcome = session.run_program(program_yaml, not args.no_amplitude_control, on_cycle, term)
-        session.catch_up(outcome, table.add, term)
-        show_rows(term, table, [b for b in sorted(table.cycles) if b not in table.printed])
-        mcap, rec_loss = session.stop_recording(outcome, term)
-        summary = session.summary(program, mcap, outcome, rec_loss,
-                                  [r for b in sorted(table.rows) for r in table.rows[b]])
-        jpath, mpath, summary_error = save_summary(mcap, summary)
+        nodes = InProcessNodes(launcher) if args.in_process else NodeProcesses(config, args.namespace, domain)
+        try:
+            session = BenchSession(launcher, nodes, args, program_yaml, out_dir, config)
+            recording = session.wait_ready()
+            for line in ([key_note] if key_note else []) + list(session.describe(program)):
+                term.line(line)
+            term.line(f'recording to {recording}')
+            term.line(BlockTable.COLUMNS[0])
+            term.line(BlockTable.COLUMNS[1])
+            meter = CpuMeter(watched_processes(nodes)).start()
+            outcome = session.run_program(program_yaml, not args.no_amplitude_control, on_cycle, term)
+            cpu = meter.stop()
+            session.catch_up(outcome, table.add, term)
+            show_rows(term, table, [b for b in sorted(table.cycles) if b not in table.printed])
+            mcap, rec_loss = session.stop_recording(outcome, term)
+            summary = session.summary(program, mcap, outcome, rec_loss,
+                                      [r for b in sorted(table.rows) for r in table.rows[b]])
+            summary['cpu'] = dict(cpu.as_dict(), nodes=nodes.description)
+            jpath, mpath, summary_error = save_summary(mcap, summary)
+        finally:
+            nodes.close()
 
     print_result(summary, rec_loss, outcome.recording_error, session.cfg.paced, mcap, jpath, mpath, summary_error)
+    print_cpu(cpu, args.in_process)
     if outcome.interrupted:
         return 130
     return 0 if summary['result']['success'] and not outcome.recording_error else 1
+
+
+def watched_processes(nodes) -> dict:
+    """{name: pid} whose CPU the bench reports: each node process, the simulated rig's (a child of rig_driver's)
+    and this one (the monitor and the table; with --in-process, every node as well).
+    """
+    watched = dict(nodes.pids())
+    watched['bench' if watched else 'bench+nodes'] = os.getpid()
+    sims = child_pids(watched['rig_driver']) if 'rig_driver' in watched else [
+        pid for pid in child_pids(os.getpid()) if pid not in watched.values()]
+    watched.update({f'sim_rig{i or ""}': pid for i, pid in enumerate(sims)})
+    return watched
+
+
+def print_cpu(cpu, in_process: bool) -> None:
+    """The CPU each process used while the program ran, and what else the machine did meanwhile."""
+    print(f'CPU while the program ran ({cpu.wall_time:.0f} s; % of one core'
+          + (', every node in this one process' if in_process else '') + '):')
+    for line in cpu.lines():
+        print(line)
+
+
+@contextmanager
+def stopped_on_terminate():
+    """SIGTERM or SIGHUP (a closed terminal) end the bench like Ctrl-C: the program ramps to rest, the recording
+    is closed and the node processes are stopped, instead of leaving them running on their own.
+    """
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+    previous = {sig: signal.signal(sig, interrupt) for sig in (signal.SIGTERM, signal.SIGHUP)}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)

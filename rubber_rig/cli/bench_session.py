@@ -12,8 +12,9 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The ROS side of ``rubber-rig bench``: the suite's nodes in this process, the RunProgram goal with its feedback
-and cycle metrics, and the end of the recording. ``bench.run`` drives it; the per-block table and the summary
+"""The ROS side of ``rubber-rig bench``: the suite's nodes (started by cli.bench_nodes, as processes or in this
+process) seen through a monitor node, the RunProgram goal with its feedback and cycle metrics, and the end of the
+recording. ``bench.run`` drives it; the per-block table and the summary
 files (``online.summary``) and the screen (``cli.bench_view``) know nothing of ROS.
 
 Every wait here waits for something to happen, with a deadline; when the deadline passes the bench says what did
@@ -27,17 +28,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
-from msg_defs.msg import RigStatus
+from msg_defs.msg import RecorderStatus, RigStatus
 from msg_defs.srv import RecorderControl
+from rubber_rig.cli.bench_nodes import suite_facts
 from rubber_rig.cli.bench_view import progress_text
 from rubber_rig.cli.main import CommandError
 from rubber_rig.nodes import conversions as conv
-from rubber_rig.nodes.element_model_node import ElementModelNode
-from rubber_rig.nodes.excitation_node import ExcitationNode
-from rubber_rig.nodes.foxglove_view_node import LAYOUT_FILE, FoxgloveViewNode
+from rubber_rig.nodes.excitation_readiness import READY_STATES
+from rubber_rig.nodes.foxglove_view_node import LAYOUT_FILE
 from rubber_rig.nodes.monitor import SuiteMonitor
-from rubber_rig.nodes.recorder_node import RecorderNode
-from rubber_rig.nodes.rig_driver_node import RigDriverNode
 from rubber_rig.recording.loss import recording_loss
 from rubber_rig.units import to_si
 
@@ -47,6 +46,7 @@ CONNECT_TIMEOUT = 30.0      # [s] nodes connected, goal accepted, recorder stopp
 ABORT_TIMEOUT = 15.0        # [s] the program ends after Ctrl-C cancelled it
 CATCH_UP_TIMEOUT = 5.0      # [s] the model predicts the last published samples
 TAIL_TIMEOUT = 10.0         # [s] the rig at rest and its last samples recorded
+RECORDER_LAG = 0.3          # [s] a recorder status this much newer than the run's last sample: it has that sample
 REFRESH_PERIOD = 0.1        # [s] the screen refreshes ten times a second, at once when the program ends
 MOVING = (RigStatus.STATE_RUNNING, RigStatus.STATE_RAMPING_DOWN)
 
@@ -64,45 +64,60 @@ class ProgramRun:
 
 
 class BenchSession:
-    """The nodes of one bench run, started in ``launcher`` (recorder first: nothing moves unless it records)."""
+    """One bench run: the nodes started by ``nodes`` (bench_nodes: processes, or threads of ``launcher``'s process;
+    the recorder first: nothing moves unless it records), watched and driven by a monitor node in ``launcher``.
+    """
 
-    def __init__(self, launcher, args, program_yaml: str, out_dir: Path):
-        self.launcher = launcher
-        self.recorder = launcher.start(RecorderNode, {
-            'output_dir': str(out_dir), 'metadata.test_program': program_yaml,
-            'metadata.notes': f'rubber-rig bench --program {args.program}'})
-        if not self.recorder.core.recording:              # before any other node exists: nothing can move
-            raise CommandError('cannot record, nothing started: '
-                               f'{self.recorder.core.error or "recorder not recording"}')
-        self.model = launcher.start(ElementModelNode)
-        self.excitation = launcher.start(ExcitationNode, excitation_overrides(args))
-        self._hold_help = (f'the rig holds at rest; resume: rubber-rig hold --resume --namespace '
-                           f'{self.excitation.get_namespace()} (signed with the rig key), Ctrl-C ends the program, '
-                           f'and it ends by itself after {self.excitation.params.hold_timeout:g} s (--hold-timeout)')
-        self.driver = launcher.start(RigDriverNode, driver_overrides(args))
-        if self.driver.lifecycle_state != 'active':
-            raise CommandError(f'rig_driver did not come up (lifecycle state {self.driver.lifecycle_state}); '
-                               'see the log')
+    def __init__(self, launcher, nodes, args, program_yaml: str, out_dir: Path, params_file):
+        self.launcher, self.nodes = launcher, nodes
+        self.monitor = launcher.spin(SuiteMonitor(context=launcher.context, namespace=args.namespace))
+        mon = self.monitor
+        nodes.start('recorder', {'output_dir': str(out_dir), 'metadata.test_program': program_yaml,
+                                 'metadata.notes': f'rubber-rig bench --program {args.program}'})
+        # before any other node exists: nothing can move unless the recorder records
+        if not self.wait_for(lambda: mon.recorder_status is not None
+                             and mon.recorder_status.state != RecorderStatus.STATE_IDLE, CONNECT_TIMEOUT):
+            raise CommandError(f'cannot record, nothing started: {mon.recording_ready()}')
+        if self.recorder_failed():
+            raise CommandError(f'cannot record, nothing started: {mon.recorder_status.error}')
+        nodes.start('element_model', {})
+        exc_overrides = excitation_overrides(args)
+        nodes.start('excitation', exc_overrides)
+        drv_overrides = dict(driver_overrides(args), **nodes.driver_overrides(paced=not args.fast))
+        self.cfg = suite_facts(params_file, drv_overrides, exc_overrides)
+        ns = '/' + args.namespace.strip('/')
+        self._hold_help = (f'the rig holds at rest; resume: rubber-rig hold --resume --namespace {ns} (signed with '
+                           'the rig key), Ctrl-C ends the program, and it ends by itself after '
+                           f'{self.cfg.hold_timeout:g} s (--hold-timeout)')
+        nodes.start('rig_driver', drv_overrides)
         self.foxglove = ''
         if args.foxglove:
-            launcher.start(FoxgloveViewNode, {'port': args.foxglove_port})
+            nodes.start('foxglove_view', {'port': args.foxglove_port})
             self.foxglove = f'Foxglove: connect to ws://127.0.0.1:{args.foxglove_port}, import layout {LAYOUT_FILE}'
-        self.monitor = launcher.spin(SuiteMonitor(context=launcher.context, namespace=args.namespace))
-        self.cfg = self.driver.config
         self._n_feedback = self._n_cycles = self._n_events = 0
         self._silent: set[str] = set()     # nodes named silent on the terminal
         self._rest_since = None
+        self._recorded_after = None        # [s] wall time the recorder must have reported after (the run's tail)
+
+    def wait_for(self, predicate: Callable[[], bool], timeout: float) -> bool:
+        """``launcher.wait_for`` that also stops, naming it, when a node ends (or fails in its thread)."""
+        def checked():
+            self.nodes.check()
+            return predicate()
+        return self.launcher.wait_for(checked, timeout)
 
     def describe(self, program) -> list[str]:
         """The opening lines: program, rig and model, nodes (and where Foxglove connects)."""
-        cfg, p = self.cfg, self.model.predictor
+        cfg, p = self.cfg, self.monitor.model_parameters
+        model = f'{p.model_name} from {p.parameter_set or cfg.model_source}' if p is not None else 'element model'
+        rig = (f'simulated rig in a process of its own on {cfg.backend}' if cfg.backend == 'udp_multicast'
+               else f'rig: {cfg.backend}')
         lines = [f"rubber-rig bench: program '{program.name}' ({len(program.blocks)} blocks, "
                  f'{program.duration(cfg.sample_rate):.1f} s of excitation at {cfg.sample_rate:g} Hz, '
                  f"{'paced' if cfg.paced else 'as fast as possible'})",
-                 f"rig: {cfg.backend}, specimen {cfg.sim.specimen}; model fractional_zener_berg from "
-                 f"{p.parameter_set or p.choice.source}",
+                 f'{rig}, specimen {cfg.specimen}; model {model}',
                  'nodes: rig_driver, excitation, element_model, recorder' + (', foxglove_view' if self.foxglove else '')
-                 + ' (one SingleThreadedExecutor thread each)']
+                 + f' ({self.nodes.description})']
         return lines + ([self.foxglove] if self.foxglove else [])
 
     # -- before the program -----------------------------------------------------------------------------------------
@@ -110,23 +125,34 @@ class BenchSession:
         st = self.monitor.recorder_status
         return st is not None and st.state == st.STATE_ERROR
 
+    def rig_ready(self) -> str:
+        """'' once rig_driver's status says the rig is ready for a program (not its first, pre-configure status)."""
+        st = self.monitor.status
+        if st is None:
+            return f"no rig status on '{self.monitor.resolve_topic_name('status')}' yet"
+        if st.state not in READY_STATES:
+            why = '; '.join(st.fault_messages[-2:]) or st.last_event
+            return f'rig is {st.state_name}' + (f': {why}' if why else '')
+        return ''
+
     def wait_ready(self) -> str:
         """Wait until the excitation has seen the rig ready (not the driver's first, pre-configure status) and the
         recorder records every stream; returns the recording's path.
         """
-        mon, exc = self.monitor, self.excitation
-        ready = self.launcher.wait_for(lambda: self.recorder_failed() or (
-            mon.status is not None and mon.action.server_is_ready() and exc.rig_ready() == ''
+        mon = self.monitor
+        ready = self.wait_for(lambda: self.recorder_failed() or (
+            self.rig_ready() == '' and mon.action.server_is_ready() and mon.model_parameters is not None
             and mon.recording_ready(*RECORDED_TOPICS) == ''), CONNECT_TIMEOUT)
         if self.recorder_failed():
             raise CommandError(f'cannot record, nothing moved: {mon.recording_ready()}')
         if not ready:
-            why = exc.rig_ready() or mon.recording_ready(*RECORDED_TOPICS) or 'run_program missing'
+            why = (self.rig_ready() or mon.recording_ready(*RECORDED_TOPICS)
+                   or ('run_program missing' if not mon.action.server_is_ready() else 'no model_parameters'))
             raise CommandError(f'the nodes did not connect within {CONNECT_TIMEOUT:.0f} s ({why})')
         return mon.recorder_status.path
 
     def _result_of(self, future, timeout: float, what: str):
-        if not self.launcher.wait_for(future.done, timeout):
+        if not self.wait_for(future.done, timeout):
             raise CommandError(f'timed out after {timeout:.0f} s waiting for {what}')
         return future.result()
 
@@ -151,7 +177,7 @@ class BenchSession:
         run.future = goal_handle.get_result_async()
         try:
             while not run.future.done():
-                self.launcher.check()
+                self.nodes.check()
                 if self.recorder_failed() and not run.recording_error:
                     run.recording_error = self.monitor.recorder_status.error
                     term.end_status()
@@ -211,7 +237,7 @@ class BenchSession:
         def predicted_all():
             return stats['prediction'].next is not None and stats['samples'].next is not None \
                 and stats['prediction'].next >= stats['samples'].next
-        if not self.launcher.wait_for(predicted_all, CATCH_UP_TIMEOUT):
+        if not self.wait_for(predicted_all, CATCH_UP_TIMEOUT):
             term.line(f'warning: the model did not predict every published sample within {CATCH_UP_TIMEOUT:.0f} s '
                       '(the table may miss the last cycles)')
         for c in self.new_cycle_metrics():
@@ -222,7 +248,8 @@ class BenchSession:
     # -- the end of the recording -------------------------------------------------------------------------------------
     def _tail_recorded(self, run: ProgramRun) -> bool:
         """True once the rig has been at rest for two batch delays (a fault's ramp tail arrives after the goal
-        ended) and every sample published so far has been recorded; then ``run.published`` holds them.
+        ended) and the recorder has reported since (its status comes from the same executor that writes the
+        samples, at least every 0.5 s); then ``run.published`` holds the samples published up to then.
         """
         mon, st = self.monitor.stats['samples'], self.monitor.status
         # unpaced (--fast), the simulated controller only ticks while setpoints are queued: after the program it
@@ -230,17 +257,17 @@ class BenchSession:
         at_rest = st is not None and (st.state not in MOVING
                                       or (st.state == RigStatus.STATE_RUNNING and not st.stream_owner))
         if not at_rest:
-            self._rest_since = None
+            self._rest_since = self._recorded_after = None
             return False
         if self._rest_since is None:
             self._rest_since = time.monotonic()
-        settled = time.monotonic() - self._rest_since >= 2 * self.driver.params.max_batch_delay
-        samples_topic = self.monitor.resolve_topic_name('samples')
-        recorded = self.recorder_failed() or mon.next is None \
-            or self.recorder.core.gaps.next_expected.get(samples_topic, -1) >= mon.next
-        if settled and recorded:
+        if time.monotonic() - self._rest_since < 2 * self.cfg.max_batch_delay:
+            return False
+        if self._recorded_after is None:
             run.published = copy.copy(mon)
-        return settled and recorded
+            self._recorded_after = time.time() + RECORDER_LAG
+        rs = self.monitor.recorder_status
+        return self.recorder_failed() or (rs is not None and conv.to_seconds(rs.header.stamp) >= self._recorded_after)
 
     def stop_recording(self, run: ProgramRun, term) -> tuple[Path, dict]:
         """Stop the recorder once the run's tail is recorded; (MCAP file, its loss against what was published).
@@ -248,7 +275,7 @@ class BenchSession:
         A paced rig goes on sampling while it stands: the run's samples are those published up to the moment it
         came to rest (``run.published``), not those that keep arriving until the recorder stops.
         """
-        if not self.launcher.wait_for(lambda: self._tail_recorded(run), TAIL_TIMEOUT):
+        if not self.wait_for(lambda: self._tail_recorded(run), TAIL_TIMEOUT):
             term.line('warning: the rig did not come to rest or the recorder did not receive the last samples '
                       f'within {TAIL_TIMEOUT:.0f} s; the summary counts what is missing')
         if self.recorder_failed() and not run.recording_error:
@@ -258,14 +285,16 @@ class BenchSession:
         if not stop.file:
             raise CommandError(f'the recorder did not report its file: {stop.message or "no message"}')
         mcap = Path(stop.file)
-        rec_loss = recording_loss(mcap, run.published or self.monitor.stats['samples'], self.recorder.core.stats())
+        status = self.monitor.recorder_status
+        rec_loss = recording_loss(mcap, run.published or self.monitor.stats['samples'],
+                                  {'samples_lost_total': int(status.samples_lost) if status is not None else None})
         if run.recording_error:
             rec_loss['recorder_error'] = run.recording_error
         return mcap, rec_loss
 
     def summary(self, program, mcap: Path, run: ProgramRun, rec_loss: dict, rows: list[dict]) -> dict:
         """The run's summary (written as JSON and Markdown by ``online.summary.write_summary``)."""
-        cfg, p, result = self.cfg, self.model.predictor, run.result
+        cfg, p, result = self.cfg, self.monitor.model_parameters, run.result
         blocks = [{'block_index': b.block_index, 'name': b.name, 'target_amplitude': b.target_amplitude,
                    'achieved_amplitude': b.achieved_amplitude, 'completed': b.completed, 'message': b.message}
                   for b in (result.blocks if result else [])]
@@ -273,9 +302,10 @@ class BenchSession:
             'program': program.name, 'recording': str(mcap), 'wall_time_s': run.wall_time,
             'interrupted': run.interrupted,
             'rig': {'backend': cfg.backend, 'sample_rate': cfg.sample_rate, 'paced': cfg.paced,
-                    'specimen': cfg.sim.specimen, 'batch_size': self.driver.params.batch_size},
-            'model': {'source': p.choice.source, 'parameter_set': p.parameter_set, 'temperature': p.temperature,
-                      'values': p.params.as_dict()},
+                    'specimen': cfg.specimen, 'batch_size': cfg.batch_size},
+            'model': {'source': cfg.model_source, 'parameter_set': p.parameter_set if p else '',
+                      'temperature': p.temperature if p else float('nan'),
+                      'values': dict(zip(p.names, p.values, strict=True)) if p else {}},
             'result': {'success': bool(result.success) if result else False,
                        'message': result.message if result else 'no result (interrupted)', 'blocks': blocks},
             'loss': {'live': {k: v.as_dict() for k, v in self.monitor.stats.items()}, 'recording': rec_loss},

@@ -78,9 +78,12 @@ def print_result(summary: dict, rec_loss: dict, recording_error: str, paced: boo
     print(f'detector events: {len(events)}' + ''.join(f"\n  {e['action']}: {e['message']}" for e in events))
     if recording_error:
         print(f'RECORDING FAILED: {recording_error}')
-    lat = summary['latency'].get('last_sample')
-    if lat:
-        print(f"latency sample -> prediction: median {lat['median_ms']:.2f} ms, p99 {lat['p99_ms']:.2f} ms")
+    lat, first = summary['latency'].get('last_sample'), summary['latency'].get('first_sample')
+    if lat and first:
+        # first sample of a batch: includes waiting for the batch to fill; last sample: the pipeline alone
+        print(f"latency sample -> prediction: last sample of a batch median {lat['median_ms']:.2f} ms, "
+              f"p99 {lat['p99_ms']:.2f} ms; first sample median {first['median_ms']:.2f} ms, "
+              f"p99 {first['p99_ms']:.2f} ms ({lat['count']} batches)")
     elif not paced:
         print('latency: not measured with --fast (rig time runs ahead of the wall clock)')
     print(f'MCAP recording: {mcap}' + ('' if rec_loss.get('complete', True) else

@@ -50,6 +50,7 @@ from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
+from ..cpu import EXECUTOR_THREAD, name_this_thread
 from ..dds import configure_dds
 from ..rig.priority import set_process_nice
 from .params import ParameterError, undeclared_overrides
@@ -75,6 +76,7 @@ class _Stop:
 
 
 def _spin(executor: SingleThreadedExecutor, errors: list) -> None:
+    name_this_thread(EXECUTOR_THREAD)   # benchmarks count its wake-ups and CPU (rubber_rig.cpu)
     try:
         executor.spin()
     except ExternalShutdownException:
