@@ -18,9 +18,8 @@ frame counts, sequence gaps, faults and the bus load.
 
 BLF is read with can.LogReader, up to the first object it cannot read. The text formats (.asc, .log) are read
 line by line by TextLogReader, which hands each line to python-can's own parser and skips (and counts) a line
-that is unreadable - not UTF-8, binary bytes, not a frame line of the format, a frame python-can cannot parse
-or one with fewer data bytes than its length field says - so one bad line costs that line only: every good
-frame before and after it is decoded.
+that is unreadable - not UTF-8, binary bytes, not a frame line of the format, a frame python-can cannot parse or
+one with fewer data bytes than its length field says - so one bad line costs that line only.
 """
 from __future__ import annotations
 
@@ -38,17 +37,8 @@ from .canlog import SUPPORTED_FORMATS, CanLogError, CanLogWarning, log_format
 from .canlog_text import TextLogReader, _asc_start, _integrity, frames_until_damage, text_damage
 from .canlog_time import TimeCheck
 from .frames import PROFILES, SampleFrames
-from .protocol import (
-    DBC_PATH,
-    STATES,
-    STATUS_SEQ_MOD,
-    MalformedFrame,
-    Protocol,
-    fault_names,
-    meet,
-    temperature_reading,
-    unwrap,
-)
+from .protocol import DBC_PATH, STATES, STATUS_SEQ_MOD, MalformedFrame, Protocol, fault_names, meet, unwrap
+from .protocol import temperature_reading as no_reading_is_nan
 from .timing import frame_bits
 
 
@@ -382,7 +372,7 @@ class _Decoder:
             a['heartbeat_state'].append(code)
             self.state = _state_change(out, self.state, code, rel)
         elif name == 'Temperature':
-            self.temperature = temperature_reading(float(sig['TEMP_Specimen']))   # NaN: the controller has none
+            self.temperature = no_reading_is_nan(float(sig['TEMP_Specimen']))   # NaN: the controller has none
         elif name == 'HostCommand':
             code = int(sig['CMD_Code'])
             out.commands.append((rel, self.cmd_names.get(code, str(code)), float(sig['CMD_Argument'])))
