@@ -37,22 +37,25 @@ def _thread_nices(pid: int) -> list:
     return out
 
 
-def test_every_thread_of_the_process_gets_the_niceness_and_new_threads_inherit_it():
+def test_every_thread_of_the_process_and_of_its_children_gets_the_niceness_and_new_threads_inherit_it():
     code = ('import threading, time, os\n'
             'from rubber_rig.rig.priority import set_process_nice\n'
+            'import subprocess, sys\n'
+            'child = subprocess.Popen([sys.executable, \'-c\', \'import time; time.sleep(5)\'])\n'
             'ev = threading.Event()\n'
             'before = [threading.Thread(target=ev.wait) for _ in range(3)]\n'
             '[t.start() for t in before]\n'
             'print(repr(set_process_nice(7)))\n'
             'after = threading.Thread(target=ev.wait); after.start()\n'
-            'print(os.getpid(), flush=True)\n'
+            'print(os.getpid(), child.pid, flush=True)\n'
             'time.sleep(3); ev.set()\n')
     proc = subprocess.Popen([sys.executable, '-c', code], stdout=subprocess.PIPE, text=True, cwd=REPO)
     try:
         assert proc.stdout.readline().strip() == "''"
-        pid = int(proc.stdout.readline())
+        pid, child = map(int, proc.stdout.readline().split())
         nices = _thread_nices(pid)
         assert len(nices) == 5 and set(nices) == {7}, nices
+        assert set(_thread_nices(child)) == {7}      # a process it had started (the spawned simulated rig)
     finally:
         proc.wait(10)
 

@@ -33,7 +33,8 @@ NICE_MIN, NICE_MAX = -20, 19
 
 
 def set_process_nice(nice: int) -> str:
-    """Give every thread of this process the niceness `nice` (-20..19; lower runs first; 0 is the default).
+    """Give every thread of this process, and of the processes it has started, the niceness `nice` (-20..19; lower
+    runs first; 0 is the default).
 
     Returns '' when done (or nothing to do), else why not: raising the priority (a niceness below the current one)
     needs root, CAP_SYS_NICE or a ``nice`` limit in /etc/security/limits.conf; the process then keeps its
@@ -42,10 +43,11 @@ def set_process_nice(nice: int) -> str:
     nice = int(nice)
     if not NICE_MIN <= nice <= NICE_MAX:
         raise ValueError(f'niceness {nice}: outside {NICE_MIN}..{NICE_MAX}')
-    try:
-        threads = [int(t) for t in os.listdir('/proc/self/task')]
-    except OSError:
-        threads = [0]
+    threads = _threads(os.getpid()) or [0]
+    # and the processes it started already (the simulated rig with spawn_sim, started by configure): the controller
+    # they stand for has a CPU of its own
+    for child in _children(os.getpid()):
+        threads += _threads(child)
     current = os.getpriority(os.PRIO_PROCESS, 0)
     try:
         for tid in threads:
@@ -57,6 +59,27 @@ def set_process_nice(nice: int) -> str:
         return (f'could not set the niceness to {nice} (raising the priority needs root, CAP_SYS_NICE or a "nice" '
                 f'limit in /etc/security/limits.conf); the process keeps {current}')
     return ''
+
+
+def _threads(pid: int) -> list:
+    try:
+        return [int(t) for t in os.listdir(f'/proc/{pid}/task')]
+    except OSError:
+        return []
+
+
+def _children(pid: int) -> list:
+    """The processes whose parent is `pid` (from /proc/<pid>/stat)."""
+    out = []
+    for entry in os.listdir('/proc'):
+        if entry.isdigit():
+            try:
+                with open(f'/proc/{entry}/stat') as f:
+                    if int(f.read().rsplit(')', 1)[1].split()[1]) == pid:
+                        out.append(int(entry))
+            except (OSError, ValueError, IndexError):
+                pass
+    return out
 
 
 def process_nice() -> int:
