@@ -113,13 +113,14 @@ class SampleFrames:
         why = codec.check(msg.data)
         if why:
             raise MalformedFrame(why)
-        v = codec.decode(msg.data)
         if self.setpoints_per_frame == 1:
+            v = codec.decode(msg.data)
             return v[0], v[1:2]
-        n = v[1]
+        n = codec.decode(msg.data, 2)[1]      # sequence and count: only the slots in use are decoded
         if not 1 <= n <= self.setpoints_per_frame:
             raise MalformedFrame(f'{codec.name}: count {n} outside 1..{self.setpoints_per_frame}')
-        return v[0], v[2:2 + n]
+        v = codec.decode(msg.data, 2 + n)
+        return v[0], v[2:]
 
     # ---- controller -> host
     def encode_feedback(self, first: int, x, f, u) -> list:
@@ -151,12 +152,13 @@ class SampleFrames:
         why = codec.check(msg.data)
         if why:
             raise MalformedFrame(why)
-        v = codec.decode(msg.data)
         if self.profile == 'packed':
-            n = v[1]
+            n = codec.decode(msg.data, 2)[1]      # sequence and count: only the slots in use are decoded
             if not 1 <= n <= self.feedback_slots:
                 raise MalformedFrame(f'{codec.name}: count {n} outside 1..{self.feedback_slots}')
-            return v[0], v[2:2 + 3 * n:3], v[3:3 + 3 * n:3], v[4:4 + 3 * n:3]
+            v = codec.decode(msg.data, 2 + 3 * n)
+            return v[0], v[2::3], v[3::3], v[4::3]
+        v = codec.decode(msg.data)
         if self.profile == 'single':
             return v[0], [v[1]], [v[2]], [v[3]]
         # classic: the two frames of a tick pair up by sequence, in either order (a controller with several
