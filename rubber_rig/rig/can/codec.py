@@ -136,8 +136,8 @@ class ByteCodec:
         them, or the first `count`.
         """
         frame, out = int.from_bytes(data, 'little'), []
-        for (shift, mask, sign, scale, offset, _, _), integer in zip(self._layout[:count], self._integer,
-                                                                               strict=False):
+        layout = self._layout if count is None else self._layout[:count]
+        for (shift, mask, sign, scale, offset, _, _), integer in zip(layout, self._integer, strict=False):
             raw = frame >> shift & mask
             if raw & sign:
                 raw -= sign << 1
