@@ -27,7 +27,7 @@ import pytest
 from rubber_rig.cli.conformance import parse_ambient, parse_reference_spring
 from rubber_rig.rig.can.codec import crc8
 from rubber_rig.rig.can.protocol import Protocol, temperature_reading
-from rubber_rig.rig.conformance.active import ConformanceRun
+from rubber_rig.rig.conformance.active import SCENARIOS
 from rubber_rig.rig.conformance.reference_run import run_against_reference
 from rubber_rig.rig.conformance.reference_specimen import (
     ReferenceSpring,
@@ -320,10 +320,9 @@ def _scenarios_for(requirements: set) -> set:
     rated velocity are read from the identity the controller sends at power-up).
     """
     names, judged = set(), set()
-    for attr in dir(ConformanceRun):
-        scenario = getattr(ConformanceRun, attr)
-        if attr.startswith('s_') and set(getattr(scenario, 'requirements', ())) & requirements:
-            names.add(attr)
+    for scenario in SCENARIOS:
+        if set(scenario.requirements) & requirements:
+            names.add(scenario.__name__)
             judged |= set(scenario.requirements)
     if requirements - judged:
         names.add('s_stream')

@@ -13,8 +13,9 @@
 # limitations under the License.
 
 """The host end of a conformance run: frames to and from the controller, the envelope watch on every sample
-that arrives, waits and streams in the controller's sample time. The scenarios (active_stream, active_faults)
-and the run (active.ConformanceRun) are built on it; it is deliberately not the driver (see active).
+that arrives, waits and streams in the controller's sample time, and the results. It is the context every
+scenario (active_power, active_stream, reference_specimen, active_faults: functions of the link) works on, and
+the run (active.ConformanceRun) holds one; it is deliberately not the driver (see active).
 """
 from __future__ import annotations
 
@@ -65,9 +66,9 @@ class Aborted(RuntimeError):
 
 
 def judges(*requirement_ids):
-    """Decorator of a scenario: the requirements it judges. A scenario that fails on its own (an exception other
-    than Aborted, e.g. a controller that does not do what the scenario needs) fails those it had not judged yet,
-    with the reason (active.ConformanceRun.run), and the run goes on.
+    """Decorator of a scenario (a function of the ConformanceLink): the requirements it judges. A scenario that
+    fails on its own (an exception other than Aborted, e.g. a controller that does not do what the scenario needs)
+    fails those it had not judged yet, with the reason (active.ConformanceRun.run), and the run goes on.
     """
     def mark(scenario):
         scenario.requirements = tuple(requirement_ids)
@@ -157,6 +158,24 @@ class ConformanceLink:
         self._stop = threading.Event()
         self.position = 0.0         # last applied command reported [m]
         self._rx = threading.Thread(target=self._receive_loop, name='conformance-rx', daemon=True)
+
+    @property
+    def host_timeout(self) -> float:
+        """The host timeout [s] the controller stated (ControllerIdentity), else DEFAULT_HOST_TIMEOUT."""
+        if self.identity and float(self.identity[1]['CI_HostTimeout']) > 0:
+            return float(self.identity[1]['CI_HostTimeout'])
+        return DEFAULT_HOST_TIMEOUT
+
+    def start(self):
+        """Start listening: the receive loop (envelope watch, heartbeat, foreign traffic) runs until stop()."""
+        self._rx.start()
+
+    def stop(self):
+        """Heartbeat off, then the receive loop ends (after 0.1 s in which the last frames still arrive)."""
+        self.heartbeat = False
+        time.sleep(0.1)
+        self._stop.set()
+        self._rx.join(timeout=2.0)
 
     # ---- bus
     def _tx(self, msg: can.Message):
