@@ -188,7 +188,7 @@ class Scenario:
         self._advance_until(lambda: False, seconds, '')
 
     def _stalled(self, component: str) -> bool:
-        if self.started_at is None:
+        if self.started_at is None or not self.stalls:
             return False
         t = self.now - self.started_at
         return any(s.component == component and s.covers(t) for s in self.stalls)

@@ -106,10 +106,12 @@ class BusMedium:
         self._heap = []
         self._counter = itertools.count()
         self._durations = {}
+        self._timing = {}                   # frame shape -> (duration [s], arbitration key) (TimedBus.send)
         self._free = self._now              # [s] the end of the last transmission
         self._next_arb = _INF               # [s] the next arbitration moment (inf: nothing queued)
         self._inflight = None               # (node, start, end) of the last transmission while it may run
         self._intervals = deque()           # (start, end) [s] of the transmissions of the last load_window
+        self._interval_sum = 0.0            # [s] their total duration
         self._transmitted = 0
         self._dropped = 0
         self._discarded = 0
@@ -133,12 +135,32 @@ class BusMedium:
         with self._lock:
             now = self._advance()
             lo = now - window
+            if window == self.load_window:
+                return self._window_load(now, lo) / window
             busy = 0.0
             for start, end in reversed(self._intervals):
                 if end <= lo:
                     break
                 busy += min(end, now) - max(start, lo)
         return busy / window
+
+    def _window_load(self, now: float, lo: float) -> float:
+        """Busy time [s] in (lo, now] over the whole load_window: the running sum of the transmissions kept,
+        less what of them lies outside (the oldest before lo, the one in flight after now).
+        """
+        intervals = self._intervals
+        while intervals and intervals[0][1] <= lo:     # wholly before the window: no longer kept
+            start, end = intervals.popleft()
+            self._interval_sum -= end - start
+        busy = self._interval_sum
+        if intervals:
+            start, end = intervals[0]
+            if start < lo:
+                busy -= lo - start
+            start, end = intervals[-1]
+            if end > now:
+                busy -= end - max(start, now)
+        return max(busy, 0.0)
 
     @property
     def stats(self) -> dict:
@@ -228,9 +250,11 @@ class BusMedium:
                 if other is not node:
                     other._rx.append((end, frame))
             intervals.append((t, end))
+            self._interval_sum += duration
             horizon = t - self.load_window
             while intervals[0][1] <= horizon:
-                intervals.popleft()
+                start, stop = intervals.popleft()
+                self._interval_sum -= stop - start
             self._inflight = (node, t, end)
             self._free = end
             t = end if heap else _INF
@@ -312,19 +336,48 @@ class TimedBus(can.BusABC):
 
     def send(self, msg: can.Message, timeout: float = None) -> None:
         medium = self.medium
-        frame = (msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame, msg.dlc, bytes(msg.data),
-                 msg.is_fd, msg.is_fd and msg.bitrate_switch, msg.error_state_indicator)
+        fd, data = msg.is_fd, bytes(msg.data)
+        frame = (msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame, msg.dlc, data, fd,
+                 fd and msg.bitrate_switch, msg.error_state_indicator)
         with medium._lock:
             self._check_open()
-            duration = medium._duration(msg)
+            # (duration, arbitration key) of each shape of frame is worked out once
+            timing = medium._timing.get(frame[:3] + (len(data), fd, frame[6], msg.is_error_frame))
+            if timing is None:
+                timing = medium._timing[frame[:3] + (len(data), fd, frame[6], msg.is_error_frame)] = (
+                    medium._duration(msg), arbitration_key(msg.arbitration_id, msg.is_extended_id,
+                                                           msg.is_remote_frame))
             now = medium._advance()
             if self._queued >= medium.tx_queue:
                 self._dropped += 1
                 medium._dropped += 1
                 raise can.CanOperationError(f'{self.name}: transmit buffer full ({medium.tx_queue} frames waiting '
                                             f'for {medium.name}); frame 0x{msg.arbitration_id:X} dropped')
-            key = arbitration_key(msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame)
-            medium._enqueue(self, now, duration, frame, key)
+            medium._enqueue(self, now, timing[0], frame, timing[1])
+
+    def recv(self, timeout: float = None):
+        """BusABC.recv; a poll (timeout 0) of a node without filters - every poll of a stepped rig - goes straight
+        to the medium (no timing and filtering loop around it, the same frame).
+        """
+        if timeout == 0 and self._filters is None:
+            medium = self.medium
+            with medium._lock:
+                self._check_open()
+                now = medium._advance()
+                rx = self._rx
+                if rx and rx[0][0] <= now:
+                    return self._message(*rx.popleft())
+            if medium.threaded:
+                time.sleep(0)           # as _recv_internal: let the other nodes' threads run
+            return None
+        return super().recv(timeout)
+
+    def _message(self, arrival: float, frame: tuple) -> can.Message:
+        """The received frame, stamped with its arrival [s] on time.time()'s scale."""
+        arb_id, extended, remote, dlc, data, fd, brs, esi = frame
+        return can.Message(timestamp=arrival + self.medium.time_offset, arbitration_id=arb_id,
+                           is_extended_id=extended, is_remote_frame=remote, dlc=dlc, data=data, is_fd=fd,
+                           bitrate_switch=brs, error_state_indicator=esi, channel=self.medium.name, is_rx=True)
 
     def _recv_internal(self, timeout: float = None):
         medium = self.medium
@@ -335,11 +388,7 @@ class TimedBus(can.BusABC):
                 now = medium._advance()
                 rx = self._rx
                 if rx and rx[0][0] <= now:
-                    arrival, (arb_id, extended, remote, dlc, data, fd, brs, esi) = rx.popleft()
-                    return can.Message(timestamp=arrival + medium.time_offset, arbitration_id=arb_id,
-                                       is_extended_id=extended, is_remote_frame=remote, dlc=dlc, data=data,
-                                       is_fd=fd, bitrate_switch=brs, error_state_indicator=esi,
-                                       channel=medium.name, is_rx=True), False
+                    return self._message(*rx.popleft()), False
                 # the next moment anything can arrive here: a frame on the bus, or the next arbitration
                 wait = (rx[0][0] if rx else medium._next_arb) - now
                 if deadline is not None:

@@ -37,7 +37,7 @@ from ..can.protocol import (
 from ..conformance.host_timing import SIM_LATE_MIN
 from .constants import IDLE_PERIOD, STREAMING
 from .faults import FaultInjector
-from .plant import Actuator, DelayLine, Sensor
+from .plant import Actuator, DelayLine, Sensor, first_invalid
 from .receive import CommandReceiver
 from .specimen import build_specimen
 from .state import ControllerState
@@ -313,24 +313,21 @@ class SimController:
             return 0
         x, v = self.actuator.run(u)
         force = self.specimen.run(np.asarray(x)) if n >= self.MIN_RUN else [self.specimen.step(p) for p in x]
-        finite = np.isfinite(force)
-        bad = not finite.all()
-        if bad:   # the load cell channel went invalid: the stream ends at that tick, as tick by tick
-            n = int(np.argmin(finite)) + 1
+        bad = first_invalid(force)
+        if bad >= 0:   # the load cell channel went invalid: the stream ends at that tick, as tick by tick
+            n = bad + 1
             for k in range(n, len(u)):
                 buffer[seq + k] = u[k]
-            u, x, force = u[:n], x[:n], np.asarray(force)[:n]
+            u, x, force = u[:n], x[:n], force[:n]
             self.actuator.x, self.actuator.v = x[-1], v[n - 1]
         if self.force_delay is not None:
             force = self.force_delay.run(force)
-        xm, fm = self.disp_sensor.read_many(x), self.force_sensor.read_many(force)
         # a frame cannot carry NaN: an invalid channel reads 0 and the status frame carries the sensor fault
-        self.tx.queue_feedback(seq, np.where(np.isfinite(xm), xm, 0.0).tolist(),
-                               np.where(np.isfinite(fm), fm, 0.0).tolist(), u)
-        self.u_prev, self.u = (u[-2] if n > 1 else self.u), u[-1]
-        self.next_seq += n
-        self.ticks += n
-        if bad and not self.fault_bits & FAULT_SENSOR:
+        self.tx.queue_feedback(seq, self.disp_sensor.read_frame(x), self.force_sensor.read_frame(force), u)
+        sh.u_prev, sh.u = (u[-2] if n > 1 else sh.u), u[-1]
+        sh.next_seq += n
+        sh.ticks += n
+        if bad >= 0 and not sh.fault_bits & FAULT_SENSOR:
             self.abort(0.0, FAULT_SENSOR)
         else:
             self.tx.housekeeping()

@@ -47,6 +47,7 @@ class FeedbackTransmitter:
         self._flood_owed, self._flood_at = 0.0, None     # bus_flood: frames owed between wake-ups
         self.held = []                    # (release_tick, message) for delayed frames
         self._jitter_until = 0            # feedback_jitter defect: release tick of the last held feedback frame
+        self._jitter = 'feedback_jitter' in defects
         self._hb = self._st = self._tc = 0
         hb_period = 0.08 if 'heartbeat_80ms' in defects else cycle_time('ControllerHeartbeat')
         self.periods = {'ControllerHeartbeat': hb_period, **{name: cycle_time(name) for name in (
@@ -90,9 +91,14 @@ class FeedbackTransmitter:
         fx, ff, fu = self._fb
         k = len(fx) if count is None else count
         if k:
-            for m in self.frames.encode_feedback(self._fb_first & self._seq_mask, fx[:k], ff[:k], fu[:k]):
+            first = self._fb_first & self._seq_mask
+            if k == len(fx):     # all of them (at 1 kHz each sample is a frame of its own)
+                frames, self._fb = self.frames.encode_feedback(first, fx, ff, fu), ([], [], [])
+            else:
+                frames = self.frames.encode_feedback(first, fx[:k], ff[:k], fu[:k])
+                self._fb = (fx[k:], ff[k:], fu[k:])
+            for m in frames:
                 self._transmit('Feedback', m)
-            self._fb = (fx[k:], ff[k:], fu[k:])
             self._fb_first += k
 
     def housekeeping(self, force=False):
@@ -163,9 +169,12 @@ class FeedbackTransmitter:
 
     def _transmit(self, name, msg):
         """Put msg on the bus through the fault injector (name: the frame's role, e.g. 'Feedback')."""
+        if not self.faults.faults and not self._jitter:     # nothing injected: straight onto the bus
+            self.put(msg)
+            return
         ticks = self.shared.ticks
         for delay, m in self.faults.transmit(name, msg, self.fault_time()):
-            if name == 'Feedback' and 'feedback_jitter' in self.defects:
+            if name == 'Feedback' and self._jitter:
                 # 0-8 ms late, never overtaking the frame before it
                 late = int(self.rng.integers(0, int(0.008 * self.fs) + 1))
                 self._jitter_until = max(self._jitter_until, ticks + late)
