@@ -153,19 +153,20 @@ class SimController:
         the frames received, tick every sample due (deadline based: no drift from late wake-ups) or do the idle
         housekeeping; returns how long [s] the controller may wait for a frame before anything is due.
         """
+        sh = self.shared
         if not self._announced:
             self.announce(now)
         if self.flood_bus is not None:
             self.tx.flood(now)
-        if self.state not in STREAMING:
+        if sh.state not in STREAMING:
             self.receiver.receive_all()  # a HostStreamStart and the first setpoints start the stream
-        if self.state not in STREAMING:
+        if sh.state not in STREAMING:
             return self._serve_idle(now)
         if self._deadline is None:
             self._deadline = now
             # the identity keeps its period across the change from wall-clock to tick time
             due = self.tx.idle_due.get('ControllerIdentity', now)
-            self.tx.id_next_tick = self.ticks + max(0, round((due - now) * self.fs))
+            self.tx.id_next_tick = sh.ticks + max(0, round((due - now) * self.fs))
             if self._idle_since is not None:
                 self.idle_ticks += int((now - self._idle_since) * self.fs)
                 self._idle_since = None
@@ -175,17 +176,17 @@ class SimController:
         if due > 1:
             # this process was not scheduled for `due` ticks: neither was the host in it, so the host watchdog does
             # not count that time (a real controller has its own CPU)
-            self.shared.last_host_hb += due - 1
+            sh.last_host_hb += due - 1
             self._log_late(now - deadline)
-        while now >= deadline and self.state in STREAMING:
+        while now >= deadline and sh.state in STREAMING:
             done = self._tick_block(int((now - deadline) * self.fs) + 1) or self._tick()
             deadline += done / self.fs
             n += done
         self._deadline = deadline
         if n > 1:
-            self.counters['overruns'] += n - 1
+            sh.counters['overruns'] += n - 1
         self._idle_before = False
-        return max(0.0, min(deadline - self._clock(), 0.01)) if self.state in STREAMING else 0.0
+        return max(0.0, min(deadline - self._clock(), 0.01)) if sh.state in STREAMING else 0.0
 
     def _serve_idle(self, now: float) -> float:
         """Paced and not streaming: periodic frames on the clock; returns the wait [s] until they are next due."""
