@@ -184,19 +184,17 @@ class ModeBank:
         the result is the same to the bit; for a few samples an lfilter call per mode costs far more than its
         arithmetic. ``out`` holds g_sum x on entry.
         """
-        xs = x.tolist()
+        xs, forces = x.tolist(), out.tolist()
         state = (self.g * (self.a * self.z + self.b1 * self.x_prev)).tolist()     # lfilter's zi of each mode
-        gz = []
+        samples, last = range(len(xs)), []
         for z, b0, b1, a1 in zip(state, self._b0g, self._b1g, self._a1, strict=True):
-            column = []
-            for xk in xs:
+            for k in samples:    # mode by mode, each sample's force less g z in run()'s order of subtraction
+                xk = xs[k]
                 y = z + b0 * xk
                 z = xk * b1 - y * a1
-                column.append(y)
-            gz.append(column)
-        gz = np.array(gz)
-        for column in gz:           # mode by mode, in run()'s order of subtraction
-            out -= column
-        self.z = gz[:, -1] / self.g
+                forces[k] -= y
+            last.append(y)
+        out[:] = forces
+        self.z = np.array(last) / self.g
         self.x_prev = xs[-1]
         return out
