@@ -16,11 +16,11 @@
 """Fast encode/decode of the rig's per-sample frames, derived from their DBC definition.
 
 cantools builds a dict per frame and (through python-can) a deep copy per send: tens of microseconds per frame,
-more than the element model costs per sample. The sample frames of rubber_rig.dbc only hold byte-aligned
-little-endian integers with a scale, so :class:`ByteCodec` reads the layout (start, length, sign, scale, offset)
-from the cantools Message once and packs a frame as one integer (each field shifted to its bit position; a
-payload of n bytes is the integer's n-byte little-endian form). cantools stays the definition: a codec refuses a
-message it cannot represent exactly, and test_rig_codec checks both agree on every field of every sample frame.
+more than the element model costs per sample. Every signal of rubber_rig.dbc is a little-endian integer with a
+scale and an offset, so :class:`ByteCodec` reads the layout (start bit, length, sign, scale, offset) from the
+cantools Message once and packs a frame as one integer (each field shifted to its start bit; a payload of n
+bytes is the integer's n-byte little-endian form). cantools stays the definition: a codec refuses a message it
+cannot represent exactly, and test_rig_codec checks both agree on every field of every message.
 
 The CRC-8 of a frame is affine over GF(2) in its payload bits (crc(a ^ b) = crc(a) ^ crc(b) ^ crc(0) for equal
 lengths), so :class:`ByteCodec` derives, once per message, the CRC of the all-zero payload and for each of the 8
@@ -71,8 +71,8 @@ def _crc_masks(frame_id: int, nbytes: int) -> tuple[int, tuple]:
 
 
 class ByteCodec:
-    """Encoder/decoder of one DBC message whose signals are all byte-aligned little-endian integers and whose
-    last byte is its CRC-8 (rubber_rig.dbc's convention).
+    """Encoder/decoder of one DBC message whose signals are all little-endian integers and whose last byte is its
+    CRC-8 (rubber_rig.dbc's convention).
 
     Values are physical (the DBC's units: m, N); raw = round((value - offset) / scale), saturated to the
     signal's integer range (a frame cannot carry more; the sender's own checks judge such a value).
@@ -88,15 +88,18 @@ class ByteCodec:
         crc = message.signals[-1]
         if not (crc.name.endswith('_Crc') and crc.start == 8 * (self.length - 1) and crc.length == 8):
             raise ValueError(f'{self.name}: the last signal must be an 8-bit CRC in the last byte')
+        self.crc_name, self._crc_bits = crc.name, crc.start
         self.names = [s.name for s in signals]
         self._layout = []        # per signal: (bit position, bit mask, sign bit (0: unsigned), scale, offset, lo, hi)
         for s in signals:
-            if s.byte_order != 'little_endian' or s.start % 8 or s.length % 8 or s.is_float or s.multiplexer_ids:
-                raise ValueError(f'{self.name}.{s.name}: not a byte-aligned little-endian integer signal')
+            if s.byte_order != 'little_endian' or s.is_float or s.multiplexer_ids \
+                    or s.start + s.length > self._crc_bits:
+                raise ValueError(f'{self.name}.{s.name}: not a little-endian integer signal before the CRC')
             lo, hi = (-(1 << (s.length - 1)), (1 << (s.length - 1)) - 1) if s.is_signed else (0, (1 << s.length) - 1)
+            # scale and offset as the DBC gives them: an int scale decodes to ints, as cantools does
             self._layout.append((s.start, (1 << s.length) - 1, 1 << (s.length - 1) if s.is_signed else 0,
-                                 float(s.scale), float(s.offset), lo, hi))
-        self._integer = [sc == 1.0 and off == 0.0 for _, _, _, sc, off, _, _ in self._layout]
+                                 s.scale, s.offset, lo, hi))
+        self._integer = [sc == 1 and off == 0 for _, _, _, sc, off, _, _ in self._layout]
         key = (self.frame_id, self.length)
         if key not in self._crc_cache:
             self._crc_cache[key] = _crc_masks(self.frame_id, self.length - 1)
