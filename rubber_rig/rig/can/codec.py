@@ -129,20 +129,32 @@ class ByteCodec:
         """'' if data has this message's length and a matching CRC, else what is wrong."""
         if len(data) != self.length:
             return f'{self.name}: {len(data)} bytes instead of {self.length}'
-        frame = int.from_bytes(data, 'little')
-        if self.crc(frame & self._payload_mask) != frame >> self._crc_shift:
-            return f'{self.name}: CRC mismatch'
-        return ''
+        return '' if self.unpack(data) is not None else f'{self.name}: CRC mismatch'
 
-    def decode(self, data, count: int = None) -> list:
-        """Physical values (ints for unscaled integer signals) in the order of `names`, from one payload: all of
-        them, or the first `count`.
+    def unpack(self, data):
+        """The frame as one little-endian integer (fields() reads its signals), None if its length or CRC is
+        wrong (check() says which).
         """
-        frame, out = int.from_bytes(data, 'little'), []
-        layout = self._layout if count is None else self._layout[:count]
-        for (shift, mask, sign, scale, offset, _, _), integer in zip(layout, self._integer, strict=False):
+        if len(data) != self.length:
+            return None
+        frame = int.from_bytes(data, 'little')
+        return frame if self.crc(frame & self._payload_mask) == frame >> self._crc_shift else None
+
+    def fields(self, frame: int, count: int = None, start: int = 0) -> list:
+        """Physical values (ints for unscaled integer signals) of the signals start, start + 1, ... up to `count`
+        (default: all) of an unpacked frame.
+        """
+        out = []
+        for (shift, mask, sign, scale, offset, _, _), integer in zip(self._layout[start:count],
+                                                                     self._integer[start:count], strict=True):
             raw = frame >> shift & mask
             if raw & sign:
                 raw -= sign << 1
             out.append(raw if integer else raw * scale + offset)
         return out
+
+    def decode(self, data, count: int = None) -> list:
+        """Physical values (ints for unscaled integer signals) in the order of `names`, from one payload: all of
+        them, or the first `count`.
+        """
+        return self.fields(int.from_bytes(data, 'little'), count)

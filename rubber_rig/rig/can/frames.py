@@ -110,17 +110,16 @@ class SampleFrames:
     def decode_setpoints(self, msg) -> tuple:
         """(sequence mod setpoint_modulus, [setpoints]) of a setpoint frame; MalformedFrame if it is broken."""
         codec = self.by_id[msg.arbitration_id]
-        why = codec.check(msg.data)
-        if why:
-            raise MalformedFrame(why)
+        frame = codec.unpack(msg.data)
+        if frame is None:
+            raise MalformedFrame(codec.check(msg.data))
         if self.setpoints_per_frame == 1:
-            v = codec.decode(msg.data)
+            v = codec.fields(frame)
             return v[0], v[1:2]
-        n = codec.decode(msg.data, 2)[1]      # sequence and count: only the slots in use are decoded
+        seq, n = codec.fields(frame, 2)      # sequence and count: only the slots in use are decoded
         if not 1 <= n <= self.setpoints_per_frame:
             raise MalformedFrame(f'{codec.name}: count {n} outside 1..{self.setpoints_per_frame}')
-        v = codec.decode(msg.data, 2 + n)
-        return v[0], v[2:]
+        return seq, codec.fields(frame, 2 + n, start=2)
 
     # ---- controller -> host
     def encode_feedback(self, first: int, x, f, u) -> list:
@@ -149,16 +148,16 @@ class SampleFrames:
         never completed, so it counts as lost). MalformedFrame if it is broken.
         """
         codec = self.by_id[msg.arbitration_id]
-        why = codec.check(msg.data)
-        if why:
-            raise MalformedFrame(why)
+        frame = codec.unpack(msg.data)
+        if frame is None:
+            raise MalformedFrame(codec.check(msg.data))
         if self.profile == 'packed':
-            n = codec.decode(msg.data, 2)[1]      # sequence and count: only the slots in use are decoded
+            seq, n = codec.fields(frame, 2)      # sequence and count: only the slots in use are decoded
             if not 1 <= n <= self.feedback_slots:
                 raise MalformedFrame(f'{codec.name}: count {n} outside 1..{self.feedback_slots}')
-            v = codec.decode(msg.data, 2 + 3 * n)
-            return v[0], v[2::3], v[3::3], v[4::3]
-        v = codec.decode(msg.data)
+            v = codec.fields(frame, 2 + 3 * n, start=2)
+            return seq, v[0::3], v[1::3], v[2::3]
+        v = codec.fields(frame)
         if self.profile == 'single':
             return v[0], [v[1]], [v[2]], [v[3]]
         # classic: the two frames of a tick pair up by sequence, in either order (a controller with several

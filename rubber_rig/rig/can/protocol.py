@@ -162,11 +162,14 @@ class Protocol:
         data = bytes(msg.data)
         if len(data) != m.length:
             raise MalformedFrame(f'{m.name}: {len(data)} bytes instead of {m.length}')
-        if crc8(m.frame_id, data[:-1]) != data[-1]:
-            raise MalformedFrame(f'{m.name}: CRC mismatch')
         codec = self._codecs.get(m.frame_id)
         if codec is None:
+            if crc8(m.frame_id, data[:-1]) != data[-1]:
+                raise MalformedFrame(f'{m.name}: CRC mismatch')
             return m.name, m.decode(data, decode_choices=False, scaling=True)
-        signals = dict(zip(codec.names, codec.decode(data), strict=True))
+        frame = codec.unpack(data)
+        if frame is None:
+            raise MalformedFrame(f'{m.name}: CRC mismatch')
+        signals = dict(zip(codec.names, codec.fields(frame), strict=True))
         signals[codec.crc_name] = data[-1]
         return m.name, signals
