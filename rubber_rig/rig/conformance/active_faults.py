@@ -49,8 +49,6 @@ from .shape import OWN_RAMP_VELOCITY, ramp_shape
 
 
 @judges('CTRL-FRAME-2', 'CTRL-FRAME-3')
-
-
 def s_bad_frames(link):
     """Malformed and foreign frames while running (CTRL-FRAME-2, CTRL-FRAME-3)."""
     a = 0.2 * link.env.half
@@ -126,8 +124,6 @@ def s_bad_frames(link):
 
 
 @judges('CTRL-LIM-1')
-
-
 def s_host_limits(link):
     """HostLimits bound the controller's own ramp, upwards and downwards (CTRL-LIM-1)."""
     for side in (+1, -1):
@@ -163,8 +159,6 @@ def _limited_abort(link, side: int):
 
 
 @judges('CTRL-LIM-2', 'CTRL-FAULT-1', 'CTRL-FAULT-2')
-
-
 def s_out_of_limits(link):
     """A setpoint above HL_DisplacementMax, then one below HL_DisplacementMin (CTRL-LIM-2, CTRL-FAULT-1,
     CTRL-FAULT-2).
@@ -265,8 +259,6 @@ def _judge_latch(link):
 
 
 @judges('CTRL-LIM-3', 'CTRL-FAULT-1')
-
-
 def s_too_fast(link):
     """A setpoint faster than the rated velocity, upwards and downwards (CTRL-LIM-3, CTRL-FAULT-1)."""
     stated = float(link.identity[1]['CI_VelocityMax']) if link.identity else 0.0
@@ -316,8 +308,6 @@ def _too_fast(link, side: int, vmax: float, step: float, basis: str):
 
 
 @judges('CTRL-WD-1', 'CTRL-FAULT-1')
-
-
 def s_host_silence(link):
     """Host silence (CTRL-WD-1, CTRL-FAULT-1)."""
     a = 0.4 * link.env.half
@@ -372,8 +362,6 @@ def s_host_silence(link):
 
 
 @judges('CTRL-SEQ-2')
-
-
 def s_wrap(link):
     """Streams across a 2^16 boundary and the field's wrap (CTRL-SEQ-2)."""
     starts = [(1 << 16) - int(0.3 * link.fs)]

@@ -26,8 +26,6 @@ from .report import FAIL, PASS
 
 
 @judges('CTRL-PWR-1')
-
-
 def s_power_up(link):
     """Power-up (CTRL-PWR-1)."""
     link.power_up()

@@ -52,8 +52,6 @@ COMMAND = {CMD_ABORT: 'ABORT', CMD_DISABLE: 'DISABLE'}
 
 
 @judges()
-
-
 def s_listen(link):
     """Listen 1.5 s to the idle controller."""
     link._sleep(1.5)
@@ -63,8 +61,6 @@ def s_listen(link):
 
 
 @judges('CTRL-ID-1', 'CTRL-ID-3')
-
-
 def s_identify(link):
     """IDENTIFY, asked IDENTIFY_REPEATS times (CTRL-ID-1, CTRL-ID-3)."""
     latencies, sig, late = [], None, 0.0
@@ -117,8 +113,6 @@ def _judge_rated_velocity(link, stated: float):
 
 
 @judges('CTRL-STREAM-1', 'CTRL-STREAM-3', 'CTRL-STREAM-4', 'CTRL-ST-4', 'CTRL-RAMP-1')
-
-
 def s_stream(link):
     """Stream, underrun, resume, underrun, ABORT (CTRL-STREAM-1/3/4, CTRL-ST-4, CTRL-RAMP-1)."""
     link.limits(link.env.lower, link.env.upper)
@@ -260,8 +254,6 @@ def _judge_ramp(link, target: float, code: int = CMD_ABORT):
 
 
 @judges('CTRL-STREAM-2')
-
-
 def s_stale(link):
     """Setpoints of the old stream after the ramp, without HostStreamStart (CTRL-STREAM-2)."""
     t = time.time()
@@ -280,8 +272,6 @@ def s_stale(link):
 
 
 @judges('CTRL-RAMP-2')
-
-
 def s_hold(link):
     """HOLD while moving (CTRL-RAMP-2)."""
     a = 0.4 * link.env.half
@@ -321,8 +311,6 @@ def s_hold(link):
 
 
 @judges('CTRL-RESET-1', 'CTRL-RAMP-1')
-
-
 def s_reset_moving(link):
     """RESET while running, DISABLE, RESET while ramping (CTRL-RESET-1, CTRL-RAMP-1)."""
     a = 0.4 * link.env.half

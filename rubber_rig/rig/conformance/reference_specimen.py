@@ -143,8 +143,6 @@ def judge_delay(fit: SpringFit, fs: float) -> tuple[bool, str, str]:
 
 
 @judges('CTRL-MEAS-1', 'CTRL-MEAS-2', 'CTRL-MEAS-3')
-
-
 def s_reference(link):
     """Reference specimen: stiffness, delay and temperature (CTRL-MEAS-1/2/3)."""
     _judge_temperature(link)
