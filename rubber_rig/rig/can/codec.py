@@ -100,6 +100,10 @@ class ByteCodec:
             self._layout.append((s.start, (1 << s.length) - 1, 1 << (s.length - 1) if s.is_signed else 0,
                                  s.scale, s.offset, lo, hi))
         self._integer = [sc == 1 and off == 0 for _, _, _, sc, off, _, _ in self._layout]
+        # what fields() reads per signal: (bit position, mask, sign bit, scale, offset), None scale for a raw int
+        self._read = [(shift, mask, sign, None if integer else scale, offset)
+                      for (shift, mask, sign, scale, offset, _, _), integer in zip(self._layout, self._integer,
+                                                                                  strict=True)]
         key = (self.frame_id, self.length)
         if key not in self._crc_cache:
             self._crc_cache[key] = _crc_masks(self.frame_id, self.length - 1)
@@ -145,12 +149,11 @@ class ByteCodec:
         (default: all) of an unpacked frame.
         """
         out = []
-        for (shift, mask, sign, scale, offset, _, _), integer in zip(self._layout[start:count],
-                                                                     self._integer[start:count], strict=True):
+        for shift, mask, sign, scale, offset in self._read[start:count]:
             raw = frame >> shift & mask
             if raw & sign:
                 raw -= sign << 1
-            out.append(raw if integer else raw * scale + offset)
+            out.append(raw if scale is None else raw * scale + offset)
         return out
 
     def decode(self, data, count: int = None) -> list:
