@@ -101,9 +101,9 @@ class ByteCodec:
                                  s.scale, s.offset, lo, hi))
         self._integer = [sc == 1 and off == 0 for _, _, _, sc, off, _, _ in self._layout]
         # what fields() reads per signal: (bit position, mask, sign bit, scale, offset), None scale for a raw int
+        pairs = zip(self._layout, self._integer, strict=True)
         self._read = [(shift, mask, sign, None if integer else scale, offset)
-                      for (shift, mask, sign, scale, offset, _, _), integer in zip(self._layout, self._integer,
-                                                                                  strict=True)]
+                      for (shift, mask, sign, scale, offset, _, _), integer in pairs]
         key = (self.frame_id, self.length)
         if key not in self._crc_cache:
             self._crc_cache[key] = _crc_masks(self.frame_id, self.length - 1)
