@@ -253,7 +253,7 @@ def test_the_clock_scan_catches_every_spelling():
 # one instance's attributes, so none of them can be read, tested or replaced alone (RigDriverNode was
 # RigDriverParameters + LifecycleNode). Split by responsibility instead: a part is an object the class holds. Counted
 # for the whole package, one number that may only go down, like the raw clocks. Target: 0.
-MIXIN_CLASSES = 2
+MIXIN_CLASSES = 0
 
 
 def project_classes() -> set:

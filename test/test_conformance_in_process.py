@@ -24,7 +24,7 @@ namespace in the system tier).
 """
 import pytest
 
-from rubber_rig.rig.conformance.active import ConformanceRun
+from rubber_rig.rig.conformance.active import scenarios_judging
 from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.in_process import run_against_simulator
 from rubber_rig.rig.conformance.log_segments import check_log
@@ -41,19 +41,6 @@ def _verdicts(results) -> dict:
 
 def _why(results) -> list:
     return [(r.id, r.status, r.measured, r.detail) for r in results.ordered() if r.status != 'pass']
-
-
-def _scenarios_for(requirements: set) -> set:
-    """The scenarios that judge `requirements`, and a stream for those only the whole trace shows."""
-    names, judged = set(), set()
-    for attr in dir(ConformanceRun):
-        scenario = getattr(ConformanceRun, attr)
-        if attr.startswith('s_') and set(getattr(scenario, 'requirements', ())) & requirements:
-            names.add(attr)
-            judged |= set(scenario.requirements)
-    if requirements - judged:
-        names.add('s_stream')
-    return names
 
 
 def test_the_correct_simulator_passes_every_requirement_and_offline_agrees_on_its_log(tmp_path):
@@ -77,7 +64,7 @@ def test_each_broken_simulator_fails_exactly_its_requirements(defect):
     passes.
     """
     expected = set(DEFECTS[defect][0])
-    run, results = run_against_simulator((defect,), only=_scenarios_for(expected))
+    run, results = run_against_simulator((defect,), only=scenarios_judging(expected))
     failed = {rid for rid, status in _verdicts(results).items() if status == 'fail'}
     assert failed == expected, _why(results)
 

@@ -26,6 +26,7 @@ from rubber_rig.cli.conformance import EXIT_ABORTED, EXIT_FAIL, EXIT_INCOMPLETE,
 from rubber_rig.rig.can.frames import SampleFrames
 from rubber_rig.rig.can.protocol import PROTOCOL_VERSION, STATE_CODE, Protocol
 from rubber_rig.rig.config import RigConfig
+from rubber_rig.rig.conformance import active_stream
 from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.host_timing import HostTiming, late_between
 from rubber_rig.rig.conformance.link import Envelope, judges
@@ -189,19 +190,20 @@ def test_an_online_run_with_a_requirement_not_tested_is_incomplete_and_exits_non
     assert online_exit_status(res, aborted=True) == EXIT_ABORTED
 
 
+@judges('CTRL-RAMP-2')
+def s_hold(link):
+    """HOLD while moving (CTRL-RAMP-2)."""
+    after = link._samples_since(time.time() + 60.0)    # nothing the controller sent
+    return after[-1].u
+
+
 class CrashingHold(ConformanceRun):
     """The run against a controller that takes no stream: the old HOLD scenario's IndexError on the samples it
-    expected (a real scenario method, marked like the others).
+    expected (a scenario function of the link, marked like the others).
     """
 
     def scenarios(self):
-        return (self.s_listen, self.s_identify, self.s_hold, self.s_reset_moving)
-
-    @judges('CTRL-RAMP-2')
-    def s_hold(self):
-        """HOLD while moving (CTRL-RAMP-2)."""
-        after = self._samples_since(time.time() + 60.0)    # nothing the controller sent
-        return after[-1].u
+        return (active_stream.s_listen, active_stream.s_identify, s_hold, active_stream.s_reset_moving)
 
 
 def test_a_scenario_that_fails_on_its_own_fails_its_requirements_and_the_run_goes_on():

@@ -353,3 +353,24 @@ def test_deadband_schedule_is_reused_across_parameters_bit_for_bit(kind):
         assert np.array_equal(got, np.array([stream.step(v)[0] for v in x]))
         assert batch.get_state() == stream.get_state()
     assert len(deadband._SCHEDULES) == 1      # one schedule served all three parameter sets
+
+
+@pytest.mark.parametrize('threshold', [0.0, 2e-6, 2e-5])
+def test_a_short_batch_of_berg_friction_is_the_same_to_the_bit_as_its_batch_form(threshold):
+    """BergFriction.run steps a few samples one by one (the online model's 10-sample batches) and a long run in its
+    batch form: the same forces and states bit for bit, batch after batch, with and without the deadband.
+    """
+    rng = np.random.default_rng(34)
+    for _ in range(100):
+        short, long = BergFriction(1500.0, 2e-4, 1e-3, threshold), BergFriction(1500.0, 2e-4, 1e-3, threshold)
+        long.SHORT_RUN = 0
+        x0 = rng.normal(0, 1e-4)
+        short.reset(x0)
+        long.reset(x0)
+        x = np.cumsum(rng.normal(0, 2e-5, 300)) + 1e-3 * np.sin(np.arange(300) * 0.2)
+        k = 0
+        while k < x.size:
+            n = int(rng.integers(1, BergFriction.SHORT_RUN + 1))
+            assert np.array_equal(short.run(x[k:k + n]), long.run(x[k:k + n]))
+            assert short.get_state() == long.get_state()
+            k += n

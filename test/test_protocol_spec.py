@@ -165,7 +165,7 @@ def test_the_state_machine_is_the_one_conformance_checks():
 def test_the_simulator_cites_the_controller_requirements_it_implements():
     """The reference controller's comments name only specified requirements, and the ones it implements."""
     source = ''.join((ROOT / 'rubber_rig' / 'rig' / 'sim' / f'{part}.py').read_text(encoding='utf-8')
-                     for part in ('controller', 'receive', 'transmit'))     # its tick, receive and transmit sides
+                     for part in ('controller', 'receive', 'transmit', 'state'))   # its tick, its parts, their state
     cited = set(re.findall(r'CTRL-[A-Z]+-\d+', source))
     assert cited <= set(BY_ID)
     for rid in ('CTRL-ID-1', 'CTRL-LIM-1', 'CTRL-LIM-2', 'CTRL-LIM-3', 'CTRL-STREAM-1', 'CTRL-STREAM-2',

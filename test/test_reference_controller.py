@@ -27,7 +27,7 @@ import pytest
 from rubber_rig.cli.conformance import parse_ambient, parse_reference_spring
 from rubber_rig.rig.can.codec import crc8
 from rubber_rig.rig.can.protocol import Protocol, temperature_reading
-from rubber_rig.rig.conformance.active import ConformanceRun
+from rubber_rig.rig.conformance.active import scenarios_judging
 from rubber_rig.rig.conformance.in_process import run_against_reference
 from rubber_rig.rig.conformance.reference_specimen import (
     ReferenceSpring,
@@ -313,21 +313,6 @@ def test_declared_reference_and_ambient_parse_with_units_and_refuse_nonsense():
 # sees stalls of 100-500 ms, which it reports as this host's lateness (not judged), and proves only that the
 # threaded wiring still works.
 
-def _scenarios_for(requirements: set) -> set:
-    """The scenarios a short run needs to judge `requirements`: those that judge one, and a stream for the
-    requirements only the whole trace shows (power-up always runs: conformance.in_process; the host timeout and
-    rated velocity are read from the identity the controller sends at power-up).
-    """
-    names, judged = set(), set()
-    for attr in dir(ConformanceRun):
-        scenario = getattr(ConformanceRun, attr)
-        if attr.startswith('s_') and set(getattr(scenario, 'requirements', ())) & requirements:
-            names.add(attr)
-            judged |= set(scenario.requirements)
-    if requirements - judged:
-        names.add('s_stream')
-    return names
-
 
 def _verdicts(results) -> dict:
     return {r.id: r.status for r in results.ordered() if r.id.startswith('CTRL')}
@@ -352,7 +337,7 @@ def test_the_reference_controller_passes_every_requirement_of_a_whole_run_on_sim
 
 def test_a_run_on_simulated_time_is_the_same_trace_every_time():
     """Same controller, same run: the same frames at the same times, the same verdicts and measured values."""
-    runs = [run_against_reference(('force_one_sample_late',), only=_scenarios_for({'CTRL-MEAS-2', 'CTRL-FB-2'}))
+    runs = [run_against_reference(('force_one_sample_late',), only=scenarios_judging({'CTRL-MEAS-2', 'CTRL-FB-2'}))
             for _ in range(2)]
     frames = [[(f.t, f.msg.arbitration_id, bytes(f.msg.data)) for f in run.trace.frames] for run, _ in runs]
     assert len(frames[0]) > 1000 and frames[0] == frames[1]
@@ -366,7 +351,7 @@ def test_each_reference_defect_fails_exactly_its_requirements_in_a_short_run(def
     for the trace's requirements): every requirement they judge passes but the defect's own, which fail.
     """
     expected = set(REFERENCE_DEFECTS[defect][0])
-    run, results = run_against_reference((defect,), only=_scenarios_for(expected))
+    run, results = run_against_reference((defect,), only=scenarios_judging(expected))
     assert _failed(results) == expected, _why(results)
     assert not {rid for rid, status in _verdicts(results).items() if status not in ('pass', 'fail', 'not tested')}
 

@@ -19,11 +19,12 @@ import cantools
 import numpy as np
 import pytest
 
-from rubber_rig.rig.can.codec import ByteCodec
+from rubber_rig.rig.can.codec import ByteCodec, crc8
 from rubber_rig.rig.can.frames import PROFILES, SampleFrames
-from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, unwrap
+from rubber_rig.rig.can.protocol import DBC_PATH, MalformedFrame, Protocol, unwrap
 
 DB = cantools.database.load_file(str(DBC_PATH))
+PROTOCOL = Protocol()
 SAMPLE_MESSAGES = ('Setpoint', 'SetpointPacked', 'Feedback', 'FeedbackPacked', 'FeedbackApplied', 'FeedbackMeasured')
 
 
@@ -36,7 +37,7 @@ def _random_values(message, rng):
     return values
 
 
-@pytest.mark.parametrize('name', SAMPLE_MESSAGES)
+@pytest.mark.parametrize('name', [m.name for m in DB.messages])
 def test_byte_codec_encodes_and_decodes_like_cantools(name):
     m = DB.get_message_by_name(name)
     codec = ByteCodec(m)
@@ -50,6 +51,35 @@ def test_byte_codec_encodes_and_decodes_like_cantools(name):
                             strict=False)
         assert bytes(data[:-1]) == bytes(expected[:-1])          # same bits as cantools, CRC aside
         assert codec.decode(data) == pytest.approx([ref[n] for n in codec.names], rel=0, abs=1e-9)
+        # Protocol packs with the codec: the very bytes, and the very values and types, cantools gives
+        msg = PROTOCOL.encode(name, dict(zip(codec.names, values, strict=True)))
+        assert bytes(msg.data) == bytes(expected[:-1]) + bytes([crc8(m.frame_id, expected[:-1])])
+        _, signals = PROTOCOL.decode(msg)
+        assert signals == m.decode(bytes(msg.data), decode_choices=False, scaling=True)
+        assert [type(v) for v in signals.values()] == [type(v) for v in m.decode(
+            bytes(msg.data), decode_choices=False, scaling=True).values()]
+
+
+def test_the_byte_codec_takes_every_message_and_its_crc_and_partial_decode_agree():
+    """The codec's CRC (affine masks derived from the DBC's lengths and identifiers) equals crc8 byte by byte on
+    random payloads, and decoding the first `count` signals gives those of a whole decode.
+    """
+    taken = []
+    for m in DB.messages:
+        try:
+            codec = ByteCodec(m)
+        except ValueError:
+            continue
+        taken.append(m.name)
+        rng = np.random.default_rng(m.frame_id)
+        for _ in range(100):
+            payload = rng.integers(0, 256, m.length - 1, dtype=np.uint8).tobytes()
+            assert codec.crc(int.from_bytes(payload, 'little')) == crc8(m.frame_id, payload)
+            data = codec.encode(_random_values(m, rng))
+            assert data[-1] == crc8(m.frame_id, data[:-1])
+            count = int(rng.integers(0, len(codec.names) + 1))
+            assert codec.decode(data, count) == codec.decode(data)[:count]
+    assert sorted(taken) == sorted(m.name for m in DB.messages)      # every message of the DBC
 
 
 def test_byte_codec_saturates_and_refuses_what_it_cannot_represent():
@@ -59,8 +89,13 @@ def test_byte_codec_saturates_and_refuses_what_it_cannot_represent():
     data = codec.encode([5, 1e-3])
     data[2] ^= 1
     assert codec.check(data) == 'Setpoint: CRC mismatch' and codec.check(data[:-1]) == 'Setpoint: 7 bytes instead of 8'
-    with pytest.raises(ValueError, match='ControllerStatus.ST_State: not a byte-aligned'):
-        ByteCodec(DB.get_message_by_name('ControllerStatus'))
+    from cantools.database.can import Message, Signal
+    from cantools.database.conversion import BaseConversion
+    crc = Signal('X_Crc', 56, 8)
+    as_float = BaseConversion.factory(scale=1, offset=0, is_float=True)
+    for odd in (Signal('X_Big', 7, 16, byte_order='big_endian'), Signal('X_Float', 0, 32, conversion=as_float)):
+        with pytest.raises(ValueError, match=f'X.{odd.name}: not a little-endian integer signal before the CRC'):
+            ByteCodec(Message(0x123, 'X', 8, [odd, crc]))
 
 
 @pytest.mark.parametrize('profile', PROFILES)

@@ -80,7 +80,7 @@ def test_dbc_protocol_module_and_rig_status_msg_agree():
     fs = 2000.0
     with can.Bus(interface='virtual', channel='dbc_periods', receive_own_messages=False) as bus:
         rig = SimController(bus, fs, SimOptions(), paced=False)
-        ticks = (rig._hb_every, rig._st_every, rig._tc_every)
+        ticks = (rig.tx._hb_every, rig.tx._st_every, rig.tx._tc_every)
     assert ticks == tuple(round(db.get_message_by_name(n).cycle_time / 1000 * fs)
                           for n in ('ControllerHeartbeat', 'ControllerStatus', 'Temperature')) == (100, 20, 200)
     assert RigConfig().heartbeat_period == db.get_message_by_name('HostHeartbeat').cycle_time / 1000

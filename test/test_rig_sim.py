@@ -301,10 +301,7 @@ def test_tighter_host_limits_refuse_the_setpoints_already_queued_and_min_above_m
         frames = SampleFrames('packed', proto.db, 1000.0)
 
         def receive():      # the receive side alone (no tick): the setpoints stay queued
-            msg = sim_bus.recv(0)
-            while msg is not None:
-                rig._handle(msg)
-                msg = sim_bus.recv(0)
+            rig.receiver.receive_all()
         bus.send(proto.encode('HostStreamStart', {'HS_FirstSequence': 0}))
         for msg in frames.encode_setpoints(0, [2e-6 * k for k in range(200)]):
             bus.send(msg)

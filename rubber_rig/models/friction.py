@@ -158,6 +158,7 @@ class BergFriction:
 
     branch_names = ('friction',)
     kinds = ('friction',)
+    SHORT_RUN = 32      # [samples] up to this many, run() steps sample by sample (the same numbers, faster)
 
     def __init__(self, f_fmax: float, x2: float, dt: float, reversal_threshold: float = 0.0):
         self.f_fmax, self.x2, self.dt = float(f_fmax), float(x2), float(dt)
@@ -184,8 +185,9 @@ class BergFriction:
         self.direction = int(self.direction)
 
     def step(self, x: float):
-        if self.reversal_threshold > 0.0:
-            return (self._step_deadband(x),)
+        return (self._step_deadband(x) if self.reversal_threshold > 0.0 else self._step_plain(x),)
+
+    def _step_plain(self, x: float) -> float:
         d = x - self.x_prev
         direction = 1 if d > 0 else (-1 if d < 0 else self.direction)
         if direction != self.direction and self.direction != 0:
@@ -194,7 +196,7 @@ class BergFriction:
         f = _berg_scalar(x, self.x_s, self.f_s, self.f_fmax, self.x2)
         self.x_prev, self.f_prev = x, f
         self.x_ext, self.f_ext = x, f
-        return (f,)
+        return f
 
     def _step_deadband(self, x: float) -> float:
         fm, x2, thr, s = self.f_fmax, self.x2, self.reversal_threshold, self.direction
@@ -220,6 +222,11 @@ class BergFriction:
         n = x.size
         if n == 0:
             return np.zeros((1, 0))
+        if n <= self.SHORT_RUN:
+            # a few samples (a batch of the online model): step() per sample is the same arithmetic (Eq. 16 as
+            # _berg_scalar) to the bit, without the batch form's dozen numpy calls
+            step = self._step_deadband if self.reversal_threshold > 0.0 else self._step_plain
+            return np.array([[step(v) for v in x.tolist()]])
         if self.reversal_threshold > 0.0:
             return self._run_deadband(x)[None, :]
         xp = np.empty(n + 1)

@@ -97,6 +97,8 @@ def discrete_response(k_static: float, g, u, h: float, frequency):
 class ModeBank:
     """Streaming/batch evaluation of sum_i g_i (x - z_i) for FOH-discretised modes (the viscous force [N])."""
 
+    SHORT_RUN = 32      # [samples] up to this many, run() recurses in plain floats instead of an lfilter per mode
+
     def __init__(self, g, u, h: float):
         self.g = np.ascontiguousarray(g, dtype=float)
         self.u = np.ascontiguousarray(u, dtype=float)
@@ -110,6 +112,8 @@ class ModeBank:
         self._mat[:, m] = self.b0
         self._mat[:, m + 1] = self.b1
         self._s = np.zeros(m + 2)
+        # run() of a short batch (_run_short): lfilter's coefficients of each mode's filter of g z
+        self._b0g, self._b1g, self._a1 = (self.g * self.b0).tolist(), (self.g * self.b1).tolist(), (-self.a).tolist()
         self.reset()
 
     @property
@@ -158,6 +162,8 @@ class ModeBank:
         if x.size == 0:
             return out
         np.multiply(x, self.g_sum, out=out)
+        if x.size <= self.SHORT_RUN:
+            return self._run_short(x, out)
         z_last = np.empty(self.g.size)
         x_prev = self.x_prev
         for i in range(self.g.size):
@@ -170,4 +176,25 @@ class ModeBank:
             z_last[i] = gz[-1] / g
         self.z = z_last
         self.x_prev = float(x[-1])
+        return out
+
+    def _run_short(self, x: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """run() for a few samples (a batch of the online model): each mode's recursion in plain floats with the
+        very operations lfilter does per sample (transposed direct form II: y = z + b0 x, z = x b1 - y a1), so
+        the result is the same to the bit; for a few samples an lfilter call per mode costs far more than its
+        arithmetic. ``out`` holds g_sum x on entry.
+        """
+        xs, forces = x.tolist(), out.tolist()
+        state = (self.g * (self.a * self.z + self.b1 * self.x_prev)).tolist()     # lfilter's zi of each mode
+        samples, last = range(len(xs)), []
+        for z, b0, b1, a1 in zip(state, self._b0g, self._b1g, self._a1, strict=True):
+            for k in samples:    # mode by mode, each sample's force less g z in run()'s order of subtraction
+                xk = xs[k]
+                y = z + b0 * xk
+                z = xk * b1 - y * a1
+                forces[k] -= y
+            last.append(y)
+        out[:] = forces
+        self.z = np.array(last) / self.g
+        self.x_prev = xs[-1]
         return out

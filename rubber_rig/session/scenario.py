@@ -188,7 +188,7 @@ class Scenario:
         self._advance_until(lambda: False, seconds, '')
 
     def _stalled(self, component: str) -> bool:
-        if self.started_at is None:
+        if self.started_at is None or not self.stalls:
             return False
         t = self.now - self.started_at
         return any(s.component == component and s.covers(t) for s in self.stalls)
@@ -269,7 +269,9 @@ class Scenario:
         block = self.driver.poll()
         while block is not None:     # rig_driver's poll: blocks into batches of BATCH_PERIOD (its batch_size 0)
             self._publish_samples(*self.batcher.add(block, self.samples_per_batch))
-            block = self.driver.poll()
+            # the node polls again until nothing comes: at the same instant that poll finds no new frame on the
+            # bus, only the blocks this one received
+            block = self.driver.io.next_block()
         self._publish_samples(self.batcher.due(MAX_BATCH_DELAY))
 
     def _publish_samples(self, *batches) -> None:

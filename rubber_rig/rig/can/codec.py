@@ -16,10 +16,16 @@
 """Fast encode/decode of the rig's per-sample frames, derived from their DBC definition.
 
 cantools builds a dict per frame and (through python-can) a deep copy per send: tens of microseconds per frame,
-more than the element model costs per sample. The sample frames of rubber_rig.dbc only hold byte-aligned
-little-endian integers with a scale, so :class:`ByteCodec` reads the layout (start, length, sign, scale, offset)
-from the cantools Message and packs values with plain integer arithmetic. cantools stays the definition: a codec
-refuses a message it cannot represent exactly, and test_rig_codec checks both agree on every field.
+more than the element model costs per sample. Every signal of rubber_rig.dbc is a little-endian integer with a
+scale and an offset, so :class:`ByteCodec` reads the layout (start bit, length, sign, scale, offset) from the
+cantools Message once and packs a frame as one integer (each field shifted to its start bit; a payload of n
+bytes is the integer's n-byte little-endian form). cantools stays the definition: a codec refuses a message it
+cannot represent exactly, and test_rig_codec checks both agree on every field of every message.
+
+The CRC-8 of a frame is affine over GF(2) in its payload bits (crc(a ^ b) = crc(a) ^ crc(b) ^ crc(0) for equal
+lengths), so :class:`ByteCodec` derives, once per message, the CRC of the all-zero payload and for each of the 8
+CRC bits the mask of payload bits whose parity flips it: a frame's CRC is then 8 AND-and-parity operations on
+its payload integer instead of a table lookup per byte; test_rig_codec checks it against :func:`crc8`.
 """
 from __future__ import annotations
 
@@ -49,14 +55,31 @@ def crc8(frame_id: int, payload) -> int:
     return crc ^ 0xFF
 
 
+def _crc_masks(frame_id: int, nbytes: int) -> tuple[int, tuple]:
+    """(crc8 of `nbytes` zero bytes, masks): bit j of crc8(frame_id, payload) is bit j of that constant XOR the
+    parity of (payload as a little-endian integer) & masks[j].
+    """
+    zero = crc8(frame_id, bytes(nbytes))
+    masks = [0] * 8
+    for bit in range(8 * nbytes):
+        unit = (1 << bit).to_bytes(nbytes, 'little')
+        flips = crc8(frame_id, unit) ^ zero
+        for j in range(8):
+            if flips >> j & 1:
+                masks[j] |= 1 << bit
+    return zero, tuple(masks)
+
+
 class ByteCodec:
-    """Encoder/decoder of one DBC message whose signals are all byte-aligned little-endian integers and whose
-    last byte is its CRC-8 (rubber_rig.dbc's convention).
+    """Encoder/decoder of one DBC message whose signals are all little-endian integers and whose last byte is its
+    CRC-8 (rubber_rig.dbc's convention).
 
     Values are physical (the DBC's units: m, N); raw = round((value - offset) / scale), saturated to the
     signal's integer range (a frame cannot carry more; the sender's own checks judge such a value).
     ValueError (naming the signal) for a message this codec cannot represent exactly.
     """
+
+    _crc_cache: dict = {}
 
     def __init__(self, message):
         self.name, self.frame_id, self.length = message.name, message.frame_id, message.length
@@ -65,40 +88,76 @@ class ByteCodec:
         crc = message.signals[-1]
         if not (crc.name.endswith('_Crc') and crc.start == 8 * (self.length - 1) and crc.length == 8):
             raise ValueError(f'{self.name}: the last signal must be an 8-bit CRC in the last byte')
+        self.crc_name, self._crc_bits = crc.name, crc.start
         self.names = [s.name for s in signals]
-        self._layout = []
+        self._layout = []        # per signal: (bit position, bit mask, sign bit (0: unsigned), scale, offset, lo, hi)
         for s in signals:
-            if s.byte_order != 'little_endian' or s.start % 8 or s.length % 8 or s.is_float or s.multiplexer_ids:
-                raise ValueError(f'{self.name}.{s.name}: not a byte-aligned little-endian integer signal')
-            nbytes = s.length // 8
+            if s.byte_order != 'little_endian' or s.is_float or s.multiplexer_ids \
+                    or s.start + s.length > self._crc_bits:
+                raise ValueError(f'{self.name}.{s.name}: not a little-endian integer signal before the CRC')
             lo, hi = (-(1 << (s.length - 1)), (1 << (s.length - 1)) - 1) if s.is_signed else (0, (1 << s.length) - 1)
-            self._layout.append((s.start // 8, nbytes, bool(s.is_signed), float(s.scale), float(s.offset), lo, hi))
-        self._integer = [sc == 1.0 and off == 0.0 for _, _, _, sc, off, _, _ in self._layout]
+            # scale and offset as the DBC gives them: an int scale decodes to ints, as cantools does
+            self._layout.append((s.start, (1 << s.length) - 1, 1 << (s.length - 1) if s.is_signed else 0,
+                                 s.scale, s.offset, lo, hi))
+        self._integer = [sc == 1 and off == 0 for _, _, _, sc, off, _, _ in self._layout]
+        # what fields() reads per signal: (bit position, mask, sign bit, scale, offset), None scale for a raw int
+        pairs = zip(self._layout, self._integer, strict=True)
+        self._read = [(shift, mask, sign, None if integer else scale, offset)
+                      for (shift, mask, sign, scale, offset, _, _), integer in pairs]
+        key = (self.frame_id, self.length)
+        if key not in self._crc_cache:
+            self._crc_cache[key] = _crc_masks(self.frame_id, self.length - 1)
+        self._crc_zero, self._crc_masks = self._crc_cache[key]
+        self._crc_shift = 8 * (self.length - 1)
+        self._payload_mask = (1 << self._crc_shift) - 1
+
+    def crc(self, payload: int) -> int:
+        """CRC-8 of the payload (all bytes but the CRC's) given as its little-endian integer; = crc8()."""
+        crc = self._crc_zero
+        for j, mask in enumerate(self._crc_masks):
+            crc ^= ((payload & mask).bit_count() & 1) << j
+        return crc
 
     def encode(self, values) -> bytearray:
         """Payload (length bytes, CRC filled in) for physical `values` in the order of `names`; signals after
         the last value given are raw 0 (the unused slots of a packed frame).
         """
-        data = bytearray(self.length)
-        for (start, nbytes, signed, scale, offset, lo, hi), value in zip(self._layout, values, strict=False):
+        payload = 0
+        for (shift, mask, _, scale, offset, lo, hi), value in zip(self._layout, values, strict=False):
             raw = round((value - offset) / scale)
             raw = lo if raw < lo else hi if raw > hi else raw
-            data[start:start + nbytes] = raw.to_bytes(nbytes, 'little', signed=signed)
-        data[-1] = crc8(self.frame_id, memoryview(data)[:-1])
-        return data
+            payload |= (raw & mask) << shift
+        return bytearray((payload | self.crc(payload) << self._crc_shift).to_bytes(self.length, 'little'))
 
     def check(self, data) -> str:
         """'' if data has this message's length and a matching CRC, else what is wrong."""
         if len(data) != self.length:
             return f'{self.name}: {len(data)} bytes instead of {self.length}'
-        if crc8(self.frame_id, memoryview(data)[:-1]) != data[-1]:
-            return f'{self.name}: CRC mismatch'
-        return ''
+        return '' if self.unpack(data) is not None else f'{self.name}: CRC mismatch'
 
-    def decode(self, data) -> list:
-        """Physical values (ints for unscaled integer signals) in the order of `names`, from one payload."""
+    def unpack(self, data):
+        """The frame as one little-endian integer (fields() reads its signals), None if its length or CRC is
+        wrong (check() says which).
+        """
+        if len(data) != self.length:
+            return None
+        frame = int.from_bytes(data, 'little')
+        return frame if self.crc(frame & self._payload_mask) == frame >> self._crc_shift else None
+
+    def fields(self, frame: int, count: int = None, start: int = 0) -> list:
+        """Physical values (ints for unscaled integer signals) of the signals start, start + 1, ... up to `count`
+        (default: all) of an unpacked frame.
+        """
         out = []
-        for (start, nbytes, signed, scale, offset, _, _), integer in zip(self._layout, self._integer, strict=True):
-            raw = int.from_bytes(data[start:start + nbytes], 'little', signed=signed)
-            out.append(raw if integer else raw * scale + offset)
+        for shift, mask, sign, scale, offset in self._read[start:count]:
+            raw = frame >> shift & mask
+            if raw & sign:
+                raw -= sign << 1
+            out.append(raw if scale is None else raw * scale + offset)
         return out
+
+    def decode(self, data, count: int = None) -> list:
+        """Physical values (ints for unscaled integer signals) in the order of `names`, from one payload: all of
+        them, or the first `count`.
+        """
+        return self.fields(int.from_bytes(data, 'little'), count)

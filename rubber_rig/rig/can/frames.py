@@ -110,16 +110,16 @@ class SampleFrames:
     def decode_setpoints(self, msg) -> tuple:
         """(sequence mod setpoint_modulus, [setpoints]) of a setpoint frame; MalformedFrame if it is broken."""
         codec = self.by_id[msg.arbitration_id]
-        why = codec.check(msg.data)
-        if why:
-            raise MalformedFrame(why)
-        v = codec.decode(msg.data)
+        frame = codec.unpack(msg.data)
+        if frame is None:
+            raise MalformedFrame(codec.check(msg.data))
         if self.setpoints_per_frame == 1:
+            v = codec.fields(frame)
             return v[0], v[1:2]
-        n = v[1]
+        seq, n = codec.fields(frame, 2)      # sequence and count: only the slots in use are decoded
         if not 1 <= n <= self.setpoints_per_frame:
             raise MalformedFrame(f'{codec.name}: count {n} outside 1..{self.setpoints_per_frame}')
-        return v[0], v[2:2 + n]
+        return seq, codec.fields(frame, 2 + n, start=2)
 
     # ---- controller -> host
     def encode_feedback(self, first: int, x, f, u) -> list:
@@ -148,15 +148,16 @@ class SampleFrames:
         never completed, so it counts as lost). MalformedFrame if it is broken.
         """
         codec = self.by_id[msg.arbitration_id]
-        why = codec.check(msg.data)
-        if why:
-            raise MalformedFrame(why)
-        v = codec.decode(msg.data)
+        frame = codec.unpack(msg.data)
+        if frame is None:
+            raise MalformedFrame(codec.check(msg.data))
         if self.profile == 'packed':
-            n = v[1]
+            seq, n = codec.fields(frame, 2)      # sequence and count: only the slots in use are decoded
             if not 1 <= n <= self.feedback_slots:
                 raise MalformedFrame(f'{codec.name}: count {n} outside 1..{self.feedback_slots}')
-            return v[0], v[2:2 + 3 * n:3], v[3:3 + 3 * n:3], v[4:4 + 3 * n:3]
+            v = codec.fields(frame, 2 + 3 * n, start=2)
+            return seq, v[0::3], v[1::3], v[2::3]
+        v = codec.fields(frame)
         if self.profile == 'single':
             return v[0], [v[1]], [v[2]], [v[3]]
         # classic: the two frames of a tick pair up by sequence, in either order (a controller with several

@@ -21,7 +21,7 @@ from pathlib import Path
 import can
 import cantools
 
-from .codec import crc8
+from .codec import ByteCodec, crc8
 
 DBC_PATH = Path(__file__).with_name('rubber_rig.dbc')
 # The DBC is the one definition of the protocol: states, command codes, fault bits and frame periods are read
@@ -115,7 +115,9 @@ class MalformedFrame(ValueError):
 
 
 class Protocol:
-    """Encoder/decoder for the frames of rubber_rig.dbc (cantools does the signal packing).
+    """Encoder/decoder for the frames of rubber_rig.dbc: the layout of each message read from the DBC by cantools
+    once, the packing done by codec.ByteCodec (the same bytes and values as cantools, test_rig_codec); a message
+    ByteCodec cannot represent is packed by cantools itself.
 
     Every message ends with an 8-bit CRC signal (checked when the DBC is loaded) that this class fills in and
     verifies.
@@ -130,13 +132,23 @@ class Protocol:
             if not (crc.name.endswith('_Crc') and crc.start == 8 * (m.length - 1) and crc.length == 8):
                 raise ValueError(f'{dbc_path}: message {m.name}: last signal must be an 8-bit CRC in the last byte')
         self._crc_name = {m.name: m.signals[-1].name for m in self.db.messages}
+        self._codecs = {}
+        for m in self.db.messages:
+            try:
+                self._codecs[m.frame_id] = self._codecs[m.name] = ByteCodec(m)
+            except ValueError:
+                pass            # cantools packs it
 
     def encode(self, name: str, signals: dict) -> can.Message:
         """A python-can Message for DBC message `name` with physical signal values (SI, as in the DBC)."""
         m = self.by_name[name]
         signals[self._crc_name[name]] = 0
-        data = bytearray(m.encode(signals, scaling=True, strict=False))
-        data[-1] = crc8(m.frame_id, data[:-1])
+        codec = self._codecs.get(name)
+        if codec is not None:
+            data = codec.encode([signals[n] for n in codec.names])
+        else:
+            data = bytearray(m.encode(signals, scaling=True, strict=False))
+            data[-1] = crc8(m.frame_id, data[:-1])
         return can.Message(arbitration_id=m.frame_id, data=data, is_extended_id=False, is_fd=m.is_fd,
                            bitrate_switch=m.is_fd, check=False)
 
@@ -150,6 +162,14 @@ class Protocol:
         data = bytes(msg.data)
         if len(data) != m.length:
             raise MalformedFrame(f'{m.name}: {len(data)} bytes instead of {m.length}')
-        if crc8(m.frame_id, data[:-1]) != data[-1]:
+        codec = self._codecs.get(m.frame_id)
+        if codec is None:
+            if crc8(m.frame_id, data[:-1]) != data[-1]:
+                raise MalformedFrame(f'{m.name}: CRC mismatch')
+            return m.name, m.decode(data, decode_choices=False, scaling=True)
+        frame = codec.unpack(data)
+        if frame is None:
             raise MalformedFrame(f'{m.name}: CRC mismatch')
-        return m.name, m.decode(data, decode_choices=False, scaling=True)
+        signals = dict(zip(codec.names, codec.fields(frame), strict=True))
+        signals[codec.crc_name] = data[-1]
+        return m.name, signals

@@ -42,25 +42,13 @@ from collections import deque
 
 import can
 
+from .simbus_node import TimedBus, arbitration_key
 from .timing import frame_bits, frame_time
 
+__all__ = ['BusMedium', 'TimedBus', 'arbitration_key']
+
 _INF = math.inf
-# shortest wait [s] on the condition when a moment is due but not yet past on the clock (avoids a busy loop)
-_MIN_WAIT = 1e-5
 _medium_names = itertools.count()
-
-
-def arbitration_key(arbitration_id: int, extended: bool = False, remote: bool = False) -> int:
-    """The arbitration field of a frame as a 32-bit number whose order is the bus's priority order (lower wins).
-
-    Standard frame: identifier (11 bits), RTR, IDE = 0. Extended frame: base identifier (11 bits), SRR = 1,
-    IDE = 1, identifier extension (18 bits), RTR. Dominant (0) bits win bit by bit, so a standard frame beats
-    an extended frame with the same base identifier and a data frame beats a remote frame with the same
-    identifier (CAN FD frames have no remote frames: RRS is always dominant).
-    """
-    if extended:
-        return ((arbitration_id >> 18) << 21) | 0x180000 | ((arbitration_id & 0x3FFFF) << 1) | int(remote)
-    return (arbitration_id << 21) | (int(remote) << 20)
 
 
 class BusMedium:
@@ -106,10 +94,12 @@ class BusMedium:
         self._heap = []
         self._counter = itertools.count()
         self._durations = {}
+        self._timing = {}                   # frame shape -> (duration [s], arbitration key) (TimedBus.send)
         self._free = self._now              # [s] the end of the last transmission
         self._next_arb = _INF               # [s] the next arbitration moment (inf: nothing queued)
         self._inflight = None               # (node, start, end) of the last transmission while it may run
         self._intervals = deque()           # (start, end) [s] of the transmissions of the last load_window
+        self._interval_sum = 0.0            # [s] their total duration
         self._transmitted = 0
         self._dropped = 0
         self._discarded = 0
@@ -133,12 +123,32 @@ class BusMedium:
         with self._lock:
             now = self._advance()
             lo = now - window
+            if window == self.load_window:
+                return self._window_load(now, lo) / window
             busy = 0.0
             for start, end in reversed(self._intervals):
                 if end <= lo:
                     break
                 busy += min(end, now) - max(start, lo)
         return busy / window
+
+    def _window_load(self, now: float, lo: float) -> float:
+        """Busy time [s] in (lo, now] over the whole load_window: the running sum of the transmissions kept,
+        less what of them lies outside (the oldest before lo, the one in flight after now).
+        """
+        intervals = self._intervals
+        while intervals and intervals[0][1] <= lo:     # wholly before the window: no longer kept
+            start, end = intervals.popleft()
+            self._interval_sum -= end - start
+        busy = self._interval_sum
+        if intervals:
+            start, end = intervals[0]
+            if start < lo:
+                busy -= lo - start
+            start, end = intervals[-1]
+            if end > now:
+                busy -= end - max(start, now)
+        return max(busy, 0.0)
 
     @property
     def stats(self) -> dict:
@@ -228,9 +238,11 @@ class BusMedium:
                 if other is not node:
                     other._rx.append((end, frame))
             intervals.append((t, end))
+            self._interval_sum += duration
             horizon = t - self.load_window
             while intervals[0][1] <= horizon:
-                intervals.popleft()
+                start, stop = intervals.popleft()
+                self._interval_sum -= stop - start
             self._inflight = (node, t, end)
             self._free = end
             t = end if heap else _INF
@@ -279,117 +291,3 @@ class BusMedium:
             self._discard(node)
             node._rx.clear()
             self._cond.notify_all()         # a recv blocked on node raises
-
-
-class TimedBus(can.BusABC):
-    """One node's end of a :class:`BusMedium`, a python-can bus (make it with :meth:`BusMedium.attach`).
-
-    send(msg) queues a frame for the bus and returns at once (timeout is accepted for BusABC and not used: a
-    full transmit queue raises CanOperationError at once, as SocketCAN's ENOBUFS); recv(timeout) returns the
-    next frame of another node once its transmission has ended on the medium's clock (timeout [s] of real
-    time; None waits forever, 0 polls). Counters: frames_sent (transmissions completed), frames_dropped,
-    frames_queued, max_queue_delay [s].
-    """
-
-    def __init__(self, medium: BusMedium, name: str = '', can_filters=None, **kwargs):
-        self.medium = medium
-        self._rx = deque()                  # (arrival [s] on the medium's clock, frame), in arrival order
-        self._txq = deque()                 # heap entries of the frames waiting for the bus, in queued order
-        self._queued = 0
-        self._sent = 0
-        self._dropped = 0
-        self._max_delay = 0.0
-        self._open = True
-        self._can_protocol = can.CanProtocol.CAN_FD if medium.fd else can.CanProtocol.CAN_20
-        self.receive_own_messages = False
-        super().__init__(channel=medium.name, can_filters=can_filters, **kwargs)
-        self.name = medium._attach(self, name)
-        self.channel_info = f'{medium.channel_info}, node {self.name}'
-
-    def _check_open(self):
-        if not self._open:
-            raise can.CanOperationError(f'{self.name} is shut down (detached from {self.medium.name})')
-
-    def send(self, msg: can.Message, timeout: float = None) -> None:
-        medium = self.medium
-        frame = (msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame, msg.dlc, bytes(msg.data),
-                 msg.is_fd, msg.is_fd and msg.bitrate_switch, msg.error_state_indicator)
-        with medium._lock:
-            self._check_open()
-            duration = medium._duration(msg)
-            now = medium._advance()
-            if self._queued >= medium.tx_queue:
-                self._dropped += 1
-                medium._dropped += 1
-                raise can.CanOperationError(f'{self.name}: transmit buffer full ({medium.tx_queue} frames waiting '
-                                            f'for {medium.name}); frame 0x{msg.arbitration_id:X} dropped')
-            key = arbitration_key(msg.arbitration_id, msg.is_extended_id, msg.is_remote_frame)
-            medium._enqueue(self, now, duration, frame, key)
-
-    def _recv_internal(self, timeout: float = None):
-        medium = self.medium
-        deadline = None if timeout is None else time.monotonic() + timeout
-        with medium._cond:
-            while True:
-                self._check_open()
-                now = medium._advance()
-                rx = self._rx
-                if rx and rx[0][0] <= now:
-                    arrival, (arb_id, extended, remote, dlc, data, fd, brs, esi) = rx.popleft()
-                    return can.Message(timestamp=arrival + medium.time_offset, arbitration_id=arb_id,
-                                       is_extended_id=extended, is_remote_frame=remote, dlc=dlc, data=data,
-                                       is_fd=fd, bitrate_switch=brs, error_state_indicator=esi,
-                                       channel=medium.name, is_rx=True), False
-                # the next moment anything can arrive here: a frame on the bus, or the next arbitration
-                wait = (rx[0][0] if rx else medium._next_arb) - now
-                if deadline is not None:
-                    left = deadline - time.monotonic()
-                    if left <= 0:
-                        break
-                    wait = min(wait, left)
-                medium._cond.wait(None if wait == _INF else max(wait, _MIN_WAIT))
-        # nothing yet: let the other nodes' threads run (a host polling in a tight loop would otherwise hold
-        # the GIL and starve the controller thread, which a real controller's own CPU never is); a medium whose
-        # nodes are all stepped by one thread on a simulated clock (threaded False) has no one to yield to
-        if medium.threaded:
-            time.sleep(0)
-        return None, False
-
-    def flush_tx_buffer(self) -> None:
-        """Discard the frames this node has queued that have not started on the bus."""
-        with self.medium._lock:
-            self.medium._advance()
-            self.medium._discard(self)
-
-    def shutdown(self) -> None:
-        """Detach from the medium: queued frames are discarded, the other nodes keep working."""
-        if not self._open:
-            return
-        self._open = False
-        self.medium._detach(self)
-        super().shutdown()
-
-    def _counter(self, name: str):
-        with self.medium._lock:
-            self.medium._advance()
-            return getattr(self, name)
-
-    @property
-    def frames_sent(self) -> int:
-        """Frames of this node whose transmission has completed."""
-        return self._counter('_sent')
-
-    @property
-    def frames_dropped(self) -> int:
-        """Frames refused because the transmit queue was full."""
-        return self._counter('_dropped')
-
-    @property
-    def frames_queued(self) -> int:
-        """Frames waiting for the bus now."""
-        return self._counter('_queued')
-
-    @property
-    def max_queue_delay(self) -> float:
-        """Longest wait [s] of a frame of this node between send and the start of its transmission."""
-        return self._counter('_max_delay')

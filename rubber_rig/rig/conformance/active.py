@@ -30,28 +30,66 @@ from pathlib import Path
 import can
 
 from ..can.protocol import CMD_ABORT
-from .active_faults import FaultScenarios
-from .active_power import PowerUpScenarios
-from .active_stream import StreamScenarios
-from .link import Aborted
+from . import active_faults, active_power, active_stream, reference_specimen
+from .link import Aborted, ConformanceLink
 from .passive import check_offline
-from .reference_specimen import MeasureScenarios
 from .report import FAIL, NOT_TESTED, Results
 from .requirements import REQUIREMENTS
 
+#: every scenario in the order a run takes them: functions of the run's ConformanceLink, each marked with the
+#: requirements it judges (link.judges); a run without --power-up leaves out the first
+SCENARIOS = (active_power.s_power_up, active_stream.s_listen, active_stream.s_identify, active_stream.s_stream,
+             active_stream.s_stale, reference_specimen.s_reference, active_stream.s_hold, active_stream.s_reset_moving,
+             active_faults.s_bad_frames, active_faults.s_host_limits, active_faults.s_out_of_limits,
+             active_faults.s_too_fast, active_faults.s_host_silence, active_faults.s_wrap)
 
-class ConformanceRun(PowerUpScenarios, StreamScenarios, MeasureScenarios, FaultScenarios):
+
+def scenarios_judging(requirements) -> set:
+    """The names of the scenarios a short run needs to judge `requirements` (CTRL ids): those that judge one, and
+    s_stream for the requirements only the whole trace shows (the power-up scenario always runs in an in-process
+    run; the host timeout and rated velocity come from the identity the controller sends at power-up).
+    """
+    names, judged = set(), set()
+    for scenario in SCENARIOS:
+        if set(scenario.requirements) & set(requirements):
+            names.add(scenario.__name__)
+            judged |= set(scenario.requirements)
+    if set(requirements) - judged:
+        names.add('s_stream')
+    return names
+
+
+class ConformanceRun:
     """One conformance run of the controller on `bus` (any python-can Bus) at sample_rate [Hz] with frame
     `profile`, inside `envelope`. run() returns the Results of every CTRL requirement.
+
+    The run holds the host end (``link``, a ConformanceLink: frames, envelope watch, results) and takes the
+    scenarios one after the other, each a function of that link (SCENARIOS; a short run takes those named in
+    `only`). The other arguments are the link's.
     """
 
+    def __init__(self, bus: can.BusABC, sample_rate: float, envelope, profile: str = 'packed', log=print,
+                 power_up=None, host_timing_files=(), reference=None, ambient=None, only=None, simulated=None):
+        self.link = ConformanceLink(bus, sample_rate, envelope, profile, log=log, power_up=power_up,
+                                    host_timing_files=host_timing_files, reference=reference, ambient=ambient,
+                                    only=only, simulated=simulated)
+
+    # what a report reads of the run: the link's
+    results = property(lambda self: self.link.results)
+    deviation = property(lambda self: self.link.deviation)
+    identity = property(lambda self: self.link.identity)
+    host_timing = property(lambda self: self.link.host_timing)
+    reference = property(lambda self: self.link.reference)
+    ambient = property(lambda self: self.link.ambient)
+    trace = property(lambda self: self.link.trace)
+    state = property(lambda self: self.link.state)
+    faults = property(lambda self: self.link.faults)
+
     def scenarios(self) -> tuple:
-        """The scenarios in the order they run (each a method marked with the requirements it judges)."""
-        every = ((self.s_power_up,) if self.power_up else ()) + (
-            self.s_listen, self.s_identify, self.s_stream, self.s_stale, self.s_reference, self.s_hold,
-            self.s_reset_moving, self.s_bad_frames, self.s_host_limits, self.s_out_of_limits, self.s_too_fast,
-            self.s_host_silence, self.s_wrap)
-        return every if self.only is None else tuple(s for s in every if s.__name__ in self.only)
+        """The scenarios in the order they run."""
+        link = self.link
+        every = SCENARIOS if link.power_up else SCENARIOS[1:]
+        return every if link.only is None else tuple(s for s in every if s.__name__ in link.only)
 
     def run(self) -> Results:
         """Every scenario in order; the offline-checkable requirements from the whole trace at the end.
@@ -59,60 +97,57 @@ class ConformanceRun(PowerUpScenarios, StreamScenarios, MeasureScenarios, FaultS
         A scenario that fails on its own fails the requirements it had not judged, with the reason, and the run
         goes on from rest; only Aborted (the envelope left, or a controller that will not come to rest) ends it.
         """
-        if self.simulated is None:
-            self._rx.start()
+        link = self.link
+        link.start()
         try:
             for scenario in self.scenarios():
-                self.log(f'conformance: {scenario.__doc__.splitlines()[0].rstrip(".")}')
-                before = {rid: (r.status, r.measured) for rid, r in self.results.items()}
+                link.log(f'conformance: {scenario.__doc__.splitlines()[0].rstrip(".")}')
+                before = {rid: (r.status, r.measured) for rid, r in link.results.items()}
                 try:
-                    scenario()
+                    scenario(link)
                 except Aborted:
                     raise
                 except Exception as exc:   # noqa: BLE001 - any failure of one scenario is that scenario's verdict
                     self._scenario_failed(scenario, exc, before)
         except Aborted as exc:
-            self.command(CMD_ABORT, 0.0)
-            self.log(f'conformance: ABORTED: {exc}')
-            self.deviation = self.deviation or str(exc)
+            link.command(CMD_ABORT, 0.0)
+            link.log(f'conformance: ABORTED: {exc}')
+            link.deviation = link.deviation or str(exc)
         finally:
-            self.heartbeat = False
-            self._pause(0.1)
-            self._stop.set()
-            if self._rx.is_alive():
-                self._rx.join(timeout=2.0)
-        self.merge_host_timing()
-        if not self.deviation:
-            passive = check_offline(self.trace)
+            link.stop()
+        link.merge_host_timing()
+        if not link.deviation:
+            passive = check_offline(link.trace)
             for rid, r in passive.items():
                 if rid.startswith('CTRL'):
-                    self.results.put(rid, r.status, r.measured, r.detail)
-        why = (f'run aborted: {self.deviation}' if self.deviation else
-               f'a short run of {", ".join(sorted(self.only))} only' if self.only is not None else
+                    link.results.put(rid, r.status, r.measured, r.detail)
+        why = (f'run aborted: {link.deviation}' if link.deviation else
+               f'a short run of {", ".join(sorted(link.only))} only' if link.only is not None else
                'needs the controller switched on during the run (--power-up)')
-        return self.results.complete({r.id for r in REQUIREMENTS if r.id.startswith('CTRL')}, why)
+        return link.results.complete({r.id for r in REQUIREMENTS if r.id.startswith('CTRL')}, why)
 
     def _scenario_failed(self, scenario, exc: Exception, before: dict):
         """`scenario` raised `exc`: each requirement it judges and had not judged yet fails with the reason (where
         in the scenario, what was raised); then the controller is brought to rest for the next scenario.
         """
+        link = self.link
         where = traceback.extract_tb(exc.__traceback__)[-1]
         reason = (f'scenario {scenario.__name__} could not complete: {type(exc).__name__}: {exc} (at '
                   f'{Path(where.filename).name}:{where.lineno}); the controller did not do what the scenario '
                   'needs to judge this')
-        self.log(f'conformance: {reason}')
+        link.log(f'conformance: {reason}')
         for rid in scenario.requirements:
-            r = self.results.get(rid)
+            r = link.results.get(rid)
             if r is None or (r.status, r.measured) == before.get(rid, (NOT_TESTED, '')):
-                self.results.put(rid, FAIL, '', reason)
-        self.to_rest(0.0)      # raises Aborted when the controller cannot be brought to rest
+                link.results.put(rid, FAIL, '', reason)
+        link.to_rest(0.0)      # raises Aborted when the controller cannot be brought to rest
 
     def trace_to_log(self, path):
         """Write every frame of the run, with the times it was judged by, to the raw CAN log `path` (.blf, .asc,
         .log): the offline mode then reads what this run saw.
         """
-        with self.lock:
-            frames = list(self.trace.frames)
+        with self.link.lock:
+            frames = list(self.link.trace.frames)
         frames.sort(key=lambda f: f.t)
         with can.Logger(str(path)) as writer:
             for f in frames:

@@ -13,7 +13,7 @@
 # limitations under the License.
 
 """Conformance scenarios of a controller that runs: power-up, listening, identification, streaming, stale
-setpoints, hold and reset while moving (mixed into active.ConformanceRun).
+setpoints, hold and reset while moving (scenarios of active.SCENARIOS: each a function of the run's link).
 """
 from __future__ import annotations
 
@@ -33,7 +33,6 @@ from .host_timing import explains, not_judged
 from .link import (
     BUFFER_IN_FLIGHT,
     BUFFER_OUTLIERS,
-    DEFAULT_HOST_TIMEOUT,
     IDENTIFY_REPEATS,
     IDENTIFY_TIMEOUT,
     LEAD,
@@ -43,7 +42,6 @@ from .link import (
     TOO_FAST_FACTOR,
     WAVE_FREQUENCY,
     Aborted,
-    ConformanceLink,
     judges,
 )
 from .report import FAIL, NOT_TESTED, PASS
@@ -52,322 +50,325 @@ from .shape import ramp_shape
 COMMAND = {CMD_ABORT: 'ABORT', CMD_DISABLE: 'DISABLE'}
 
 
-class StreamScenarios(ConformanceLink):
-    """The scenarios of normal operation and its commands."""
+@judges()
+def s_listen(link):
+    """Listen 1.5 s to the idle controller."""
+    link._sleep(1.5)
+    if link.state not in ('idle', 'fault', 'unconfigured'):
+        raise Aborted(f'the controller is {link.state}, not at rest: conformance starts from rest')
+    link.to_rest()
 
-    @judges()
-    def s_listen(self):
-        """Listen 1.5 s to the idle controller."""
-        self._sleep(1.5)
-        if self.state not in ('idle', 'fault', 'unconfigured'):
-            raise Aborted(f'the controller is {self.state}, not at rest: conformance starts from rest')
-        self.to_rest()
 
-    @judges('CTRL-ID-1', 'CTRL-ID-3')
-    def s_identify(self):
-        """IDENTIFY, asked IDENTIFY_REPEATS times (CTRL-ID-1, CTRL-ID-3)."""
-        latencies, sig, late = [], None, 0.0
-        for k in range(IDENTIFY_REPEATS):
-            if k:
-                self._sleep(0.25)
-            t = self.now()
-            self.command(CMD_IDENTIFY)
-            if not self._wait(lambda t=t: self.identity is not None and self.identity[0] >= t, 1.0):
-                latencies.append(math.inf)
-                continue
-            at, sig = self.identity
-            latencies.append(at - t)
-            if at - t > IDENTIFY_TIMEOUT:
-                self.merge_host_timing()
-                host = explains(self.trace.host_late, t, at, at - t - IDENTIFY_TIMEOUT)
-                late = max(late, host) if host else math.inf      # inf: late beyond what this host explains
-        if sig is None:
-            self.results.put('CTRL-ID-1', FAIL, f'no ControllerIdentity within 1 s of any of {IDENTIFY_REPEATS} '
-                             'IDENTIFY', '')
-            self.results.put('CTRL-ID-3', FAIL, 'no ControllerIdentity', 'no rated velocity stated')
-            return
-        version = int(sig['CI_Protocol'])
-        slow = [x for x in latencies if x > IDENTIFY_TIMEOUT]
-        ok = not slow and version == PROTOCOL_VERSION
-        measured = (f'{IDENTIFY_REPEATS} IDENTIFY answered in ' + ', '.join(
-            f'{x * 1e3:.1f}' if math.isfinite(x) else 'never' for x in latencies) + f' ms: protocol {version}, '
-            f'device 0x{int(sig["CI_Device"]):04x}, firmware {int(sig["CI_Firmware"])}, host timeout '
-            f'{float(sig["CI_HostTimeout"]):g} s, rated velocity {float(sig["CI_VelocityMax"]):g} m/s')
-        if not ok and version == PROTOCOL_VERSION and 0 < late < math.inf and all(math.isfinite(x) for x in slow):
-            self.results.put('CTRL-ID-1', NOT_TESTED, measured, not_judged(late, 'while an answer was due'))
-        else:
-            self.results.put('CTRL-ID-1', PASS if ok else FAIL, measured,
-                             '' if ok else f'every IDENTIFY must be answered with protocol {PROTOCOL_VERSION} within '
-                             f'{IDENTIFY_TIMEOUT * 1e3:.0f} ms')
-        self._judge_rated_velocity(float(sig['CI_VelocityMax']))
+@judges('CTRL-ID-1', 'CTRL-ID-3')
+def s_identify(link):
+    """IDENTIFY, asked IDENTIFY_REPEATS times (CTRL-ID-1, CTRL-ID-3)."""
+    latencies, sig, late = [], None, 0.0
+    for k in range(IDENTIFY_REPEATS):
+        if k:
+            link._sleep(0.25)
+        t = link.now()
+        link.command(CMD_IDENTIFY)
+        if not link._wait(lambda t=t: link.identity is not None and link.identity[0] >= t, 1.0):
+            latencies.append(math.inf)
+            continue
+        at, sig = link.identity
+        latencies.append(at - t)
+        if at - t > IDENTIFY_TIMEOUT:
+            link.merge_host_timing()
+            host = explains(link.trace.host_late, t, at, at - t - IDENTIFY_TIMEOUT)
+            late = max(late, host) if host else math.inf      # inf: late beyond what this host explains
+    if sig is None:
+        link.results.put('CTRL-ID-1', FAIL, f'no ControllerIdentity within 1 s of any of {IDENTIFY_REPEATS} '
+                         'IDENTIFY', '')
+        link.results.put('CTRL-ID-3', FAIL, 'no ControllerIdentity', 'no rated velocity stated')
+        return
+    version = int(sig['CI_Protocol'])
+    slow = [x for x in latencies if x > IDENTIFY_TIMEOUT]
+    ok = not slow and version == PROTOCOL_VERSION
+    measured = (f'{IDENTIFY_REPEATS} IDENTIFY answered in ' + ', '.join(
+        f'{x * 1e3:.1f}' if math.isfinite(x) else 'never' for x in latencies) + f' ms: protocol {version}, '
+        f'device 0x{int(sig["CI_Device"]):04x}, firmware {int(sig["CI_Firmware"])}, host timeout '
+        f'{float(sig["CI_HostTimeout"]):g} s, rated velocity {float(sig["CI_VelocityMax"]):g} m/s')
+    if not ok and version == PROTOCOL_VERSION and 0 < late < math.inf and all(math.isfinite(x) for x in slow):
+        link.results.put('CTRL-ID-1', NOT_TESTED, measured, not_judged(late, 'while an answer was due'))
+    else:
+        link.results.put('CTRL-ID-1', PASS if ok else FAIL, measured,
+                         '' if ok else f'every IDENTIFY must be answered with protocol {PROTOCOL_VERSION} within '
+                         f'{IDENTIFY_TIMEOUT * 1e3:.0f} ms')
+    _judge_rated_velocity(link, float(sig['CI_VelocityMax']))
 
-    def _judge_rated_velocity(self, stated: float):
-        """CTRL-ID-3: a rated velocity above 0 and at most the envelope's bound is taken as stated; any other is
-        flagged here, and CTRL-LIM-3 is tested at the envelope's value instead (s_too_fast).
-        """
-        bound = self.env.velocity_max
-        ok = 0.0 < stated <= bound
-        self.results.put('CTRL-ID-3', PASS if ok else FAIL,
-                         f'CI_VelocityMax {stated:g} m/s (plausible: above 0, at most {bound:g} m/s, the envelope '
-                         'bound)', '' if ok else f'an implausible rated velocity (0, wrong scale or byte order?): '
-                         f'CTRL-LIM-3 is tested at the envelope value '
-                         f'{self.env.test_velocity(self.fs, TOO_FAST_FACTOR):g} m/s instead')
 
-    @property
-    def host_timeout(self) -> float:
-        if self.identity and float(self.identity[1]['CI_HostTimeout']) > 0:
-            return float(self.identity[1]['CI_HostTimeout'])
-        return DEFAULT_HOST_TIMEOUT
+def _judge_rated_velocity(link, stated: float):
+    """CTRL-ID-3: a rated velocity above 0 and at most the envelope's bound is taken as stated; any other is
+    flagged here, and CTRL-LIM-3 is tested at the envelope's value instead (s_too_fast).
+    """
+    bound = link.env.velocity_max
+    ok = 0.0 < stated <= bound
+    link.results.put('CTRL-ID-3', PASS if ok else FAIL,
+                     f'CI_VelocityMax {stated:g} m/s (plausible: above 0, at most {bound:g} m/s, the envelope '
+                     'bound)', '' if ok else f'an implausible rated velocity (0, wrong scale or byte order?): '
+                     f'CTRL-LIM-3 is tested at the envelope value '
+                     f'{link.env.test_velocity(link.fs, TOO_FAST_FACTOR):g} m/s instead')
 
-    @judges('CTRL-STREAM-1', 'CTRL-STREAM-3', 'CTRL-STREAM-4', 'CTRL-ST-4', 'CTRL-RAMP-1')
-    def s_stream(self):
-        """Stream, underrun, resume, underrun, ABORT (CTRL-STREAM-1/3/4, CTRL-ST-4, CTRL-RAMP-1)."""
-        self.limits(self.env.lower, self.env.upper)
-        a = 0.4 * self.env.half
-        first, p0 = 1000, self.position
-        t0 = self.now()
-        # setpoints below HS_FirstSequence, after it was announced: never the start of the stream (CTRL-STREAM-1)
-        self.send('HostStreamStart', {'HS_FirstSequence': first})
-        per = self.frames.setpoints_per_frame
-        for k in range(first - 3 * per, first, per):
-            self.send_setpoints(k, [p0] * per, record=False)
-        end = self.stream(first, self.smooth(p0, a), 2.0, start=False)
-        self._sleep(LEAD + 0.3)                       # underrun: the controller holds
-        t_hold = self.now()
-        self._sleep(0.3)
-        held = self._samples_since(t_hold)
-        samples = [s for s in self._samples_since(t0) if first <= s.seq < end]
-        # CTRL-STREAM-1: started at the first setpoint with that setpoint
-        starts = [s for s in self._samples_since(t0)]
-        ok = bool(starts) and starts[0].seq == first and abs(starts[0].u - self.sent[first]) <= 1.5 * LSB
-        self.results.put('CTRL-STREAM-1', PASS if ok else FAIL,
-                         f'first sample {starts[0].seq if starts else None} (stream start {first}; setpoints from '
-                         f'{first - 3 * per} sent after HostStreamStart)',
-                         '' if ok else 'the first applied sample must be the first setpoint of the stream: none below '
-                         'HS_FirstSequence')
-        self._judge_applied(samples, first, end, 'stream')
-        self._judge_buffer(t0, t_hold)
-        # CTRL-STREAM-3: held the last command without a fault
-        last = self.sent[end - 1]
-        still = held and all(abs(s.u - last) <= 1.5 * LSB for s in held)
-        states = {s[1] for s in self._states_since(t_hold)}
-        faults = [s[2] for s in self._states_since(t_hold) if s[2]]
-        ok = bool(still) and 'holding' in states and not faults
-        # resume from the held position, after the controller's current tick
-        first2 = self.next_sequence()
-        t1 = self.now()
-        end2 = self.stream(first2, self.smooth(last, -0.5 * a), 0.5, start=False)
-        self._sleep(2 * LEAD + 0.2)                   # the resumed stream starts LEAD ahead and is sent LEAD ahead
-        resumed = [s for s in self._samples_since(t1) if first2 <= s.seq < end2]
-        ok_resume = len(resumed) == end2 - first2 and all(abs(s.u - self.sent[s.seq]) <= 1.5 * LSB for s in resumed)
-        self.results.put('CTRL-STREAM-3', PASS if ok and ok_resume else FAIL,
-                         f'held {len(held)} samples at {last * 1e3:.4f} mm, states {sorted(states)}, resumed '
-                         f'{len(resumed)} of {end2 - first2} setpoints',
-                         '' if ok and ok_resume else 'an underrun must hold the last command without a fault and the '
-                         'stream must resume with the setpoints that follow')
-        self._judge_ramp(target=-a)
 
-    def _judge_applied(self, samples: list, first: int, end: int, what: str):
-        """CTRL-STREAM-4: every setpoint applied once, at its own sequence. A setpoint this host sent after the
-        feedback of its sequence had arrived was late by the host's fault: not judged (counted).
-        """
-        seqs = [s.seq for s in samples]
-        late = {s.seq for s in samples if self.sent_at.get(s.seq, -math.inf) > s.t - 1e-3}
-        wrong = sum(1 for s in samples if s.seq not in late and abs(s.u - self.sent.get(s.seq, math.inf)) > 1.5 * LSB)
-        ok = seqs == list(range(first, end)) and wrong == 0 and len(late) < 0.05 * len(samples)
-        measured = (f'{what}: {len(samples)} of {end - first} setpoints applied, {wrong} different from the '
-                    f'setpoint of their sequence, {len(late)} sent too late by this host (not judged)')
-        host_late = self._missing_while_host_late(samples) if not ok and wrong == 0 else 0.0
-        if host_late and seqs == sorted(set(seqs)) and len(late) < 0.05 * len(samples):
-            self.results.put('CTRL-STREAM-4', NOT_TESTED, measured,
-                             not_judged(host_late, 'every sample never received falls where it was'))
-            return
-        self.results.put('CTRL-STREAM-4', PASS if ok else FAIL, measured,
-                         '' if ok else 'each setpoint must be applied at its sequence')
+@judges('CTRL-STREAM-1', 'CTRL-STREAM-3', 'CTRL-STREAM-4', 'CTRL-ST-4', 'CTRL-RAMP-1')
+def s_stream(link):
+    """Stream, underrun, resume, underrun, ABORT (CTRL-STREAM-1/3/4, CTRL-ST-4, CTRL-RAMP-1)."""
+    link.limits(link.env.lower, link.env.upper)
+    a = 0.4 * link.env.half
+    first, p0 = 1000, link.position
+    t0 = link.now()
+    # setpoints below HS_FirstSequence, after it was announced: never the start of the stream (CTRL-STREAM-1)
+    link.send('HostStreamStart', {'HS_FirstSequence': first})
+    per = link.frames.setpoints_per_frame
+    for k in range(first - 3 * per, first, per):
+        link.send_setpoints(k, [p0] * per, record=False)
+    end = link.stream(first, link.smooth(p0, a), 2.0, start=False)
+    link._sleep(LEAD + 0.3)                       # underrun: the controller holds
+    t_hold = link.now()
+    link._sleep(0.3)
+    held = link._samples_since(t_hold)
+    samples = [s for s in link._samples_since(t0) if first <= s.seq < end]
+    # CTRL-STREAM-1: started at the first setpoint with that setpoint
+    starts = [s for s in link._samples_since(t0)]
+    ok = bool(starts) and starts[0].seq == first and abs(starts[0].u - link.sent[first]) <= 1.5 * LSB
+    link.results.put('CTRL-STREAM-1', PASS if ok else FAIL,
+                     f'first sample {starts[0].seq if starts else None} (stream start {first}; setpoints from '
+                     f'{first - 3 * per} sent after HostStreamStart)',
+                     '' if ok else 'the first applied sample must be the first setpoint of the stream: none below '
+                     'HS_FirstSequence')
+    _judge_applied(link, samples, first, end, 'stream')
+    _judge_buffer(link, t0, t_hold)
+    # CTRL-STREAM-3: held the last command without a fault
+    last = link.sent[end - 1]
+    still = held and all(abs(s.u - last) <= 1.5 * LSB for s in held)
+    states = {s[1] for s in link._states_since(t_hold)}
+    faults = [s[2] for s in link._states_since(t_hold) if s[2]]
+    ok = bool(still) and 'holding' in states and not faults
+    # resume from the held position, after the controller's current tick
+    first2 = link.next_sequence()
+    t1 = link.now()
+    end2 = link.stream(first2, link.smooth(last, -0.5 * a), 0.5, start=False)
+    link._sleep(2 * LEAD + 0.2)                   # the resumed stream starts LEAD ahead and is sent LEAD ahead
+    resumed = [s for s in link._samples_since(t1) if first2 <= s.seq < end2]
+    ok_resume = len(resumed) == end2 - first2 and all(abs(s.u - link.sent[s.seq]) <= 1.5 * LSB for s in resumed)
+    link.results.put('CTRL-STREAM-3', PASS if ok and ok_resume else FAIL,
+                     f'held {len(held)} samples at {last * 1e3:.4f} mm, states {sorted(states)}, resumed '
+                     f'{len(resumed)} of {end2 - first2} setpoints',
+                     '' if ok and ok_resume else 'an underrun must hold the last command without a fault and the '
+                     'stream must resume with the setpoints that follow')
+    _judge_ramp(link, target=-a)
 
-    def _missing_while_host_late(self, samples: list) -> float:
-        """How late this host was [s] where the samples missing between those received are, if every gap falls
-        where it was late (it may not have read them in time), else 0.
-        """
-        self.merge_host_timing()
-        worst = 0.0
-        for a, b in zip(samples, samples[1:], strict=False):
-            if b.seq > a.seq + 1:
-                late = explains(self.trace.host_late, a.t, b.t, 0.5 * (b.t - a.t))
-                if not late:
-                    return 0.0
-                worst = max(worst, late)
-        return worst
 
-    def _judge_buffer(self, t0: float, t1: float):
-        """CTRL-ST-4: the buffer level the status reports is what the host has queued beyond the last sample."""
-        with self.lock:
-            log = list(self.sent_log)
-        errors = []
-        for t, state, _, last, level in self._states_since(t0):
-            if t > t1 or state != 'running':
-                continue
-            # counted at most: every frame whose send had begun by t; at least: every frame logged as sent
-            # BUFFER_IN_FLIGHT before t
-            sent_end = max((f + n for started, _, f, n in log if started <= t), default=None)
-            sent_before = max((f + n for _, logged, f, n in log if logged <= t - BUFFER_IN_FLIGHT), default=None)
-            if sent_end is None or sent_before is None:
-                continue
-            full_last = unwrap(last, sent_end, 1 << 16)
-            hi, lo = sent_end - 1 - full_last, sent_before - 1 - full_last - self.frames.setpoints_per_frame
-            errors.append(0 if lo <= level <= hi else min(abs(level - lo), abs(level - hi)))
-        if not errors:
-            self.results.put('CTRL-ST-4', NOT_TESTED, '', 'no status frame while running')
-            return
-        bad = sum(1 for e in errors if e)
-        ok = bad <= BUFFER_OUTLIERS * len(errors)
-        self.results.put('CTRL-ST-4', PASS if ok else FAIL, f'{len(errors)} status frames while running, {bad} with '
-                         f'a level off the queued setpoints (by up to {max(errors)})',
-                         '' if ok else f'ST_BufferLevel must count the setpoints queued (at most '
-                         f'{BUFFER_OUTLIERS * 100:g} % of the status frames off)')
+def _judge_applied(link, samples: list, first: int, end: int, what: str):
+    """CTRL-STREAM-4: every setpoint applied once, at its own sequence. A setpoint this host sent after the
+    feedback of its sequence had arrived was late by the host's fault: not judged (counted).
+    """
+    seqs = [s.seq for s in samples]
+    late = {s.seq for s in samples if link.sent_at.get(s.seq, -math.inf) > s.t - 1e-3}
+    wrong = sum(1 for s in samples if s.seq not in late and abs(s.u - link.sent.get(s.seq, math.inf)) > 1.5 * LSB)
+    ok = seqs == list(range(first, end)) and wrong == 0 and len(late) < 0.05 * len(samples)
+    measured = (f'{what}: {len(samples)} of {end - first} setpoints applied, {wrong} different from the '
+                f'setpoint of their sequence, {len(late)} sent too late by this host (not judged)')
+    host_late = _missing_while_host_late(link, samples) if not ok and wrong == 0 else 0.0
+    if host_late and seqs == sorted(set(seqs)) and len(late) < 0.05 * len(samples):
+        link.results.put('CTRL-STREAM-4', NOT_TESTED, measured,
+                         not_judged(host_late, 'every sample never received falls where it was'))
+        return
+    link.results.put('CTRL-STREAM-4', PASS if ok else FAIL, measured,
+                     '' if ok else 'each setpoint must be applied at its sequence')
 
-    def _judge_ramp(self, target: float, code: int = CMD_ABORT):
-        """ABORT (or DISABLE, `code`) from holding to target at RAMP_VELOCITY (CTRL-RAMP-1)."""
-        p0 = self.position
-        t = self.now()
-        self.command(code, target, RAMP_VELOCITY)
-        done = self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)
-        self._sleep(0.05)
-        ramp = self._samples_since(t)
-        if not done or not ramp:
-            self.results.put('CTRL-RAMP-1', FAIL, f'{COMMAND[code]}: state {self.state} after {REST_TIMEOUT:g} s',
-                             'no ramp to rest')
-            self.to_rest(self.position)
-            return
-        u = [p0] + [s.u for s in ramp]
-        moving = [s for s, a, b in zip(ramp, u, u[1:], strict=False) if abs(b - a) > 0.5 * LSB]
-        duration = (moving[-1].seq - ramp[0].seq + 1) / self.fs if moving else 0.0
-        allowed = 1.5 * abs(target - p0) / RAMP_VELOCITY + 0.1
-        shape = ramp_shape(u, self.fs, target, RAMP_VELOCITY)     # from holding: no inherited motion
-        ok = (abs(u[-1] - target) <= 1e-6 and shape.ok and duration <= allowed and not self.faults
-              and self.state == 'idle')
-        self.results.put('CTRL-RAMP-1', PASS if ok else FAIL,
-                         f'{COMMAND[code]}: {p0 * 1e3:.4f} -> {u[-1] * 1e3:.4f} mm (target {target * 1e3:.4f}) '
-                         f'in {duration:.3f} s '
-                         f'(at most {allowed:.3f} s) at {RAMP_VELOCITY * 1e3:g} mm/s commanded: {shape.describe()}, '
-                         f'state {self.state}',
-                         '' if ok else shape.why() or 'the ramp must reach its target at the commanded velocity '
-                         'without a step and end idle')
-        self.to_rest()
 
-    @judges('CTRL-STREAM-2')
-    def s_stale(self):
-        """Setpoints of the old stream after the ramp, without HostStreamStart (CTRL-STREAM-2)."""
-        t = self.now()
-        with self.lock:
-            last = max(self.sent) if self.sent else 0
-        self.heartbeat = True
-        for k in range(10):
-            self.send_setpoints(last + 1 + 19 * k, [self.position] * 19, record=False)
-        self._sleep(0.3)
-        got = self._samples_since(t)
-        states = {s[1] for s in self._states_since(t)}
-        ok = not got and states <= {'idle'}
-        self.results.put('CTRL-STREAM-2', PASS if ok else FAIL, f'{len(got)} samples taken, states {sorted(states)}',
-                         '' if ok else 'a controller at rest must take no setpoint before the next HostStreamStart')
-        self.to_rest(self.position)
+def _missing_while_host_late(link, samples: list) -> float:
+    """How late this host was [s] where the samples missing between those received are, if every gap falls
+    where it was late (it may not have read them in time), else 0.
+    """
+    link.merge_host_timing()
+    worst = 0.0
+    for a, b in zip(samples, samples[1:], strict=False):
+        if b.seq > a.seq + 1:
+            late = explains(link.trace.host_late, a.t, b.t, 0.5 * (b.t - a.t))
+            if not late:
+                return 0.0
+            worst = max(worst, late)
+    return worst
 
-    @judges('CTRL-RAMP-2')
-    def s_hold(self):
-        """HOLD while moving (CTRL-RAMP-2)."""
-        a = 0.4 * self.env.half
-        p0 = self.position
-        first = self.next_sequence() + 1000
-        box = {}
-        base = self.smooth(p0, -a if p0 > 0 else a)
-        k_hold = int((0.25 / WAVE_FREQUENCY + LEAD) * self.fs)    # the controller is at full speed then
 
-        def wave(k):
-            if k == k_hold and 'hold' not in box:
-                box['hold'] = self.now()
-                self.command(CMD_HOLD, 0.0, RAMP_VELOCITY)
-            return base(k)
-        t = self.now()
-        self.stream(first, wave, k_hold / self.fs + 0.2)          # HOLD goes out at k_hold, mid-stream
-        done = self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)
-        self._sleep(0.05)
-        t_hold = box.get('hold', t)
-        before = [s for s in self._samples_since(t) if s.t < t_hold]
-        after = self._samples_since(t_hold)
-        u = [s.u for s in before[-3:] + after]
-        v = [(b - a) * self.fs for a, b in zip(u, u[1:], strict=False)]
-        acc = [abs(b - a) * self.fs for a, b in zip(v, v[1:], strict=False)]
-        decel = DECEL_MAX
-        still = bool(after) and len(v) >= 2 and abs(v[-1]) <= 2 * LSB * self.fs
-        peak_v = max((abs(x) for x in v[:3]), default=0.0)
-        ok = done and still and max(acc, default=0) <= decel * 1.1 + 4 * LSB * self.fs ** 2 and not self.faults \
-            and self.state == 'idle'
-        self.results.put('CTRL-RAMP-2', PASS if ok else FAIL,
-                         f'from {peak_v * 1e3:.2f} mm/s to a stop at {(u[-1] if u else math.nan) * 1e3:.4f} mm in '
-                         f'{len(after)} samples, '
-                         f'peak deceleration {max(acc, default=0):.1f} m/s^2 (HostLimits {decel:g}), '
-                         f'state {self.state}',
-                         '' if ok else 'HOLD must brake to a stop without a step and end idle without a fault')
-        self.to_rest(self.position)
+def _judge_buffer(link, t0: float, t1: float):
+    """CTRL-ST-4: the buffer level the status reports is what the host has queued beyond the last sample."""
+    with link.lock:
+        log = list(link.sent_log)
+    errors = []
+    for t, state, _, last, level in link._states_since(t0):
+        if t > t1 or state != 'running':
+            continue
+        # counted at most: every frame whose send had begun by t; at least: every frame logged as sent
+        # BUFFER_IN_FLIGHT before t
+        sent_end = max((f + n for started, _, f, n in log if started <= t), default=None)
+        sent_before = max((f + n for _, logged, f, n in log if logged <= t - BUFFER_IN_FLIGHT), default=None)
+        if sent_end is None or sent_before is None:
+            continue
+        full_last = unwrap(last, sent_end, 1 << 16)
+        hi, lo = sent_end - 1 - full_last, sent_before - 1 - full_last - link.frames.setpoints_per_frame
+        errors.append(0 if lo <= level <= hi else min(abs(level - lo), abs(level - hi)))
+    if not errors:
+        link.results.put('CTRL-ST-4', NOT_TESTED, '', 'no status frame while running')
+        return
+    bad = sum(1 for e in errors if e)
+    ok = bad <= BUFFER_OUTLIERS * len(errors)
+    link.results.put('CTRL-ST-4', PASS if ok else FAIL, f'{len(errors)} status frames while running, {bad} with '
+                     f'a level off the queued setpoints (by up to {max(errors)})',
+                     '' if ok else f'ST_BufferLevel must count the setpoints queued (at most '
+                     f'{BUFFER_OUTLIERS * 100:g} % of the status frames off)')
 
-    @judges('CTRL-RESET-1', 'CTRL-RAMP-1')
-    def s_reset_moving(self):
-        """RESET while running, DISABLE, RESET while ramping (CTRL-RESET-1, CTRL-RAMP-1)."""
-        a = 0.4 * self.env.half
-        p0 = self.position
-        first = self.next_sequence() + 1000
-        t = self.now()
-        box = {}
-        base = self.smooth(p0, -a if p0 > 0 else a)
 
-        def wave(k):
-            if k == int(0.5 * self.fs) and 'reset' not in box:
-                box['reset'] = self.now()
-                self.command(CMD_RESET)
-            return base(k)
-        end = self.stream(first, wave, 1.2)
-        self._sleep(LEAD + 0.05)
-        after = [s for s in self._samples_since(box.get('reset', t)) if s.seq < end]
-        states = self._states_before(box.get('reset', t), end)
-        ok = bool(after) and states <= {'running'} and all(abs(s.u - self.sent[s.seq]) <= 1.5 * LSB for s in after)
-        self.results.put('CTRL-RESET-1', PASS if ok else FAIL,
-                         f'after RESET while running: {len(after)} samples as streamed, states {sorted(states)}',
-                         '' if ok else 'RESET while the rig moves must change nothing')
-        # DISABLE from holding: a ramp like ABORT's (CTRL-RAMP-1)
-        self._judge_ramp(self._ramp_target(), CMD_DISABLE)
-        self._reset_while_ramping()
+def _judge_ramp(link, target: float, code: int = CMD_ABORT):
+    """ABORT (or DISABLE, `code`) from holding to target at RAMP_VELOCITY (CTRL-RAMP-1)."""
+    p0 = link.position
+    t = link.now()
+    link.command(code, target, RAMP_VELOCITY)
+    done = link._wait(lambda: link.state in ('idle', 'fault'), REST_TIMEOUT)
+    link._sleep(0.05)
+    ramp = link._samples_since(t)
+    if not done or not ramp:
+        link.results.put('CTRL-RAMP-1', FAIL, f'{COMMAND[code]}: state {link.state} after {REST_TIMEOUT:g} s',
+                         'no ramp to rest')
+        link.to_rest(link.position)
+        return
+    u = [p0] + [s.u for s in ramp]
+    moving = [s for s, a, b in zip(ramp, u, u[1:], strict=False) if abs(b - a) > 0.5 * LSB]
+    duration = (moving[-1].seq - ramp[0].seq + 1) / link.fs if moving else 0.0
+    allowed = 1.5 * abs(target - p0) / RAMP_VELOCITY + 0.1
+    shape = ramp_shape(u, link.fs, target, RAMP_VELOCITY)     # from holding: no inherited motion
+    ok = (abs(u[-1] - target) <= 1e-6 and shape.ok and duration <= allowed and not link.faults
+          and link.state == 'idle')
+    link.results.put('CTRL-RAMP-1', PASS if ok else FAIL,
+                     f'{COMMAND[code]}: {p0 * 1e3:.4f} -> {u[-1] * 1e3:.4f} mm (target {target * 1e3:.4f}) '
+                     f'in {duration:.3f} s '
+                     f'(at most {allowed:.3f} s) at {RAMP_VELOCITY * 1e3:g} mm/s commanded: {shape.describe()}, '
+                     f'state {link.state}',
+                     '' if ok else shape.why() or 'the ramp must reach its target at the commanded velocity '
+                     'without a step and end idle')
+    link.to_rest()
 
-    def _ramp_target(self) -> float:
-        """A target 0.6 x the envelope's half from the present position, inside 0.8 x the envelope."""
-        p0 = self.position
-        return p0 - 0.6 * self.env.half if p0 > 0 else p0 + 0.6 * self.env.half
 
-    def _reset_while_ramping(self):
-        """CTRL-RESET-1: RESET during an ABORT ramp changes nothing: the ramp goes on to its target."""
-        p0 = self.position
-        first = self.next_sequence() + 1000
-        self.stream(first, lambda k: p0, 0.2)
-        self._sleep(LEAD + 0.1)                       # holding
-        target = self._ramp_target()
-        t = self.now()
-        self.command(CMD_ABORT, target, RAMP_VELOCITY)
-        if not self._wait(lambda: self.state == 'ramping_down', 1.0):
-            self.to_rest(self.position)               # no ramp: CTRL-RAMP-1's to judge, not this one
-            return
-        self._sleep(0.05)
-        t_reset = self.now()
-        self.command(CMD_RESET)
-        self._wait(lambda: self.state in ('idle', 'fault'), REST_TIMEOUT)
-        self._sleep(0.05)
-        samples = self._samples_since(t)
-        end = samples[-1].u if samples else self.position
-        reached = abs(end - target) <= 1e-6
-        moving_until = max((s.t for a, s in zip(samples, samples[1:], strict=False) if abs(s.u - a.u) > 0.5 * LSB),
-                           default=t_reset)
-        early = [s for s in self._states_since(t_reset) if s[0] < moving_until and s[1] != 'ramping_down']
-        ok = reached and not early
-        self.results.put('CTRL-RESET-1', PASS if ok else FAIL,
-                         f'RESET {t_reset - t:.3f} s into an ABORT ramp to {target * 1e3:.4f} mm: ended at '
-                         f'{end * 1e3:.4f} mm, {len(early)} status frames out of ramping_down before it ended',
-                         '' if ok else 'RESET while ramping must change nothing: the ramp must reach its target')
-        self.to_rest(self.position)
+@judges('CTRL-STREAM-2')
+def s_stale(link):
+    """Setpoints of the old stream after the ramp, without HostStreamStart (CTRL-STREAM-2)."""
+    t = link.now()
+    with link.lock:
+        last = max(link.sent) if link.sent else 0
+    link.heartbeat = True
+    for k in range(10):
+        link.send_setpoints(last + 1 + 19 * k, [link.position] * 19, record=False)
+    link._sleep(0.3)
+    got = link._samples_since(t)
+    states = {s[1] for s in link._states_since(t)}
+    ok = not got and states <= {'idle'}
+    link.results.put('CTRL-STREAM-2', PASS if ok else FAIL, f'{len(got)} samples taken, states {sorted(states)}',
+                     '' if ok else 'a controller at rest must take no setpoint before the next HostStreamStart')
+    link.to_rest(link.position)
+
+
+@judges('CTRL-RAMP-2')
+def s_hold(link):
+    """HOLD while moving (CTRL-RAMP-2)."""
+    a = 0.4 * link.env.half
+    p0 = link.position
+    first = link.next_sequence() + 1000
+    box = {}
+    base = link.smooth(p0, -a if p0 > 0 else a)
+    k_hold = int((0.25 / WAVE_FREQUENCY + LEAD) * link.fs)    # the controller is at full speed then
+
+    def wave(k):
+        if k == k_hold and 'hold' not in box:
+            box['hold'] = link.now()
+            link.command(CMD_HOLD, 0.0, RAMP_VELOCITY)
+        return base(k)
+    t = link.now()
+    link.stream(first, wave, k_hold / link.fs + 0.2)          # HOLD goes out at k_hold, mid-stream
+    done = link._wait(lambda: link.state in ('idle', 'fault'), REST_TIMEOUT)
+    link._sleep(0.05)
+    t_hold = box.get('hold', t)
+    before = [s for s in link._samples_since(t) if s.t < t_hold]
+    after = link._samples_since(t_hold)
+    u = [s.u for s in before[-3:] + after]
+    v = [(b - a) * link.fs for a, b in zip(u, u[1:], strict=False)]
+    acc = [abs(b - a) * link.fs for a, b in zip(v, v[1:], strict=False)]
+    decel = DECEL_MAX
+    still = bool(after) and len(v) >= 2 and abs(v[-1]) <= 2 * LSB * link.fs
+    peak_v = max((abs(x) for x in v[:3]), default=0.0)
+    ok = done and still and max(acc, default=0) <= decel * 1.1 + 4 * LSB * link.fs ** 2 and not link.faults \
+        and link.state == 'idle'
+    link.results.put('CTRL-RAMP-2', PASS if ok else FAIL,
+                     f'from {peak_v * 1e3:.2f} mm/s to a stop at {(u[-1] if u else math.nan) * 1e3:.4f} mm in '
+                     f'{len(after)} samples, '
+                     f'peak deceleration {max(acc, default=0):.1f} m/s^2 (HostLimits {decel:g}), '
+                     f'state {link.state}',
+                     '' if ok else 'HOLD must brake to a stop without a step and end idle without a fault')
+    link.to_rest(link.position)
+
+
+@judges('CTRL-RESET-1', 'CTRL-RAMP-1')
+def s_reset_moving(link):
+    """RESET while running, DISABLE, RESET while ramping (CTRL-RESET-1, CTRL-RAMP-1)."""
+    a = 0.4 * link.env.half
+    p0 = link.position
+    first = link.next_sequence() + 1000
+    t = link.now()
+    box = {}
+    base = link.smooth(p0, -a if p0 > 0 else a)
+
+    def wave(k):
+        if k == int(0.5 * link.fs) and 'reset' not in box:
+            box['reset'] = link.now()
+            link.command(CMD_RESET)
+        return base(k)
+    end = link.stream(first, wave, 1.2)
+    link._sleep(LEAD + 0.05)
+    after = [s for s in link._samples_since(box.get('reset', t)) if s.seq < end]
+    states = link._states_before(box.get('reset', t), end)
+    ok = bool(after) and states <= {'running'} and all(abs(s.u - link.sent[s.seq]) <= 1.5 * LSB for s in after)
+    link.results.put('CTRL-RESET-1', PASS if ok else FAIL,
+                     f'after RESET while running: {len(after)} samples as streamed, states {sorted(states)}',
+                     '' if ok else 'RESET while the rig moves must change nothing')
+    # DISABLE from holding: a ramp like ABORT's (CTRL-RAMP-1)
+    _judge_ramp(link, _ramp_target(link), CMD_DISABLE)
+    _reset_while_ramping(link)
+
+
+def _ramp_target(link) -> float:
+    """A target 0.6 x the envelope's half from the present position, inside 0.8 x the envelope."""
+    p0 = link.position
+    return p0 - 0.6 * link.env.half if p0 > 0 else p0 + 0.6 * link.env.half
+
+
+def _reset_while_ramping(link):
+    """CTRL-RESET-1: RESET during an ABORT ramp changes nothing: the ramp goes on to its target."""
+    p0 = link.position
+    first = link.next_sequence() + 1000
+    link.stream(first, lambda k: p0, 0.2)
+    link._sleep(LEAD + 0.1)                       # holding
+    target = _ramp_target(link)
+    t = link.now()
+    link.command(CMD_ABORT, target, RAMP_VELOCITY)
+    if not link._wait(lambda: link.state == 'ramping_down', 1.0):
+        link.to_rest(link.position)               # no ramp: CTRL-RAMP-1's to judge, not this one
+        return
+    link._sleep(0.05)
+    t_reset = link.now()
+    link.command(CMD_RESET)
+    link._wait(lambda: link.state in ('idle', 'fault'), REST_TIMEOUT)
+    link._sleep(0.05)
+    samples = link._samples_since(t)
+    end = samples[-1].u if samples else link.position
+    reached = abs(end - target) <= 1e-6
+    moving_until = max((s.t for a, s in zip(samples, samples[1:], strict=False) if abs(s.u - a.u) > 0.5 * LSB),
+                       default=t_reset)
+    early = [s for s in link._states_since(t_reset) if s[0] < moving_until and s[1] != 'ramping_down']
+    ok = reached and not early
+    link.results.put('CTRL-RESET-1', PASS if ok else FAIL,
+                     f'RESET {t_reset - t:.3f} s into an ABORT ramp to {target * 1e3:.4f} mm: ended at '
+                     f'{end * 1e3:.4f} mm, {len(early)} status frames out of ramping_down before it ended',
+                     '' if ok else 'RESET while ramping must change nothing: the ramp must reach its target')
+    link.to_rest(link.position)

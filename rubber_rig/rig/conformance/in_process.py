@@ -109,7 +109,7 @@ def run_against_reference(defects=(), sample_rate: float = 1000.0, envelope: Env
         if simulated is not None:
             simulated.poll = ctrl.poll
         else:
-            run.power_up = lambda: ctrl.start(late=run.host_timing.add, late_min=LATE_MIN)
+            run.link.power_up = lambda: ctrl.start(late=run.host_timing.add, late_min=LATE_MIN)
             # two threads of one interpreter share the GIL: a short switch interval keeps the ticks on time
             sys.setswitchinterval(min(interval, 5e-4))
         results = run.run()

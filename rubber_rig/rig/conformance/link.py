@@ -13,15 +13,15 @@
 # limitations under the License.
 
 """The host end of a conformance run: frames to and from the controller, the envelope watch on every sample
-that arrives, waits and streams in the controller's sample time. The scenarios (active_stream, active_faults)
-and the run (active.ConformanceRun) are built on it; it is deliberately not the driver (see active).
+that arrives, waits and streams in the controller's sample time, and the results. It is the context every
+scenario (active_power, active_stream, reference_specimen, active_faults: functions of the link) works on, and
+the run (active.ConformanceRun) holds one; it is deliberately not the driver (see active).
 """
 from __future__ import annotations
 
 import math
 import threading
 import time
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import can
@@ -36,6 +36,7 @@ from ..can.protocol import (
     cycle_time,
     unwrap,
 )
+from .envelope import Envelope, Sample
 from .host_timing import HostTiming
 from .report import Results
 from .trace import Trace
@@ -61,7 +62,6 @@ TOO_FAST_FACTOR = 1.5       # CTRL-LIM-3 steps at this multiple of the rated vel
 LATCH_TIME = 3.0            # [s] a fault must stay latched this long without RESET (CTRL-FAULT-2)
 FOREIGN_ID = 0x7FE          # an identifier the DBC does not define: another node's traffic
 FOREIGN_PERIOD = 0.01       # [s] of that traffic while the host is silent (CTRL-WD-1)
-PLAUSIBLE_VELOCITY = 1.0    # [m/s] default bound of a plausible rated velocity (Envelope.velocity_max)
 
 
 class Aborted(RuntimeError):
@@ -69,51 +69,14 @@ class Aborted(RuntimeError):
 
 
 def judges(*requirement_ids):
-    """Decorator of a scenario: the requirements it judges. A scenario that fails on its own (an exception other
-    than Aborted, e.g. a controller that does not do what the scenario needs) fails those it had not judged yet,
-    with the reason (active.ConformanceRun.run), and the run goes on.
+    """Decorator of a scenario (a function of the ConformanceLink): the requirements it judges. A scenario that
+    fails on its own (an exception other than Aborted, e.g. a controller that does not do what the scenario needs)
+    fails those it had not judged yet, with the reason (active.ConformanceRun.run), and the run goes on.
     """
     def mark(scenario):
         scenario.requirements = tuple(requirement_ids)
         return scenario
     return mark
-
-
-@dataclass
-class Envelope:
-    """The displacement range [m] the operator allows the run to use: lower < 0 < upper; velocity_max [m/s]: the
-    most a rated velocity stated by the controller may be to be taken as stated (CTRL-ID-3; above it the rating
-    is implausible and CTRL-LIM-3 is tested at the envelope's own value, test_velocity).
-    """
-
-    lower: float
-    upper: float
-    velocity_max: float = PLAUSIBLE_VELOCITY
-
-    def __post_init__(self):
-        if not (math.isfinite(self.lower) and math.isfinite(self.upper) and self.lower < 0.0 < self.upper):
-            raise ValueError(f'envelope {self.lower * 1e3:g}..{self.upper * 1e3:g} mm: it must contain the rest '
-                             'position 0 mm (lower < 0 < upper)')
-
-    @property
-    def half(self) -> float:
-        return min(-self.lower, self.upper)
-
-    def test_velocity(self, fs: float, step_factor: float) -> float:
-        """The rated velocity [m/s] CTRL-LIM-3 tests when the stated one is implausible: velocity_max, or less if
-        a step of step_factor x it in one sample at fs [Hz] would not fit in 80 % of the envelope from rest.
-        """
-        return min(self.velocity_max, 0.8 * self.half * fs / step_factor)
-
-
-@dataclass
-class Sample:
-    t: float
-    seq: int
-    x: float
-    u: float
-    state: str
-    force: float = math.nan     # [N] measured force (CTRL-MEAS-1, CTRL-MEAS-2)
 
 
 class ConformanceLink:
@@ -165,6 +128,28 @@ class ConformanceLink:
         self._stop = threading.Event()
         self.position = 0.0         # last applied command reported [m]
         self._rx = threading.Thread(target=self._receive_loop, name='conformance-rx', daemon=True)
+
+    @property
+    def host_timeout(self) -> float:
+        """The host timeout [s] the controller stated (ControllerIdentity), else DEFAULT_HOST_TIMEOUT."""
+        if self.identity and float(self.identity[1]['CI_HostTimeout']) > 0:
+            return float(self.identity[1]['CI_HostTimeout'])
+        return DEFAULT_HOST_TIMEOUT
+
+    def start(self):
+        """Start listening: the receive loop (envelope watch, heartbeat, foreign traffic) runs until stop() (on
+        simulated time there is no thread: each _pause reads what arrived).
+        """
+        if self.simulated is None:
+            self._rx.start()
+
+    def stop(self):
+        """Heartbeat off, then the receive loop ends (after 0.1 s in which the last frames still arrive)."""
+        self.heartbeat = False
+        self._pause(0.1)
+        self._stop.set()
+        if self._rx.is_alive():
+            self._rx.join(timeout=2.0)
 
     # ---- bus
     def _tx(self, msg: can.Message):

@@ -25,13 +25,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .link import LEAD, ConformanceLink, judges
+from .link import LEAD, judges
 from .report import FAIL, NOT_TESTED, PASS
 
 REFERENCE_FREQUENCY = 2.0       # [Hz] of the reference motion
+
+
 REFERENCE_CYCLES = 4            # cycles of it judged
+
+
 REFERENCE_RISE = 0.25           # [s] its amplitude rises smoothly from 0 over this long
+
+
 COVERAGE = 2.0                  # coverage factor of the expanded uncertainties (about 95 %, GUM)
+
+
 TEMPERATURE_NOT_AVAILABLE = -327.68   # [degC] TEMP_Specimen's lowest raw value: the controller has no reading
 
 
@@ -134,61 +142,59 @@ def judge_delay(fit: SpringFit, fs: float) -> tuple[bool, str, str]:
     return ok, measured, '' if ok else 'force and displacement of a sample must be measured at the same tick'
 
 
-class MeasureScenarios(ConformanceLink):
-    """The reference-specimen scenario (mixed into active.ConformanceRun)."""
+@judges('CTRL-MEAS-1', 'CTRL-MEAS-2', 'CTRL-MEAS-3')
+def s_reference(link):
+    """Reference specimen: stiffness, delay and temperature (CTRL-MEAS-1/2/3)."""
+    _judge_temperature(link)
+    if link.reference is None:
+        for rid in ('CTRL-MEAS-1', 'CTRL-MEAS-2'):
+            link.results.put(rid, NOT_TESTED, '', 'no reference spring declared on the rig (--reference-spring '
+                             'STIFFNESS+-U, e.g. 10kN/mm+-1%): measured values cannot be judged')
+        return
+    link.limits(link.env.lower, link.env.upper)
+    a, p0 = 0.4 * link.env.half, link.position
+    w, rise = 2 * math.pi * REFERENCE_FREQUENCY / link.fs, REFERENCE_RISE * link.fs
+    first = link.next_sequence() + 1000
+    duration = REFERENCE_CYCLES / REFERENCE_FREQUENCY + REFERENCE_RISE
 
-    @judges('CTRL-MEAS-1', 'CTRL-MEAS-2', 'CTRL-MEAS-3')
-    def s_reference(self):
-        """Reference specimen: stiffness, delay and temperature (CTRL-MEAS-1/2/3)."""
-        self._judge_temperature()
-        if self.reference is None:
-            for rid in ('CTRL-MEAS-1', 'CTRL-MEAS-2'):
-                self.results.put(rid, NOT_TESTED, '', 'no reference spring declared on the rig (--reference-spring '
-                                 'STIFFNESS+-U, e.g. 10kN/mm+-1%): measured values cannot be judged')
-            return
-        self.limits(self.env.lower, self.env.upper)
-        a, p0 = 0.4 * self.env.half, self.position
-        w, rise = 2 * math.pi * REFERENCE_FREQUENCY / self.fs, REFERENCE_RISE * self.fs
-        first = self.next_sequence() + 1000
-        duration = REFERENCE_CYCLES / REFERENCE_FREQUENCY + REFERENCE_RISE
+    def wave(k):
+        envelope = 0.5 * (1 - math.cos(math.pi * min(k / rise, 1.0)))
+        return p0 + a * envelope * math.sin(w * k)
+    end = link.stream(first, wave, duration)
+    link._sleep(LEAD + 0.1)
+    with link.lock:
+        got = [(s.x, s.force) for s in link.samples if first + rise <= s.seq < end and math.isfinite(s.force)]
+    link.to_rest(0.0)
+    if len(got) < 0.5 * REFERENCE_CYCLES / REFERENCE_FREQUENCY * link.fs:
+        for rid in ('CTRL-MEAS-1', 'CTRL-MEAS-2'):
+            link.results.put(rid, FAIL, f'{len(got)} samples of the reference motion received',
+                             'the controller did not take the reference motion')
+        return
+    fit = fit_spring([g[0] for g in got], [g[1] for g in got], link.fs)
+    ok, measured, why = judge_stiffness(fit, link.reference)
+    link.results.put('CTRL-MEAS-1', PASS if ok else FAIL, measured, why)
+    ok, measured, why = judge_delay(fit, link.fs)
+    link.results.put('CTRL-MEAS-2', PASS if ok else FAIL, measured, why)
 
-        def wave(k):
-            envelope = 0.5 * (1 - math.cos(math.pi * min(k / rise, 1.0)))
-            return p0 + a * envelope * math.sin(w * k)
-        end = self.stream(first, wave, duration)
-        self._sleep(LEAD + 0.1)
-        with self.lock:
-            got = [(s.x, s.force) for s in self.samples if first + rise <= s.seq < end and math.isfinite(s.force)]
-        self.to_rest(0.0)
-        if len(got) < 0.5 * REFERENCE_CYCLES / REFERENCE_FREQUENCY * self.fs:
-            for rid in ('CTRL-MEAS-1', 'CTRL-MEAS-2'):
-                self.results.put(rid, FAIL, f'{len(got)} samples of the reference motion received',
-                                 'the controller did not take the reference motion')
-            return
-        fit = fit_spring([g[0] for g in got], [g[1] for g in got], self.fs)
-        ok, measured, why = judge_stiffness(fit, self.reference)
-        self.results.put('CTRL-MEAS-1', PASS if ok else FAIL, measured, why)
-        ok, measured, why = judge_delay(fit, self.fs)
-        self.results.put('CTRL-MEAS-2', PASS if ok else FAIL, measured, why)
 
-    def _judge_temperature(self):
-        """CTRL-MEAS-3: every Temperature frame so far within the declared ambient's tolerance."""
-        with self.lock:
-            temps = [float(f.signals['TEMP_Specimen']) for f in self.trace.frames
-                     if f.name == 'Temperature' and f.host is False and not f.malformed]
-        if self.ambient is None:
-            self.results.put('CTRL-MEAS-3', NOT_TESTED, f'{len(temps)} Temperature frames', 'no ambient declared '
-                             '(--ambient T+-TOL, e.g. 23degC+-5K): the temperature cannot be judged')
-            return
-        if not temps or all(t <= TEMPERATURE_NOT_AVAILABLE + 0.005 for t in temps):
-            self.results.put('CTRL-MEAS-3', NOT_TESTED, f'{len(temps)} Temperature frames, none with a reading',
-                             'the controller reports no temperature (-327.68 degC: not available)')
-            return
-        read = [t for t in temps if t > TEMPERATURE_NOT_AVAILABLE + 0.005]
-        worst = max(read, key=lambda t: abs(t - self.ambient.temperature))
-        ok = abs(worst - self.ambient.temperature) <= self.ambient.tolerance
-        self.results.put('CTRL-MEAS-3', PASS if ok else FAIL,
-                         f'{len(read)} readings {min(read):.2f} .. {max(read):.2f} degC, declared ambient '
-                         f'{self.ambient.temperature:g} +- {self.ambient.tolerance:g} K',
-                         '' if ok else f'{worst:.2f} degC is not plausible for the declared ambient (byte order, '
-                         'scale or offset of TEMP_Specimen?)')
+def _judge_temperature(link):
+    """CTRL-MEAS-3: every Temperature frame so far within the declared ambient's tolerance."""
+    with link.lock:
+        temps = [float(f.signals['TEMP_Specimen']) for f in link.trace.frames
+                 if f.name == 'Temperature' and f.host is False and not f.malformed]
+    if link.ambient is None:
+        link.results.put('CTRL-MEAS-3', NOT_TESTED, f'{len(temps)} Temperature frames', 'no ambient declared '
+                         '(--ambient T+-TOL, e.g. 23degC+-5K): the temperature cannot be judged')
+        return
+    if not temps or all(t <= TEMPERATURE_NOT_AVAILABLE + 0.005 for t in temps):
+        link.results.put('CTRL-MEAS-3', NOT_TESTED, f'{len(temps)} Temperature frames, none with a reading',
+                         'the controller reports no temperature (-327.68 degC: not available)')
+        return
+    read = [t for t in temps if t > TEMPERATURE_NOT_AVAILABLE + 0.005]
+    worst = max(read, key=lambda t: abs(t - link.ambient.temperature))
+    ok = abs(worst - link.ambient.temperature) <= link.ambient.tolerance
+    link.results.put('CTRL-MEAS-3', PASS if ok else FAIL,
+                     f'{len(read)} readings {min(read):.2f} .. {max(read):.2f} degC, declared ambient '
+                     f'{link.ambient.temperature:g} +- {link.ambient.tolerance:g} K',
+                     '' if ok else f'{worst:.2f} degC is not plausible for the declared ambient (byte order, '
+                     'scale or offset of TEMP_Specimen?)')

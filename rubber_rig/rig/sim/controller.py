@@ -26,31 +26,45 @@ from typing import Callable
 
 import numpy as np
 
-from ...safety import DECEL_MAX, RAMP_ACCEL, RAMP_VELOCITY, SafeRamp, stopping_positions
+from ...safety import RAMP_ACCEL, RAMP_VELOCITY, SafeRamp, stopping_positions
 from ..can.frames import SampleFrames
 from ..can.protocol import (
     FAULT_CONTROLLER,
     FAULT_SENSOR,
     FAULT_WATCHDOG,
     Protocol,
-    cycle_time,
 )
 from ..conformance.host_timing import SIM_LATE_MIN
 from .constants import IDLE_PERIOD, STREAMING
 from .faults import FaultInjector
-from .plant import Actuator, DelayLine, Sensor
-from .receive import ControllerReceive
+from .plant import Actuator, DelayLine, Sensor, first_invalid
+from .receive import CommandReceiver
 from .specimen import build_specimen
-from .transmit import ControllerTransmit
+from .state import ControllerState
+from .transmit import FeedbackTransmitter
 
 
-class SimController(ControllerReceive, ControllerTransmit):
+def _shared(name: str) -> property:
+    """The controller's view of one field of its shared state (state.ControllerState)."""
+    return property(lambda self: getattr(self.shared, name), lambda self, value: setattr(self.shared, name, value),
+                    doc=f'ControllerState.{name}')
+
+
+class SimController:
     """Simulated rig on python-can `bus` (any interface) at sample_rate [Hz] with SimOptions `options`, speaking
     the frame profile `profile` (rubber_rig.rig.can.frames) for setpoints and samples.
+
+    Three parts share one explicit state (``shared``, a state.ControllerState): the receiver
+    (receive.CommandReceiver) applies the host's frames to it, the tick here moves the actuator and specimen by
+    it, the transmitter (transmit.FeedbackTransmitter) reports it.
     """
 
     MAX_BLOCK = 1024           # ticks computed at once (numpy) while nothing but the stream happens
     MIN_RUN = 32               # from this many ticks the specimen model's batch run beats its per-sample step
+
+    state, fault_bits, ticks, next_seq, buffer = map(_shared, ('state', 'fault_bits', 'ticks', 'next_seq', 'buffer'))
+    u, u_prev, counters, lower, upper, decel_max = map(_shared, ('u', 'u_prev', 'counters', 'lower', 'upper',
+                                                                 'decel_max'))
 
     def __init__(self, bus, sample_rate: float, options, paced: bool, protocol: Protocol = None,
                  profile: str = 'packed', flood_bus=None, clock: Callable[[], float] = time.monotonic):
@@ -59,14 +73,7 @@ class SimController(ControllerReceive, ControllerTransmit):
         self.proto = protocol or Protocol()
         self.defects = frozenset(options.defects)   # deliberate protocol defects (conformance testing only)
         self.frames = SampleFrames(profile, self.proto.db, self.fs)
-        self._setpoint_ids = {self.frames.codecs[n].frame_id for n in self.frames.setpoint_names}
-        self._fb = ([], [], [])           # measured x, f and applied u not yet sent
-        self._fb_first = 0                # sequence of the first of them
-        # setpoints start a stream from idle only at or after this sample (HostStreamStart); after a ramp to rest
-        # none until the host announces the next stream
-        self.accept_from = math.inf       # CTRL-PWR-1: from power-up, no setpoint before a HostStreamStart
-        # bus_flood faults: another node on the same bus (paced only), owed frames carried between wake-ups
-        self.flood_bus, self._flood_owed, self._flood_at = flood_bus, 0.0, None
+        self.shared = ControllerState()
         # one stream per noise source, so idle-time draws (temperature) never shift the sensor noise and paced
         # and fast runs stay identical
         rng_x, rng_f, rng_t = (np.random.default_rng([options.seed, k]) for k in range(3))
@@ -81,44 +88,29 @@ class SimController(ControllerReceive, ControllerTransmit):
         delay = options.force_delay * self.fs
         delay = float(round(delay)) if abs(delay - round(delay)) < 1e-9 else delay
         self.force_delay = DelayLine(delay) if delay > 0 else None
-        self.temp_rng = rng_t
         self.faults = FaultInjector(options.faults, self.fs, options.seed)
-        self.state, self.fault_bits = 'idle', 0
-        self.next_seq = 0                 # full sequence of the next tick
-        self.ticks = 0                    # ticks since start = rig time * fs
+        base = options.specimen.get('temperature', options.temperature)
+        self.receiver = CommandReceiver(self.shared, bus, self.proto, self.frames, self.defects,
+                                        options.actuator_velocity_max, self.fs, abort=self.abort,
+                                        report=lambda: self.tx.housekeeping(force=True),
+                                        identify=lambda: self.tx.send_identity())
+        self.tx = FeedbackTransmitter(self.shared, bus, self.proto, self.frames, self.faults, self.fault_time,
+                                      options, self.fs, float(base if isinstance(base, (int, float)) else
+                                                              options.temperature), rng_t, self.defects, flood_bus)
+        self.flood_bus = flood_bus
         # fault schedules run on rig time plus, paced, the wall time the rig stood idle after its first tick: a
         # fault window ends in real time even while the rig stands faulted (first program: sample = time * fs)
         self.idle_ticks = 0
         self._idle_since = None
-        self.buffer = {}                  # seq -> setpoint [m]
-        self.u = self.u_prev = 0.0        # applied command [m]
         self.ramp = None
         self._ramp_then = None            # defect fault_ramp_overshoot: the target after the ramp past it
-        self._identified = False          # defect identify_answered_once: IDENTIFY was answered
         self._fault_since = None          # defect fault_clears_after_500ms: when the fault state began (wall)
-        self.last_host_hb = 0
-        # the host's limits for the controller's own ramps (HostLimits frame); until then: no bounds
-        self.lower, self.upper, self.decel_max = -math.inf, math.inf, DECEL_MAX
-        self.counters = {'underruns': 0, 'setpoints_late': 0, 'frames_bad': 0, 'overruns': 0, 'tx_dropped': 0,
-                         'setpoints_stale': 0}
-        self._held = []                   # (release_tick, message) for delayed frames
-        self._hb = self._st = self._tc = 0
-        hb_period = 0.08 if 'heartbeat_80ms' in self.defects else cycle_time('ControllerHeartbeat')
-        self._periods = {'ControllerHeartbeat': hb_period, **{name: cycle_time(name) for name in (
-            'ControllerStatus', 'Temperature', 'ControllerIdentity')}}
-        self._hb_every, self._st_every, self._tc_every, self._id_every = (   # in ticks
-            max(1, round(period * self.fs)) for period in self._periods.values())
-        self._idle_due = {}               # frame name -> wall-clock time it is next due while idle (paced)
-        self._id_next_tick = 0            # rig tick the next ControllerIdentity is due at while ticking
-        self._jitter_until = 0            # feedback_jitter defect: release tick of the last held feedback frame
         self._stop = threading.Event()
         # paced: a text file that gets a 'start end' line (wall-clock s) for every deadline this process missed by
         # SIM_LATE_MIN or more - its host was late, which a real controller on its own CPU would not be
         self.timing_log = None
         self._announced, self._thread = False, None
         self._deadline, self._idle_before, self._next_idle_hk = None, True, 0.0   # paced schedule (serve)
-        base = options.specimen.get('temperature', options.temperature)
-        self.temperature = float(base if isinstance(base, (int, float)) else options.temperature)
 
     # ---- lifecycle
     def start(self):
@@ -140,23 +132,20 @@ class SimController(ControllerReceive, ControllerTransmit):
             if self.paced:
                 msg = self.bus.recv(self.serve(self._clock()))   # wait for a frame until the next moment due
                 if msg is not None:
-                    self._handle(msg)
-                    self._receive_all()
+                    self.receiver.handle(msg)
+                    self.receiver.receive_all()
             else:
                 msg = self.bus.recv(0.02)
                 while msg is not None:
                     self._handle_in_order(msg)
                     msg = self.bus.recv(0)
                 self._catch_up()   # ticks only as far as setpoints are queued (or while ramping down)
-                self._send_feedback()
+                self.tx.send_feedback()
 
     def announce(self, now: float):
         """Power-up at `now` [s] on the clock: status and identity go out, the idle periods start."""
-        self._housekeeping(force=True)
-        self._send_identity()
-        self._id_next_tick = self.ticks + self._id_every
+        self.tx.start_periods(now)
         self._next_idle_hk = now
-        self._idle_due = {name: now + period for name, period in self._periods.items()}
         self._announced = True
 
     def serve(self, now: float) -> float:
@@ -164,44 +153,45 @@ class SimController(ControllerReceive, ControllerTransmit):
         the frames received, tick every sample due (deadline based: no drift from late wake-ups) or do the idle
         housekeeping; returns how long [s] the controller may wait for a frame before anything is due.
         """
+        sh = self.shared
         if not self._announced:
             self.announce(now)
         if self.flood_bus is not None:
-            self._flood(now)
-        if self.state not in STREAMING:
-            self._receive_all()          # a HostStreamStart and the first setpoints start the stream
-        if self.state not in STREAMING:
+            self.tx.flood(now)
+        if sh.state not in STREAMING:
+            self.receiver.receive_all()  # a HostStreamStart and the first setpoints start the stream
+        if sh.state not in STREAMING:
             return self._serve_idle(now)
         if self._deadline is None:
             self._deadline = now
             # the identity keeps its period across the change from wall-clock to tick time
-            due = self._idle_due.get('ControllerIdentity', now)
-            self._id_next_tick = self.ticks + max(0, round((due - now) * self.fs))
+            due = self.tx.idle_due.get('ControllerIdentity', now)
+            self.tx.id_next_tick = sh.ticks + max(0, round((due - now) * self.fs))
             if self._idle_since is not None:
                 self.idle_ticks += int((now - self._idle_since) * self.fs)
                 self._idle_since = None
-        self._receive_all()              # frames that arrived meanwhile come before the ticks that are due
+        self.receiver.receive_all()      # frames that arrived meanwhile come before the ticks that are due
         n, deadline = 0, self._deadline
         due = int((now - deadline) * self.fs) + 1 if now >= deadline else 0
         if due > 1:
             # this process was not scheduled for `due` ticks: neither was the host in it, so the host watchdog does
             # not count that time (a real controller has its own CPU)
-            self.last_host_hb += due - 1
+            sh.last_host_hb += due - 1
             self._log_late(now - deadline)
-        while now >= deadline and self.state in STREAMING:
+        while now >= deadline and sh.state in STREAMING:
             done = self._tick_block(int((now - deadline) * self.fs) + 1) or self._tick()
             deadline += done / self.fs
             n += done
         self._deadline = deadline
         if n > 1:
-            self.counters['overruns'] += n - 1
+            sh.counters['overruns'] += n - 1
         self._idle_before = False
-        return max(0.0, min(deadline - self._clock(), 0.01)) if self.state in STREAMING else 0.0
+        return max(0.0, min(deadline - self._clock(), 0.01)) if sh.state in STREAMING else 0.0
 
     def _serve_idle(self, now: float) -> float:
         """Paced and not streaming: periodic frames on the clock; returns the wait [s] until they are next due."""
         if self._deadline is not None:   # stopped ticking: back to wall-clock time
-            self._idle_due['ControllerIdentity'] = now + max(0, self._id_next_tick - self.ticks) / self.fs
+            self.tx.idle_due['ControllerIdentity'] = now + max(0, self.tx.id_next_tick - self.ticks) / self.fs
         self._deadline = None
         if self._idle_since is None and self.ticks:
             self._idle_since = now
@@ -210,10 +200,20 @@ class SimController(ControllerReceive, ControllerTransmit):
         if now >= self._next_idle_hk:
             if self._idle_before:      # due while idle: a late wake-up is this host's lateness
                 self._log_late(now - self._next_idle_hk)
-            self._idle_housekeeping(now)
+            self.tx.idle_housekeeping(now)
             self._next_idle_hk = max(self._next_idle_hk + IDLE_PERIOD, now)
         self._idle_before = True
         return min(IDLE_PERIOD, max(0.0, self._next_idle_hk - now))
+
+    def _clear_fault_by_itself(self, now: float):
+        """Defect fault_clears_after_500ms: a fault that goes back to idle 0.5 s after it began, without RESET."""
+        if self.state != 'fault':
+            self._fault_since = None
+        elif self._fault_since is None:
+            self._fault_since = now
+        elif now - self._fault_since > 0.5:
+            self.fault_bits, self.state, self._fault_since = 0, 'idle', None
+            self.tx.housekeeping(force=True)
 
     def _log_late(self, late: float):
         """A deadline missed by `late` [s]: a line in timing_log when SIM_LATE_MIN or more."""
@@ -233,15 +233,15 @@ class SimController(ControllerReceive, ControllerTransmit):
             self._handle_in_order(msg)
             msg = self.bus.recv(0)
         self._catch_up()
-        self._send_feedback()   # nothing more to tick now: the host gets what there is
+        self.tx.send_feedback()   # nothing more to tick now: the host gets what there is
 
     def _handle_in_order(self, msg):
         """Fast mode: setpoint frames queue up; any other frame (heartbeat, command) is handled after the ticks
         of the setpoints that came before it on the bus, as it would be in real time.
         """
-        if msg.arbitration_id not in self._setpoint_ids:
+        if not self.receiver.is_setpoint(msg):
             self._catch_up()
-        self._handle(msg)
+        self.receiver.handle(msg)
 
     def _catch_up(self):
         """Fast mode: tick as far as the queued setpoints allow (or while ramping down)."""
@@ -284,7 +284,7 @@ class SimController(ControllerReceive, ControllerTransmit):
             self.state = 'ramping_down'
         elif self.fault_bits:
             self.state = 'fault'
-        self._housekeeping(force=True)
+        self.tx.housekeeping(force=True)
 
     # ---- many samples at once
     def _tick_block(self, limit: int) -> int:
@@ -295,12 +295,12 @@ class SimController(ControllerReceive, ControllerTransmit):
         A block ends at the next housekeeping tick, so status, heartbeat and temperature frames go out at the
         same ticks as tick by tick.
         """
-        if self.state != 'running' or self.faults.faults or self._held:
+        sh = self.shared
+        if sh.state != 'running' or self.faults.faults or self.tx.held:
             return 0
-        ticks, seq, buffer = self.ticks, self.next_seq, self.buffer
-        n = min(limit, self._st_every - ticks % self._st_every, self._hb_every - ticks % self._hb_every,
-                self._tc_every - ticks % self._tc_every, self._id_next_tick - ticks,
-                int(self.opt.host_timeout * self.fs - (ticks - self.last_host_hb)) + 1)
+        ticks, seq, buffer = sh.ticks, sh.next_seq, sh.buffer
+        n = min(limit, self.tx.ticks_to_periodic(), int(self.opt.host_timeout * self.fs - (ticks - sh.last_host_hb))
+                + 1)
         if n < 2:
             return 0
         u = []
@@ -314,33 +314,30 @@ class SimController(ControllerReceive, ControllerTransmit):
             return 0
         x, v = self.actuator.run(u)
         force = self.specimen.run(np.asarray(x)) if n >= self.MIN_RUN else [self.specimen.step(p) for p in x]
-        finite = np.isfinite(force)
-        bad = not finite.all()
-        if bad:   # the load cell channel went invalid: the stream ends at that tick, as tick by tick
-            n = int(np.argmin(finite)) + 1
+        bad = first_invalid(force)
+        if bad >= 0:   # the load cell channel went invalid: the stream ends at that tick, as tick by tick
+            n = bad + 1
             for k in range(n, len(u)):
                 buffer[seq + k] = u[k]
-            u, x, force = u[:n], x[:n], np.asarray(force)[:n]
+            u, x, force = u[:n], x[:n], force[:n]
             self.actuator.x, self.actuator.v = x[-1], v[n - 1]
         if self.force_delay is not None:
             force = self.force_delay.run(force)
-        xm, fm = self.disp_sensor.read_many(x), self.force_sensor.read_many(force)
         # a frame cannot carry NaN: an invalid channel reads 0 and the status frame carries the sensor fault
-        self._queue_feedback(seq, np.where(np.isfinite(xm), xm, 0.0).tolist(),
-                             np.where(np.isfinite(fm), fm, 0.0).tolist(), u)
-        self.u_prev, self.u = (u[-2] if n > 1 else self.u), u[-1]
-        self.next_seq += n
-        self.ticks += n
-        if bad and not self.fault_bits & FAULT_SENSOR:
+        self.tx.queue_feedback(seq, self.disp_sensor.read_frame(x), self.force_sensor.read_frame(force), u)
+        sh.u_prev, sh.u = (u[-2] if n > 1 else sh.u), u[-1]
+        sh.next_seq += n
+        sh.ticks += n
+        if bad >= 0 and not sh.fault_bits & FAULT_SENSOR:
             self.abort(0.0, FAULT_SENSOR)
         else:
-            self._housekeeping()
+            self.tx.housekeeping()
         return n
 
     # ---- one sample
     def _tick(self) -> int:
         t = self.fault_time()
-        self._release_held()
+        self.tx.release_held()
         if self.state == 'ramping_down':
             u = self.ramp.step()
         else:
@@ -351,7 +348,7 @@ class SimController(ControllerReceive, ControllerTransmit):
                 self.state = 'holding'
             else:
                 self.state = 'running'
-            if self.ticks - self.last_host_hb > self.opt.host_timeout * self.fs \
+            if self.ticks - self.shared.last_host_hb > self.opt.host_timeout * self.fs \
                     and 'keep_setpoint_on_host_silence' not in self.defects:
                 # CTRL-WD-1: host gone, the controller brings the rig to rest itself
                 self.abort(0.0, FAULT_CONTROLLER if 'wrong_fault_bit' in self.defects else FAULT_WATCHDOG)
@@ -370,8 +367,8 @@ class SimController(ControllerReceive, ControllerTransmit):
                 sensor.stuck_value = None
         xm, fm = self.disp_sensor.read(x), self.force_sensor.read(force)
         # a frame cannot carry NaN: an invalid channel reads 0 and the status frame carries the sensor fault
-        self._queue_feedback(self.next_seq, [xm if math.isfinite(xm) else 0.0], [fm if math.isfinite(fm) else 0.0],
-                             [u])
+        self.tx.queue_feedback(self.next_seq, [xm if math.isfinite(xm) else 0.0],
+                               [fm if math.isfinite(fm) else 0.0], [u])
         self.next_seq += 1
         self.ticks += 1
         if self.state == 'ramping_down' and self.ramp.done and self._ramp_then is not None:
@@ -380,16 +377,14 @@ class SimController(ControllerReceive, ControllerTransmit):
                                  decel_max=self.decel_max, lower=self.lower, upper=self.upper)
             self._ramp_then = None
         if self.state == 'ramping_down' and self.ramp.done:
-            self._send_feedback()
-            self.accept_from = math.inf
+            self.tx.send_feedback()
+            self.shared.accept_from = math.inf
             self.state = 'fault' if self.fault_bits else 'idle'
             self.buffer.clear()
-            for _, m in self._held:   # delayed frames still go out once the rig stops ticking
-                self._put(m)
-            self._held = []
-            self._housekeeping(force=True)
+            self.tx.release_all_held()   # delayed frames still go out once the rig stops ticking
+            self.tx.housekeeping(force=True)
         else:
-            self._housekeeping()
+            self.tx.housekeeping()
         return 1
 
     def fault_time(self) -> float:

@@ -145,6 +145,16 @@ class Sensor:
             return math.nan
         return round(counts) * self.res
 
+    def read_frame(self, true_values) -> list:
+        """read_many() as a frame carries the readings (a list of floats): one that is not finite (an invalid
+        channel) is sent as 0, and the status frame carries the sensor fault.
+        """
+        if len(true_values) <= self.SCALAR_UP_TO:
+            readings = [self.read(float(v)) for v in true_values]
+            return [r if math.isfinite(r) else 0.0 for r in readings]
+        readings = self.read_many(true_values)
+        return np.where(np.isfinite(readings), readings, 0.0).tolist()
+
     def read_many(self, true_values) -> np.ndarray:
         """Measured values for an array of true values: the same numbers and noise sequence as read() one by one
         (not while stuck: the caller reads stuck sensors one by one).
@@ -169,3 +179,11 @@ class Sensor:
             out = np.round(counts) * self.res
         out[~np.isfinite(counts)] = np.nan
         return out
+
+
+def first_invalid(values) -> int:
+    """Index of the first value that is not finite (a list of a few floats, or an array), -1 if all are."""
+    if isinstance(values, list):
+        return next((i for i, v in enumerate(values) if not math.isfinite(v)), -1)
+    finite = np.isfinite(values)
+    return -1 if finite.all() else int(np.argmin(finite))
