@@ -51,12 +51,25 @@ def pytest_runtest_makereport(item, call):
     setattr(item, f'rep_{call.when}', outcome.get_result())
 
 
+def _group(item) -> str:
+    """The pytest-xdist group of a test: 'end_to_end' for those that run processes on the wall clock (markers ros
+    and slow: node processes on a DDS domain, a simulator process on a bus), else its module."""
+    return 'end_to_end' if item.get_closest_marker('ros') or item.get_closest_marker('slow') else item.module.__name__
+
+
+@pytest.hookimpl(trylast=True)
 def pytest_collection_modifyitems(config, items):
     """make test runs on two pytest-xdist workers (--dist loadgroup): the tests of one module stay on one worker
-    (module fixtures are set up once), and every test that runs processes on the wall clock (markers ros and slow:
-    node processes on a DDS domain, a simulator process on a bus) runs on one worker, one after the other, so two of
+    (module fixtures are set up once), and the end-to-end tests all run on one worker, one after the other, so two of
     them never share the DDS domains or the cores; the logic tests on simulated time fill the other worker.
+
+    pytest-xdist 3.8 marks a test's group by appending '@group' to its node id, which it does by setting the
+    attribute pytest 8 kept the id in; pytest 9 keeps it elsewhere, so the groups would be silently ignored (and two
+    suites of nodes met on one DDS domain). The id is set here as xdist would, on the worker (option loadgroup).
     """
+    if not getattr(config.option, 'loadgroup', False):
+        return
+    from _pytest.nodeid import NodeId
     for item in items:
-        wall_clock = item.get_closest_marker('ros') or item.get_closest_marker('slow')
-        item.add_marker(pytest.mark.xdist_group('end_to_end' if wall_clock else item.module.__name__))
+        if '@' not in item.nodeid.rsplit('::', 1)[-1]:
+            item._id = NodeId.parse(f'{item.nodeid}@{_group(item)}')
