@@ -38,7 +38,8 @@ IMPORT_PROVIDER = {
     'lifecycle_msgs': 'lifecycle_msgs', 'action_msgs': 'action_msgs', 'msg_defs': 'msg_defs',
     'ament_index_python': 'ament_index_python', 'launch': 'launch', 'launch_ros': 'launch_ros',
     # tests and benchmarks
-    'pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip', 'catkin_pkg': 'python3-catkin-pkg',
+    'pytest': 'python3-pytest', '_pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip',
+    'catkin_pkg': 'python3-catkin-pkg',
     'differint': 'differint', 'pytest_timeout': 'python3-pytest-timeout',
     'ament_copyright': 'ament_copyright', 'ament_flake8': 'ament_flake8', 'ament_pep257': 'ament_pep257',
 }

@@ -131,6 +131,8 @@ def test_bench_stops_naming_a_node_process_that_ended(tmp_path, capsys):
 
 @pytest.mark.ros
 @pytest.mark.slow
+@pytest.mark.system     # the whole main job paced in real time takes about 1.4 cores (make bench prints it): beside
+#                         make test's other worker it faulted on the fresh clone; `make bench` is this run for users
 def test_paced_bench_runs_the_simulated_rig_in_a_process_of_its_own(tmp_path, capsys):
     # paced (make bench), the simulated rig runs in its own process on udp_multicast, a child of rig_driver's; the
     # bench meters it apart. A busy computer may fault this short program (stream lost): the run still ends with a
@@ -139,7 +141,8 @@ def test_paced_bench_runs_the_simulated_rig_in_a_process_of_its_own(tmp_path, ca
                '--domain-id', str(domain_id() - 83), '--quiet'])
     out = capsys.readouterr().out
     assert rc in (0, 1), out
-    assert 'simulated rig in a process of its own on udp_multicast' in out
+    assert 'simulated rig in a process of its own on udp_multicast' in out, out
+    assert 'MCAP recording:' in out, out
     mcap = Path(out.split('MCAP recording:')[1].split()[0])
     summary = json.loads(mcap.with_suffix('').with_name(mcap.stem + '.summary.json').read_text())
     procs = summary['cpu']['processes']
