@@ -28,6 +28,14 @@ from .config import RigConfig
 from .sim.controller import SimController
 
 
+def stepped_medium(cfg: RigConfig, clock) -> BusMedium:
+    """The CAN segment of `cfg` (bitrate, data bitrate, FD, transmit queue) on a simulated clock only the caller
+    advances: no thread, and frames stamped with the simulated time itself, so the same run gives the same stamps.
+    """
+    return BusMedium(cfg.bitrate, cfg.data_bitrate, cfg.fd, tx_queue=cfg.tx_queue, clock=clock, threaded=False,
+                     time_offset=0.0)
+
+
 class SteppedRig:
     """A paced simulated rig (RigConfig or settings over the defaults) whose time is ``now`` [s]; ``step`` [s]
     the time one ``poll()`` lets pass (rig_driver's poll period by default 1 ms here).
@@ -36,9 +44,7 @@ class SteppedRig:
     def __init__(self, config=None, step: float = 0.001, start: float = 100.0):
         cfg = config if isinstance(config, RigConfig) else RigConfig.from_dict({**(config or {}), 'paced': True})
         self.cfg, self.step, self.now = cfg, float(step), float(start)
-        # frames are stamped with the simulated time itself: the same run gives the same stamps
-        medium = BusMedium(cfg.bitrate, cfg.data_bitrate, cfg.fd, tx_queue=cfg.tx_queue, clock=self.clock,
-                           threaded=False, time_offset=0.0)
+        medium = stepped_medium(cfg, self.clock)
         controller_bus, host_bus = medium.attach('controller'), medium.attach('host')
         self.controller = SimController(controller_bus, cfg.sample_rate, cfg.sim, paced=True,
                                         profile=cfg.frame_profile, clock=self.clock)

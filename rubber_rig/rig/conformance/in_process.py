@@ -32,10 +32,10 @@ import sys
 
 import can
 
-from ..can.simbus import BusMedium
 from ..config import RigConfig
 from ..reference import ReferenceController
 from ..sim.controller import SimController
+from ..stepped import stepped_medium
 from .active import ConformanceRun
 from .link import Envelope
 from .reference_specimen import Ambient, ReferenceSpring
@@ -73,8 +73,7 @@ def _rig_config(sample_rate: float, profile: str, sim: dict | None = None) -> Ri
 
 def _simulated_buses(cfg: RigConfig, simulated: SimulatedTime) -> tuple:
     """(controller bus, host bus) on one simulated CAN bus whose frames are stamped with the simulated clock."""
-    medium = BusMedium(cfg.bitrate, cfg.data_bitrate, cfg.fd, tx_queue=cfg.tx_queue, clock=lambda: simulated.t,
-                       threaded=False, time_offset=0.0)
+    medium = stepped_medium(cfg, lambda: simulated.t)
     return medium.attach('controller'), medium.attach('host')
 
 
