@@ -93,7 +93,7 @@ class Event:
     action: str
     message: str
     sequence: int = 0              # rig sample sequence the event belongs to (after the cycle or batch judged)
-    cause: str = ''                # diagnosis.CAUSES: what the event is put down to (also the message's start)
+    cause: str = ''                # diagnosis.CAUSES: what the event is put down to (DetectorEvent.cause)
     code: str = ''                 # finer: stuck | saturation | spikes | offset_jump | mean_step | changed | mismatch
 
 

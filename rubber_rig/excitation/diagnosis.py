@@ -75,7 +75,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.stats import t as student_t
 
-# cause labels an Event carries (DetectorEvent has no field for it: its message starts with "[cause ...]")
+# cause labels an Event carries (DetectorEvent.cause; its message starts with "[cause CAUSE/CODE]" for people too)
 CAUSES = ('specimen', 'fixture', 'sensor', 'model', 'control', 'program', 'undetermined')
 CAUSE_OF_TYPE = {'residual': 'specimen', 'stiffness_change': 'specimen', 'force_drift': 'specimen',
                  'tracking': 'control', 'cycle_count': 'program', 'elapsed_time': 'program',

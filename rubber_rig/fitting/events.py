@@ -20,12 +20,15 @@ The report draws K_dyn(cycle) with the events as markers from these; both are op
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 
 CYCLE_METRICS = 'msg_defs/msg/CycleMetrics'
 DETECTOR_EVENT = 'msg_defs/msg/DetectorEvent'
 EVENT_FIELDS = ('program', 'detector', 'kind', 'block_index', 'block_name', 'cycle', 'program_cycle', 'elapsed',
-                'sequence', 'value', 'reference', 'threshold', 'units', 'action', 'message')
+                'sequence', 'value', 'reference', 'threshold', 'units', 'action', 'cause', 'code', 'message')
+_CAUSE_LABEL = re.compile(r'^\[cause ([a-z_]+)(?:/([a-z_]+))?\] ')
 
 
 def _of_type(rec, type_name: str) -> list:
@@ -71,7 +74,10 @@ def recorded_events(rec) -> list[dict]:
     """The recorded detector events ({EVENT_FIELDS..., 'sample': index of the sample it belongs to or -1})."""
     events = []
     for m in _of_type(rec, DETECTOR_EVENT):
-        e = {k: getattr(m, k) for k in EVENT_FIELDS}
+        e = {k: getattr(m, k, '') for k in EVENT_FIELDS}
+        label = _CAUSE_LABEL.match(str(e['message'])) if not e['cause'] else None
+        if label:   # recorded before DetectorEvent had the fields: the message's label carries them
+            e['cause'], e['code'] = label.group(1), label.group(2) or ''
         e['sample'] = int(_sample_index(rec.sequence, [max(int(e['sequence']) - 1, 0)])[0])
         events.append(e)
     return events

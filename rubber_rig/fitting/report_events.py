@@ -72,10 +72,12 @@ def events_html(events: list) -> list[str]:
     out = [f'<h2>Detector events ({len(events)})</h2>']
     if not events:
         return out + ['<p>No detector tripped while this was recorded (or the recording has no events topic).</p>']
-    head = ['block', 'cycle', 'program cycle', 'rig time [s]', 'detector', 'action', 'message']
+    head = ['block', 'cycle', 'program cycle', 'rig time [s]', 'detector', 'cause', 'action', 'message']
     out.append('<table class="blocks"><tr>' + ''.join(f'<th>{h}</th>' for h in head) + '</tr>')
     for e in events:
         cells = [f"{e['block_index']} {esc(e['block_name'])}", str(e['cycle']), str(e['program_cycle']),
-                 f"{e['elapsed']:.3f}", esc(f"{e['detector']} ({e['kind']})"), esc(e['action']), esc(e['message'])]
+                 f"{e['elapsed']:.3f}", esc(f"{e['detector']} ({e['kind']})"),
+                 esc('/'.join(x for x in (e.get('cause', ''), e.get('code', '')) if x) or '-'), esc(e['action']),
+                 esc(e['message'])]
         out.append('<tr>' + ''.join(f'<td>{c}</td>' for c in cells) + '</tr>')
     return out + ['</table>']

@@ -312,4 +312,5 @@ def detector_event_msg(event: Any, program: str, block_name: str, t: float) -> D
     msg.elapsed, msg.value, msg.sequence = float(event.elapsed), float(event.value), int(event.sequence)
     msg.reference, msg.threshold = float(event.reference), float(event.threshold)
     msg.units, msg.message = event.units, event.message
+    msg.cause, msg.code = str(getattr(event, 'cause', '') or ''), str(getattr(event, 'code', '') or '')
     return msg
