@@ -202,6 +202,7 @@ def test_slip_is_held_by_the_force_drift_detector_within_two_cycles(suite):
     # whether it creeps back (a slip: cause fixture) or stays flat (a load-cell offset): one cycle more than before
     # (bench_detector_causes: decided 2.2 cycles after the slip; the hold then leaves the queued setpoints)
     assert drift.message.startswith('[cause fixture/mean_step]'), drift.message
+    assert (drift.cause, drift.code) == ('fixture', 'mean_step')     # and as the message's fields
     assert 0 < delay <= 4.0
 
 
