@@ -30,7 +30,7 @@ from pathlib import Path
 import can
 
 from ..can.protocol import CMD_ABORT
-from . import active_faults, active_power, active_stream, reference_specimen
+from . import active_faults, active_limits, active_power, active_stream, reference_specimen
 from .link import Aborted, ConformanceLink
 from .passive import check_offline
 from .report import FAIL, NOT_TESTED, Results
@@ -41,7 +41,8 @@ from .requirements import REQUIREMENTS
 SCENARIOS = (active_power.s_power_up, active_stream.s_listen, active_stream.s_identify, active_stream.s_stream,
              active_stream.s_stale, reference_specimen.s_reference, active_stream.s_hold, active_stream.s_reset_moving,
              active_faults.s_bad_frames, active_faults.s_host_limits, active_faults.s_out_of_limits,
-             active_faults.s_too_fast, active_faults.s_host_silence, active_faults.s_wrap)
+             active_limits.s_tightened_limits, active_faults.s_too_fast, active_faults.s_host_silence,
+             active_faults.s_wrap)
 
 
 def scenarios_judging(requirements) -> set:

@@ -183,7 +183,9 @@ class ReferenceController:
         self.lower = -math.inf if 'ignore_lower_limit' in self.defects else lower
         self.decel = sig['HL_Deceleration'] or DEFAULT_DECEL
         # tighter limits bind the setpoints already queued as well: one outside them is refused now
-        if self.state in ('running', 'holding') and any(not self._inside(v) for v in self.queue.values()):
+        if self.state in ('running', 'holding') and not self.defects & {'tighter_limits_spare_queued',
+                                                                       'queued_checked_when_applied'} \
+                and any(not self._inside(v) for v in self.queue.values()):
             self._fault('displacement_limit')
 
     def _on_command(self, code: int, sig: dict, now: float):
@@ -253,8 +255,10 @@ class ReferenceController:
         u_before = self.u
         if self.state in ('running', 'holding') and t - self.last_host_heartbeat > self.host_timeout:
             self._fault('watchdog')
+        value = self.queue.pop(self.next_seq, None) if self.state in ('running', 'holding') else None
+        if value is not None and 'queued_checked_when_applied' in self.defects and not self._inside(value):
+            self._fault('displacement_limit')     # refused only when its tick comes, not when the limits came
         if self.state in ('running', 'holding'):
-            value = self.queue.pop(self.next_seq, None)
             if value is None:
                 if self.state == 'running':
                     self._set_state('holding')

@@ -40,6 +40,10 @@ REFERENCE_DEFECTS = {
     'identify_answered_once': (('CTRL-ID-1',), 'answers only the first IDENTIFY'),
     'reset_while_ramping': (('CTRL-RESET-1',), 'honours RESET while ramping down: stops where it is, idle'),
     'ignore_disable': (('CTRL-RAMP-1',), 'ignores DISABLE (ABORT works)'),
+    'tighter_limits_spare_queued': (('CTRL-LIM-2',), 'HostLimits that tighten bind only the setpoints that arrive '
+                                    'later: those already queued outside them are applied'),
+    'queued_checked_when_applied': (('CTRL-LIM-2',), 'HostLimits that tighten refuse a queued setpoint outside them '
+                                    'only when its tick comes, not when the limits arrive'),
     'host_limits_crc_unchecked': (('CTRL-FRAME-2',), 'applies a HostLimits frame whatever its CRC'),
     'feedback_six_per_frame': (('CTRL-FB-2',), 'sends feedback in frames of 6 samples (5 ms late for the first)'),
     'force_in_kN': (('CTRL-MEAS-1',), 'sends FB_Force in kN where the DBC says N'),
