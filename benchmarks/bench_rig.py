@@ -52,12 +52,13 @@ def program(duration: float) -> Program:
                                   f'amplitude: 0.5 mm, cycles: {cycles}, taper_cycles: 1}}\n')
 
 
-def run(rate: float, duration: float, paced: bool, profile: str, fd: bool = True, bitrate: int = 1_000_000) -> dict:
+def run(rate: float, duration: float, paced: bool, profile: str, fd: bool = True, bitrate: int = 1_000_000,
+        data_bitrate: int = 5_000_000) -> dict:
     prog = program(duration)
     # the paced simulator shares this process (and its GIL) with the host loop on a loaded machine: a wall-clock
     # heartbeat watchdog of 1 s keeps a starved thread from aborting the run (hardware has its own CPU)
     cfg = {'paced': paced, 'sample_rate': rate, 'watchdog_timeout': 1.0 if paced else 0.25, 'profile': profile,
-           'fd': fd, 'bitrate': bitrate, 'max_bus_load': 1.0}
+           'fd': fd, 'bitrate': bitrate, 'data_bitrate': data_bitrate, 'max_bus_load': 1.0}
     c0, t0 = time.process_time(), time.perf_counter()
     with open_rig(cfg) as rig:
         busy0, w0 = (rig.medium.stats['busy_time'], time.perf_counter()) if rig.medium else (None, None)
@@ -133,18 +134,21 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument('--duration', type=float, default=60.0, help='program length [s] (default 60)')
     ap.add_argument('--paced', type=float, nargs='*', default=[],
-                    help='also run these rates paced (real time, packed frames on the timed 1/5 Mbit/s bus)')
+                    help='also run these rates paced (real time, packed frames on the timed CAN FD bus)')
+    ap.add_argument('--data-bitrate', type=int, default=5_000_000,
+                    help='CAN FD data bitrate of the paced runs [bit/s] (default 5000000; 8000000: FD 1/8)')
     args = ap.parse_args(argv)
-    bus_profiles([500.0, 1000.0, 2000.0, 5000.0, 10000.0])
+    bus_profiles([500.0, 1000.0, 2000.0, 5000.0, 10000.0, 20000.0])
     run(1000.0, 1.0, False, 'packed')   # warm-up: imports, model set-up, DBC load are not per-sample costs
     ok = cost_table(args.duration)
     if args.paced:
-        print(f'paced runs on the simulated CAN FD 1/5 Mbit/s bus with bit timing, packed frames, '
+        print(f'paced runs on the simulated CAN FD 1/{args.data_bitrate / 1e6:g} Mbit/s bus with bit timing, packed '
+              f'frames, driver and simulated controller in this one process (one interpreter lock), '
               f'{args.duration:g} s program')
         print(f"{'rate':>7} {'samples':>8} {'lost':>5} {'late':>5} {'bad':>4} {'bus load':>8} {'expected':>8} "
               f"{'tx dropped':>10} {'cpu us/sample':>13}")
     for rate in args.paced:
-        m = run(rate, args.duration, True, 'packed')
+        m = run(rate, args.duration, True, 'packed', data_bitrate=args.data_bitrate)
         ok &= m['completed'] and m['lost'] == 0 and m['samples'] >= m['expected']
         print(f"{m['rate']:7.0f} {m['samples']:8d} {m['lost']:5d} {m['late']:5d} {m['malformed']:4d} "
               f"{m['load'] * 100:7.1f}% {m['expected_load'] * 100:7.1f}% {m['tx_dropped']:10d} {m['cpu_us']:13.1f}",
