@@ -26,6 +26,7 @@ import can
 import numpy as np
 
 from .protocol import MalformedFrame, meet, unwrap
+from .receiver import BusReceiver
 from .stream import SampleBlock
 
 
@@ -62,6 +63,7 @@ class FrameIO:
         self._hb_every = heartbeat_every     # samples between the heartbeats that ride with a stream
         self._next_hb_seq = None
         self.measured_load = None        # callable -> busy fraction of the last second, when the bus can tell
+        self.receiver = None             # receiver.BusReceiver reading the bus in a thread, or None: polled
         self._load_at, self._load = -math.inf, None
 
     # ---- host -> controller
@@ -145,13 +147,36 @@ class FrameIO:
 
     # ---- controller -> host
     def receive_all(self):
-        """Drain the bus without blocking; the contiguous samples received go to the ready blocks."""
-        recv = self.bus.recv
-        msg = recv(0)
-        while msg is not None:
-            self._receive(msg)
+        """Drain the bus without blocking (or take what the receiving thread read, when one reads it:
+        receiver.BusReceiver); the contiguous samples received go to the ready blocks.
+        """
+        if self.receiver is not None:
+            for msg in self.receiver.take():
+                self._receive(msg)
+        else:
+            recv = self.bus.recv
             msg = recv(0)
+            while msg is not None:
+                self._receive(msg)
+                msg = recv(0)
         self.flush_pending()
+
+    def receive_in_thread(self, wake, samples_per_wake: int, on_error=lambda exc: None):
+        """From now on a thread reads the bus (receiver.BusReceiver) and calls ``wake()`` (thread-safe) whenever
+        ``samples_per_wake`` samples have arrived since it last did; receive_all() then takes what it read. The
+        BusReceiver, or None when the bus is already read in a thread.
+        """
+        if self.receiver is not None:
+            return None
+        measured = self.frames.codecs[self.frames.feedback_names[-1]].frame_id   # one frame per sample group
+        per_wake = max(1, math.ceil(samples_per_wake / self.frames.feedback_per_frame))
+        self.receiver = BusReceiver(self.bus, {measured}, per_wake, wake, on_error).start()
+        return self.receiver
+
+    def stop_receiving(self):
+        """Stop the receiving thread, if one runs (before the bus is shut down)."""
+        if self.receiver is not None:
+            self.receiver.stop()
 
     def next_block(self):
         """The oldest SampleBlock not yet returned, or None."""
