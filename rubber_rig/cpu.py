@@ -40,6 +40,7 @@ PROC = Path('/proc')
 CLOCK_TICKS = os.sysconf('SC_CLK_TCK') if hasattr(os, 'sysconf') else 100   # jiffies per second
 UNDER_LOAD = 0.1          # [cores] CPU used by other programs over a run above which its figures are "under load"
 EXECUTOR_THREAD = 'executor'   # the thread name nodes/spin.py gives the thread that spins a node's executor
+RECEIVE_THREAD = 'can-receive'   # rig_driver's thread that reads the bus (receive: thread, rig.can.receiver)
 
 
 def name_this_thread(name: str) -> None:

@@ -51,6 +51,7 @@ from std_srvs.srv import Trigger
 
 from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import OpenStream, StopStream
+from rubber_rig.cpu import RECEIVE_THREAD, name_this_thread
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import rig_driver_services as services
 from rubber_rig.nodes import topics
@@ -220,7 +221,8 @@ class RigDriverNode(LifecycleNode):
         driver = self.rig.driver
         if self.params.receive == 'thread' and driver.pump is None:
             driver.receive_in_thread(self._frames_in.trigger, self.params.samples_per_batch(self.config.sample_rate),
-                                     lambda exc: driver.events.append(('error', f'CAN receive stopped: {exc!r}')))
+                                     lambda exc: driver.events.append(('error', f'CAN receive stopped: {exc!r}')),
+                                     lambda: name_this_thread(RECEIVE_THREAD))
         self.ticks.every_tick(self.poll, driver.tick_period if driver.io.receiver else self.params.poll_period)
 
     def _stop_polling(self) -> None:
@@ -331,6 +333,8 @@ class RigDriverNode(LifecycleNode):
         if verdict.why:
             return SetParametersResult(successful=False, reason=verdict.why)
         self.params.apply(changed)
+        if self.rig is not None:   # a new batch size: the receiving thread wakes the node once per new batch
+            self.rig.driver.io.wake_after(self.params.samples_per_batch(self.config.sample_rate))
         self.owner_watch.peers.silent_after = self.params.owner_timeout
         if verdict.limits is not None:
             if self.rig is not None:

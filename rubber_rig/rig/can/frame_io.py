@@ -161,17 +161,22 @@ class FrameIO:
                 msg = recv(0)
         self.flush_pending()
 
-    def receive_in_thread(self, wake, samples_per_wake: int, on_error=lambda exc: None):
-        """From now on a thread reads the bus (receiver.BusReceiver) and calls ``wake()`` (thread-safe) whenever
-        ``samples_per_wake`` samples have arrived since it last did; receive_all() then takes what it read. The
-        BusReceiver, or None when the bus is already read in a thread.
+    def receive_in_thread(self, wake, samples_per_wake: int, on_error=lambda exc: None, on_start=None):
+        """From now on a thread reads the bus (receiver.BusReceiver: ``on_error``, ``on_start``) and calls ``wake()``
+        (thread-safe) whenever ``samples_per_wake`` samples have arrived since it last did; receive_all() then takes
+        what it read. The BusReceiver, or None when the bus is already read in a thread.
         """
         if self.receiver is not None:
             return None
         measured = self.frames.codecs[self.frames.feedback_names[-1]].frame_id   # one frame per sample group
-        per_wake = max(1, math.ceil(samples_per_wake / self.frames.feedback_per_frame))
-        self.receiver = BusReceiver(self.bus, {measured}, per_wake, wake, on_error).start()
-        return self.receiver
+        self.receiver = BusReceiver(self.bus, {measured}, 1, wake, on_error, on_start)
+        self.wake_after(samples_per_wake)
+        return self.receiver.start()
+
+    def wake_after(self, samples: int):
+        """The receiving thread wakes its owner once per ``samples`` samples from now on (a new batch size)."""
+        if self.receiver is not None:
+            self.receiver.frames_per_wake = max(1, math.ceil(samples / self.frames.feedback_per_frame))
 
     def stop_receiving(self):
         """Stop the receiving thread, if one runs (before the bus is shut down)."""
