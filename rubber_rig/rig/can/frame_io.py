@@ -179,9 +179,14 @@ class FrameIO:
             self.receiver.frames_per_wake = max(1, math.ceil(samples / self.frames.feedback_per_frame))
 
     def stop_receiving(self):
-        """Stop the receiving thread, if one runs (before the bus is shut down)."""
-        if self.receiver is not None:
-            self.receiver.stop()
+        """Stop the receiving thread, if one runs (before the bus is shut down), and take what it read; from now on
+        receive_all() reads the bus itself (a ramp to rest at shutdown is watched that way).
+        """
+        receiver, self.receiver = self.receiver, None
+        if receiver is not None:
+            receiver.stop()
+            for msg in receiver.take():
+                self._receive(msg)
 
     def next_block(self):
         """The oldest SampleBlock not yet returned, or None."""
