@@ -63,4 +63,3 @@ class Cadence:
             out.append(name)
             self._next[name] = now + period if when is None or now >= when + period else when + period
         return out
-
