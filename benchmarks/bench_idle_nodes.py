@@ -84,7 +84,8 @@ def measure(checkout: Path, window: float, domain: int) -> dict:
     procs = {name: subprocess.Popen(
         [sys.executable, '-m', f'rubber_rig.nodes.{name}_node', '--ros-args', '--params-file', str(config), *extra,
          *(('-p', f'output_dir:={out_dir}') if name == 'recorder' else ())],
-        env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL) for name, extra in NODES.items()}
+        cwd=checkout, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)   # -m puts the cwd first
+        for name, extra in NODES.items()}
     try:
         end = time.monotonic() + START_TIMEOUT
         while time.monotonic() < end and not all(executor_thread(p.pid) for p in procs.values()):
