@@ -144,3 +144,17 @@ def test_the_driver_reads_the_simulated_rig_through_the_thread_and_its_watchdog_
         assert ok, drv.fault_messages
         assert any('silent' in m or 'no feedback' in m for m in drv.fault_messages)
     assert not receiver.running               # closing the rig stopped the thread before the bus
+
+
+def test_a_receiving_thread_that_stops_on_a_failed_bus_is_said_once_in_the_drivers_log():
+    with open_rig({'paced': True, 'bus_timing': False, 'sample_rate': 1000.0}) as rig:
+        drv = rig.driver
+        assert rig.wait_ready(PATIENCE)
+        receiver = drv.receive_in_thread(lambda: None, 10)
+        drv.take_events()
+        drv.bus.shutdown()                       # the interface goes away under the blocked receive
+        assert _until(lambda: not receiver.running)
+        drv.io.receive_all()
+        drv.io.receive_all()
+        said = [text for level, text in drv.take_events() if 'CAN receive stopped' in text]
+        assert len(said) == 1 and 'the watchdog judges the silence' in said[0]

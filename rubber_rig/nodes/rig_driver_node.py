@@ -221,8 +221,7 @@ class RigDriverNode(LifecycleNode):
         driver = self.rig.driver
         if self.params.receive == 'thread' and driver.pump is None:
             driver.receive_in_thread(self._frames_in.trigger, self.params.samples_per_batch(self.config.sample_rate),
-                                     lambda exc: driver.events.append(('error', f'CAN receive stopped: {exc!r}')),
-                                     lambda: name_this_thread(RECEIVE_THREAD))
+                                     on_start=lambda: name_this_thread(RECEIVE_THREAD))   # (an error: its poll says)
         self.ticks.every_tick(self.poll, driver.tick_period if driver.io.receiver else self.params.poll_period)
 
     def _stop_polling(self) -> None:

@@ -34,8 +34,8 @@ class FrameIO:
     """Frames to and from the controller on python-can `bus` at sample rate fs [Hz].
 
     listener (set before the first frame arrives) provides: controller_sequence, controller_faults,
-    temperature, on_frame(name, signals) -> bool (False: not a frame the host consumes), bad_frames(n),
-    samples_lost(n), jumped(sequence) and measured(xs, fs, us).
+    temperature, event(level, text), on_frame(name, signals) -> bool (False: not a frame the host consumes),
+    bad_frames(n), samples_lost(n), jumped(sequence) and measured(xs, fs, us).
     """
 
     def __init__(self, bus, proto, frames, fs: float, heartbeat_every: int, clock):
@@ -153,6 +153,10 @@ class FrameIO:
         if self.receiver is not None:
             for msg in self.receiver.take():
                 self._receive(msg)
+            if self.receiver.error is not None and not self.receiver.said:   # said once, from the owner's thread
+                self.receiver.said = True
+                self.listener.event('error', f'CAN receive stopped: {self.receiver.error!r} (nothing is read now: '
+                                             'the watchdog judges the silence)')
         else:
             recv = self.bus.recv
             msg = recv(0)

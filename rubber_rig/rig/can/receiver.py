@@ -53,7 +53,8 @@ class BusReceiver:
         self.wake, self.on_error, self.on_start = wake, on_error, on_start
         self.frames = collections.deque()   # received, not yet taken (append/popleft are atomic: no lock)
         self.wakes = 0                       # how often wake() was called
-        self.error: BaseException | None = None
+        self.error: BaseException | None = None   # why the thread stopped on its own (set once, by the thread)
+        self.said = False                          # the owner has reported the error (FrameIO.receive_all)
         self._stop = threading.Event()
         self._thread = threading.Thread(target=self._run, name='can-receive', daemon=True)
 
