@@ -92,6 +92,8 @@ BENCHMARKS = (
     Benchmark('main_job', 'bench_main_job.py', ('--runs', '2', '--modes', 'processes,in-process'),
               '`rubber-rig bench` (make bench) timed from outside: latency, CPU per node process, the load', 10,
               '--json'),
+    Benchmark('idle_nodes', 'bench_idle_nodes.py', ('--rounds', '2'), 'the four node processes at rest: CPU, '
+              'executor wake-ups and CPU per wake-up of each (what their timers cost)', 3, '--json'),
     Benchmark('identification', 'bench_identification.py', ('--seeds', '20'), 'does every fit tell the truth: '
               '19 cases x 20 noise seeds', 60, '--json'),
     Benchmark('soak', 'bench_soak.py', (), '30 minutes of churn: kills, restarts, clients, a second suite', 32,

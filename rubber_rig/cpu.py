@@ -29,6 +29,7 @@ and no node code is involved in counting.
 """
 from __future__ import annotations
 
+import cProfile
 import ctypes
 import os
 import time
@@ -39,6 +40,7 @@ PROC = Path('/proc')
 CLOCK_TICKS = os.sysconf('SC_CLK_TCK') if hasattr(os, 'sysconf') else 100   # jiffies per second
 UNDER_LOAD = 0.1          # [cores] CPU used by other programs over a run above which its figures are "under load"
 EXECUTOR_THREAD = 'executor'   # the thread name nodes/spin.py gives the thread that spins a node's executor
+RECEIVE_THREAD = 'can-receive'   # rig_driver's thread that reads the bus (receive: thread, rig.can.receiver)
 
 
 def name_this_thread(name: str) -> None:
@@ -47,6 +49,28 @@ def name_this_thread(name: str) -> None:
         ctypes.CDLL(None).prctl(15, name.encode()[:15], 0, 0, 0)   # PR_SET_NAME: the calling thread
     except (OSError, AttributeError):   # not Linux: the thread keeps its name, wake-ups are not counted
         pass
+
+
+PROFILE_ENV = 'RUBBER_RIG_PROFILE_DIR'   # set: each node's executor thread runs under cProfile (run_profiled)
+
+
+def run_profiled(fn, name: str) -> None:
+    """``fn()``; under cProfile when the environment names a directory in PROFILE_ENV, the statistics then written
+    to ``<dir>/<name>-<pid>.prof`` when it returns (read them with ``python -m pstats``). Where a node's CPU goes,
+    without py-spy: ``RUBBER_RIG_PROFILE_DIR=/tmp/prof rubber-rig bench``. Wall time: on a busy machine a function
+    preempted half way is charged the wait; cProfile slows what it profiles (a paced program may run out of
+    setpoints): its call counts and shares count, not its times.
+    """
+    where = os.environ.get(PROFILE_ENV)
+    if not where:
+        fn()
+        return
+    profile = cProfile.Profile()   # wall time (a CPU-time timer is a system call per event: too slow to keep up)
+    try:
+        profile.runcall(fn)
+    finally:
+        Path(where).mkdir(parents=True, exist_ok=True)
+        profile.dump_stats(str(Path(where) / f'{name.strip("/").replace("/", "_") or "node"}-{os.getpid()}.prof'))
 
 
 def process_cpu(pid: int) -> float:

@@ -155,15 +155,30 @@ def test_rig_driver_lifecycle(tmp_path):
             driver.trigger_configure()
             assert driver.lifecycle_state == 'inactive' and driver.rig is not None
             assert launcher.wait_for(lambda: driver.count_publishers(samples) == 1, 5.0) and driver.channels is not None
-            assert driver._poll_timer.is_canceled() and not driver.active      # the bus is read only when active
+            idle = driver.params.status_period       # the one timer: status, heartbeat, diagnostics; no bus reads
+            assert driver.ticks.period == idle and not driver.active        # the bus is read only when active
             driver.trigger_activate()
-            assert driver.lifecycle_state == 'active' and not driver._poll_timer.is_canceled() and driver.active
+            # unpaced, the driver's polls drive the simulator: polled every poll_period, no receiving thread
+            assert driver.lifecycle_state == 'active' and driver.active and driver.rig.driver.io.receiver is None
+            assert driver.ticks.period == driver.params.poll_period
             driver.trigger_deactivate()
-            assert driver.lifecycle_state == 'inactive' and driver._poll_timer.is_canceled() and not driver.active
+            assert driver.lifecycle_state == 'inactive' and driver.ticks.period == idle and not driver.active
             driver.trigger_cleanup()
-            assert driver.lifecycle_state == 'unconfigured' and driver.rig is None
-            assert driver.channels is None and driver._poll_timer is None and driver.pub_samples is None
+            assert driver.lifecycle_state == 'unconfigured' and driver.rig is None and driver.ticks.period == idle
+            assert driver.channels is None and driver._frames_in is None and driver.pub_samples is None
             assert launcher.wait_for(lambda: driver.count_publishers(samples) == 0, 5.0)   # (the graph learns it)
+        # paced (the default): a thread reads the bus and wakes the node per batch; the timer polls at the watchdog's
+        # period only; deactivating stops the thread (what it read is taken), activating starts a new one
+        paced = launcher.start(RigDriverNode, {'autostart': True}, node_name='rig_driver_paced')
+        receiver = paced.rig.driver.io.receiver
+        assert receiver is not None and receiver.running and paced.ticks.period == paced.rig.driver.tick_period
+        # an idle controller sends no samples (no wake-up), but its heartbeats reach the driver through the thread
+        assert launcher.wait_for(lambda: paced.rig.driver.counters['heartbeats_received'] > 3, 10.0)
+        assert receiver.wakes == 0 and paced.rig.driver.faults == 0
+        paced.trigger_deactivate()
+        assert not receiver.running and paced.rig.driver.io.receiver is None and paced.ticks.period == idle
+        paced.trigger_activate()
+        assert paced.rig.driver.io.receiver.running and paced.rig.driver.io.receiver is not receiver
         # a bus that cannot be opened: configure fails and the node stays unconfigured
         bad = launcher.start(RigDriverNode, {'autostart': False, 'backend': 'socketcan', 'can.channel': 'nocan7'},
                              node_name='rig_driver_bad')

@@ -71,9 +71,10 @@ from rubber_rig.models import load_parameter_set
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.auth import SAMPLES, SETPOINTS, declare_auth, start_auth_diagnostics
-from rubber_rig.nodes.heartbeat import start_heartbeat
+from rubber_rig.nodes.heartbeat import PERIOD, start_heartbeat
 from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.nodes.spin import spin_node
+from rubber_rig.nodes.ticks import NodeTicks
 from rubber_rig.online import (
     DEFAULT_REVERSAL_THRESHOLD,
     SOURCES,
@@ -147,10 +148,11 @@ class ElementModelNode(Node):
                                                       topics.STREAM_QOS).topic_name
         self.setpoints_topic = self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints,
                                                         topics.STREAM_QOS).topic_name
-        start_auth_diagnostics(self, self.auth)
         self._published_params = None
         self.publish_parameters()
-        start_heartbeat(self, lambda: self.predictor.model_name)
+        self.ticks = NodeTicks(self, {   # one timer (nodes/ticks.py)
+            'heartbeat': (PERIOD, start_heartbeat(self, lambda: self.predictor.model_name, timer=False)),
+            'diagnostics': (1.0, start_auth_diagnostics(self, self.auth, timer=False))})
         choice = self.predictor.choice
         self.get_logger().info(f'model {self.predictor.model_name} from {choice.source}: {self.predictor.params}, '
                                f'friction reversal threshold {choice.friction_reversal_threshold:g} m')

@@ -30,6 +30,9 @@ from rubber_rig.nodes.auth import HEARTBEAT, annotate
 from rubber_rig.session.peer_watch import PeerWatch, blind_detectors, program_diagnosis, result_message
 from rubber_rig.session.program_watch import Throttle
 
+PEER_CHECK = 0.1           # [s] how often the peers' silences are looked at (named within SILENT + this)
+DIAGNOSTICS_PERIOD = 1.0   # [s] /diagnostics at least this often (and at once on news)
+
 
 class ProgramHealth:
     """The events, silences and detector blindness of the running (or last) program of the excitation ``node``
@@ -46,8 +49,10 @@ class ProgramHealth:
         self.beat_topic = node.create_subscription(Heartbeat, topics.HEARTBEAT, self.on_beat,
                                                    topics.HEARTBEAT_QOS).topic_name
         self.pub_diagnostics = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
-        node.create_timer(1.0, self.publish_diagnostics)
-        node.create_timer(0.1, self.watch_peers)
+
+    def duties(self) -> dict:
+        """What the node's one timer runs for its health (nodes/ticks.py): name -> (period [s], function)."""
+        return {'peers': (PEER_CHECK, self.watch_peers), 'diagnostics': (DIAGNOSTICS_PERIOD, self.publish_diagnostics)}
 
     @property
     def stall(self):

@@ -71,8 +71,9 @@ from rubber_rig.nodes.auth import (
 from rubber_rig.nodes.excitation_health import ProgramHealth
 from rubber_rig.nodes.excitation_params import declare_excitation_parameters
 from rubber_rig.nodes.excitation_recording import recorder_name, recorder_topic, recorder_view, samples_topic
-from rubber_rig.nodes.heartbeat import start_heartbeat
+from rubber_rig.nodes.heartbeat import PERIOD, start_heartbeat
 from rubber_rig.nodes.spin import spin_node
+from rubber_rig.nodes.ticks import NodeTicks
 from rubber_rig.session import GoalAdmission, ProgramSession, RigTime
 from rubber_rig.session.program_watch import ProgramWatch, detector_action, why_rig_stopped
 from rubber_rig.session.recorder_watch import RecorderWatch
@@ -123,8 +124,9 @@ class ExcitationNode(Node):
         self.action = ActionServer(self, RunProgram, 'run_program', execute_callback=self.execute,
                                    goal_callback=self.admit_goal,
                                    cancel_callback=lambda _: CancelResponse.ACCEPT, **topics.ACTION_SERVICES_QOS)
-        self.create_timer(self.params.stream_period, self.stream)
-        start_heartbeat(self, lambda: self.state)
+        self.ticks = NodeTicks(self, {   # one timer (nodes/ticks.py): streaming first, then the health's duties
+            'stream': (self.params.stream_period, self.stream), **self.health.duties(),
+            'heartbeat': (PERIOD, start_heartbeat(self, lambda: self.state, timer=False))})
 
     @property
     def state(self) -> str:
@@ -244,6 +246,8 @@ class ExcitationNode(Node):
     # -- streaming (timer) ------------------------------------------------------------------------------------------
     def stream(self) -> None:
         self.health.stall.tick(self.clock())
+        if (goal := self.goal_handle) is not None and goal.is_cancel_requested and self.session is not None:
+            self.abort_program('goal cancelled')   # looked at every stream period: no timer of its own
         try:
             self._stream()
         except Exception as exc:   # noqa: BLE001 - no callback may take the node down
@@ -350,15 +354,9 @@ class ExcitationNode(Node):
             goal_handle.abort()
             return RunProgram.Result(success=False, message=why)
         self.goal_handle, self._done = goal_handle, (done := Future())
-
-        def check_cancel():
-            if goal_handle.is_cancel_requested and self.session is not None and self.goal_handle is goal_handle:
-                self.abort_program('goal cancelled')
-        cancel_timer = self.create_timer(0.01, check_cancel)
         try:
             result = await done
         finally:
-            self.destroy_timer(cancel_timer)
             if self._done is done:     # a next goal may have started while this result waited for the recorder
                 self.goal_handle, self._done = None, None
         if goal_handle.is_cancel_requested:

@@ -36,9 +36,10 @@ from . import topics
 from .auth import HEARTBEAT
 
 
-def start_heartbeat(node: Node, state: Callable[[], str] = lambda: '') -> None:
-    """Beat every PERIOD on the node's relative ``heartbeat`` topic, with `state()` as the state text; signed when
-    the node has an ``auth`` (NodeAuth): a forged beat in its name is refused by a Peers that verifies.
+def start_heartbeat(node: Node, state: Callable[[], str] = lambda: '', timer: bool = True) -> Callable[[], None]:
+    """Beat now and then every PERIOD on the node's relative ``heartbeat`` topic, with `state()` as the state text;
+    signed when the node has an ``auth`` (NodeAuth): a forged beat in its name is refused by a Peers that verifies.
+    Returns the beat; with ``timer=False`` the node calls it every PERIOD itself (from its one timer: ticks.py).
     """
     pub = node.create_publisher(Heartbeat, topics.HEARTBEAT, topics.HEARTBEAT_QOS)
     auth = getattr(node, 'auth', None)     # signed with the rig's key when the node has one (nodes/auth.py)
@@ -51,8 +52,10 @@ def start_heartbeat(node: Node, state: Callable[[], str] = lambda: '') -> None:
             auth.sign(msg, HEARTBEAT)
         pub.publish(msg)
         count[0] += 1
-    node.create_timer(PERIOD, beat)
+    if timer:
+        node.create_timer(PERIOD, beat)
     beat()
+    return beat
 
 
 class Peers(liveness.Peers):

@@ -53,9 +53,10 @@ from msg_defs.msg import RecorderStatus, RigSampleBatch, SetpointBatch
 from msg_defs.srv import RecorderControl
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.auth import RECORDER_CONTROL, SAMPLES, SETPOINTS, annotate, declare_auth
-from rubber_rig.nodes.heartbeat import start_heartbeat
+from rubber_rig.nodes.heartbeat import PERIOD, start_heartbeat
 from rubber_rig.nodes.params import declare
 from rubber_rig.nodes.spin import spin_node
+from rubber_rig.nodes.ticks import NodeTicks
 from rubber_rig.recording import Recorder, RecordingError, full_definition
 from rubber_rig.recording.metadata import BOOKKEEPING_TOPIC, bookkeeping_text, bookkeeping_topic
 from rubber_rig.recording.qos import qos_entry
@@ -148,11 +149,13 @@ class RecorderNode(Node):
         self.status_cadence = StatusCadence(self.status_period)   # on a change, and at least every status_period
         self._callback_errors = 0
         self.create_service(RecorderControl, '~/control', self._on_control)
-        self.create_timer(discovery_period, self._guarded(self.discover))
-        self.create_timer(flush_period, self._guarded(self.flush))
-        self.create_timer(diagnostics_period, self._guarded(self.publish_diagnostics))
-        self.create_timer(min(0.1, self.status_period), self._guarded(self.update_status))
-        start_heartbeat(self, lambda: 'recording' if self.core.recording else 'error' if self.core.error else 'idle')
+        beat = start_heartbeat(self, lambda: 'recording' if self.core.recording else 'error' if self.core.error
+                               else 'idle', timer=False)
+        self.ticks = NodeTicks(self, {   # one timer for all of them (nodes/ticks.py)
+            'status': (min(0.1, self.status_period), self._guarded(self.update_status)), 'heartbeat': (PERIOD, beat),
+            'discover': (discovery_period, self._guarded(self.discover)),
+            'flush': (flush_period, self._guarded(self.flush)),
+            'diagnostics': (diagnostics_period, self._guarded(self.publish_diagnostics))})
         self._reported_error = None
         if autostart:
             self.start_recording()

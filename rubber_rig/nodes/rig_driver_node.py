@@ -16,10 +16,12 @@
 
 Lifecycle (as the ros2/demos lifecycle talker): configure = validate parameters, open the bus they choose (``backend:
 sim`` = the simulated rig on python-can's virtual bus, or any python-can interface) and create what works on it (the
-samples publisher, the poll timer, the owners' command channels); activate = start the timer: stream samples, accept
-setpoints; deactivate = safe ramp to rest, stop the timer; cleanup = ramp, close the bus, destroy what configure
-created. Status, diagnostics, heartbeat and services report the state in every state. With ``autostart`` the node
-configures and activates itself (what ``ros2 launch`` users expect from a simulated rig). Parameters:
+samples publisher, the owners' command channels); activate = read the bus: stream samples, accept setpoints;
+deactivate = safe ramp to rest, stop reading; cleanup = ramp, close the bus, destroy what configure created. The
+bus is read by a thread that wakes the node once per batch (``receive: thread``, rig.can.receiver) or polled every
+``poll_period``; status, heartbeat, diagnostics, the watchdog's polls run from the node's one timer (nodes/ticks.py).
+Status, diagnostics, heartbeat and services report the state in every state. With ``autostart`` the node configures
+and activates itself (what ``ros2 launch`` users expect from a simulated rig). Parameters:
 nodes/rig_driver_params.py (what a bad value or a rate the bus cannot carry does), held as ``self.params``.
 
 Subscribes:  ~/setpoint_stream/<owner> (msg_defs/SetpointBatch): each owner's command channel; only the open
@@ -41,8 +43,6 @@ stream ownership and stream-loss detection, fault detection and the safe ramp ar
 """
 from __future__ import annotations
 
-import math
-
 from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.lifecycle import LifecycleNode, LifecycleState, TransitionCallbackReturn
@@ -51,10 +51,19 @@ from std_srvs.srv import Trigger
 
 from msg_defs.msg import RigSampleBatch, RigStatus, SetpointBatch
 from msg_defs.srv import OpenStream, StopStream
+from rubber_rig.cpu import RECEIVE_THREAD, name_this_thread
 from rubber_rig.nodes import conversions as conv
+from rubber_rig.nodes import rig_driver_services as services
 from rubber_rig.nodes import topics
-from rubber_rig.nodes.auth import OPEN_STREAM, SAMPLES, SETPOINT_STREAM, STOP_STREAM, annotate, declare_auth
-from rubber_rig.nodes.heartbeat import OwnerSilence, OwnerWatch, Peers, annotate_owner_silence, start_heartbeat
+from rubber_rig.nodes.auth import SAMPLES, SETPOINT_STREAM, annotate, declare_auth
+from rubber_rig.nodes.heartbeat import (
+    PERIOD,
+    OwnerSilence,
+    OwnerWatch,
+    Peers,
+    annotate_owner_silence,
+    start_heartbeat,
+)
 from rubber_rig.nodes.params import ParameterError, accept_integers_for_doubles
 from rubber_rig.nodes.rclpy_compat import lifecycle_state
 from rubber_rig.nodes.rig_driver_channels import CommandChannels
@@ -69,8 +78,8 @@ from rubber_rig.nodes.rig_driver_params import (  # noqa: F401 - also imported f
     rig_config,
 )
 from rubber_rig.nodes.spin import spin_node, with_process_nice
+from rubber_rig.nodes.ticks import NodeTicks
 from rubber_rig.rig.can.batcher import SampleBatcher
-from rubber_rig.rig.can.driver import StreamRefused
 from rubber_rig.rig.can.gate import StreamGate
 from rubber_rig.rig.config import RigConfig, configuration_text
 from rubber_rig.rig.interface import open_rig
@@ -95,7 +104,7 @@ class RigDriverNode(LifecycleNode):
         self.rig = None
         self.gate = None                   # StreamGate of the open rig: who may stream (rig.can.gate)
         self.pub_samples = None
-        self._poll_timer = None            # runs while active
+        self._frames_in = None             # guard condition: the receiving thread's frames wake the node
         self.channels: CommandChannels | None = None   # the owners' command channels
         self.batcher = SampleBatcher()     # the driver's sample blocks -> RigSampleBatch messages
         self.active = False                # streaming samples and accepting setpoints
@@ -108,16 +117,17 @@ class RigDriverNode(LifecycleNode):
         self.pub_diag = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         self.create_service(Trigger, '~/abort', self.on_abort)
         self.create_service(Trigger, '~/reset', self.on_reset)
-        self.create_service(OpenStream, '~/open_stream', self.on_open_stream)
-        self.create_service(StopStream, '~/stop_stream', self.on_stop_stream)
+        self.create_service(OpenStream, '~/open_stream', lambda req, res: services.open_stream(self, req, res))
+        self.create_service(StopStream, '~/stop_stream', lambda req, res: services.stop_stream(self, req, res))
         accept_integers_for_doubles(self)
         self.add_on_set_parameters_callback(self.on_set_parameters)
-        self.create_timer(1.0, lambda: self.channels is not None and self.channels.find())
-        start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig is not None else 'unconfigured')
+        beat = start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig else 'unconfigured', timer=False)
         peers = Peers(self, silent=self.params.owner_timeout, auth=self.auth)   # owner silent: stream lost
         self.owner_watch, self.owner_silence = OwnerWatch(peers), OwnerSilence(peers)
-        self.create_timer(self.params.status_period, self.publish_status)
-        self.create_timer(self.params.diagnostics_period, self.publish_diagnostics)
+        self.ticks = NodeTicks(self, {   # one timer: these, and the bus polls while active
+            'status': (self.params.status_period, self.publish_status), 'heartbeat': (PERIOD, beat),
+            'diagnostics': (self.params.diagnostics_period, self.publish_diagnostics),
+            'channels': (1.0, lambda: self.channels is not None and self.channels.find())})
         self.publish_status()
         if self.params.autostart and self.trigger_configure() == TransitionCallbackReturn.SUCCESS:
             self.trigger_activate()
@@ -145,8 +155,7 @@ class RigDriverNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         self.batcher = SampleBatcher()
         self.pub_samples = self.create_lifecycle_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
-        self._poll_timer = self.create_timer(self.params.poll_period, self.poll)
-        self._poll_timer.cancel()          # activate starts it
+        self._frames_in = self.create_guard_condition(lambda: self.active and self.poll())
         self.pub_configuration.publish(String(data=configuration_text(self.config)))
         self.get_logger().info(f'rig open: backend {self.config.backend}, {self.config.sample_rate:g} Hz, '
                                f'{self.params.samples_per_batch(self.config.sample_rate)} samples per batch')
@@ -159,7 +168,7 @@ class RigDriverNode(LifecycleNode):
             if why:
                 self.get_logger().error(f'activate refused: {why}')
                 return TransitionCallbackReturn.FAILURE
-        self._poll_timer.reset()
+        self._start_polling()
         self.active = True
         self.get_logger().info('active: streaming samples, accepting a setpoint stream')
         return super().on_activate(state)
@@ -167,7 +176,7 @@ class RigDriverNode(LifecycleNode):
     def on_deactivate(self, state: LifecycleState) -> TransitionCallbackReturn:
         if self.rig is not None:
             self.rig.driver.abort('driver deactivated')
-            self._log_events()
+            self.log_events()
         self._stop_polling()
         return super().on_deactivate(state)
 
@@ -185,9 +194,9 @@ class RigDriverNode(LifecycleNode):
         controller; none when idle).
         """
         self._stop_polling()
-        if self._poll_timer is not None:
-            self.destroy_timer(self._poll_timer)
-            self._poll_timer = None
+        if self._frames_in is not None:
+            self.destroy_guard_condition(self._frames_in)
+            self._frames_in = None
         if self.channels is not None:
             self.channels.close()
             self.channels = None
@@ -197,7 +206,7 @@ class RigDriverNode(LifecycleNode):
             outcome = ramp_to_rest(driver, 'rig_driver shutting down')
             if outcome.message:
                 self.get_logger().warning(outcome.message)
-            self._log_events(driver)
+            self.log_events(driver)
             self.get_logger().info(f'rig closed (controller {driver.controller_state}, at '
                                    f'{driver.status.extra["position"] * 1e3:.4f} mm)')
             rig.close()
@@ -205,10 +214,21 @@ class RigDriverNode(LifecycleNode):
             self.destroy_lifecycle_publisher(self.pub_samples)
             self.pub_samples = None
 
+    def _start_polling(self) -> None:
+        """Poll on the timer's ticks; with receive 'thread' the frames wake the node once per batch and the ticks
+        are the watchdog's (a silent bus wakes nobody). Unpaced, the polls drive the simulator: always polled.
+        """
+        driver = self.rig.driver
+        if self.params.receive == 'thread' and driver.pump is None:
+            driver.receive_in_thread(self._frames_in.trigger, self.params.samples_per_batch(self.config.sample_rate),
+                                     on_start=lambda: name_this_thread(RECEIVE_THREAD))   # (an error: its poll says)
+        self.ticks.every_tick(self.poll, driver.tick_period if driver.io.receiver else self.params.poll_period)
+
     def _stop_polling(self) -> None:
         self.active = False
-        if self._poll_timer is not None:
-            self._poll_timer.cancel()
+        self.ticks.every_tick(None)
+        if self.rig is not None:
+            self.rig.driver.io.stop_receiving()   # (what it read is taken now; later frames wait in the bus)
 
     def on_setpoints(self, msg: SetpointBatch, channel: str) -> None:
         """Queue setpoints that arrived on `channel`'s command channel on the bus - only the open stream's owner's,
@@ -228,7 +248,7 @@ class RigDriverNode(LifecycleNode):
         elif verdict.action == 'refused':
             self.get_logger().warning(f'setpoints from {msg.source or "an unnamed sender"} refused: {verdict.why}',
                                       throttle_duration_sec=1.0)
-        self._log_events()
+        self.log_events()
 
     def poll(self) -> None:
         """Move every sample the bus delivered into batches of at least ``batch_size`` samples. Blocks from the
@@ -244,7 +264,7 @@ class RigDriverNode(LifecycleNode):
         self._publish_batch(self.batcher.due(self.params.max_batch_delay))   # the stream paused: what waits goes now
         if driver is None:
             return
-        self._log_events(driver)
+        self.log_events(driver)
         status = driver.status
         key = (status.state, status.faults, status.extra['stream_id'], status.extra['last_event'])
         if key != self._status_key:
@@ -282,7 +302,7 @@ class RigDriverNode(LifecycleNode):
             return
         why = self.owner_watch.lost(grant, self.params.owner_timeout)
         if why and self.rig.driver.owner_lost(why):
-            self._log_events()
+            self.log_events()
 
     def publish_diagnostics(self) -> None:
         status = self._last_status or self.status_message()
@@ -312,11 +332,13 @@ class RigDriverNode(LifecycleNode):
         if verdict.why:
             return SetParametersResult(successful=False, reason=verdict.why)
         self.params.apply(changed)
+        if self.rig is not None:   # a new batch size: the receiving thread wakes the node once per new batch
+            self.rig.driver.io.wake_after(self.params.samples_per_batch(self.config.sample_rate))
         self.owner_watch.peers.silent_after = self.params.owner_timeout
         if verdict.limits is not None:
             if self.rig is not None:
                 self.rig.driver.set_limits(verdict.limits)
-                self._log_events()
+                self.log_events()
             self.publish_status()
         return SetParametersResult(successful=True)
 
@@ -326,7 +348,7 @@ class RigDriverNode(LifecycleNode):
         else:
             why = self.rig.driver.reset()
             response.success, response.message = not why, why or 'faults cleared'
-            self._log_events()
+            self.log_events()
             self.publish_status()
         return response
 
@@ -335,49 +357,12 @@ class RigDriverNode(LifecycleNode):
             response.success, response.message = False, 'rig not configured'
         else:
             self.rig.driver.abort('operator abort (rig_driver/abort)')
-            self._log_events()
+            self.log_events()
             self.publish_status()
             response.success, response.message = True, 'safe ramp to rest'
         return response
 
-    def on_open_stream(self, request, response):
-        if self.rig is None or not self.active:
-            response.success, response.message = False, f'rig_driver is {self.lifecycle_state}, not active'
-            return response
-        driver = self.rig.driver
-        if self.auth.refuse_request(self, request, OPEN_STREAM, response):   # a stranger cannot take the rig
-            return response
-        why = self.channels.listen_to(request.owner)   # (found in the graph already, unless the owner has just started)
-        if why:
-            response.success, response.message = False, why
-            return response
-        try:
-            grant = driver.open_stream(request.owner, int(math.ceil(request.lead_time * self.config.sample_rate)))
-        except StreamRefused as exc:
-            response.success, response.message = False, str(exc)
-            return response
-        finally:
-            self._log_events()
-        response.success, response.message = True, f'stream {grant.stream_id} open'
-        response.stream_id, response.first_sequence = grant.stream_id, grant.first_sequence
-        response.position, response.velocity = grant.position, grant.velocity
-        self.publish_status()
-        return response
-
-    def on_stop_stream(self, request, response):
-        if self.rig is None:
-            response.success, response.message = False, 'rig not configured'
-            return response
-        if self.auth.refuse_request(self, request, STOP_STREAM, response):   # nor park it where it likes
-            return response
-        why = self.rig.driver.stop_stream(request.stream_id, request.target, request.reason or 'stop requested',
-                                          hold=request.action == StopStream.Request.ACTION_HOLD)
-        self._log_events()
-        self.publish_status()
-        response.success, response.message = not why, why or 'ramping'
-        return response
-
-    def _log_events(self, driver=None) -> None:
+    def log_events(self, driver=None) -> None:
         driver = driver or (self.rig.driver if self.rig is not None else None)
         if driver is None:
             return

@@ -62,7 +62,8 @@ class RigDriverParams:
     """rig_driver's own parameters (those RigConfig does not hold), as read from the node's declared parameters.
 
     autostart: configure and activate at start; batch_size: samples per message (0: BATCH_PERIOD of samples);
-    max_batch_delay [s]: a partial batch waits at most this long; poll_period [s]: the bus is read this often;
+    max_batch_delay [s]: a partial batch waits at most this long; receive: 'thread' (a thread blocks on the bus and
+    wakes the node once per batch, rig.can.receiver) or 'poll'; poll_period [s]: the bus is read this often (poll);
     status_period, diagnostics_period [s]; owner_timeout [s]: the stream owner's heartbeat silent this long is stream
     loss; nice: the niceness of the rig_driver process (rig.priority);
     configured_protection: the protective settings (limits, timeouts) the node was started with, which run time
@@ -78,6 +79,7 @@ class RigDriverParams:
     owner_timeout: float
     configured_protection: dict
     nice: int = 0
+    receive: str = 'thread'
 
     def samples_per_batch(self, sample_rate: float) -> int:
         """batch_size, or BATCH_PERIOD of samples at ``sample_rate`` [Hz] when it is 0."""
@@ -107,8 +109,12 @@ def declare_rig_driver_parameters(node: Node) -> RigDriverParams:
                          'at 1 kHz', range=(0, 10000))
     max_batch_delay = declare(node, 'max_batch_delay', 0.1, 'a partial batch is published when its first sample '
                               'has waited this long (the stream paused or ended)', range=(0.001, 10.0), units='s')
-    poll_period = declare(node, 'poll_period', 0.002, 'how often the bus is read (a sample waits up to this long)',
-                          range=(0.0005, 0.5), units='s')
+    receive = declare(node, 'receive', 'thread', "how the bus is read: 'thread' = a thread waits on the bus and wakes "
+                      'the node once per batch of samples (fewest wake-ups; the watchdog still polls at its own '
+                      "period), 'poll' = every poll_period (the simulated rig run unpaced is always polled)",
+                      choices=('thread', 'poll'))
+    poll_period = declare(node, 'poll_period', 0.002, "how often the bus is read with receive 'poll' (a sample waits "
+                          'up to this long)', range=(0.0005, 0.5), units='s')
     declare(node, 'sim.specimen.parameter_set', '', 'simulated specimen: fractional_zener_berg parameter set '
             '(empty: use sim.specimen.temperature)')
     declare(node, 'sim.specimen.temperature', 20.0, 'simulated specimen: fractional_zener_berg parameters at this '
@@ -126,7 +132,7 @@ def declare_rig_driver_parameters(node: Node) -> RigDriverParams:
                    "programs of this computer (ros2_control's thread_priority, without a real-time kernel); needs "
                    'root or CAP_SYS_NICE, else a warning and the process keeps its priority', range=(-20, 19))
     return RigDriverParams(autostart, batch_size, max_batch_delay, poll_period, status_period, diagnostics_period,
-                           owner_timeout, protective_values(node), nice)
+                           owner_timeout, protective_values(node), nice, receive)
 
 
 def protective_values(node: Node) -> dict:

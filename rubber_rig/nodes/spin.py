@@ -50,7 +50,7 @@ from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
 
-from ..cpu import EXECUTOR_THREAD, name_this_thread
+from ..cpu import EXECUTOR_THREAD, name_this_thread, run_profiled
 from ..dds import configure_dds
 from ..rig.priority import set_process_nice
 from .params import ParameterError, undeclared_overrides
@@ -75,10 +75,10 @@ class _Stop:
             raise KeyboardInterrupt   # still starting: abandon the start (nothing to clean up but the context)
 
 
-def _spin(executor: SingleThreadedExecutor, errors: list) -> None:
+def _spin(executor: SingleThreadedExecutor, errors: list, name: str = 'node') -> None:
     name_this_thread(EXECUTOR_THREAD)   # benchmarks count its wake-ups and CPU (rubber_rig.cpu)
     try:
-        executor.spin()
+        run_profiled(executor.spin, name)   # under cProfile if RUBBER_RIG_PROFILE_DIR is set
     except ExternalShutdownException:
         pass
     except BaseException as exc:   # noqa: BLE001 - handed to the main thread, which cleans up and re-raises
@@ -123,7 +123,8 @@ def spin_node(node_factory: Callable[[], Node], args=None) -> None:
         undeclared_overrides(node)   # a misspelt key in a parameter file must not pass silently
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        thread = threading.Thread(target=_spin, args=(executor, errors), name='executor', daemon=True)
+        thread = threading.Thread(target=_spin, args=(executor, errors, node.get_fully_qualified_name()),
+                                  name='executor', daemon=True)
         stop.started = True
         if not stop.requested:
             thread.start()

@@ -58,8 +58,8 @@ class RigDriver:
     the owner's last batch) end in the controller's own ramp, inside the limits. `events` collects one
     (level, text) line per transition for the caller's log.
 
-    Call poll() often (at least every watchdog_timeout / 2): it drains the bus without blocking, updates the
-    watchdog and returns the next block of contiguous samples or None.
+    Call poll() often (at least every tick_period, and when frames arrived: receive_in_thread): it drains the bus
+    without blocking, updates the watchdog and returns the next block of contiguous samples or None.
     """
 
     MAX_LEAD_SAMPLES = 16384     # a stream may start at most this far ahead (16-bit sequences stay unambiguous)
@@ -79,6 +79,8 @@ class RigDriver:
     controller_identity = _read('supervisor', 'controller_identity', 'ControllerIdentity as a dict, or None.')
     temperature = _read('supervisor', 'temperature', 'The specimen temperature last reported [degC].')
     limits = _read('supervisor', 'limits', 'The Limits in force (set_limits changes them).')
+    tick_period = _read('supervisor', 'tick_period', 'Call poll() at least this often [s], frames or not.')
+    receive_in_thread = _read('io', 'receive_in_thread', 'Read the bus in a thread of its own (FrameIO).')
 
     @property
     def measured_load(self):
@@ -310,9 +312,7 @@ class RigDriver:
 
     # ---- the cycle
     def poll(self):
-        """Drain received frames (non-blocking), run the watchdog and checks; return the next SampleBlock of
-        contiguous samples, or None if there is none.
-        """
+        """Drain received frames (non-blocking), run the watchdog and checks; the next SampleBlock or None."""
         late = self.supervisor.starved()
         if late and self._stream is not None:
             self._stream.last_rx_wall += late
@@ -393,7 +393,8 @@ class RigDriver:
                    io.sent_end)
 
     def close(self, ramp: bool = True):
-        """Command the ramp to rest (unless ramp=False), then shut the bus down."""
+        """Command the ramp to rest (unless ramp=False), stop a receiving thread, then shut the bus down."""
         if ramp and self.controller_state in ('running', 'holding'):
             self.abort('driver shutting down')
+        self.io.stop_receiving()
         self.bus.shutdown()

@@ -26,6 +26,7 @@ import can
 import numpy as np
 
 from .protocol import MalformedFrame, meet, unwrap
+from .receiver import BusReceiver
 from .stream import SampleBlock
 
 
@@ -33,8 +34,8 @@ class FrameIO:
     """Frames to and from the controller on python-can `bus` at sample rate fs [Hz].
 
     listener (set before the first frame arrives) provides: controller_sequence, controller_faults,
-    temperature, on_frame(name, signals) -> bool (False: not a frame the host consumes), bad_frames(n),
-    samples_lost(n), jumped(sequence) and measured(xs, fs, us).
+    temperature, event(level, text), on_frame(name, signals) -> bool (False: not a frame the host consumes),
+    bad_frames(n), samples_lost(n), jumped(sequence) and measured(xs, fs, us).
     """
 
     def __init__(self, bus, proto, frames, fs: float, heartbeat_every: int, clock):
@@ -62,6 +63,7 @@ class FrameIO:
         self._hb_every = heartbeat_every     # samples between the heartbeats that ride with a stream
         self._next_hb_seq = None
         self.measured_load = None        # callable -> busy fraction of the last second, when the bus can tell
+        self.receiver = None             # receiver.BusReceiver reading the bus in a thread, or None: polled
         self._load_at, self._load = -math.inf, None
 
     # ---- host -> controller
@@ -145,13 +147,50 @@ class FrameIO:
 
     # ---- controller -> host
     def receive_all(self):
-        """Drain the bus without blocking; the contiguous samples received go to the ready blocks."""
-        recv = self.bus.recv
-        msg = recv(0)
-        while msg is not None:
-            self._receive(msg)
+        """Drain the bus without blocking (or take what the receiving thread read, when one reads it:
+        receiver.BusReceiver); the contiguous samples received go to the ready blocks.
+        """
+        if self.receiver is not None:
+            for msg in self.receiver.take():
+                self._receive(msg)
+            if self.receiver.error is not None and not self.receiver.said:   # said once, from the owner's thread
+                self.receiver.said = True
+                self.listener.event('error', f'CAN receive stopped: {self.receiver.error!r} (nothing is read now: '
+                                             'the watchdog judges the silence)')
+        else:
+            recv = self.bus.recv
             msg = recv(0)
+            while msg is not None:
+                self._receive(msg)
+                msg = recv(0)
         self.flush_pending()
+
+    def receive_in_thread(self, wake, samples_per_wake: int, on_error=lambda exc: None, on_start=None):
+        """From now on a thread reads the bus (receiver.BusReceiver: ``on_error``, ``on_start``) and calls ``wake()``
+        (thread-safe) whenever ``samples_per_wake`` samples have arrived since it last did; receive_all() then takes
+        what it read. The BusReceiver, or None when the bus is already read in a thread.
+        """
+        if self.receiver is not None:
+            return None
+        measured = self.frames.codecs[self.frames.feedback_names[-1]].frame_id   # one frame per sample group
+        self.receiver = BusReceiver(self.bus, {measured}, 1, wake, on_error, on_start)
+        self.wake_after(samples_per_wake)
+        return self.receiver.start()
+
+    def wake_after(self, samples: int):
+        """The receiving thread wakes its owner once per ``samples`` samples from now on (a new batch size)."""
+        if self.receiver is not None:
+            self.receiver.frames_per_wake = max(1, math.ceil(samples / self.frames.feedback_per_frame))
+
+    def stop_receiving(self):
+        """Stop the receiving thread, if one runs (before the bus is shut down), and take what it read; from now on
+        receive_all() reads the bus itself (a ramp to rest at shutdown is watched that way).
+        """
+        receiver, self.receiver = self.receiver, None
+        if receiver is not None:
+            receiver.stop()
+            for msg in receiver.take():
+                self._receive(msg)
 
     def next_block(self):
         """The oldest SampleBlock not yet returned, or None."""

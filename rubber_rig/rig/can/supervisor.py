@@ -304,6 +304,16 @@ class Supervisor:
             self.fault(FAULT_DISPLACEMENT_LIMIT, f'measured displacement {x:.6g} m outside the limits')
 
     # ---- watchdog
+    @property
+    def tick_period(self) -> float:
+        """The longest [s] the host may leave between polls when no frame arrives (a silent bus wakes nobody): a
+        quarter of the wall-clock watchdog limit, so a poll late by one whole period is still not taken for a
+        starved host (starved(): half the limit), and paced at most half the host heartbeat period (the controller
+        hears the host at least every heartbeat_period and a half).
+        """
+        quarter = 0.25 * self.wd_wall
+        return min(quarter, 0.5 * self.cfg.heartbeat_period) if self.cfg.paced else quarter
+
     def starved(self) -> float:
         """Called at the start of every poll: how long [s] this host was not scheduled (0 if it was on time).
 
