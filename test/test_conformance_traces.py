@@ -28,7 +28,7 @@ from rubber_rig.rig.can.protocol import PROTOCOL_VERSION, STATE_CODE, Protocol
 from rubber_rig.rig.config import RigConfig
 from rubber_rig.rig.conformance import active_stream
 from rubber_rig.rig.conformance.active import ConformanceRun
-from rubber_rig.rig.conformance.host_timing import HostTiming, late_between
+from rubber_rig.rig.conformance.host_timing import HostTiming, late_between, own_intervals
 from rubber_rig.rig.conformance.link import Envelope, judges
 from rubber_rig.rig.conformance.passive import STALL_MAX, check_offline
 from rubber_rig.rig.conformance.report import FAIL, NOT_TESTED, PASS, Results
@@ -268,6 +268,40 @@ def test_a_period_violated_only_where_this_host_was_late_is_not_judged():
     assert res['CTRL-ST-1'].status == NOT_TESTED and 'not judged: this host was late by 290 ms' in \
         res['CTRL-ST-1'].detail
     assert "less this host's lateness around each interval" in res['CTRL-ST-1'].measured
+
+
+def test_lateness_elsewhere_never_moves_the_median_period():
+    """Under load this host is late in most intervals (a 15 ms window in every 50 ms here): subtracting that from
+    every interval made the median heartbeat period 35 ms and failed CTRL-HB-1 for the host's delays (seen on two
+    cores with two busy loops, issue 36). Lateness only explains the part of an interval beyond the period: a
+    106 ms silence with 60 ms of lateness in it is not judged; the same silence where the host ran on time fails.
+    """
+    def trace_with_gap():
+        w = TraceWriter()
+        w.periodic(0.0, 1.0, 'idle')
+        w.periodic(1.056, 3.0, 'idle')          # one heartbeat, status and temperature gap of ~56 ms more
+        return w.done()
+    scattered = [(0.05 * k + 0.02, 0.05 * k + 0.035) for k in range(60)]
+    trace = trace_with_gap()
+    trace.host_late = scattered + [(0.99, 1.05)]
+    res = check_offline(trace)
+    assert res['CTRL-HB-1'].status == NOT_TESTED, res['CTRL-HB-1']
+    assert 'not judged: this host was late by 56 ms' in res['CTRL-HB-1'].detail, res['CTRL-HB-1']
+    trace = trace_with_gap()
+    trace.host_late = [w for w in scattered if not 0.9 < w[0] < 1.1]
+    res = check_offline(trace)
+    assert res['CTRL-HB-1'].status == FAIL and 'silent for 106 ms' in res['CTRL-HB-1'].detail, res['CTRL-HB-1']
+
+
+def test_own_intervals_credit_the_host_only_beyond_the_period():
+    t = [0.0, 0.05, 0.10, 0.25, 0.30]
+    own, credited = own_intervals([(0.0, 0.04), (0.12, 0.20)], t, 0.05)
+    # 50 ms intervals keep their length though the host was late in the first; the 150 ms one is credited with
+    # the 80 ms of lateness in it (widened by MARGIN on each side: the windows overlap it by 80 ms)
+    assert own == pytest.approx([0.05, 0.05, 0.07, 0.05])
+    assert credited == pytest.approx([0.0, 0.0, 0.08, 0.0])
+    own, credited = own_intervals([(0.0, 1.0)], t, 0.05)       # never shorter than the period
+    assert own == pytest.approx([0.05] * 4)
 
 
 def test_host_timing_records_late_wakeups_and_merges_a_file_once(tmp_path):

@@ -29,6 +29,8 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
+import numpy as np
+
 LATE_MIN = 0.010     # [s] a wake-up this much later than due is recorded
 MARGIN = 0.005       # [s] a window is widened by this much on each side when a stretch of the trace is judged
 SIM_LATE_MIN = 0.002  # [s] the simulator on this host logs each deadline it missed by this much (the 2 ms a
@@ -104,6 +106,19 @@ def late_total(windows, t0: float, t1: float) -> float:
             total += b - max(a, end)
             end = b
     return total
+
+
+def own_intervals(windows, t, period: float):
+    """The intervals between frames at times t [s] (shape (n,)) less this host's lateness around each, as far as it
+    can explain them: only the part of an interval beyond `period` [s] can be the host's (a late host delays a
+    frame; it never makes an on-time interval shorter). Returns (own, credited), both shape (n - 1,) [s]: what the
+    controller alone is answerable for, and the lateness credited to the host per interval.
+    """
+    t = np.asarray(t, dtype=float)
+    dt = np.diff(t)
+    late = np.array([late_total(windows, a, b) for a, b in zip(t[:-1], t[1:], strict=True)])
+    credited = np.minimum(late, np.maximum(dt - period, 0.0)) if dt.size else dt
+    return dt - credited, credited
 
 
 def explains(windows, t0: float, t1: float, excess: float) -> float:

@@ -25,7 +25,7 @@ from ..can.protocol import CMD_IDENTIFY, FAULT_NAMES, STATES, STATUS_SEQ_MOD, cy
 
 # (the feedback tolerances, with the others of a trace, are read from this module: spec_doc, docs/protocol.md)
 from .feedback import JITTER_MAX, RATE_TOLERANCE, STALL_MAX, STATE_TICKING, check_feedback  # noqa: F401
-from .host_timing import explains, late_total, not_judged
+from .host_timing import explains, not_judged, own_intervals
 from .report import FAIL, NOT_TESTED, PASS, Results
 from .trace import Trace
 
@@ -82,12 +82,13 @@ def check_periodic(trace: Trace, results: Results):
                     f'{longest * 1e3:.1f} ms ({t.size} frames)')
         if why and trace.host_late:
             # each interval less the time this host was late around it: what the controller alone can be blamed for
-            late = np.array([late_total(trace.host_late, a, b) for a, b in zip(t, t[1:], strict=False)])
-            own = np.maximum(dt - late, 0.0)
+            # (an interval is never shortened below the period: that would move the median, which lateness
+            # cannot explain)
+            own, credited = own_intervals(trace.host_late, t, period)
             if not _period_violation(own, period, name):
                 results.put(rid, NOT_TESTED, measured + f'; less this host\'s lateness around each interval: 99th '
                             f'percentile {np.percentile(own, 99) * 1e3:.1f} ms, longest {own.max() * 1e3:.1f} ms',
-                            not_judged(float(late.max()), why))
+                            not_judged(float(credited.max()), why))
                 continue
         results.put(rid, FAIL if why else PASS, measured, why)
 
