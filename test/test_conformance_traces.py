@@ -293,14 +293,37 @@ def test_lateness_elsewhere_never_moves_the_median_period():
     assert res['CTRL-HB-1'].status == FAIL and 'silent for 106 ms' in res['CTRL-HB-1'].detail, res['CTRL-HB-1']
 
 
+def test_the_burst_after_a_stall_of_this_host_does_not_move_the_median_period():
+    """A paced controller held back by this host sends what fell due at once when it runs again (a burst of
+    status frames 0.1 ms apart): with ten 100 ms stalls that is most of the intervals, and their median is no
+    longer the period. The stall and its burst lie in the host's lateness window (the simulator logs it until it
+    caught up): the median is taken where the host was on time, so it is not judged; without the windows it fails.
+    """
+    times = [0.01 * k for k in range(51)]
+    for _ in range(10):
+        t = times[-1] + 0.1
+        times += [t + 1e-4 * k for k in range(10)]
+    trace = Trace(FS)
+    for k, t in enumerate(times):
+        trace.add(PROTO.encode('ControllerStatus', {'ST_State': STATE_CODE['idle'], 'ST_Counter': (k + 1) % 16,
+                                                    'ST_Faults': 0, 'ST_LastSequence': 0, 'ST_BufferLevel': 0}), t)
+    res = check_offline(trace)
+    assert res['CTRL-ST-1'].status == FAIL and 'median interval 0.1 ms' in res['CTRL-ST-1'].detail, res['CTRL-ST-1']
+    trace.host_late = [(t - 0.1, t + 0.001) for t in times[51::10]]      # stall and burst: this host's
+    res = check_offline(trace)
+    assert res['CTRL-ST-1'].status == NOT_TESTED, res['CTRL-ST-1']
+    assert 'median where it was on time 10.0 ms (49 intervals)' in res['CTRL-ST-1'].measured, res['CTRL-ST-1']
+
+
 def test_own_intervals_credit_the_host_only_beyond_the_period():
     t = [0.0, 0.05, 0.10, 0.25, 0.30]
-    own, credited = own_intervals([(0.0, 0.04), (0.12, 0.20)], t, 0.05)
+    own, credited, late = own_intervals([(0.0, 0.04), (0.12, 0.20)], t, 0.05)
     # 50 ms intervals keep their length though the host was late in the first; the 150 ms one is credited with
     # the 80 ms of lateness in it (widened by MARGIN on each side: the windows overlap it by 80 ms)
     assert own == pytest.approx([0.05, 0.05, 0.07, 0.05])
     assert credited == pytest.approx([0.0, 0.0, 0.08, 0.0])
-    own, credited = own_intervals([(0.0, 1.0)], t, 0.05)       # never shorter than the period
+    assert late == pytest.approx([0.04, 0.0, 0.08, 0.0])        # the first window, widened, ends at 0.045
+    own, credited, late = own_intervals([(0.0, 1.0)], t, 0.05)       # never shorter than the period
     assert own == pytest.approx([0.05] * 4)
 
 

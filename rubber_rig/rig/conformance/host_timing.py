@@ -38,27 +38,32 @@ SIM_LATE_MIN = 0.002  # [s] the simulator on this host logs each deadline it mis
 
 
 class HostTiming:
-    """Windows (start, end) [s] during which this host ran late; thread-safe to record."""
+    """Windows (start, end) [s] during which this host ran late; thread-safe to record. Each window is counted
+    under the source that recorded it (sources: name -> [windows, seconds in all]) for the report.
+    """
 
     def __init__(self):
         self.windows = []
+        self.sources = {}
         self._lock = threading.Lock()
         self._read = {}          # path -> bytes of it already merged
 
-    def due(self, t_due: float, t_now: float) -> None:
+    def due(self, t_due: float, t_now: float, source: str = 'receive loop and heartbeat') -> None:
         """Something due at t_due ran at t_now: a window when it was LATE_MIN or more late."""
         if t_now - t_due >= LATE_MIN:
-            with self._lock:
-                self.windows.append((float(t_due), float(t_now)))
+            self.add(t_due, t_now, source)
 
-    def add(self, t0: float, t1: float) -> None:
-        """A window [t0, t1] a process of this host recorded at its own threshold (the in-process reference
-        controller's late ticks).
+    def add(self, t0: float, t1: float, source: str = 'reference controller') -> None:
+        """A window [t0, t1] a part of this host recorded at its own threshold (the in-process reference
+        controller's late ticks, the kernel's run-queue waits of the simulator).
         """
         with self._lock:
             self.windows.append((float(t0), float(t1)))
+            count = self.sources.setdefault(source, [0, 0.0])
+            count[0] += 1
+            count[1] += float(t1) - float(t0)
 
-    def add_from_file(self, path) -> int:
+    def add_from_file(self, path, source: str = 'simulator') -> int:
         """Merge the windows written one per line as 'start end' (the simulator's missed deadlines, at its own
         threshold: it misses the feedback timing by less than LATE_MIN) since the last call for this path; returns
         how many. A missing file adds nothing; a line still being written waits.
@@ -79,8 +84,7 @@ class HostTiming:
                 t0, t1 = float(parts[0]), float(parts[1])
             except (IndexError, ValueError):
                 continue
-            with self._lock:          # the writer chose its own threshold
-                self.windows.append((t0, t1))
+            self.add(t0, t1, source)          # the writer chose its own threshold
             added += 1
         return added
 
@@ -111,14 +115,15 @@ def late_total(windows, t0: float, t1: float) -> float:
 def own_intervals(windows, t, period: float):
     """The intervals between frames at times t [s] (shape (n,)) less this host's lateness around each, as far as it
     can explain them: only the part of an interval beyond `period` [s] can be the host's (a late host delays a
-    frame; it never makes an on-time interval shorter). Returns (own, credited), both shape (n - 1,) [s]: what the
-    controller alone is answerable for, and the lateness credited to the host per interval.
+    frame; it never makes an on-time interval shorter). Returns (own, credited, late), each shape (n - 1,) [s]:
+    what the controller alone is answerable for, the lateness credited to the host, and all of the host's
+    lateness around each interval (late_total; 0 where it was on time).
     """
     t = np.asarray(t, dtype=float)
     dt = np.diff(t)
     late = np.array([late_total(windows, a, b) for a, b in zip(t[:-1], t[1:], strict=True)])
     credited = np.minimum(late, np.maximum(dt - period, 0.0)) if dt.size else dt
-    return dt - credited, credited
+    return dt - credited, credited, late
 
 
 def explains(windows, t0: float, t1: float, excess: float) -> float:

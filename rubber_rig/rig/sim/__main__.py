@@ -16,7 +16,7 @@
 
     python -m rubber_rig.rig.sim --config rig.json      (RigConfig as JSON; backend e.g. udp_multicast)
     python -m rubber_rig.rig.sim --config-json '{"backend": "udp_multicast", "paced": false}'
-    ... --timing-log late.txt      (paced: every deadline missed by 10 ms or more, 'start end' wall-clock s)
+    ... --timing-log late.txt      (paced: every deadline missed by 2 ms or more, 'start end' wall-clock s)
 Stops on SIGTERM/SIGINT.
 """
 import argparse
@@ -50,7 +50,7 @@ def main(argv=None) -> int:
     bus = open_bus(cfg)
     sim = SimController(bus, cfg.sample_rate, cfg.sim, cfg.paced, profile=cfg.frame_profile)
     if args.timing_log:
-        sim.timing_log = open(args.timing_log, 'a', encoding='utf-8', buffering=1)   # noqa: SIM115 - whole run
+        sim.lateness.file = open(args.timing_log, 'a', encoding='utf-8', buffering=1)   # noqa: SIM115 - whole run
     signal.signal(signal.SIGTERM, lambda *_: sim._stop.set())
     signal.signal(signal.SIGINT, lambda *_: sim._stop.set())
     print('rubber_rig.rig.sim: serving', cfg.backend, cfg.channel or '', flush=True)
@@ -58,8 +58,7 @@ def main(argv=None) -> int:
         sim.run_forever()
     finally:
         bus.shutdown()
-        if sim.timing_log is not None:
-            sim.timing_log.close()
+        sim.lateness.close()
     return 0
 
 

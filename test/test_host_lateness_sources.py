@@ -1,0 +1,104 @@
+# Copyright 2026 rubber_rig developers
+#
+# Licensed under the Apache License, Version 2.0 (the "License");
+# you may not use this file except in compliance with the License.
+# You may obtain a copy of the License at
+#
+#     http://www.apache.org/licenses/LICENSE-2.0
+#
+# Unless required by applicable law or agreed to in writing, software
+# distributed under the License is distributed on an "AS IS" BASIS,
+# WITHOUT WARRANTIES OR CONDITIONS OF ANY KIND, either express or implied.
+# See the License for the specific language governing permissions and
+# limitations under the License.
+
+"""The sources of this host's lateness in a conformance run (docs/protocol.md, "Host timing"), on synthetic data:
+the kernel's run-queue waits of the simulator's process (run_queue), the CPU pressure reported with the run, and
+the simulator's own record of its missed deadlines (sim.lateness). Nothing here depends on how busy this host is.
+"""
+import os
+
+import can
+import pytest
+
+from rubber_rig.rig.conformance.host_timing import SIM_LATE_MIN, HostTiming, late_total
+from rubber_rig.rig.conformance.run_queue import (
+    RUN_QUEUE_MIN,
+    RunQueueWatch,
+    cpu_pressure,
+    pressure_share,
+    read_waits,
+)
+from rubber_rig.rig.sim.lateness import LatenessLog
+
+
+def test_a_run_queue_wait_becomes_a_window_ending_at_the_sample():
+    watch = RunQueueWatch()
+    task = (100, 100)
+    assert watch.update(10.000, {task: 5.0}) == []           # first sight: the wait so far is no window
+    assert watch.update(10.005, {task: 5.001}) == []          # 1 ms: below RUN_QUEUE_MIN
+    # 30 ms waited within the 40 ms since the last sample: a window of 30 ms ending at this sample
+    assert watch.update(10.045, {task: 5.031}) == [(pytest.approx(10.015), 10.045)]
+    # more wait than the interval (a task of several threads is counted per thread): clipped to the interval
+    other = (100, 101)
+    watch.update(10.045, {other: 0.0})
+    assert watch.update(10.050, {task: 5.031, other: 0.020}) == [(10.045, 10.050)]
+    assert RUN_QUEUE_MIN == SIM_LATE_MIN
+
+
+def test_run_queue_windows_explain_a_silence_of_the_simulator():
+    """A 60 ms silence of the simulator's frames: the kernel counted 55 ms of waiting for a CPU in it (sampled
+    every 5 ms, as the run does), so this host's lateness around the silence covers it; a silence where the
+    simulator never waited is not explained.
+    """
+    watch, timing = RunQueueWatch(), HostTiming()
+    wait = 0.0
+    for k in range(40):
+        t = 100.0 + 0.005 * k
+        if 100.05 < t <= 100.105:
+            wait += 0.005                                      # runnable, not running
+        for a, b in watch.update(t, {(1, 1): wait}):
+            timing.add(a, b, 'run-queue waits of the simulator')
+    assert late_total(timing.windows, 100.045, 100.105) == pytest.approx(0.06, abs=0.006)
+    assert late_total(timing.windows, 100.15, 100.19) == 0.0
+    assert timing.sources['run-queue waits of the simulator'][0] == len(timing.windows) > 0
+
+
+def test_read_waits_reads_this_process_and_skips_a_gone_one():
+    waits = read_waits([os.getpid()])
+    if not waits:
+        pytest.skip('this kernel accounts no run-queue waits (/proc/<pid>/task/<tid>/schedstat)')
+    assert all(pid == os.getpid() and w >= 0.0 for (pid, _), w in waits.items())
+    assert (os.getpid(), os.getpid()) in waits                 # the main thread
+    assert read_waits([2 ** 22 + 7]) == {}                     # no such process: nothing, no error
+
+
+def test_cpu_pressure_parses_the_some_total_and_gives_a_share(tmp_path):
+    psi = tmp_path / 'cpu'
+    psi.write_text('some avg10=88.37 avg60=35.53 avg300=17.79 total=15213126470\n'
+                   'full avg10=0.00 avg60=0.00 avg300=0.00 total=0\n')
+    assert cpu_pressure(str(psi)) == pytest.approx(15213.126470)
+    assert cpu_pressure(str(tmp_path / 'missing')) is None
+    psi.write_text('garbage\n')
+    assert cpu_pressure(str(psi)) is None
+    assert pressure_share(100.0, 127.0, 30.0) == pytest.approx(0.9)
+    assert pressure_share(100.0, 200.0, 30.0) == 1.0 and pressure_share(None, 1.0, 30.0) is None
+
+
+def test_the_simulator_logs_a_late_wakeup_and_a_frame_read_late(tmp_path):
+    now = 1000.0
+    log = LatenessLog(wall=lambda: now)                        # the wall clock, as the simulator reads it
+    log.missed(0.5)                                            # no file: nothing, no error
+    path = tmp_path / 'late.txt'
+    log.file = path.open('a', encoding='utf-8')
+    log.woke(now - 1.0, 0.5, None)          # asked 1 s ago for at most 0.5 s: woke 0.5 s late
+    msg = can.Message(arbitration_id=1, timestamp=now - 0.3)
+    log.woke(now - 1.0, 0.9, msg)           # a frame that arrived 0.3 s ago, read only now
+    log.woke(now - 0.001, 0.5, can.Message(arbitration_id=1, timestamp=now - 2.0))   # queued before: not a wake
+    log.missed(0.001)                       # below SIM_LATE_MIN
+    log.missed(0.004, noticed=now - 0.1)    # behind from 4 ms before it noticed until it caught up (now)
+    log.close()
+    windows = [tuple(map(float, line.split())) for line in path.read_text().splitlines()]
+    assert len(windows) == 3
+    assert windows == [pytest.approx((999.5, 1000.0)), pytest.approx((999.7, 1000.0)),
+                       pytest.approx((999.896, 1000.0))]
