@@ -13,16 +13,18 @@
 # limitations under the License.
 
 """The sources of this host's lateness in a conformance run (docs/protocol.md, "Host timing"), on synthetic data:
-the kernel's run-queue waits of the simulator's process (run_queue), the CPU pressure reported with the run, and
+the kernel's run-queue waits of the simulator's process (kernel_counts), the CPU pressure reported with the run, and
 the simulator's own record of its missed deadlines (sim.lateness). Nothing here depends on how busy this host is.
 """
 import os
+import socket
 
 import can
 import pytest
 
-from rubber_rig.rig.conformance.host_timing import SIM_LATE_MIN, HostTiming, late_total
-from rubber_rig.rig.conformance.run_queue import (
+from rubber_rig.rig.can.udp_socket import dropped, enlarge_receive_buffer, socket_inode
+from rubber_rig.rig.conformance.host_timing import SIM_LATE_MIN, DropWatch, HostTiming, late_total
+from rubber_rig.rig.conformance.kernel_counts import (
     RUN_QUEUE_MIN,
     RunQueueWatch,
     cpu_pressure,
@@ -102,3 +104,47 @@ def test_the_simulator_logs_a_late_wakeup_and_a_frame_read_late(tmp_path):
     assert len(windows) == 3
     assert windows == [pytest.approx((999.5, 1000.0)), pytest.approx((999.7, 1000.0)),
                        pytest.approx((999.896, 1000.0))]
+
+
+def test_a_socket_drop_becomes_a_window_since_the_previous_reading(tmp_path):
+    watch = DropWatch()
+    assert watch.update(5.0, 3) is None                    # first reading: what was lost before is no window
+    assert watch.update(5.005, 3) is None and watch.update(5.010, None) is None
+    assert watch.update(5.020, 9) == (5.005, 5.020)         # lost between the last two readings
+    table = tmp_path / 'udp'
+    table.write_text('  sl  local_address rem_address   st tx_queue rx_queue tr tm->when retrnsmt   uid  timeout '
+                     'inode ref pointer drops\n'
+                     '11886: 00000000:B26E 00000000:0000 07 00000000:00034000 00:00000000 00000000     0        0 '
+                     '563271 2 0000000007555bcf 4549\n')
+    assert dropped(563271, (str(table),)) == 4549
+    assert dropped(1, (str(table),)) is None and dropped(None) is None
+
+
+def test_the_simulator_logs_what_its_socket_dropped(tmp_path):
+    now, count = 1000.0, [0]
+    log = LatenessLog(wall=lambda: now, drops=lambda: count[0])
+    path = tmp_path / 'late.txt'
+    log.file = path.open('a', encoding='utf-8')
+    log.woke(now, 0.0, None)                   # first reading
+    now, count[0] = 1000.2, 40                 # 40 frames lost while it did not read its socket
+    log.woke(now, 0.0, None)
+    now = 1000.201
+    log.woke(now, 0.0, None)                   # read again only DROPS_PERIOD later
+    log.close()
+    assert [tuple(map(float, line.split())) for line in path.read_text().splitlines()] == [(1000.0, 1000.2)]
+
+
+def test_a_bus_socket_gets_a_deep_receive_queue_and_its_drops_are_read():
+    """On a UDP socket bound to loopback (what udp_multicast's bus holds; no multicast group is joined here, so
+    nothing reaches a network): the receive queue grows, the socket is found in /proc/net/udp with 0 drops.
+    """
+    sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+    try:
+        sock.bind(('127.0.0.1', 0))
+        default = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        granted = enlarge_receive_buffer(sock, 1 << 20)
+        assert granted > default and granted == sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+        assert dropped(socket_inode(sock)) == 0
+    finally:
+        sock.close()
+    assert enlarge_receive_buffer(object()) == 0 and socket_inode(object()) is None

@@ -50,12 +50,12 @@ from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.host_timing import LATE_MIN, SIM_LATE_MIN
 from rubber_rig.rig.conformance.in_process import REFERENCE_AMBIENT, REFERENCE_SPRING, run_against_reference
+from rubber_rig.rig.conformance.kernel_counts import RUN_QUEUE_MIN, cpu_pressure, pressure_share
 from rubber_rig.rig.conformance.link import Aborted, Envelope
 from rubber_rig.rig.conformance.log_segments import check_log
 from rubber_rig.rig.conformance.reference_specimen import Ambient, ReferenceSpring
 from rubber_rig.rig.conformance.report import NOT_TESTED, to_junit, to_markdown
 from rubber_rig.rig.conformance.requirements import REQUIREMENTS
-from rubber_rig.rig.conformance.run_queue import RUN_QUEUE_MIN, cpu_pressure, pressure_share
 from rubber_rig.rig.conformance.trace import read_log
 from rubber_rig.rig.reference import REFERENCE_DEFECTS
 from rubber_rig.settings import describe_violation, described
@@ -266,7 +266,7 @@ def run(args) -> int:
     sim_command = [sys.executable, '-m', 'rubber_rig.rig.sim', '--config-json', json.dumps(cfg.to_dict()),
                    *(['--timing-log', timing_files[0]] if timing_files else [])]
 
-    watch = []        # the simulator's process: its waits for a CPU are this host's lateness (run_queue)
+    watch = []        # the simulator's process: its waits for a CPU are this host's lateness (kernel_counts)
 
     def start_sim():
         box['process'] = subprocess.Popen(sim_command, stdout=subprocess.DEVNULL)
@@ -289,7 +289,7 @@ def run(args) -> int:
                               log=lambda text: print(text, file=sys.stderr, flush=True), power_up=power_up,
                               host_timing_files=timing_files, reference=args.reference_spring_declared,
                               ambient=args.ambient_declared)
-        conf.link.watch_pids = watch
+        conf.link.kernel.pids = watch
         pressure = cpu_pressure()
         results = conf.run()
         pressure = pressure_share(pressure, cpu_pressure(), time.monotonic() - t0)

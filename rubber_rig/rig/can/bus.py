@@ -19,6 +19,8 @@ import os
 
 import can
 
+from .udp_socket import enlarge_receive_buffer
+
 _counter = itertools.count()
 
 
@@ -40,8 +42,10 @@ def open_bus(config, channel=None) -> can.BusABC:
         udp = importlib.import_module('can.interfaces.udp_multicast')   # needs msgpack
         kwargs.setdefault('fd', config.fd)
         kwargs.setdefault('hop_limit', 0)   # frames stay on this host unless the user asks (bus_options)
-        return can.Bus(interface='udp_multicast', channel=channel or config.channel or
-                       udp.UdpMulticastBus.DEFAULT_GROUP_IPv4, **kwargs)
+        bus = can.Bus(interface='udp_multicast', channel=channel or config.channel or
+                      udp.UdpMulticastBus.DEFAULT_GROUP_IPv4, **kwargs)
+        enlarge_receive_buffer(bus)     # frames that arrive while this process waits for a CPU stay queued
+        return bus
     kwargs.setdefault('bitrate', config.bitrate)
     if config.fd:
         kwargs.setdefault('fd', True)

@@ -89,6 +89,24 @@ class HostTiming:
         return added
 
 
+class DropWatch:
+    """Windows from successive readings of a count of frames this host lost (a socket's drops: can.udp_socket):
+    update(now [s], count) returns (previous reading's time, now) when the count grew since, else None - the
+    frames were lost in between, wherever the process reading them was.
+    """
+
+    def __init__(self):
+        self._last = None          # (time [s], count) of the previous reading
+
+    def update(self, now: float, count):
+        if count is None:
+            return None
+        last, self._last = self._last, (float(now), int(count))
+        if last is None or count <= last[1]:
+            return None
+        return (last[0], float(now))
+
+
 def late_between(windows, t0: float, t1: float) -> float:
     """The longest lateness [s] of a window (start, end) that overlaps [t0, t1] widened by MARGIN, 0 if none."""
     worst = 0.0

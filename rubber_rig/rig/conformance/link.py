@@ -38,9 +38,8 @@ from ..can.protocol import (
 )
 from .envelope import Envelope, Sample
 from .host_timing import HostTiming
+from .kernel_counts import KernelCounts
 from .report import Results
-from .run_queue import SAMPLE_PERIOD as RUN_QUEUE_PERIOD
-from .run_queue import RunQueueWatch, read_waits
 from .trace import Trace
 
 if TYPE_CHECKING:
@@ -109,10 +108,10 @@ class ConformanceLink:
         self.host_timing = HostTiming()
         self.trace.host_late = self.host_timing.windows
         self.host_timing_files = tuple(host_timing_files)
-        # processes of this host that stand for the controller (the simulator with --sim): the kernel's count of
-        # their waits for a CPU is this host's lateness too (run_queue), sampled by the receive loop
-        self.watch_pids = []
-        self._run_queue, self._next_run_queue = RunQueueWatch(), 0.0
+        # the kernel's count of this host's lateness, sampled by the receive loop (kernel_counts): the waits for a
+        # CPU of the processes standing for the controller (kernel.pids: the simulator with --sim), and the frames
+        # the socket under this run's bus dropped
+        self.kernel = KernelCounts(self.host_timing, bus if simulated is None else None)
         self.results = Results()
         self.lock = threading.RLock()
         self.state, self.faults, self.identity = 'unconfigured', 0, None
@@ -246,14 +245,7 @@ class ConformanceLink:
             beating = self.heartbeat
             if msg is not None:
                 self._on_frame(msg, msg.timestamp or now)
-            if self.watch_pids and now >= self._next_run_queue:
-                self._sample_run_queue(now)
-
-    def _sample_run_queue(self, now: float):
-        """Each wait for a CPU of RUN_QUEUE_MIN or more of a watched process since the last sample: a window."""
-        self._next_run_queue = now + RUN_QUEUE_PERIOD
-        for t0, t1 in self._run_queue.update(now, read_waits(self.watch_pids)):
-            self.host_timing.add(t0, t1, 'run-queue waits of the simulator')
+            self.kernel.sample(now)
 
     def _on_frame(self, msg: can.Message, t: float):
         """One frame the controller sent, seen at `t` [s]: into the trace, and the link's view of the controller."""

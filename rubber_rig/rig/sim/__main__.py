@@ -25,6 +25,7 @@ import signal
 import sys
 
 from ..can.bus import open_bus
+from ..can.udp_socket import dropped, socket_inode
 from ..config import ConfigError, RigConfig
 from .controller import SimController
 
@@ -51,6 +52,8 @@ def main(argv=None) -> int:
     sim = SimController(bus, cfg.sample_rate, cfg.sim, cfg.paced, profile=cfg.frame_profile)
     if args.timing_log:
         sim.lateness.file = open(args.timing_log, 'a', encoding='utf-8', buffering=1)   # noqa: SIM115 - whole run
+        inode = socket_inode(bus)
+        sim.lateness.drops = lambda: dropped(inode)     # frames its socket lost are this host's loss too
     signal.signal(signal.SIGTERM, lambda *_: sim._stop.set())
     signal.signal(signal.SIGINT, lambda *_: sim._stop.set())
     print('rubber_rig.rig.sim: serving', cfg.backend, cfg.channel or '', flush=True)

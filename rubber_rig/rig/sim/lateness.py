@@ -19,17 +19,22 @@ missed because of that is this host's lateness, not the controller's it stands f
 import time
 from typing import Callable
 
-from ..conformance.host_timing import SIM_LATE_MIN
+from ..conformance.host_timing import SIM_LATE_MIN, DropWatch
+
+DROPS_PERIOD = 0.005    # [s] the socket's drop count is read at most this often
 
 
 class LatenessLog:
     """Missed deadlines as 'start end' lines (wall-clock s, `wall`: time.time()) in `file` (a text file open for
-    append; None: nothing is recorded), each SIM_LATE_MIN or more.
+    append; None: nothing is recorded), each SIM_LATE_MIN or more; with `drops` (a callable: the count of frames
+    the controller's socket dropped so far, None if unknown; can.udp_socket.dropped) also each stretch in which
+    that count grew, read at most every DROPS_PERIOD at a wake-up.
     """
 
-    def __init__(self, wall: Callable[[], float] = time.time):
-        self.file = None
+    def __init__(self, wall: Callable[[], float] = time.time, drops: Callable[[], int] = None):
+        self.file, self.drops = None, drops
         self._wall = wall
+        self._drop_watch, self._next_drops = DropWatch(), 0.0
 
     def missed(self, late: float, noticed: float = None):
         """A deadline missed by `late` [s], noticed at wall-clock time `noticed` (default now): a window from the
@@ -52,6 +57,11 @@ class LatenessLog:
             self.missed(now - asked - wait)
         elif msg.timestamp:
             self.missed(now - max(msg.timestamp, asked))
+        if self.drops is not None and now >= self._next_drops:
+            self._next_drops = now + DROPS_PERIOD
+            lost = self._drop_watch.update(now, self.drops())
+            if lost:       # frames (setpoints, heartbeats) the socket lost while this process did not read it
+                self.file.write(f'{lost[0]:.6f} {lost[1]:.6f}\n')
 
     def close(self):
         if self.file is not None:

@@ -13,14 +13,16 @@
 # limitations under the License.
 
 """The kernel's own account of this host's lateness: how long a process of this host (the simulator with
-``conformance --sim``) was ready to run but waited for a CPU (docs/protocol.md, "Host timing").
+``conformance --sim``) was ready to run but waited for a CPU, and how many frames the run's socket dropped
+(docs/protocol.md, "Host timing").
 
 Linux counts, per task, the time it spent runnable on a run-queue without running: the second field of
 /proc/<pid>/task/<tid>/schedstat, in ns (CONFIG_SCHED_INFO; 0 where the kernel does not account it). A simulator
 that waited X ms there sent its frames X ms late because this host gave its CPUs to others; a controller with a
 CPU of its own would not have. This catches what the simulator's own deadline log cannot: a wait between its
 deadline check and its send, or across a wake-up that started a stream. The conformance run samples the waits
-every few ms (RunQueueWatch) and adds each increase of RUN_QUEUE_MIN or more as a lateness window.
+every few ms (RunQueueWatch) and adds each increase of RUN_QUEUE_MIN or more as a lateness window; with it the
+drops of its own udp_multicast socket (can.udp_socket), each increase a window since the previous sample.
 
 Linux's pressure stall information (/proc/pressure/cpu, ``some``: the time at least one task of the host waited)
 is reported with the run as context (cpu_pressure) but never used to excuse a verdict: with a busy loop per core
@@ -29,6 +31,9 @@ it is near 100 % all the time, so it cannot tell whether the controller's proces
 from __future__ import annotations
 
 import glob
+
+from ..can.udp_socket import dropped, socket_inode
+from .host_timing import DropWatch
 
 RUN_QUEUE_MIN = 0.002    # [s] a run-queue wait this long (within one sampling interval) is recorded: as the
 #                         simulator's own missed deadlines (host_timing.SIM_LATE_MIN)
@@ -100,3 +105,28 @@ def pressure_share(before, after, seconds: float):
         return None
     return min(max((after - before) / seconds, 0.0), 1.0)
 
+
+
+class KernelCounts:
+    """What the kernel counted of this host's lateness during a run on the wall clock, into `timing` (a
+    host_timing.HostTiming): the run-queue waits of the processes `pids` (the simulator's, added when it starts)
+    and the drops of the socket under `bus` (None: no socket watched). sample(now) is called by the run's receive
+    loop; it reads at most every SAMPLE_PERIOD.
+    """
+
+    def __init__(self, timing, bus=None):
+        self.timing, self.pids = timing, []
+        self._waits, self._drops, self._next = RunQueueWatch(), DropWatch(), 0.0
+        self._socket = socket_inode(bus) if bus is not None else None
+
+    def sample(self, now: float):
+        if now < self._next:
+            return
+        self._next = now + SAMPLE_PERIOD
+        if self.pids:
+            for t0, t1 in self._waits.update(now, read_waits(self.pids)):
+                self.timing.add(t0, t1, 'run-queue waits of the simulator')
+        if self._socket is not None:
+            lost = self._drops.update(now, dropped(self._socket))
+            if lost:
+                self.timing.add(*lost, "frames dropped by this run's socket")
