@@ -23,6 +23,8 @@ import can
 import pytest
 
 from rubber_rig.rig.can.udp_socket import dropped, enlarge_receive_buffer, socket_inode
+from rubber_rig.rig.conformance.active_stream import _judge_buffer
+from rubber_rig.rig.conformance.envelope import Envelope
 from rubber_rig.rig.conformance.host_timing import SIM_LATE_MIN, DropWatch, HostTiming, late_total
 from rubber_rig.rig.conformance.kernel_counts import (
     RUN_QUEUE_MIN,
@@ -31,6 +33,8 @@ from rubber_rig.rig.conformance.kernel_counts import (
     pressure_share,
     read_waits,
 )
+from rubber_rig.rig.conformance.link import ConformanceLink
+from rubber_rig.rig.conformance.report import FAIL, NOT_TESTED, PASS
 from rubber_rig.rig.sim.lateness import LatenessLog
 
 
@@ -148,3 +152,43 @@ def test_a_bus_socket_gets_a_deep_receive_queue_and_its_drops_are_read():
     finally:
         sock.close()
     assert enlarge_receive_buffer(object()) == 0 and socket_inode(object()) is None
+
+
+def _buffer_run(off_at: set):
+    """A link whose controller streamed 1 s (a setpoint frame of `per` setpoints every `per` ms, 30 ms ahead of
+    its tick) and reported its buffer level every 10 ms, correctly except in the status frames `off_at` (indices:
+    then 80 setpoints too few, as a controller that had not read its socket for 80 ms).
+    """
+    bus = can.Bus(interface='virtual', channel='buffer_level_attribution', receive_own_messages=False)
+    link = ConformanceLink(bus, 1000.0, Envelope(-1e-3, 1e-3))
+    per = link.frames.setpoints_per_frame
+    link.sent_log = [(0.001 * k, 0.001 * k, 1000 + 30 + k, per) for k in range(0, 1000, per)]
+    for i, k in enumerate(range(10, 1000, 10)):
+        t = 0.001 * k
+        sent = max(f + n for started, _, f, n in link.sent_log if started <= t)
+        last = 1000 + k
+        level = sent - 1 - last - (80 if i in off_at else 0)
+        link.status_log.append((t, 'running', 0, last % (1 << 16), level))
+    bus.shutdown()
+    return link
+
+
+def test_a_buffer_level_off_only_where_this_host_was_late_is_not_judged():
+    off = {20, 21, 22, 50, 51, 52}           # 6 of 99 status frames: more than the 2 % a controller may be off
+    link = _buffer_run(off)
+    _judge_buffer(link, 0.0, 1.0)
+    assert link.results['CTRL-ST-4'].status == FAIL
+    link = _buffer_run(off)
+    link.host_timing.add(0.13, 0.21, 'simulator')      # the simulator did not run then: it read them late
+    link.host_timing.add(0.43, 0.51, 'simulator')
+    _judge_buffer(link, 0.0, 1.0)
+    r = link.results['CTRL-ST-4']
+    assert r.status == NOT_TESTED and 'not judged: this host was late by 80 ms' in r.detail, r
+    assert '6 with a level off' in r.measured and '6 of them within 0.1 s after this host was late' in r.measured
+    link = _buffer_run(off)
+    link.host_timing.add(0.13, 0.21, 'simulator')      # late at one of the two places only: the other is its own
+    _judge_buffer(link, 0.0, 1.0)
+    assert link.results['CTRL-ST-4'].status == FAIL
+    link = _buffer_run(set())
+    _judge_buffer(link, 0.0, 1.0)
+    assert link.results['CTRL-ST-4'].status == PASS
