@@ -25,7 +25,7 @@ import signal
 import sys
 
 from ..can.bus import open_bus
-from ..can.udp_socket import dropped, socket_inode
+from ..can.udp_socket import RECEIVE_BUFFER, dropped, socket_inode
 from ..config import ConfigError, RigConfig
 from .controller import SimController
 
@@ -48,7 +48,9 @@ def main(argv=None) -> int:
     except (ValueError, OSError) as exc:
         print(f'rubber_rig.rig.sim: error: {exc}', file=sys.stderr)
         return 2
-    bus = open_bus(cfg)
+    # a deep receive queue: setpoints and heartbeats that arrive while this process waits for a CPU are read
+    # late, never lost (it reads its whole queue before each tick)
+    bus = open_bus(cfg, receive_buffer=RECEIVE_BUFFER)
     sim = SimController(bus, cfg.sample_rate, cfg.sim, cfg.paced, profile=cfg.frame_profile)
     if args.timing_log:
         sim.lateness.file = open(args.timing_log, 'a', encoding='utf-8', buffering=1)   # noqa: SIM115 - whole run
