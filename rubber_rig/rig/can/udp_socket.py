@@ -18,14 +18,14 @@ kernel's count of the datagrams it dropped because the queue was full.
 Every process on the group receives every frame, its own included: at a 1 kHz rig about 1000 datagrams a
 second. Linux's default receive queue (net.core.rmem_default, 212992 bytes, about 200 datagrams) then holds
 0.2 s of traffic; a process that waits longer for a CPU loses frames - the host's loss, which a CAN controller
-with its own mailboxes would not see. A bus opened here asks for RECEIVE_BUFFER (the kernel caps it at
-net.core.rmem_max), and `dropped` reads the count of what was lost anyway, for the conformance run's host timing
-(docs/protocol.md, "Host timing").
+with its own mailboxes would not see. The separate-process simulator asks for RECEIVE_BUFFER (bus.open_bus; the
+kernel caps it at net.core.rmem_max), and `dropped` reads the count of what was lost anyway, for the
+conformance run's host timing (docs/protocol.md, "Host timing").
 """
 import os
 import socket
 
-RECEIVE_BUFFER = 4 << 20    # [bytes] asked for each udp_multicast bus socket (4 MiB: several seconds of traffic)
+RECEIVE_BUFFER = 4 << 20    # [bytes] the simulator's receive queue (4 MiB: several seconds of traffic)
 PROC_UDP = ('/proc/net/udp', '/proc/net/udp6')
 
 
