@@ -341,8 +341,8 @@ def _host_timing_fact(args, timing, pressure) -> str:
     late = [b - a for a, b in timing.windows]
     thresholds = {'receive loop and heartbeat': LATE_MIN, 'simulator': SIM_LATE_MIN,
                   'reference controller': SIM_LATE_MIN, 'run-queue waits of the simulator': RUN_QUEUE_MIN}
-    parts = [f'{name} {count} (by {thresholds.get(name, 0.0) * 1e3:g} ms or more, {seconds:.3f} s)'
-             for name, (count, seconds) in sorted(timing.sources.items())]
+    parts = [f'{name} {count} (' + (f'by {thresholds[name] * 1e3:g} ms or more, ' if name in thresholds else '')
+             + f'{seconds:.3f} s)' for name, (count, seconds) in sorted(timing.sources.items())]
     who = ('the simulator' if args.sim else 'the reference controller' if args.reference else 'none')
     text = (f'host timing: this host ran late {len(late)} times' + (f": {', '.join(parts)}" if parts else '')
             + (f'; longest {max(late) * 1e3:.0f} ms' if late else '') + f' (process standing for the controller '
