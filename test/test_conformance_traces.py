@@ -162,6 +162,17 @@ def test_a_heartbeat_that_never_comes_fails_and_a_short_trace_is_not_tested():
     assert res['CTRL-HB-1'].status == NOT_TESTED and res['CTRL-HB-2'].status == NOT_TESTED
 
 
+def test_ramp_shape_judges_a_move_across_samples_never_received_per_sample():
+    """A 2 mm/s ramp with 3 samples lost (this host's socket dropped them): the 8 um between the samples either side
+    are 4 samples' travel, no step; 8 um in one sample is. A real step across the gap still fails.
+    """
+    u = [0.0, 2e-6, 4e-6, 12e-6, 14e-6, 16e-6]
+    assert not ramp_shape(u, FS, 20e-6, 2e-3).ok
+    assert ramp_shape(u, FS, 20e-6, 2e-3, gaps=[1, 1, 4, 1, 1]).ok
+    stepped = ramp_shape([0.0, 2e-6, 4e-6, 112e-6, 114e-6], FS, 120e-6, 2e-3, gaps=[1, 1, 4, 1])
+    assert not stepped.ok and stepped.largest_step == pytest.approx(27e-3)
+
+
 def test_ramp_shape_finds_a_step_and_an_overshoot_and_passes_the_reference_ramp():
     ramp = SafeRamp(0.4e-3, 0.0, 0.0, FS, velocity_max=OWN_RAMP_VELOCITY)
     u = [0.4e-3] + [ramp.step() for _ in range(400)]

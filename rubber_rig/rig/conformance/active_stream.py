@@ -251,7 +251,8 @@ def _judge_ramp(link, target: float, code: int = CMD_ABORT):
     moving = [s for s, a, b in zip(ramp, u, u[1:], strict=False) if abs(b - a) > 0.5 * LSB]
     duration = (moving[-1].seq - ramp[0].seq + 1) / link.fs if moving else 0.0
     allowed = 1.5 * abs(target - p0) / RAMP_VELOCITY + 0.1
-    shape = ramp_shape(u, link.fs, target, RAMP_VELOCITY)     # from holding: no inherited motion
+    seqs = [ramp[0].seq - 1] + [s.seq for s in ramp]         # samples never received: judged per sample
+    shape = ramp_shape(u, link.fs, target, RAMP_VELOCITY, gaps=[b - a for a, b in zip(seqs, seqs[1:], strict=False)])
     ok = (abs(u[-1] - target) <= 1e-6 and shape.ok and duration <= allowed and not link.faults
           and link.state == 'idle')
     link.results.put('CTRL-RAMP-1', PASS if ok else FAIL,
