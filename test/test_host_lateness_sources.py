@@ -23,8 +23,8 @@ import can
 import pytest
 
 from rubber_rig.rig.can.udp_socket import dropped, enlarge_receive_buffer, socket_inode
-from rubber_rig.rig.conformance.active_stream import _judge_buffer
-from rubber_rig.rig.conformance.envelope import Envelope
+from rubber_rig.rig.conformance.active_stream import _judge_buffer, _sent_after_its_tick
+from rubber_rig.rig.conformance.envelope import Envelope, Sample
 from rubber_rig.rig.conformance.host_timing import SIM_LATE_MIN, DropWatch, HostTiming, late_total
 from rubber_rig.rig.conformance.kernel_counts import (
     RUN_QUEUE_MIN,
@@ -198,3 +198,18 @@ def test_a_buffer_level_off_only_where_this_host_was_late_is_not_judged():
     link = _buffer_run(set())
     _judge_buffer(link, 0.0, 1.0)
     assert link.results['CTRL-ST-4'].status == PASS
+
+
+def test_a_resumed_stream_sent_after_its_tick_is_this_hosts_lateness():
+    """CTRL-STREAM-3 resumes LEAD ahead of the last sample the run saw; a run whose view lagged more than that
+    sent the first setpoint after the controller had ticked past it (holding): the delay is the host's.
+    """
+    bus = can.Bus(interface='virtual', channel='resume_attribution', receive_own_messages=False)
+    link = ConformanceLink(bus, 1000.0, Envelope(-1e-3, 1e-3))
+    bus.shutdown()
+    link.samples = [Sample(10.0 + 0.001 * k, 5000 + k, 0.0, 0.0, 'holding', 0.0) for k in range(400)]
+    link.sent_at = {5100: 10.25}               # sequence 5100 was ticked (held) at 10.100: sent 150 ms late
+    assert _sent_after_its_tick(link, 5100) == pytest.approx(0.15)
+    link.sent_at = {5300: 10.25}               # in time: 50 ms before its tick
+    assert _sent_after_its_tick(link, 5300) == 0.0
+    assert _sent_after_its_tick(link, 9999) == 0.0      # never ticked: unknown, not excused

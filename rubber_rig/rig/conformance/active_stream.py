@@ -152,11 +152,14 @@ def s_stream(link):
     link._sleep(2 * LEAD + 0.2)                   # the resumed stream starts LEAD ahead and is sent LEAD ahead
     resumed = [s for s in link._samples_since(t1) if first2 <= s.seq < end2]
     ok_resume = len(resumed) == end2 - first2 and all(abs(s.u - link.sent[s.seq]) <= 1.5 * LSB for s in resumed)
-    link.results.put('CTRL-STREAM-3', PASS if ok and ok_resume else FAIL,
-                     f'held {len(held)} samples at {last * 1e3:.4f} mm, states {sorted(states)}, resumed '
-                     f'{len(resumed)} of {end2 - first2} setpoints',
-                     '' if ok and ok_resume else 'an underrun must hold the last command without a fault and the '
-                     'stream must resume with the setpoints that follow')
+    measured = (f'held {len(held)} samples at {last * 1e3:.4f} mm, states {sorted(states)}, resumed '
+                f'{len(resumed)} of {end2 - first2} setpoints')
+    late = _sent_after_its_tick(link, first2) if ok and not ok_resume else 0.0
+    link.results.put('CTRL-STREAM-3', NOT_TESTED if late else PASS if ok and ok_resume else FAIL, measured,
+                     not_judged(late, "the resumed stream's first setpoint was sent after its tick: this host's "
+                                "view of the controller lagged") if late else '' if ok and ok_resume else
+                     'an underrun must hold the last command without a fault and the stream must resume with the '
+                     'setpoints that follow')
     _judge_ramp(link, target=-a)
 
 
@@ -177,6 +180,16 @@ def _judge_applied(link, samples: list, first: int, end: int, what: str):
         return
     link.results.put('CTRL-STREAM-4', PASS if ok else FAIL, measured,
                      '' if ok else 'each setpoint must be applied at its sequence')
+
+
+def _sent_after_its_tick(link, seq: int) -> float:
+    """How late [s] this host sent the setpoint of `seq` after the controller had ticked it (the arrival of the
+    first sample of that sequence or later: held samples count), 0 if it was in time or that is unknown.
+    """
+    with link.lock:
+        sent = link.sent_at.get(seq)
+        ticked = min((s.t for s in link.samples if s.seq >= seq), default=None)
+    return sent - ticked if sent is not None and ticked is not None and sent > ticked - 1e-3 else 0.0
 
 
 def _missing_while_host_late(link, samples: list) -> float:
