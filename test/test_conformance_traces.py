@@ -28,7 +28,7 @@ from rubber_rig.rig.can.protocol import PROTOCOL_VERSION, STATE_CODE, Protocol
 from rubber_rig.rig.config import RigConfig
 from rubber_rig.rig.conformance import active_stream
 from rubber_rig.rig.conformance.active import ConformanceRun
-from rubber_rig.rig.conformance.host_timing import HostTiming, late_between
+from rubber_rig.rig.conformance.host_timing import HostTiming, late_between, own_intervals
 from rubber_rig.rig.conformance.link import Envelope, judges
 from rubber_rig.rig.conformance.passive import STALL_MAX, check_offline
 from rubber_rig.rig.conformance.report import FAIL, NOT_TESTED, PASS, Results
@@ -162,6 +162,17 @@ def test_a_heartbeat_that_never_comes_fails_and_a_short_trace_is_not_tested():
     assert res['CTRL-HB-1'].status == NOT_TESTED and res['CTRL-HB-2'].status == NOT_TESTED
 
 
+def test_ramp_shape_judges_a_move_across_samples_never_received_per_sample():
+    """A 2 mm/s ramp with 3 samples lost (this host's socket dropped them): the 8 um between the samples either side
+    are 4 samples' travel, no step; 8 um in one sample is. A real step across the gap still fails.
+    """
+    u = [0.0, 2e-6, 4e-6, 12e-6, 14e-6, 16e-6]
+    assert not ramp_shape(u, FS, 20e-6, 2e-3).ok
+    assert ramp_shape(u, FS, 20e-6, 2e-3, gaps=[1, 1, 4, 1, 1]).ok
+    stepped = ramp_shape([0.0, 2e-6, 4e-6, 112e-6, 114e-6], FS, 120e-6, 2e-3, gaps=[1, 1, 4, 1])
+    assert not stepped.ok and stepped.largest_step == pytest.approx(27e-3)
+
+
 def test_ramp_shape_finds_a_step_and_an_overshoot_and_passes_the_reference_ramp():
     ramp = SafeRamp(0.4e-3, 0.0, 0.0, FS, velocity_max=OWN_RAMP_VELOCITY)
     u = [0.4e-3] + [ramp.step() for _ in range(400)]
@@ -268,6 +279,63 @@ def test_a_period_violated_only_where_this_host_was_late_is_not_judged():
     assert res['CTRL-ST-1'].status == NOT_TESTED and 'not judged: this host was late by 290 ms' in \
         res['CTRL-ST-1'].detail
     assert "less this host's lateness around each interval" in res['CTRL-ST-1'].measured
+
+
+def test_lateness_elsewhere_never_moves_the_median_period():
+    """Under load this host is late in most intervals (a 15 ms window in every 50 ms here): subtracting that from
+    every interval made the median heartbeat period 35 ms and failed CTRL-HB-1 for the host's delays (seen on two
+    cores with two busy loops, issue 36). Lateness only explains the part of an interval beyond the period: a
+    106 ms silence with 60 ms of lateness in it is not judged; the same silence where the host ran on time fails.
+    """
+    def trace_with_gap():
+        w = TraceWriter()
+        w.periodic(0.0, 1.0, 'idle')
+        w.periodic(1.056, 3.0, 'idle')          # one heartbeat, status and temperature gap of ~56 ms more
+        return w.done()
+    scattered = [(0.05 * k + 0.02, 0.05 * k + 0.035) for k in range(60)]
+    trace = trace_with_gap()
+    trace.host_late = scattered + [(0.99, 1.05)]
+    res = check_offline(trace)
+    assert res['CTRL-HB-1'].status == NOT_TESTED, res['CTRL-HB-1']
+    assert 'not judged: this host was late by 56 ms' in res['CTRL-HB-1'].detail, res['CTRL-HB-1']
+    trace = trace_with_gap()
+    trace.host_late = [w for w in scattered if not 0.9 < w[0] < 1.1]
+    res = check_offline(trace)
+    assert res['CTRL-HB-1'].status == FAIL and 'silent for 106 ms' in res['CTRL-HB-1'].detail, res['CTRL-HB-1']
+
+
+def test_the_burst_after_a_stall_of_this_host_does_not_move_the_median_period():
+    """A paced controller held back by this host sends what fell due at once when it runs again (a burst of
+    status frames 0.1 ms apart): with ten 100 ms stalls that is most of the intervals, and their median is no
+    longer the period. The stall and its burst lie in the host's lateness window (the simulator logs it until it
+    caught up): the median is taken where the host was on time, so it is not judged; without the windows it fails.
+    """
+    times = [0.01 * k for k in range(51)]
+    for _ in range(10):
+        t = times[-1] + 0.1
+        times += [t + 1e-4 * k for k in range(10)]
+    trace = Trace(FS)
+    for k, t in enumerate(times):
+        trace.add(PROTO.encode('ControllerStatus', {'ST_State': STATE_CODE['idle'], 'ST_Counter': (k + 1) % 16,
+                                                    'ST_Faults': 0, 'ST_LastSequence': 0, 'ST_BufferLevel': 0}), t)
+    res = check_offline(trace)
+    assert res['CTRL-ST-1'].status == FAIL and 'median interval 0.1 ms' in res['CTRL-ST-1'].detail, res['CTRL-ST-1']
+    trace.host_late = [(t - 0.1, t + 0.001) for t in times[51::10]]      # stall and burst: this host's
+    res = check_offline(trace)
+    assert res['CTRL-ST-1'].status == NOT_TESTED, res['CTRL-ST-1']
+    assert 'median where it was on time 10.0 ms (49 intervals)' in res['CTRL-ST-1'].measured, res['CTRL-ST-1']
+
+
+def test_own_intervals_credit_the_host_only_beyond_the_period():
+    t = [0.0, 0.05, 0.10, 0.25, 0.30]
+    own, credited, late = own_intervals([(0.0, 0.04), (0.12, 0.20)], t, 0.05)
+    # 50 ms intervals keep their length though the host was late in the first; the 150 ms one is credited with
+    # the 80 ms of lateness in it (widened by MARGIN on each side: the windows overlap it by 80 ms)
+    assert own == pytest.approx([0.05, 0.05, 0.07, 0.05])
+    assert credited == pytest.approx([0.0, 0.0, 0.08, 0.0])
+    assert late == pytest.approx([0.04, 0.0, 0.08, 0.0])        # the first window, widened, ends at 0.045
+    own, credited, late = own_intervals([(0.0, 1.0)], t, 0.05)       # never shorter than the period
+    assert own == pytest.approx([0.05] * 4)
 
 
 def test_host_timing_records_late_wakeups_and_merges_a_file_once(tmp_path):

@@ -50,6 +50,7 @@ from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.host_timing import LATE_MIN, SIM_LATE_MIN
 from rubber_rig.rig.conformance.in_process import REFERENCE_AMBIENT, REFERENCE_SPRING, run_against_reference
+from rubber_rig.rig.conformance.kernel_counts import RUN_QUEUE_MIN, cpu_pressure, pressure_share
 from rubber_rig.rig.conformance.link import Aborted, Envelope
 from rubber_rig.rig.conformance.log_segments import check_log
 from rubber_rig.rig.conformance.reference_specimen import Ambient, ReferenceSpring
@@ -265,8 +266,11 @@ def run(args) -> int:
     sim_command = [sys.executable, '-m', 'rubber_rig.rig.sim', '--config-json', json.dumps(cfg.to_dict()),
                    *(['--timing-log', timing_files[0]] if timing_files else [])]
 
+    watch = []        # the simulator's process: its waits for a CPU are this host's lateness (kernel_counts)
+
     def start_sim():
         box['process'] = subprocess.Popen(sim_command, stdout=subprocess.DEVNULL)
+        watch.append(box['process'].pid)
 
     def ask_operator():
         print('rubber-rig conformance: switch the controller on now (waiting 60 s)', file=sys.stderr, flush=True)
@@ -285,7 +289,10 @@ def run(args) -> int:
                               log=lambda text: print(text, file=sys.stderr, flush=True), power_up=power_up,
                               host_timing_files=timing_files, reference=args.reference_spring_declared,
                               ambient=args.ambient_declared)
+        conf.link.kernel.pids = watch
+        pressure = cpu_pressure()
         results = conf.run()
+        pressure = pressure_share(pressure, cpu_pressure(), time.monotonic() - t0)
         if args.can_log:
             conf.trace_to_log(args.can_log)
     except Aborted as exc:
@@ -300,7 +307,7 @@ def run(args) -> int:
             timing_dir.cleanup()
     simulated = f" (simulated, defects: {', '.join(args.defect) or 'none'})" if args.sim else ''
     return _online_report(args, conf, results, f'bus {cfg.backend} {cfg.channel or ""}, {cfg.frame_profile} '
-                          f'frames, {cfg.sample_rate:g} Hz', simulated, t0)
+                          f'frames, {cfg.sample_rate:g} Hz', simulated, t0, pressure)
 
 
 def _reference(args) -> int:
@@ -327,7 +334,27 @@ def _reference(args) -> int:
                           f'{args.rate_hz:g} Hz', what, t0)
 
 
-def _online_report(args, conf, results, bus: str, controller: str, t0: float) -> int:
+def _host_timing_fact(args, timing, pressure) -> str:
+    """What this host's own lateness was during the run, by source, and the CPU pressure (share of the run some
+    task of this host waited for a CPU; None: not measured).
+    """
+    late = [b - a for a, b in timing.windows]
+    thresholds = {'receive loop and heartbeat': LATE_MIN, 'simulator': SIM_LATE_MIN,
+                  'reference controller': SIM_LATE_MIN, 'run-queue waits of the simulator': RUN_QUEUE_MIN}
+    parts = [f'{name} {count} (' + (f'by {thresholds[name] * 1e3:g} ms or more, ' if name in thresholds else '')
+             + f'{seconds:.3f} s)' for name, (count, seconds) in sorted(timing.sources.items())]
+    who = ('the simulator' if args.sim else 'the reference controller' if args.reference else 'none')
+    text = (f'host timing: this host ran late {len(late)} times' + (f": {', '.join(parts)}" if parts else '')
+            + (f'; longest {max(late) * 1e3:.0f} ms' if late else '') + f' (process standing for the controller '
+            f'on this host: {who}); a timing requirement violated only by as much as this host was late is not '
+            'judged')
+    if pressure is not None:
+        text += (f'; CPU pressure: some task of this host waited for a CPU {pressure * 100:.0f} % of the run '
+                 '(/proc/pressure/cpu, context only)')
+    return text
+
+
+def _online_report(args, conf, results, bus: str, controller: str, t0: float, pressure=None) -> int:
     """Facts, report and exit status of an online run."""
     ident = conf.identity[1] if conf.identity else None
     facts = [bus, f'envelope {args.lower * 1e3:g} .. {args.upper * 1e3:g} mm (stated by the operator)',
@@ -340,13 +367,7 @@ def _online_report(args, conf, results, bus: str, controller: str, t0: float) ->
                  ([f'the ambient {conf.ambient.temperature:g} degC +- {conf.ambient.tolerance:g} K']
                   if conf.ambient else ['no ambient declared'])),
              'host requirements (HOST-*) are checked offline on a log written by the driver']
-    late = [b - a for a, b in conf.host_timing.windows]
-    sim_late = (f', the simulator it ran by {SIM_LATE_MIN * 1e3:g} ms or more' if args.sim else
-                f', the reference controller it ran by {SIM_LATE_MIN * 1e3:g} ms or more' if args.reference else '')
-    facts.append(f'host timing: this host ran late {len(late)} times (the run\'s receive loop and heartbeat by '
-                 f'{LATE_MIN * 1e3:g} ms or more' + sim_late + ')'
-                 + (f', longest {max(late) * 1e3:.0f} ms, {sum(late):.3f} s in all' if late else '')
-                 + '; a timing requirement violated only by as much as this host was late is not judged')
+    facts.append(_host_timing_fact(args, conf.host_timing, pressure))
     if conf.deviation:
         facts.append(f'ABORTED: {conf.deviation}')
     untested = [r.id for r in results.ordered() if r.status == NOT_TESTED]

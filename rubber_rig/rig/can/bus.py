@@ -19,6 +19,8 @@ import os
 
 import can
 
+from .udp_socket import enlarge_receive_buffer
+
 _counter = itertools.count()
 
 
@@ -27,9 +29,11 @@ def sim_channel_name() -> str:
     return f'rubber_rig_sim_{os.getpid()}_{next(_counter)}'
 
 
-def open_bus(config, channel=None) -> can.BusABC:
+def open_bus(config, channel=None, receive_buffer: int = 0) -> can.BusABC:
     """python-can Bus for RigConfig `config`: the virtual interface for the in-process "sim" backend,
-    otherwise config.backend with channel, bitrates, fd and bus_options.
+    otherwise config.backend with channel, bitrates, fd and bus_options. receive_buffer [bytes]: with
+    udp_multicast, the receive queue to ask for (udp_socket.RECEIVE_BUFFER for the simulator; 0: the kernel's
+    default).
     """
     if config.backend == 'sim':
         return can.Bus(interface='virtual', channel=channel or sim_channel_name(), receive_own_messages=False)
@@ -40,8 +44,11 @@ def open_bus(config, channel=None) -> can.BusABC:
         udp = importlib.import_module('can.interfaces.udp_multicast')   # needs msgpack
         kwargs.setdefault('fd', config.fd)
         kwargs.setdefault('hop_limit', 0)   # frames stay on this host unless the user asks (bus_options)
-        return can.Bus(interface='udp_multicast', channel=channel or config.channel or
-                       udp.UdpMulticastBus.DEFAULT_GROUP_IPv4, **kwargs)
+        bus = can.Bus(interface='udp_multicast', channel=channel or config.channel or
+                      udp.UdpMulticastBus.DEFAULT_GROUP_IPv4, **kwargs)
+        if receive_buffer:      # frames that arrive while this process waits for a CPU stay queued
+            enlarge_receive_buffer(bus, receive_buffer)
+        return bus
     kwargs.setdefault('bitrate', config.bitrate)
     if config.fd:
         kwargs.setdefault('fd', True)

@@ -29,6 +29,8 @@ from __future__ import annotations
 import threading
 from pathlib import Path
 
+import numpy as np
+
 LATE_MIN = 0.010     # [s] a wake-up this much later than due is recorded
 MARGIN = 0.005       # [s] a window is widened by this much on each side when a stretch of the trace is judged
 SIM_LATE_MIN = 0.002  # [s] the simulator on this host logs each deadline it missed by this much (the 2 ms a
@@ -36,27 +38,32 @@ SIM_LATE_MIN = 0.002  # [s] the simulator on this host logs each deadline it mis
 
 
 class HostTiming:
-    """Windows (start, end) [s] during which this host ran late; thread-safe to record."""
+    """Windows (start, end) [s] during which this host ran late; thread-safe to record. Each window is counted
+    under the source that recorded it (sources: name -> [windows, seconds in all]) for the report.
+    """
 
     def __init__(self):
         self.windows = []
+        self.sources = {}
         self._lock = threading.Lock()
         self._read = {}          # path -> bytes of it already merged
 
-    def due(self, t_due: float, t_now: float) -> None:
+    def due(self, t_due: float, t_now: float, source: str = 'receive loop and heartbeat') -> None:
         """Something due at t_due ran at t_now: a window when it was LATE_MIN or more late."""
         if t_now - t_due >= LATE_MIN:
-            with self._lock:
-                self.windows.append((float(t_due), float(t_now)))
+            self.add(t_due, t_now, source)
 
-    def add(self, t0: float, t1: float) -> None:
-        """A window [t0, t1] a process of this host recorded at its own threshold (the in-process reference
-        controller's late ticks).
+    def add(self, t0: float, t1: float, source: str = 'reference controller') -> None:
+        """A window [t0, t1] a part of this host recorded at its own threshold (the in-process reference
+        controller's late ticks, the kernel's run-queue waits of the simulator).
         """
         with self._lock:
             self.windows.append((float(t0), float(t1)))
+            count = self.sources.setdefault(source, [0, 0.0])
+            count[0] += 1
+            count[1] += float(t1) - float(t0)
 
-    def add_from_file(self, path) -> int:
+    def add_from_file(self, path, source: str = 'simulator') -> int:
         """Merge the windows written one per line as 'start end' (the simulator's missed deadlines, at its own
         threshold: it misses the feedback timing by less than LATE_MIN) since the last call for this path; returns
         how many. A missing file adds nothing; a line still being written waits.
@@ -77,10 +84,27 @@ class HostTiming:
                 t0, t1 = float(parts[0]), float(parts[1])
             except (IndexError, ValueError):
                 continue
-            with self._lock:          # the writer chose its own threshold
-                self.windows.append((t0, t1))
+            self.add(t0, t1, source)          # the writer chose its own threshold
             added += 1
         return added
+
+
+class DropWatch:
+    """Windows from successive readings of a count of frames this host lost (a socket's drops: can.udp_socket):
+    update(now [s], count) returns (previous reading's time, now) when the count grew since, else None - the
+    frames were lost in between, wherever the process reading them was.
+    """
+
+    def __init__(self):
+        self._last = None          # (time [s], count) of the previous reading
+
+    def update(self, now: float, count):
+        if count is None:
+            return None
+        last, self._last = self._last, (float(now), int(count))
+        if last is None or count <= last[1]:
+            return None
+        return (last[0], float(now))
 
 
 def late_between(windows, t0: float, t1: float) -> float:
@@ -104,6 +128,20 @@ def late_total(windows, t0: float, t1: float) -> float:
             total += b - max(a, end)
             end = b
     return total
+
+
+def own_intervals(windows, t, period: float):
+    """The intervals between frames at times t [s] (shape (n,)) less this host's lateness around each, as far as it
+    can explain them: only the part of an interval beyond `period` [s] can be the host's (a late host delays a
+    frame; it never makes an on-time interval shorter). Returns (own, credited, late), each shape (n - 1,) [s]:
+    what the controller alone is answerable for, the lateness credited to the host, and all of the host's
+    lateness around each interval (late_total; 0 where it was on time).
+    """
+    t = np.asarray(t, dtype=float)
+    dt = np.diff(t)
+    late = np.array([late_total(windows, a, b) for a, b in zip(t[:-1], t[1:], strict=True)])
+    credited = np.minimum(late, np.maximum(dt - period, 0.0)) if dt.size else dt
+    return dt - credited, credited, late
 
 
 def explains(windows, t0: float, t1: float, excess: float) -> float:

@@ -38,6 +38,7 @@ from ..can.protocol import (
 )
 from .envelope import Envelope, Sample
 from .host_timing import HostTiming
+from .kernel_counts import KernelCounts
 from .report import Results
 from .trace import Trace
 
@@ -107,6 +108,10 @@ class ConformanceLink:
         self.host_timing = HostTiming()
         self.trace.host_late = self.host_timing.windows
         self.host_timing_files = tuple(host_timing_files)
+        # the kernel's count of this host's lateness, sampled by the receive loop (kernel_counts): the waits for a
+        # CPU of the processes standing for the controller (kernel.pids: the simulator with --sim), and the frames
+        # the socket under this run's bus dropped
+        self.kernel = KernelCounts(self.host_timing, bus if simulated is None else None)
         self.results = Results()
         self.lock = threading.RLock()
         self.state, self.faults, self.identity = 'unconfigured', 0, None
@@ -240,6 +245,7 @@ class ConformanceLink:
             beating = self.heartbeat
             if msg is not None:
                 self._on_frame(msg, msg.timestamp or now)
+            self.kernel.sample(now)
 
     def _on_frame(self, msg: can.Message, t: float):
         """One frame the controller sent, seen at `t` [s]: into the trace, and the link's view of the controller."""

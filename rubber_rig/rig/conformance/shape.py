@@ -60,17 +60,19 @@ class RampShape:
 
 
 def ramp_shape(u, fs: float, target: float, travel_velocity: float, start_velocity: float = 0.0,
-               decel: float = math.inf) -> RampShape:
+               decel: float = math.inf, gaps=None) -> RampShape:
     """The shape of the ramp whose applied commands are u [m] (the command before the ramp first, then one per
     sample), at sample rate fs [Hz], towards target [m].
 
     travel_velocity [m/s]: the most the ramp may travel at; start_velocity [m/s]: the velocity of the motion it
     inherits (a step of that size is no step); decel [m/s^2]: the braking it may use to stop the inherited motion
     (HostLimits deceleration), whose braking distance v^2 / (2 decel) it may pass the target by, plus
-    RAMP_OVERSHOOT.
+    RAMP_OVERSHOOT. gaps: samples between each two commands of u (len(u) - 1; default 1 each): across samples
+    never received (this host's loss) a move is judged per sample, as the most even one the data allow.
     """
     u = [float(x) for x in u]
-    steps = [abs(b - a) * fs for a, b in zip(u, u[1:], strict=False)]
+    gaps = [1] * max(len(u) - 1, 0) if gaps is None else [max(int(n), 1) for n in gaps]
+    steps = [abs(b - a) * fs / n for a, b, n in zip(u, u[1:], gaps, strict=False)]
     bound = max(travel_velocity, abs(start_velocity)) * (1 + STEP_TOLERANCE) + 2 * LSB * fs
     direction = math.copysign(1.0, target - u[0]) if u and abs(target - u[0]) > RAMP_OVERSHOOT else 0.0
     # a ramp that starts at its target must not move from it at all

@@ -34,9 +34,9 @@ from ..can.protocol import (
     FAULT_WATCHDOG,
     Protocol,
 )
-from ..conformance.host_timing import SIM_LATE_MIN
 from .constants import IDLE_PERIOD, STREAMING
 from .faults import FaultInjector
+from .lateness import LatenessLog
 from .plant import Actuator, DelayLine, Sensor, first_invalid
 from .receive import CommandReceiver
 from .specimen import build_specimen
@@ -106,9 +106,9 @@ class SimController:
         self._ramp_then = None            # defect fault_ramp_overshoot: the target after the ramp past it
         self._fault_since = None          # defect fault_clears_after_500ms: when the fault state began (wall)
         self._stop = threading.Event()
-        # paced: a text file that gets a 'start end' line (wall-clock s) for every deadline this process missed by
-        # SIM_LATE_MIN or more - its host was late, which a real controller on its own CPU would not be
-        self.timing_log = None
+        # paced: every deadline this process missed by SIM_LATE_MIN or more, when its file is set - its host was
+        # late, which a real controller on its own CPU would not be
+        self.lateness = LatenessLog()
         self._announced, self._thread = False, None
         self._deadline, self._idle_before, self._next_idle_hk = None, True, 0.0   # paced schedule (serve)
 
@@ -130,7 +130,10 @@ class SimController:
         self.announce(self._clock())
         while not self._stop.is_set():
             if self.paced:
-                msg = self.bus.recv(self.serve(self._clock()))   # wait for a frame until the next moment due
+                wait = self.serve(self._clock())
+                asked = time.time()
+                msg = self.bus.recv(wait)   # wait for a frame until the next moment due
+                self.lateness.woke(asked, wait, msg)
                 if msg is not None:
                     self.receiver.handle(msg)
                     self.receiver.receive_all()
@@ -173,16 +176,19 @@ class SimController:
         self.receiver.receive_all()      # frames that arrived meanwhile come before the ticks that are due
         n, deadline = 0, self._deadline
         due = int((now - deadline) * self.fs) + 1 if now >= deadline else 0
+        behind = now - deadline if due > 1 else 0.0
         if due > 1:
             # this process was not scheduled for `due` ticks: neither was the host in it, so the host watchdog does
             # not count that time (a real controller has its own CPU)
             sh.last_host_hb += due - 1
-            self._log_late(now - deadline)
+        started = time.time()
         while now >= deadline and sh.state in STREAMING:
             done = self._tick_block(int((now - deadline) * self.fs) + 1) or self._tick()
             deadline += done / self.fs
             n += done
         self._deadline = deadline
+        if behind:     # late from the missed deadline until the ticks due are caught up (a burst of frames)
+            self.lateness.missed(behind, started)
         if n > 1:
             sh.counters['overruns'] += n - 1
         self._idle_before = False
@@ -199,7 +205,7 @@ class SimController:
             self._clear_fault_by_itself(now)
         if now >= self._next_idle_hk:
             if self._idle_before:      # due while idle: a late wake-up is this host's lateness
-                self._log_late(now - self._next_idle_hk)
+                self.lateness.missed(now - self._next_idle_hk)
             self.tx.idle_housekeeping(now)
             self._next_idle_hk = max(self._next_idle_hk + IDLE_PERIOD, now)
         self._idle_before = True
@@ -214,12 +220,6 @@ class SimController:
         elif now - self._fault_since > 0.5:
             self.fault_bits, self.state, self._fault_since = 0, 'idle', None
             self.tx.housekeeping(force=True)
-
-    def _log_late(self, late: float):
-        """A deadline missed by `late` [s]: a line in timing_log when SIM_LATE_MIN or more."""
-        if self.timing_log is not None and late >= SIM_LATE_MIN:
-            t = time.time()
-            self.timing_log.write(f'{t - late:.6f} {t:.6f}\n')
 
     def pump(self):
         """Fast mode without a thread: handle every frame waiting on the bus and tick as far as the queued
