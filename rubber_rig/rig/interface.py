@@ -149,7 +149,10 @@ def _open(cfg: RigConfig, proto: Protocol, tap) -> Rig:
         if medium is not None:
             driver.measured_load = medium.load
         if cfg.paced:
-            sim.start()              # real time: the simulator keeps its own clock in a thread
+            # real time: the simulator keeps its own clock in a thread; the time this host keeps it from its
+            # deadlines is this host's lateness, never the rig's silence (rig.sim.lateness)
+            driver.supervisor.host_lateness = sim.lateness.behind
+            sim.start()
         else:
             driver.pump = sim.pump   # as fast as possible: the driver's poll() lets the simulator catch up
         rig = Rig(cfg, driver, sim=sim, sim_bus=sim_bus, can_log=tap, medium=medium)

@@ -67,6 +67,9 @@ class Supervisor:
         self._bad = collections.deque()  # (sample position, count) of bad-frame events, 1 s window
         now = clock()
         self.last_feedback = self._last_poll_wall = now   # clock times
+        # the embedded simulator's lateness ledger (callable: now [s] -> time [s] it was kept from its deadlines),
+        # None for a real controller; and how much of it starved() has already excused
+        self.host_lateness, self._sim_behind = None, None
         # a silence judged by the wall clock [s]; not paced (as fast as possible) a host turn may take longer
         self.wd_wall = config.watchdog_timeout if config.paced else max(config.watchdog_timeout, 2.0)
         # heartbeat, status and identity: each owed from the controller's first word on (liveness)
@@ -308,14 +311,22 @@ class Supervisor:
         """Called at the start of every poll: how long [s] this host was not scheduled (0 if it was on time).
 
         Silence is judged only over time the host was awake, so a starved host never blames the controller for
-        its own absence.
+        its own absence. With an embedded simulator (``host_lateness``, its LatenessLedger.behind) the time this
+        host kept the simulator from its deadlines is the host's absence too (the same busy spell counted once:
+        the longer of the two); a real controller has its own CPU, and no such discount.
         """
         now = self._clock()
         late = now - self._last_poll_wall if now - self._last_poll_wall > 0.5 * self.wd_wall else 0.0
-        if late:
-            self.last_feedback += late
-            self.liveness.shift(late)
         self._last_poll_wall = now
+        excused = late
+        if self.host_lateness is not None:
+            behind = self.host_lateness(now)
+            seen = behind if self._sim_behind is None else self._sim_behind   # (what it owed before it was asked)
+            excused = max(late, behind - seen)
+            self._sim_behind = max(seen, behind)
+        if excused:
+            self.last_feedback += excused
+            self.liveness.shift(excused)
         return late
 
     def watchdog(self, streaming: bool):
