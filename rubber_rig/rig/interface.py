@@ -154,7 +154,7 @@ def _open(cfg: RigConfig, proto: Protocol, tap) -> Rig:
             # a flooding node (bus_flood): then its own work for that node makes it late (0.6 s of 1 s in
             # test_bus_overload_mid_run_faults_safely_and_counts_the_loss), which a real controller would not be
             if flood is None:
-                driver.supervisor.host_lateness = sim.lateness.behind
+                driver.supervisor.host_lateness = sim.lateness.lag
             sim.start()
         else:
             driver.pump = sim.pump   # as fast as possible: the driver's poll() lets the simulator catch up

@@ -54,7 +54,7 @@ class SteppedRig:
                                         profile=cfg.frame_profile, clock=self.clock)
         self.driver = RigDriver(host_bus, cfg, clock=self.clock)
         if embedded:
-            self.driver.supervisor.host_lateness = self.controller.lateness.behind
+            self.driver.supervisor.host_lateness = self.controller.lateness.lag
         self.driver.measured_load = medium.load
         # the buses have no thread and no socket: they are shut down with the rig, whenever it is collected
         self.close = weakref.finalize(self, _shut_down, controller_bus, host_bus)

@@ -67,9 +67,9 @@ class Supervisor:
         self._bad = collections.deque()  # (sample position, count) of bad-frame events, 1 s window
         now = clock()
         self.last_feedback = self._last_poll_wall = now   # clock times
-        # the embedded simulator's lateness ledger (callable: now [s] -> time [s] it was kept from its deadlines),
-        # None for a real controller; and how much of it starved() has already excused
-        self.host_lateness, self._sim_behind = None, None
+        # the embedded simulator's lag (callable: now [s] -> how far [s] this host keeps its output behind its
+        # schedule, LatenessLedger.lag); None for a real controller
+        self.host_lateness = None
         # a silence judged by the wall clock [s]; not paced (as fast as possible) a host turn may take longer
         self.wd_wall = config.watchdog_timeout if config.paced else max(config.watchdog_timeout, 2.0)
         # heartbeat, status and identity: each owed from the controller's first word on (liveness)
@@ -150,7 +150,7 @@ class Supervisor:
         """'' when heartbeat, status and (require_identity) identity have each been received within their silence
         limits (liveness.silence_limits), else which one was not.
         """
-        return self.liveness.why_not_heard(self._clock(), self.io.expected)
+        return self.liveness.why_not_heard(self.controller_now(self._clock()), self.io.expected)
 
     def why_not_reset(self) -> str:
         """'' when the controller is at rest (faults may be cleared), else why not."""
@@ -311,23 +311,22 @@ class Supervisor:
         """Called at the start of every poll: how long [s] this host was not scheduled (0 if it was on time).
 
         Silence is judged only over time the host was awake, so a starved host never blames the controller for
-        its own absence. With an embedded simulator (``host_lateness``, its LatenessLedger.behind) the time this
-        host kept the simulator from its deadlines is the host's absence too (the same busy spell counted once:
-        the longer of the two); a real controller has its own CPU, and no such discount.
+        its own absence.
         """
         now = self._clock()
         late = now - self._last_poll_wall if now - self._last_poll_wall > 0.5 * self.wd_wall else 0.0
+        if late:
+            self.last_feedback += late
+            self.liveness.shift(late)
         self._last_poll_wall = now
-        excused = late
-        if self.host_lateness is not None:
-            behind = self.host_lateness(now)
-            seen = behind if self._sim_behind is None else self._sim_behind   # (what it owed before it was asked)
-            excused = max(late, behind - seen)
-            self._sim_behind = max(seen, behind)
-        if excused:
-            self.last_feedback += excused
-            self.liveness.shift(excused)
         return late
+
+    def controller_now(self, now: float) -> float:
+        """The moment [s] the controller's schedule has reached at `now` [s]: `now` for a real controller (its own
+        CPU); for the embedded simulator (``host_lateness``, its LatenessLedger.lag) `now` less how far this host
+        has kept its output behind, so its silence is judged on its schedule, never on the host's lateness.
+        """
+        return now if self.host_lateness is None else now - self.host_lateness(now)
 
     def watchdog(self, streaming: bool):
         """Host heartbeat when due; faults when feedback or the controller's heartbeat falls silent.
@@ -340,8 +339,9 @@ class Supervisor:
             io.send_host_heartbeat()
         if self.faults & FAULT_WATCHDOG:
             return
-        if streaming and not self.aborting and now - self.last_feedback > self.wd_wall:
-            self.fault(FAULT_WATCHDOG, f'no feedback for {now - self.last_feedback:.3f} s with setpoints queued')
+        sched = self.controller_now(now)       # silence is judged on the controller's schedule
+        if streaming and not self.aborting and sched - self.last_feedback > self.wd_wall:
+            self.fault(FAULT_WATCHDOG, f'no feedback for {sched - self.last_feedback:.3f} s with setpoints queued')
             return
         if io.expected is not None and not self.aborting:
             # an idle rig starting a new stream jumps to its first sample: the samples before it are not owed
@@ -353,7 +353,7 @@ class Supervisor:
         # every periodic frame is owed from the controller's first word on, heard or not (liveness): paced by
         # the clock, as fast as possible in samples of feedback (on a busy bus the lowest-priority heartbeat may
         # trail many samples legitimately, so paced the clock judges it)
-        quiet = self.liveness.silent(now, io.expected)
+        quiet = self.liveness.silent(sched, io.expected)
         if quiet is not None:
             name, seconds, ever = quiet
             what = {'ControllerHeartbeat': 'heartbeat', 'ControllerStatus': 'status',

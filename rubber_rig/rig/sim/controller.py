@@ -186,7 +186,7 @@ class SimController:
             deadline += done / self.fs
             n += done
         self._deadline = deadline
-        self.lateness.missed(late, deadline)
+        self.lateness.woke(now, late, deadline)
         if n > 1:
             sh.counters['overruns'] += n - 1
         self._idle_before = False
@@ -206,7 +206,7 @@ class SimController:
             self._log_late(late)     # due while idle: a late wake-up is this host's lateness
             self.tx.idle_housekeeping(now)
             self._next_idle_hk = max(self._next_idle_hk + IDLE_PERIOD, now)
-        self.lateness.missed(late, self._next_idle_hk)
+        self.lateness.woke(now, late, self._next_idle_hk)
         self._idle_before = True
         return min(IDLE_PERIOD, max(0.0, self._next_idle_hk - now))
 
