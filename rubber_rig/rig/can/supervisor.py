@@ -341,7 +341,8 @@ class Supervisor:
             return
         sched = self.controller_now(now)       # silence is judged on the controller's schedule
         if streaming and not self.aborting and sched - self.last_feedback > self.wd_wall:
-            self.fault(FAULT_WATCHDOG, f'no feedback for {sched - self.last_feedback:.3f} s with setpoints queued')
+            self.fault(FAULT_WATCHDOG, f'no feedback for {sched - self.last_feedback:.3f} s with setpoints queued'
+                       + self._excused(now, sched))
             return
         if io.expected is not None and not self.aborting:
             # an idle rig starting a new stream jumps to its first sample: the samples before it are not owed
@@ -360,4 +361,13 @@ class Supervisor:
                     'ControllerIdentity': 'identity'}[name]
             unit = 's' if cfg.paced else 's of samples'
             self.fault(FAULT_WATCHDOG, f'controller {what} silent for {seconds:.3f} {unit}'
-                       + ('' if ever else f' (no {name} received since the controller was first heard)'))
+                       + ('' if ever else f' (no {name} received since the controller was first heard)')
+                       + self._excused(now, sched))
+
+    def _excused(self, now: float, sched: float) -> str:
+        """What a watchdog fault of the embedded simulator says of the host's lateness it excused ('' for a real
+        controller): a fault under load names how far behind this host kept the simulator when it came.
+        """
+        if self.host_lateness is None:
+            return ''
+        return f' (embedded simulator: {(now - sched) * 1e3:.0f} ms of this host\'s lateness excused)'
