@@ -328,10 +328,12 @@ class Supervisor:
         """
         return now if self.host_lateness is None else now - self.host_lateness(now)
 
-    def watchdog(self, streaming: bool):
+    def watchdog(self, streaming: bool, read_at: float = None):
         """Host heartbeat when due; faults when feedback or the controller's heartbeat falls silent.
 
-        streaming: setpoints are queued that the rig has not yet played.
+        streaming: setpoints are queued that the rig has not yet played. read_at [s]: when the bus was last read
+        (default now): silence is judged up to then, as this host may have been descheduled since (the soak saw
+        'no feedback for 0.35 s' with the controller on time: frames waiting unread are not silence).
         """
         now = self._clock()
         cfg, io = self.cfg, self.io
@@ -339,10 +341,11 @@ class Supervisor:
             io.send_host_heartbeat()
         if self.faults & FAULT_WATCHDOG:
             return
-        sched = self.controller_now(now)       # silence is judged on the controller's schedule
+        read = now if read_at is None else min(read_at, now)
+        sched = self.controller_now(read)       # silence is judged on the controller's schedule
         if streaming and not self.aborting and sched - self.last_feedback > self.wd_wall:
             self.fault(FAULT_WATCHDOG, f'no feedback for {sched - self.last_feedback:.3f} s with setpoints queued'
-                       + self._excused(now, sched))
+                       + self._excused(now, read, sched))
             return
         if io.expected is not None and not self.aborting:
             # an idle rig starting a new stream jumps to its first sample: the samples before it are not owed
@@ -362,12 +365,13 @@ class Supervisor:
             unit = 's' if cfg.paced else 's of samples'
             self.fault(FAULT_WATCHDOG, f'controller {what} silent for {seconds:.3f} {unit}'
                        + ('' if ever else f' (no {name} received since the controller was first heard)')
-                       + self._excused(now, sched))
+                       + self._excused(now, read, sched))
 
-    def _excused(self, now: float, sched: float) -> str:
-        """What a watchdog fault of the embedded simulator says of the host's lateness it excused ('' for a real
-        controller): a fault under load names how far behind this host kept the simulator when it came.
+    def _excused(self, now: float, read: float, sched: float) -> str:
+        """What a watchdog fault says of the host lateness it excused: since the bus was read at `read` [s], and how
+        far behind this host kept an embedded simulator ('' when neither): a fault under load names it.
         """
-        if self.host_lateness is None:
-            return ''
-        return f' (embedded simulator: {(now - sched) * 1e3:.0f} ms of this host\'s lateness excused)'
+        parts = [f'{(now - read) * 1e3:.0f} ms since the bus was read'] if now - read >= 0.001 else []
+        if self.host_lateness is not None:
+            parts.append(f'embedded simulator {(read - sched) * 1e3:.0f} ms behind')
+        return f' (host lateness excused: {", ".join(parts)})' if parts else ''
