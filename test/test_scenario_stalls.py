@@ -54,6 +54,17 @@ def test_an_excitation_stalled_half_to_most_of_a_second_on_a_loaded_computer_doe
     assert [b.cycles_measured for b in o.blocks] == [60, 5]
 
 
+@pytest.mark.parametrize('stall', [0.5, 0.8])
+def test_a_sample_path_late_for_the_whole_program_is_read_from_the_stamps(stall):
+    """A loaded computer for seconds on end (the soak's second suite): every sample batch 0.5 s late, so the arrival
+    times alone never see the rig's pace; the batches' stamps do (rig_pace.MAX_STAMP_LAG 1 s: with 0.25 s this
+    stall lost the stream, 'no setpoints ... for 0.352 s (140 ms of setpoints left)')."""
+    o = Scenario(DURABILITY).delay('samples', 0.5).delay('setpoints', SETPOINTS_LATE).stall('excitation', 3.77,
+                                                                                           stall).run()
+    assert o.completed and not o.faults, (o.reason, o.faults)
+    assert full_cycles(o) == 60
+
+
 @pytest.mark.parametrize('at', [1.03, 3.77])
 def test_a_dead_excitation_on_a_loaded_computer_still_ends_its_program_at_rest_within_the_stated_time(at):
     """Dead at `at`: the driver calls the stream lost once less than stream_timeout of setpoints is left, lead_time

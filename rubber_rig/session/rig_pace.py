@@ -27,8 +27,10 @@ rig's sample 0 was at most ``now - end / fs`` on this clock; the earliest such o
 That alone still counts the fastest batch's own lag. A batch's stamp (the bus time its samples were measured,
 on time.time()'s scale like the owner's ROS clock on the same computer) removes it, when it is credible: a stamp
 origin is taken only if the batch arrived after it was measured and at most MAX_STAMP_LAG later. A clock of
-another computer (or simulated time) further off than that is ignored, and one off by less makes the stream at
-most MAX_STAMP_LAG longer (latency), never shorter: the arrival bound stays.
+another computer (or simulated time) further off than that is ignored, and one off by less makes the stream
+longer (latency; ProgramSession.ahead_of caps it at one lead past the measurement), never shorter: the arrival
+bound stays. The bound is long because a loaded computer's sample path lags that long for seconds on end (a
+second suite on the same cores), when the arrival times alone no longer tell the rig's pace.
 """
 from __future__ import annotations
 
@@ -40,7 +42,7 @@ from typing import Optional
 #: 100 ppm over 5 s is 0.5 ms)
 WINDOW = 5.0
 #: [s] the longest lag from a batch's stamp to its arrival that is taken as the sample path's, not a clock offset
-MAX_STAMP_LAG = 0.25
+MAX_STAMP_LAG = 1.0
 
 
 class RigPace:
