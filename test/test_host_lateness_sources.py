@@ -14,7 +14,7 @@
 
 """The sources of this host's lateness in a conformance run (docs/protocol.md, "Host timing"), on synthetic data:
 the kernel's run-queue waits of the simulator's process (kernel_counts), the CPU pressure reported with the run, and
-the simulator's own record of its missed deadlines (sim.lateness). Nothing here depends on how busy this host is.
+the simulator's own record of its missed deadlines (sim.timing_log). Nothing here depends on how busy this host is.
 """
 import os
 import socket

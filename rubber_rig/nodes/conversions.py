@@ -82,6 +82,11 @@ def _get(obj: Any, name: str, default=None):
 
 
 # -- samples and setpoints ------------------------------------------------------------------------------------
+def last_sample_time(msg: RigSampleBatch) -> float:
+    """When the last sample of a msg_defs/RigSampleBatch was measured [s] (its stamp is the first sample's)."""
+    return to_seconds(msg.header.stamp) + max(len(msg.displacement) - 1, 0) * msg.sample_period
+
+
 def sample_batch_msg(first_sequence: int, t0: float, sample_period: float, displacement, force, setpoint,
                      temperature: float, status_flags: int, frames_lost: int) -> RigSampleBatch:
     msg = RigSampleBatch()

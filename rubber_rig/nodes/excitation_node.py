@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""excitation: runs test programs on the rig, streaming setpoints ahead of the measured samples.
+"""excitation: runs test programs on the rig, streaming setpoints ahead of the rig.
 
 Action:      run_program (msg_defs/action/RunProgram; feedback: block, cycle, achieved amplitude; result:
              per-block summaries and why it ended). A goal that arrives while one runs is rejected at once
@@ -31,7 +31,7 @@ Signatures:  its setpoints, stream requests and heartbeats carry the rig key's s
 
 A program starts only on a stream the driver grants (one owner at a time), from wherever the rig holds (an approach
 ramp leads to the program's start). Setpoints are generated from the sample index by a rubber_rig.session.
-ProgramSession (never from wall-clock time) and published ``lead_time`` ahead of the latest measured sample. Abort,
+ProgramSession (never from wall-clock time) and published ``lead_time`` ahead of the sample the rig plays. Abort,
 cancel and hold go to the driver directly (its controller ramps at once, instead of after the queued lead); a rig
 that stops the stream, faults or goes silent ends the goal with the reason. When a program may start and when it
 must stop is decided by the ROS-free session.program_watch, session.recorder_watch and session.peer_watch on the
@@ -136,8 +136,7 @@ class ExcitationNode(Node):
 
     # -- inputs -----------------------------------------------------------------------------------------------
     def on_status(self, msg: RigStatus) -> None:
-        rig = readiness.rig_view(msg)
-        self.status = msg
+        rig, self.status = readiness.rig_view(msg), msg
         self.watch.on_rig_status(rig, self.clock())
         s = self.session
         if s is None or not s.stream_id or self.opening:
@@ -166,7 +165,8 @@ class ExcitationNode(Node):
         if s is None:
             return
         try:
-            self.act(s.measured(msg.first_sequence, conv.as_array(msg.displacement), conv.as_array(msg.setpoint)))
+            self.act(s.measured(msg.first_sequence, conv.as_array(msg.displacement), conv.as_array(msg.setpoint),
+                                self.clock(), conv.last_sample_time(msg)))   # (arrival and stamp: the rig's pace)
         except Exception as exc:   # noqa: BLE001 - a bad batch must not take the node down
             self.abort_program(f'internal error on a sample batch: {exc!r}')
 
@@ -270,7 +270,7 @@ class ExcitationNode(Node):
             return
         if s.held or not s.stream_id:
             return
-        s.stream(self._publish)
+        s.stream(self._publish, now)     # lead ahead of the sample the rig plays now (session.rig_pace)
         if self.goal_handle is not None:
             self.health.publish_feedback(self.goal_handle, s.runner.progress)
         if s.measured_to_end:

@@ -67,8 +67,8 @@ def declare_excitation_parameters(node: Node) -> ExcitationParams:
     compensation_memory = declare(node, 'compensation_memory', True, 'with amplitude control, each '
                                   'block starts from the gain and mean offset earlier blocks of the run '
                                   'learned (false: every block starts uncompensated)')
-    lead_time = declare(node, 'lead_time', LEAD_TIME, 'how far ahead of the latest measured sample '
-                        'setpoints are streamed', range=(0.02, 5.0), units='s')
+    lead_time = declare(node, 'lead_time', LEAD_TIME, 'how far ahead of the sample the rig plays (from when '
+                        'its samples arrived) setpoints are streamed', range=(0.02, 5.0), units='s')
     batch_size = declare(node, 'batch_size', 50, 'setpoints per SetpointBatch', range=(1, 5000))
     stream_period = declare(node, 'stream_period', 0.02, 'period of the streaming timer',
                             range=(0.001, 0.5), units='s')

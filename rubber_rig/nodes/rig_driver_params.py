@@ -38,6 +38,7 @@ from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.rig.config import BusLoadError, ConfigError, RigConfig
 from rubber_rig.rig.live import LIMIT_SETTINGS, LIVE_SETTINGS, PROTECTIVE_SETTINGS, RIG_SETTINGS
 from rubber_rig.safety import LimitError, Limits
+from rubber_rig.session.liveness import OWNER_TIMEOUT
 from rubber_rig.settings import nest, setting_for
 
 __all__ = ['BATCH_PERIOD', 'LIVE_PARAMETERS', 'RIG_SETTINGS', 'BusCapacityError', 'RigDriverParams', 'asked_limits',
@@ -124,9 +125,9 @@ def declare_rig_driver_parameters(node: Node) -> RigDriverParams:
     status_period = declare(node, 'status_period', 0.1, 'status publishing period', range=(0.01, 10.0), units='s')
     diagnostics_period = declare(node, 'diagnostics_period', 1.0, 'diagnostics period', range=(0.1, 60.0),
                                  units='s')
-    owner_timeout = declare(node, 'owner_timeout', 1.0, "the stream owner's heartbeat silent this long is stream "
-                            'loss, also while it holds the rig (an owner that never beat, e.g. a script without one, '
-                            'is watched by stream_timeout alone)', range=(0.3, 30.0), units='s')
+    owner_timeout = declare(node, 'owner_timeout', OWNER_TIMEOUT, "the stream owner's heartbeat silent this long is "
+                            'stream loss, also while it holds the rig (an owner that never beat, e.g. a script without '
+                            'one, is watched by stream_timeout alone)', range=(0.3, 30.0), units='s')
     nice = declare(node, 'nice', 0, 'niceness of the rig_driver process, set when it starts as a process of its own '
                    '(rubber_rig.rig.priority): below 0 its bus reads and setpoints get the CPU before the other '
                    "programs of this computer (ros2_control's thread_priority, without a real-time kernel); needs "

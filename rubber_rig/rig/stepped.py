@@ -39,9 +39,13 @@ def stepped_medium(cfg: RigConfig, clock) -> BusMedium:
 class SteppedRig:
     """A paced simulated rig (RigConfig or settings over the defaults) whose time is ``now`` [s]; ``step`` [s]
     the time one ``poll()`` lets pass (rig_driver's poll period by default 1 ms here).
+
+    embedded: the controller stands for rig_driver's embedded simulator (a thread of the driver's process: the
+    time it misses its deadlines is the host's, and the driver excuses it); by default it stands for a real
+    controller on its own CPU, whose silence faults the rig.
     """
 
-    def __init__(self, config=None, step: float = 0.001, start: float = 100.0):
+    def __init__(self, config=None, step: float = 0.001, start: float = 100.0, embedded: bool = False):
         cfg = config if isinstance(config, RigConfig) else RigConfig.from_dict({**(config or {}), 'paced': True})
         self.cfg, self.step, self.now = cfg, float(step), float(start)
         medium = stepped_medium(cfg, self.clock)
@@ -49,6 +53,8 @@ class SteppedRig:
         self.controller = SimController(controller_bus, cfg.sample_rate, cfg.sim, paced=True,
                                         profile=cfg.frame_profile, clock=self.clock)
         self.driver = RigDriver(host_bus, cfg, clock=self.clock)
+        if embedded:
+            self.driver.supervisor.host_lateness = self.controller.lateness.lag
         self.driver.measured_load = medium.load
         # the buses have no thread and no socket: they are shut down with the rig, whenever it is collected
         self.close = weakref.finalize(self, _shut_down, controller_bus, host_bus)

@@ -21,12 +21,25 @@ a scenario (rubber_rig.session.scenario); ``clock`` is the time they are judged 
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 from typing import Callable
 
 PERIOD = 0.25        # [s] between beats
 # [s] without a beat: the node is called silent (three beats missed; a watcher that checks every 0.1 s names
 # it within 0.85 s of its last beat)
 SILENT = 0.75
+#: [s] rig_driver's owner_timeout by default: a stream owner silent this long has lost its stream. Above the
+#: longest executor stall a busy computer causes (0.8 s) plus a beat period, so a stalled owner keeps its stream;
+#: a dead streaming owner is caught earlier by its queue running short (the driver's stream_timeout)
+OWNER_TIMEOUT = 1.5
+
+
+@dataclass
+class Beat:
+    """A heartbeat as the owner watch reads it (msg_defs/Heartbeat's node and pid)."""
+
+    node: str
+    pid: int
 
 
 class Peers:

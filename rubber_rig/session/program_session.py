@@ -16,12 +16,14 @@
 
 The excitation node (setpoints as ROS messages, the grant from the driver's open_stream service) and
 :func:`.run.run_program` (an in-process RigDriver) both run a program through it, so the stream's rules are
-written once: the setpoints are generated from the sample index and kept ``lead`` samples ahead of the latest
-measured sample; a hold keeps the stream (the driver holds the rig) and a resume on a new grant continues the
+written once: the setpoints are generated from the sample index and kept ``lead`` samples ahead of the sample the
+rig plays (the latest measured one, or where the rig's pace has taken it since, on the caller's clock: rig_pace);
+a hold keeps the stream (the driver holds the rig) and a resume on a new grant continues the
 held block with the full cycles it had not run, counted from where the rig left the program (found in the applied
 command measured after the hold: the rig runs on through what was streamed ahead until the hold reaches it); the
 program has ended once its last setpoint was generated and measured. The session also carries the program's
-detectors (what they judge, since when they were blind). Time is the sample index: nothing here reads a clock.
+detectors (what they judge, since when they were blind). Time is the sample index and the caller's `now`: nothing
+here reads a clock.
 """
 from __future__ import annotations
 
@@ -32,16 +34,18 @@ import numpy as np
 from ..excitation.detectors import Event, Monitor, blind_for, cycle_of
 from ..excitation.runner import ProgramRunner
 from ..excitation.streamer import SetpointChunk, SetpointStreamer
+from .rig_pace import RigPace
 
 #: applied command within this of the setpoint handed on [m]: the rig ran the program's sample (the feedback frames
 #: carry the command in 0.1 um steps; run_program's fault split uses the same bound)
 FOLLOW_TOLERANCE = 1.5e-7
 
-#: [s] how far ahead of the latest measured sample a program is streamed by default (the excitation's lead_time):
-#: the queue rides out a stall of its producer of lead - the driver's stream_timeout (0.15 s) - one stream period
-#: (0.7 s: 0.55 s; a busy computer delays an executor 0.3-0.8 s), at the price of amplitude-loop latency (a 30 Hz
-#: block of 40 cycles ends 0.6 % short, 0.0 % at 0.5 s, 1.3 % at 0.8 s: benchmarks/bench_scenario.py --lead)
-LEAD_TIME = 0.7
+#: [s] how far ahead of the sample the rig plays (ProgramSession.ahead_of) a program is streamed by default (the
+#: excitation's lead_time): the queue rides out a stall of its producer of lead - the driver's stream_timeout
+#: (0.15 s) - one stream period - the setpoints' way to the driver; a busy computer delays an executor 0.3-0.8 s,
+#: and 1.0 s rides out 0.8 s (issue 34 item 4). The price is amplitude-loop latency (a 30 Hz block of 40 cycles as
+#: a program's first ends 2.7 % short, 0.0 % at 0.5 s, 1.3 % at 0.8 s: benchmarks/bench_scenario.py --lead)
+LEAD_TIME = 1.0
 
 #: publish(first_sequence, displacement [m], block_index, end_of_stream): how a session hands setpoints on
 Publish = Callable[[int, object, int, bool], None]
@@ -65,6 +69,7 @@ class ProgramSession:
         self._sent: list = []             # SetpointChunks handed on and not yet measured: (first, setpoints)
         self.elapsed_samples = 0          # program samples measured (rig time of the program, holds excluded)
         self.last_cycle_end = grant.first_sequence   # end of the latest judged cycle (detectors' blindness)
+        self.pace = RigPace(runner.fs)    # the sample the rig plays now, on the owner's clock
         self._open(grant)
 
     @classmethod
@@ -91,6 +96,7 @@ class ProgramSession:
         self.streamer = SetpointStreamer(self.runner, self.lead, self.chunk)
         self.stream_id, self.held = grant.stream_id, False
         self.start_sequence, self.start_position = grant.first_sequence, grant.position
+        self.pace.reset()
         # samples of an earlier rig (a restarted driver counts from 0) do not count
         self.next_sample: Optional[int] = None   # sequence after the latest measured sample of this stream
 
@@ -108,9 +114,11 @@ class ProgramSession:
         """A batch of ``n`` samples from ``first_sequence`` lies wholly before this stream (not the program's)."""
         return first_sequence + n <= self.start_sequence
 
-    def measured(self, first_sequence: int, displacement, setpoint=None) -> list[Event]:
+    def measured(self, first_sequence: int, displacement, setpoint=None, now: Optional[float] = None,
+                 stamp: Optional[float] = None) -> list[Event]:
         """A batch of measured samples [m] of this stream: to the amplitude control (not while held) and to the
-        end-of-test triggers. Returns the detector events the batch trips.
+        end-of-test triggers. Returns the detector events the batch trips. now [s]: when it arrived on the owner's
+        clock, stamp [s]: when its last sample was measured (the rig's pace, see ``ahead_of``; None: not known).
 
         setpoint: the command [m] the rig applied to each sample (RigSampleBatch.setpoint), shape (n,). While held
         it tells where the rig left the program (its hold ramp's first sample, see ``left_at``); without it the
@@ -118,6 +126,8 @@ class ProgramSession:
         """
         n = len(displacement)
         self.next_sample = first_sequence + n
+        if now is not None and n:
+            self.pace.observe(self.next_sample, now, stamp)
         if self.held:
             if n and setpoint is not None and len(setpoint) == n:
                 ran = self._follow(first_sequence, np.asarray(setpoint, dtype=float))
@@ -151,10 +161,23 @@ class ProgramSession:
             return True                    # resumed after the rig had run the whole program: nothing to measure
         return self.next_sample is not None and self.next_sample >= self.end_sequence
 
+    def ahead_of(self, now: Optional[float] = None) -> int:
+        """The sequence the stream is kept ``lead`` ahead of: the sample the rig plays at `now` [s] on the owner's
+        clock (rig_pace.RigPace, from when the sample batches arrived) where that is past the latest measured one,
+        else measured_sequence (now None, or no pace known yet). At most ``lead`` past the measurement: a rig that
+        stopped keeping its pace (it faults or holds) costs at most one lead of latency.
+
+        Streaming ahead of the measurement alone counted the sample path's lag against the rig's reserve: on a busy
+        computer the samples arrive late just when the excitation stalls (issue 34 item 4).
+        """
+        measured = self.measured_sequence
+        playing = None if now is None else self.pace.playing(now)
+        return measured if playing is None else max(measured, min(playing, measured + self.lead))
+
     # -- the setpoints ------------------------------------------------------------------------------------------
     def due(self, measured: Optional[int] = None) -> Iterator[SetpointChunk]:
-        """The chunks that bring the stream ``lead`` ahead of ``measured`` (default: measured_sequence); a
-        generator, see SetpointStreamer.due.
+        """The chunks that bring the stream ``lead`` ahead of ``measured`` (default: measured_sequence; see
+        ``ahead_of``); a generator, see SetpointStreamer.due.
         """
         for chunk in self.streamer.due(self.measured_sequence if measured is None else measured):
             if chunk.displacement.size:
@@ -194,13 +217,14 @@ class ProgramSession:
             self.elapsed_samples += 1          # the rig ran this program sample after the hold was asked for
         return (start, self.left_at) if self.left_at > start else None
 
-    def stream(self, publish: Publish) -> None:
-        """Hand on what is due; the program's end once (an empty batch if its last setpoints went out before);
-        with nothing due, an empty keep-alive batch (the driver's stream timeout watches for one).
+    def stream(self, publish: Publish, now: Optional[float] = None) -> None:
+        """Hand on what is due (``lead`` ahead of ``ahead_of(now)``, now [s] on the owner's clock); the program's
+        end once (an empty batch if its last setpoints went out before); with nothing due, an empty keep-alive
+        batch (the driver's stream timeout watches for one).
         """
         r = self.runner
         sent = False
-        for chunk in self.due():
+        for chunk in self.due(self.ahead_of(now)):
             publish(chunk.first_sequence, chunk.displacement, chunk.block, chunk.end)
             sent = True
         if r.finished and self.end_sequence is None:

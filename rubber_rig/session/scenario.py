@@ -21,7 +21,7 @@ What runs, each the same code the nodes call:
 * the driver's admission of setpoint batches (rig.can.gate.StreamGate) and its owner watch
   (session.liveness.OwnerWatch: an owner that beat and fell silent for owner_timeout loses its stream);
 * the excitation's program session (session.ProgramSession): setpoints generated from the sample index and
-  streamed ``lead_time`` ahead of the measured samples, every ``stream_period``, with a heartbeat every
+  streamed ``lead_time`` ahead of the sample the rig plays, every ``stream_period``, with a heartbeat every
   liveness.PERIOD; its detectors judge each cycle and their strongest action (hold, end) is taken as the
   excitation node takes it;
 * the element model (online.OnlinePredictor) predicting every sample batch, and its cycle cutter
@@ -38,7 +38,6 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from dataclasses import dataclass
 from typing import Optional
 
 import numpy as np
@@ -52,35 +51,16 @@ from ..rig.can.batcher import SampleBatcher
 from ..rig.can.gate import StreamGate
 from ..rig.can.stream import StreamRefused
 from ..rig.stepped import SteppedRig
-from .liveness import PERIOD, OwnerWatch, Peers
+from .liveness import OWNER_TIMEOUT, PERIOD, Beat, OwnerWatch, Peers
 from .program_session import LEAD_TIME, ProgramSession
 from .program_watch import RigView, detector_action, why_rig_stopped
+from .scenario_delays import PATHS, Link, Stall
 from .scenario_outcome import Outcome, sample_batch_record, setpoint_batch_record
 
 #: the names components are stalled by
 COMPONENTS = ('excitation', 'driver', 'controller', 'element_model')
 BATCH_PERIOD, MAX_BATCH_DELAY = 0.01, 0.1   # [s] rig_driver's sample batches (batch_size 0), max_batch_delay
 MIN_CYCLE_AMPLITUDE = 5e-6      # [m] smallest cycle the element model pairs (its min_cycle_amplitude default)
-
-
-@dataclass
-class Beat:
-    """A heartbeat as the owner watch reads it (msg_defs/Heartbeat's node and pid)."""
-
-    node: str
-    pid: int
-
-
-@dataclass
-class Stall:
-    """`component` misses its wake-ups from `at` for `duration` [s] on the scenario clock (inf: never again)."""
-
-    component: str
-    at: float
-    duration: float
-
-    def covers(self, now: float) -> bool:
-        return self.at <= now < self.at + self.duration
 
 
 class Scenario:
@@ -97,7 +77,7 @@ class Scenario:
     OWNER = '/scenario/excitation'
 
     def __init__(self, program, rig: Optional[dict] = None, *, lead_time: float = LEAD_TIME,
-                 stream_period: float = 0.02, batch_size: int = 50, owner_timeout: float = 1.0,
+                 stream_period: float = 0.02, batch_size: int = 50, owner_timeout: float = OWNER_TIMEOUT,
                  poll_period: float = 0.002, amplitude_control: bool = False, model: Optional[ModelChoice] = None,
                  detectors: Optional[list] = None, record=None, start: float = 100.0):
         self.rig = SteppedRig(rig, step=poll_period, start=start)
@@ -128,10 +108,10 @@ class Scenario:
         self.grant = None
         self.record, self.writer = record, None
         # the topics: what each component receives at its next wake-up
-        self.samples = deque()          # sample blocks on their way to the excitation
+        self.samples = Link()           # sample blocks on their way to the excitation
         self.model_inbox = deque()      # sample blocks and setpoint batches on their way to the element model
         self.cycles = deque()           # the element model's cycles on their way to the excitation
-        self.batches = deque()          # setpoint batches on their way to the driver
+        self.batches = Link()           # setpoint batches on their way to the driver
         self.measured = []              # every block the driver measured (what a recorder would record)
         self.ended, self.completed, self.started_at, self._measured_from = '', False, None, 0
         self._excitation_due = self.now
@@ -186,6 +166,18 @@ class Scenario:
     def wait(self, seconds: float) -> None:
         """Let `seconds` [s] of scenario time pass (between programs: an operator looking at the rig)."""
         self._advance_until(lambda: False, seconds, '')
+
+    def delay(self, path: str, seconds: float, at: float = 0.0, duration: float = math.inf) -> 'Scenario':
+        """Messages on `path` ('samples': driver to excitation, 'setpoints': excitation to driver) published from
+        `at` [s after the program's start] for `duration` [s] arrive `seconds` [s] late (a loaded computer).
+        """
+        if path not in PATHS:
+            raise ValueError(f'no path {path!r}: one of {", ".join(PATHS)}')
+        (self.samples if path == 'samples' else self.batches).delay(seconds, at, duration)
+        return self
+
+    def _since_start(self) -> Optional[float]:
+        return None if self.started_at is None else self.now - self.started_at
 
     def _stalled(self, component: str) -> bool:
         if self.started_at is None or not self.stalls:
@@ -261,8 +253,8 @@ class Scenario:
             self._wake_excitation()
 
     def _wake_driver(self) -> None:
-        while self.batches:
-            self.gate.offer(self.OWNER, self.OWNER, *self.batches.popleft())
+        for batch in self.batches.arrived(self.now):
+            self.gate.offer(self.OWNER, self.OWNER, *batch)
         why = self.owner_watch.lost(self.driver.stream, self.owner_timeout)
         if why:
             self.driver.owner_lost(why)
@@ -280,7 +272,7 @@ class Scenario:
                 self.writer.write_message(*sample_batch_record(batch))
             if batch is not None:
                 self.measured.append(batch)
-                self.samples.append(batch)
+                self.samples.publish(batch, self.now, self._since_start())
                 self.model_inbox.append(batch)
 
     def _wake_model(self) -> None:
@@ -297,7 +289,7 @@ class Scenario:
     def _publish(self, first, x, block, end) -> None:
         """The excitation's setpoint batch, to the driver's command channel and the setpoints topic."""
         batch = (first, np.asarray(x, dtype=float), self.session.stream_id, bool(end), block)
-        self.batches.append(batch[:4])
+        self.batches.publish(batch[:4], self.now, self._since_start())
         self.streamed.append(batch[:2])
         if self.writer is not None:
             self.writer.write_message(*setpoint_batch_record(self.now, batch, self.OWNER, 1.0 / self.fs))
@@ -331,10 +323,10 @@ class Scenario:
             self.peers.on_beat(Beat(self.OWNER, 1))
             self._next_beat = self.now + PERIOD
         s = self.session
-        while self.samples:
-            b = self.samples.popleft()
+        for b in self.samples.arrived(self.now):
             if not s.before_stream(b.first_sequence, len(b)):
-                self._act(s.measured(b.first_sequence, b.displacement, b.setpoint))
+                self._act(s.measured(b.first_sequence, b.displacement, b.setpoint, self.now,
+                                     b.t0 + (len(b) - 1) * b.sample_period))
             if self.session is None:
                 return
         while self.cycles:
@@ -354,7 +346,7 @@ class Scenario:
             return
         if s.held:
             return
-        s.stream(self._publish)
+        s.stream(self._publish, self.now)
         if s.measured_to_end:
             self._end('', completed=not s.runner.aborted)
 

@@ -320,9 +320,10 @@ class RigDriver:
             self._drain_outbox()
         if self.pump is not None:
             self.pump()
+        read_at = self._clock()     # silence is known up to this read, however late the checks below run
         self.io.receive_all()
         s = self._stream
-        self.supervisor.watchdog(s is not None and s.playing(self.io.expected))
+        self.supervisor.watchdog(s is not None and s.playing(self.io.expected), read_at)
         self._check_stream()
         return self.io.next_block()
 

@@ -67,6 +67,9 @@ class Supervisor:
         self._bad = collections.deque()  # (sample position, count) of bad-frame events, 1 s window
         now = clock()
         self.last_feedback = self._last_poll_wall = now   # clock times
+        # the embedded simulator's lag (callable: now [s] -> how far [s] this host keeps its output behind its
+        # schedule, LatenessLedger.lag); None for a real controller
+        self.host_lateness = None
         # a silence judged by the wall clock [s]; not paced (as fast as possible) a host turn may take longer
         self.wd_wall = config.watchdog_timeout if config.paced else max(config.watchdog_timeout, 2.0)
         # heartbeat, status and identity: each owed from the controller's first word on (liveness)
@@ -147,7 +150,7 @@ class Supervisor:
         """'' when heartbeat, status and (require_identity) identity have each been received within their silence
         limits (liveness.silence_limits), else which one was not.
         """
-        return self.liveness.why_not_heard(self._clock(), self.io.expected)
+        return self.liveness.why_not_heard(self.controller_now(self._clock()), self.io.expected)
 
     def why_not_reset(self) -> str:
         """'' when the controller is at rest (faults may be cleared), else why not."""
@@ -328,10 +331,19 @@ class Supervisor:
         self._last_poll_wall = now
         return late
 
-    def watchdog(self, streaming: bool):
+    def controller_now(self, now: float) -> float:
+        """The moment [s] the controller's schedule has reached at `now` [s]: `now` for a real controller (its own
+        CPU); for the embedded simulator (``host_lateness``, its LatenessLedger.lag) `now` less how far this host
+        has kept its output behind, so its silence is judged on its schedule, never on the host's lateness.
+        """
+        return now if self.host_lateness is None else now - self.host_lateness(now)
+
+    def watchdog(self, streaming: bool, read_at: float = None):
         """Host heartbeat when due; faults when feedback or the controller's heartbeat falls silent.
 
-        streaming: setpoints are queued that the rig has not yet played.
+        streaming: setpoints are queued that the rig has not yet played. read_at [s]: when the bus was last read
+        (default now): silence is judged up to then, as this host may have been descheduled since (the soak saw
+        'no feedback for 0.35 s' with the controller on time: frames waiting unread are not silence).
         """
         now = self._clock()
         cfg, io = self.cfg, self.io
@@ -339,8 +351,11 @@ class Supervisor:
             io.send_host_heartbeat()
         if self.faults & FAULT_WATCHDOG:
             return
-        if streaming and not self.aborting and now - self.last_feedback > self.wd_wall:
-            self.fault(FAULT_WATCHDOG, f'no feedback for {now - self.last_feedback:.3f} s with setpoints queued')
+        read = now if read_at is None else min(read_at, now)
+        sched = self.controller_now(read)       # silence is judged on the controller's schedule
+        if streaming and not self.aborting and sched - self.last_feedback > self.wd_wall:
+            self.fault(FAULT_WATCHDOG, f'no feedback for {sched - self.last_feedback:.3f} s with setpoints queued'
+                       + self._excused(now, read, sched))
             return
         if io.expected is not None and not self.aborting:
             # an idle rig starting a new stream jumps to its first sample: the samples before it are not owed
@@ -352,11 +367,21 @@ class Supervisor:
         # every periodic frame is owed from the controller's first word on, heard or not (liveness): paced by
         # the clock, as fast as possible in samples of feedback (on a busy bus the lowest-priority heartbeat may
         # trail many samples legitimately, so paced the clock judges it)
-        quiet = self.liveness.silent(now, io.expected)
+        quiet = self.liveness.silent(sched, io.expected)
         if quiet is not None:
             name, seconds, ever = quiet
             what = {'ControllerHeartbeat': 'heartbeat', 'ControllerStatus': 'status',
                     'ControllerIdentity': 'identity'}[name]
             unit = 's' if cfg.paced else 's of samples'
             self.fault(FAULT_WATCHDOG, f'controller {what} silent for {seconds:.3f} {unit}'
-                       + ('' if ever else f' (no {name} received since the controller was first heard)'))
+                       + ('' if ever else f' (no {name} received since the controller was first heard)')
+                       + self._excused(now, read, sched))
+
+    def _excused(self, now: float, read: float, sched: float) -> str:
+        """What a watchdog fault says of the host lateness it excused: since the bus was read at `read` [s], and how
+        far behind this host kept an embedded simulator ('' when neither): a fault under load names it.
+        """
+        parts = [f'{(now - read) * 1e3:.0f} ms since the bus was read'] if now - read >= 0.001 else []
+        if self.host_lateness is not None:
+            parts.append(f'embedded simulator {(read - sched) * 1e3:.0f} ms behind')
+        return f' (host lateness excused: {", ".join(parts)})' if parts else ''

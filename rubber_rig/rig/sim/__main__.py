@@ -53,9 +53,9 @@ def main(argv=None) -> int:
     bus = open_bus(cfg, receive_buffer=RECEIVE_BUFFER)
     sim = SimController(bus, cfg.sample_rate, cfg.sim, cfg.paced, profile=cfg.frame_profile)
     if args.timing_log:
-        sim.lateness.file = open(args.timing_log, 'a', encoding='utf-8', buffering=1)   # noqa: SIM115 - whole run
+        sim.timing_log.file = open(args.timing_log, 'a', encoding='utf-8', buffering=1)   # noqa: SIM115 - whole run
         inode = socket_inode(bus)
-        sim.lateness.drops = lambda: dropped(inode)     # frames its socket lost are this host's loss too
+        sim.timing_log.drops = lambda: dropped(inode)     # frames its socket lost are this host's loss too
     signal.signal(signal.SIGTERM, lambda *_: sim._stop.set())
     signal.signal(signal.SIGINT, lambda *_: sim._stop.set())
     print('rubber_rig.rig.sim: serving', cfg.backend, cfg.channel or '', flush=True)
@@ -63,7 +63,7 @@ def main(argv=None) -> int:
         sim.run_forever()
     finally:
         bus.shutdown()
-        sim.lateness.close()
+        sim.timing_log.close()
     return 0
 
 

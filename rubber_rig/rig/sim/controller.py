@@ -36,7 +36,7 @@ from ..can.protocol import (
 )
 from .constants import IDLE_PERIOD, STREAMING
 from .faults import FaultInjector
-from .lateness import LatenessLog
+from .lateness import LatenessLedger, LatenessLog
 from .plant import Actuator, DelayLine, Sensor, first_invalid
 from .receive import CommandReceiver
 from .specimen import build_specimen
@@ -100,15 +100,14 @@ class SimController:
         self.flood_bus = flood_bus
         # fault schedules run on rig time plus, paced, the wall time the rig stood idle after its first tick: a
         # fault window ends in real time even while the rig stands faulted (first program: sample = time * fs)
-        self.idle_ticks = 0
-        self._idle_since = None
-        self.ramp = None
+        self.idle_ticks, self._idle_since, self.ramp = 0, None, None
         self._ramp_then = None            # defect fault_ramp_overshoot: the target after the ramp past it
         self._fault_since = None          # defect fault_clears_after_500ms: when the fault state began (wall)
         self._stop = threading.Event()
         # paced: every deadline this process missed by SIM_LATE_MIN or more, when its file is set - its host was
         # late, which a real controller on its own CPU would not be
-        self.lateness = LatenessLog()
+        self.timing_log = LatenessLog()
+        self.lateness = LatenessLedger()   # how far its output lags its schedule now: for a driver in this process
         self._announced, self._thread = False, None
         self._deadline, self._idle_before, self._next_idle_hk = None, True, 0.0   # paced schedule (serve)
 
@@ -128,22 +127,25 @@ class SimController:
         bus until the next tick or housekeeping is due; fast: as far as the queued setpoints allow).
         """
         self.announce(self._clock())
-        while not self._stop.is_set():
-            if self.paced:
-                wait = self.serve(self._clock())
-                asked = time.time()
-                msg = self.bus.recv(wait)   # wait for a frame until the next moment due
-                self.lateness.woke(asked, wait, msg)
-                if msg is not None:
-                    self.receiver.handle(msg)
-                    self.receiver.receive_all()
-            else:
-                msg = self.bus.recv(0.02)
-                while msg is not None:
-                    self._handle_in_order(msg)
-                    msg = self.bus.recv(0)
-                self._catch_up()   # ticks only as far as setpoints are queued (or while ramping down)
-                self.tx.send_feedback()
+        try:
+            while not self._stop.is_set():
+                if self.paced:
+                    wait = self.serve(self._clock())
+                    asked = time.time()
+                    msg = self.bus.recv(wait)   # wait for a frame until the next moment due
+                    self.timing_log.woke(asked, wait, msg)
+                    if msg is not None:
+                        self.receiver.handle(msg)
+                        self.receiver.receive_all()
+                else:
+                    msg = self.bus.recv(0.02)
+                    while msg is not None:
+                        self._handle_in_order(msg)
+                        msg = self.bus.recv(0)
+                    self._catch_up()   # ticks only as far as setpoints are queued (or while ramping down)
+                    self.tx.send_feedback()
+        finally:
+            self.lateness.stopped()     # nothing it misses from now on is this host's lateness
 
     def announce(self, now: float):
         """Power-up at `now` [s] on the clock: status and identity go out, the idle periods start."""
@@ -187,8 +189,9 @@ class SimController:
             deadline += done / self.fs
             n += done
         self._deadline = deadline
+        self.lateness.woke(now, behind, deadline)
         if behind:     # late from the missed deadline until the ticks due are caught up (a burst of frames)
-            self.lateness.missed(behind, started)
+            self.timing_log.missed(behind, started)
         if n > 1:
             sh.counters['overruns'] += n - 1
         self._idle_before = False
@@ -203,11 +206,12 @@ class SimController:
             self._idle_since = now
         if 'fault_clears_after_500ms' in self.defects:
             self._clear_fault_by_itself(now)
+        late = now - self._next_idle_hk if self._idle_before and now >= self._next_idle_hk else 0.0
         if now >= self._next_idle_hk:
-            if self._idle_before:      # due while idle: a late wake-up is this host's lateness
-                self.lateness.missed(now - self._next_idle_hk)
+            self.timing_log.missed(late)     # due while idle: a late wake-up is this host's lateness
             self.tx.idle_housekeeping(now)
             self._next_idle_hk = max(self._next_idle_hk + IDLE_PERIOD, now)
+        self.lateness.woke(now, late, self._next_idle_hk)
         self._idle_before = True
         return min(IDLE_PERIOD, max(0.0, self._next_idle_hk - now))
 
