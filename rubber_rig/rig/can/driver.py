@@ -322,8 +322,7 @@ class RigDriver:
             self.pump()
         read_at = self._clock()     # silence is known up to this read, however late the checks below run
         self.io.receive_all()
-        s = self._stream
-        self.supervisor.watchdog(s is not None and s.playing(self.io.expected), read_at)
+        self.supervisor.watchdog(self._stream is not None and self._stream.playing(self.io.expected), read_at)
         self._check_stream()
         return self.io.next_block()
 
