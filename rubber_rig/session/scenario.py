@@ -132,7 +132,7 @@ class Scenario:
         """
         if component not in COMPONENTS:
             raise ValueError(f'no component {component!r}: one of {", ".join(COMPONENTS)}')
-        self.stalls.append(Stall(component, float(at), float(duration)))
+        self.stalls.append(Stall(float(at), float(duration), component=component))
         return self
 
     def hold(self, at: float, duration: float) -> 'Scenario':

@@ -30,27 +30,28 @@ PATHS = ('samples', 'setpoints')
 
 
 @dataclass
-class Stall:
-    """`component` misses its wake-ups from `at` for `duration` [s] on the scenario clock (inf: never again)."""
-
-    component: str
-    at: float
-    duration: float
-
-    def covers(self, now: float) -> bool:
-        return self.at <= now < self.at + self.duration
-
-
-@dataclass
-class Delay:
-    """Messages published from `at` [s after the program's start] for `duration` [s] arrive `seconds` [s] late."""
+class Window:
+    """From `at` for `duration` [s] on the scenario clock (inf: never ending)."""
 
     at: float
     duration: float
-    seconds: float
 
     def covers(self, t: float) -> bool:
         return self.at <= t < self.at + self.duration
+
+
+@dataclass
+class Stall(Window):
+    """`component` misses its wake-ups from `at` for `duration` [s] on the scenario clock (inf: never again)."""
+
+    component: str = ''
+
+
+@dataclass
+class Delay(Window):
+    """Messages published from `at` [s after the program's start] for `duration` [s] arrive `seconds` [s] late."""
+
+    seconds: float = 0.0
 
 
 class Link:
@@ -61,7 +62,7 @@ class Link:
         self._queue: deque = deque()      # (arrival time [s], message)
 
     def delay(self, seconds: float, at: float = 0.0, duration: float = math.inf) -> None:
-        self.delays.append(Delay(float(at), float(duration), float(seconds)))
+        self.delays.append(Delay(float(at), float(duration), seconds=float(seconds)))
 
     def publish(self, message, now: float, since_start=None) -> None:
         """`message` published at `now` [s]; since_start [s]: the program time the delay windows are judged on
