@@ -25,9 +25,12 @@ not judged. Needs unshare and ip (root or unprivileged user namespaces).
 """
 from __future__ import annotations
 
+import os
+
+if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse
 import collections
-import os
 import shutil
 import subprocess
 import sys

@@ -29,9 +29,12 @@ which other programs used more than 0.1 core says so.
 """
 from __future__ import annotations
 
+import os
+
+if not os.environ.get('ROS_AUTOMATIC_DISCOVERY_RANGE'):   # DDS discovery stays on this machine unless asked
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'   # (README "Networking"); before rclpy loads
 import argparse
 import json
-import os
 import subprocess
 import sys
 import tempfile

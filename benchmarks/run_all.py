@@ -92,6 +92,9 @@ BENCHMARKS = (
     Benchmark('main_job', 'bench_main_job.py', ('--runs', '2', '--modes', 'processes,in-process'),
               '`rubber-rig bench` (make bench) timed from outside: latency, CPU per node process, the load', 10,
               '--json'),
+    Benchmark('conformance_load', 'bench_conformance_load.py', ('--runs', '3'), '`rubber-rig conformance --sim` in '
+              'a network namespace, run after run: the verdict of each timing requirement (under '
+              'benchmarks/busy_load.py: is this host\'s lateness ever blamed on the controller?)', 6),
     Benchmark('idle_nodes', 'bench_idle_nodes.py', ('--rounds', '2'), 'the four node processes at rest: CPU, '
               'executor wake-ups and CPU per wake-up of each (what their timers cost)', 3, '--json'),
     Benchmark('identification', 'bench_identification.py', ('--seeds', '20'), 'does every fit tell the truth: '

@@ -59,8 +59,8 @@ def test_a_sample_path_late_for_the_whole_program_is_read_from_the_stamps(stall)
     """A loaded computer for seconds on end (the soak's second suite): every sample batch 0.5 s late, so the arrival
     times alone never see the rig's pace; the batches' stamps do (rig_pace.MAX_STAMP_LAG 1 s: with 0.25 s this
     stall lost the stream, 'no setpoints ... for 0.352 s (140 ms of setpoints left)')."""
-    o = Scenario(DURABILITY).delay('samples', 0.5).delay('setpoints', SETPOINTS_LATE).stall('excitation', 3.77,
-                                                                                           stall).run()
+    scenario = Scenario(DURABILITY).delay('samples', 0.5).delay('setpoints', SETPOINTS_LATE)
+    o = scenario.stall('excitation', 3.77, stall).run()
     assert o.completed and not o.faults, (o.reason, o.faults)
     assert full_cycles(o) == 60
 

@@ -106,7 +106,6 @@ def pressure_share(before, after, seconds: float):
     return min(max((after - before) / seconds, 0.0), 1.0)
 
 
-
 class KernelCounts:
     """What the kernel counted of this host's lateness during a run on the wall clock, into `timing` (a
     host_timing.HostTiming): the run-queue waits of the processes `pids` (the simulator's, added when it starts)

@@ -183,9 +183,8 @@ class ReferenceController:
         self.lower = -math.inf if 'ignore_lower_limit' in self.defects else lower
         self.decel = sig['HL_Deceleration'] or DEFAULT_DECEL
         # tighter limits bind the setpoints already queued as well: one outside them is refused now
-        if self.state in ('running', 'holding') and not self.defects & {'tighter_limits_spare_queued',
-                                                                       'queued_checked_when_applied'} \
-                and any(not self._inside(v) for v in self.queue.values()):
+        spared = self.defects & {'tighter_limits_spare_queued', 'queued_checked_when_applied'}
+        if self.state in ('running', 'holding') and not spared and not all(map(self._inside, self.queue.values())):
             self._fault('displacement_limit')
 
     def _on_command(self, code: int, sig: dict, now: float):
