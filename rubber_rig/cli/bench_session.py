@@ -136,18 +136,20 @@ class BenchSession:
         return ''
 
     def wait_ready(self) -> str:
-        """Wait until the excitation has seen the rig ready (not the driver's first, pre-configure status) and the
-        recorder records every stream; returns the recording's path.
+        """Wait until the excitation has seen the rig ready (not the driver's first, pre-configure status), the
+        recorder records every stream and the bench's own live topics are matched; returns the recording's path.
         """
         mon = self.monitor
         ready = self.wait_for(lambda: self.recorder_failed() or (
             self.rig_ready() == '' and mon.action.server_is_ready() and mon.model_parameters is not None
-            and mon.recording_ready(*RECORDED_TOPICS) == ''), CONNECT_TIMEOUT)
+            and mon.recording_ready(*RECORDED_TOPICS) == '' and not mon.unmatched()), CONNECT_TIMEOUT)
         if self.recorder_failed():
             raise CommandError(f'cannot record, nothing moved: {mon.recording_ready()}')
         if not ready:
             why = (self.rig_ready() or mon.recording_ready(*RECORDED_TOPICS)
-                   or ('run_program missing' if not mon.action.server_is_ready() else 'no model_parameters'))
+                   or ('run_program missing' if not mon.action.server_is_ready() else '')
+                   or ('no model_parameters' if mon.model_parameters is None else '')
+                   or f"no publisher yet for {', '.join(mon.unmatched())}")
             raise CommandError(f'the nodes did not connect within {CONNECT_TIMEOUT:.0f} s ({why})')
         return mon.recorder_status.path
 

@@ -88,11 +88,12 @@ class SuiteMonitor(Node):
         self.program_yaml = ''
         self.temperature = float('nan')
         sub = self.create_subscription
-        sub(RigSampleBatch, topics.SAMPLES, self._on_samples, topics.STREAM_QOS)
-        sub(ModelPrediction, topics.PREDICTION, self._on_prediction, topics.STREAM_QOS)
-        sub(SetpointBatch, topics.SETPOINTS, self._on_setpoints, topics.STREAM_QOS)
-        sub(CycleMetrics, topics.CYCLE_METRICS, self._on_cycle, topics.EVENT_QOS)
-        sub(DetectorEvent, topics.EVENTS, self.events.append, topics.EVENT_QOS)
+        self.live = {name: sub(msg_type, name, callback, qos) for name, msg_type, callback, qos in (
+            (topics.SAMPLES, RigSampleBatch, self._on_samples, topics.STREAM_QOS),
+            (topics.PREDICTION, ModelPrediction, self._on_prediction, topics.STREAM_QOS),
+            (topics.SETPOINTS, SetpointBatch, self._on_setpoints, topics.STREAM_QOS),
+            (topics.CYCLE_METRICS, CycleMetrics, self._on_cycle, topics.EVENT_QOS),
+            (topics.EVENTS, DetectorEvent, self.events.append, topics.EVENT_QOS))}
         sub(RigStatus, topics.STATUS, self._on_status, topics.LATCHED_QOS)
         sub(ModelParameters, topics.MODEL_PARAMETERS, self._on_parameters, topics.LATCHED_QOS)
         sub(String, topics.PROGRAM, self._on_program, topics.LATCHED_QOS)
@@ -156,6 +157,12 @@ class SuiteMonitor(Node):
         """Call the recorder's ~/control (RecorderControl.Request.START/STOP/SPLIT/SNAPSHOT); returns a future."""
         return self.recorder_control.call_async(self.auth.sign(RecorderControl.Request(command=command, path=path),
                                                                RECORDER_CONTROL))
+
+    def unmatched(self) -> list[str]:
+        """The live topics (samples, prediction, setpoints, cycle metrics, events) this monitor has no publisher for
+        yet: what it would miss if a program started now. Under load DDS discovery can take seconds, and a block
+        whose cycle metrics went out before the match is missing from the table."""
+        return [self.resolve_topic_name(name) for name, s in self.live.items() if s.get_publisher_count() == 0]
 
     def recorder_subscribed(self, *names: str) -> bool:
         """True when the recorder node subscribes to every one of the given topics."""
