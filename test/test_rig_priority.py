@@ -12,7 +12,7 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The niceness of the rig_driver process (rubber_rig/rig/priority.py, parameter ``nice``): every thread of the
+"""The niceness of the rig_driver and excitation processes (rubber_rig/rig/priority.py, parameter ``nice``): every thread of the
 process gets it, those the middleware started before the node read its parameters included.
 """
 import os
@@ -83,12 +83,14 @@ def test_a_niceness_outside_the_range_is_refused_and_one_not_permitted_says_why(
 
 
 @pytest.mark.ros
-def test_rig_driver_started_as_a_process_runs_at_the_niceness_of_its_parameter(tmp_path):
+@pytest.mark.parametrize('node, extra', [('rig_driver', ['-p', 'autostart:=false']), ('excitation', [])])
+def test_a_node_started_as_a_process_runs_at_the_niceness_of_its_parameter(tmp_path, node, extra):
+    # the two nodes on the setpoint path: rig_driver feeds the controller, the excitation streams lead_time ahead
     env = dict(os.environ, ROS_DOMAIN_ID=str(170 + os.getpid() % 10), PYTHONUNBUFFERED='1')
-    log = tmp_path / 'rig_driver.log'
+    log = tmp_path / f'{node}.log'
     with open(log, 'wb') as out:
-        proc = subprocess.Popen([sys.executable, '-m', 'rubber_rig.nodes.rig_driver_node', '--ros-args',
-                                 '-r', '__ns:=/nice_test', '-p', 'nice:=4', '-p', 'autostart:=false'],
+        proc = subprocess.Popen([sys.executable, '-m', f'rubber_rig.nodes.{node}_node', '--ros-args',
+                                 '-r', '__ns:=/nice_test', '-p', 'nice:=4', *extra],
                                 env=env, stdout=out, stderr=subprocess.STDOUT, cwd=REPO)
     try:
         deadline = time.monotonic() + 60.0

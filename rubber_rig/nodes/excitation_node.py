@@ -72,7 +72,7 @@ from rubber_rig.nodes.excitation_health import ProgramHealth
 from rubber_rig.nodes.excitation_params import declare_excitation_parameters
 from rubber_rig.nodes.excitation_recording import recorder_name, recorder_topic, recorder_view, samples_topic
 from rubber_rig.nodes.heartbeat import PERIOD, start_heartbeat
-from rubber_rig.nodes.spin import spin_node
+from rubber_rig.nodes.spin import spin_node, with_process_nice
 from rubber_rig.nodes.ticks import NodeTicks
 from rubber_rig.session import GoalAdmission, ProgramSession, RigTime
 from rubber_rig.session.program_watch import ProgramWatch, detector_action, why_rig_stopped
@@ -391,7 +391,7 @@ class ExcitationNode(Node):
 
 
 def main(args=None):
-    spin_node(ExcitationNode, args)
+    spin_node(with_process_nice(ExcitationNode), args)   # a process of its own: its niceness from parameter nice
 
 
 if __name__ == '__main__':

@@ -54,6 +54,7 @@ class ExcitationParams:
     default_detectors: list
     force_model: object = None
     program: Optional[tuple] = None
+    nice: int = 0
 
 
 def declare_excitation_parameters(node: Node) -> ExcitationParams:
@@ -104,6 +105,10 @@ def declare_excitation_parameters(node: Node) -> ExcitationParams:
         detectors = parse_detectors(raw, 'default_detectors')
     except (DetectorError, yaml.YAMLError) as exc:
         raise ParameterError(node, 'default_detectors', str(exc)) from None
+    nice = declare(node, 'nice', 0, 'niceness of the excitation process, set when it starts as a process of its own '
+                   '(rubber_rig.rig.priority): below 0 its setpoint stream gets the CPU before the other programs of '
+                   'this computer, so a busy computer delays the stream less than lead_time; needs root or '
+                   'CAP_SYS_NICE, else a warning and the process keeps its priority', range=(-20, 19))
     if stream_period >= lead_time / 2:
         raise ParameterError(node, 'stream_period', f'{stream_period} s must be below half '
                              f'of lead_time ({lead_time} s) or the driver could starve')
@@ -119,4 +124,4 @@ def declare_excitation_parameters(node: Node) -> ExcitationParams:
             raise ParameterError(node, 'program', str(exc)) from None
     return ExcitationParams(program_param, amplitude_control, compensation_memory, lead_time, batch_size, stream_period,
                             feedback_period, rig_driver, status_timeout, start_timeout, require_recording,
-                            recorder_timeout, force_model_set, hold_timeout, detectors, force_model, program)
+                            recorder_timeout, force_model_set, hold_timeout, detectors, force_model, program, nice)
