@@ -12,8 +12,8 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The niceness of the rig_driver and excitation processes (rubber_rig/rig/priority.py, parameter ``nice``): every thread of the
-process gets it, those the middleware started before the node read its parameters included.
+"""The niceness of the rig_driver and excitation processes (rubber_rig/rig/priority.py, parameter ``nice``): every
+thread of the process gets it, those the middleware started before the node read its parameters included.
 """
 import os
 import subprocess
@@ -22,6 +22,7 @@ import time
 from pathlib import Path
 
 import pytest
+import yaml
 
 from rubber_rig.rig.priority import set_process_nice
 
@@ -103,3 +104,18 @@ def test_a_node_started_as_a_process_runs_at_the_niceness_of_its_parameter(tmp_p
     finally:
         proc.terminate()
         proc.wait(20)
+
+
+def test_a_niced_suite_keeps_its_niceness_against_its_parameter_file(tmp_path):
+    # SuiteProcesses(niceness=10) stands for a second station that would have a computer of its own: the parameter
+    # file's nice (-10 rig_driver, -5 excitation) would set those two processes back above everything else
+    from rubber_rig.cli.processes import SuiteProcesses
+    config = REPO / 'config' / 'rig_sim.yaml'
+    niced = SuiteProcesses(config, '/second', 0, tmp_path / 'niced', niceness=10)
+    plain = SuiteProcesses(config, '/first', 0, tmp_path / 'plain')
+    for node in ('rig_driver', 'excitation'):
+        cmd = niced.command(node)
+        assert cmd[-2] == '--params-file' and yaml.safe_load(Path(cmd[-1]).read_text()) == {
+            '/**': {'ros__parameters': {'nice': 10}}}
+        assert cmd.count('--params-file') == 1 + 1 and plain.command(node).count('--params-file') == 1
+    assert niced.command('recorder').count('--params-file') == 1     # declares no nice: nothing to override

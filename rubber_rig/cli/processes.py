@@ -71,6 +71,9 @@ def _signal(pid: int, sig: int) -> bool:
     return True
 
 
+NICE_NODES = ('rig_driver', 'excitation')   # the nodes that set their own niceness (parameter nice)
+
+
 class SuiteProcesses:
     """Start, kill and restart the suite's node processes in namespace `namespace` on DDS domain `domain_id`.
 
@@ -105,6 +108,8 @@ class SuiteProcesses:
                '-r', f'__ns:={self.namespace}', '--params-file', self.params_file]
         cmd += self.extra_args.get(node, [])
         params = dict(self.overrides.get(node, {}), **(overrides or {}))
+        if self.niceness > 0 and node in NICE_NODES:
+            params.setdefault('nice', self.niceness)    # else its parameter file's -10/-5 would undo the niceness
         if params:
             path = self.log_dir / f'{node}.overrides.yaml'
             path.write_text(yaml.safe_dump({'/**': {'ros__parameters': params}}))
