@@ -304,6 +304,9 @@ def test_a_paced_stream_that_goes_silent_is_lost_while_stream_timeout_of_setpoin
     assert 'no setpoints from /rig1/excitation for 1.' in message and 'ms of setpoints left' in message
     left_ms = float(message.split('(')[-1].split(' ms')[0])
     assert 200 <= left_ms <= 300, message
+    # the owner's only batch had queued the whole 2 s: it stalled, it was not behind
+    after_batch_ms = float(message.split('last batch had left ')[1].split(' ms')[0])
+    assert 1900 <= after_batch_ms <= 2000, message
     assert _poll_until(rig, lambda: _at_rest(drv), 10 ** 5)
     assert drv.status.extra['position'] == 0.0
 

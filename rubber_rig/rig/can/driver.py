@@ -241,6 +241,7 @@ class RigDriver:
         io.send_setpoints(first_sequence, x.tolist())
         s.queued_end = first_sequence + x.size
         s.last_queued = float(x[-1])
+        s.reserve_after_batch = (s.queued_end - self.controller_sequence - 1) / self.cfg.sample_rate
         return True
 
     def _local_stream(self, first_sequence):

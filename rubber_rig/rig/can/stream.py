@@ -97,6 +97,7 @@ class GrantedStream:
     ended: bool = False         # the owner sent its last batch: running dry is the end, not a loss
     batches: int = 0            # batches accepted (keep-alives included): 0 = granted, nothing sent yet
     held: bool = False          # stopped by a hold: the owner keeps the rig and re-opens to resume
+    reserve_after_batch: float = float('nan')   # [s] setpoints queued ahead of the rig once the latest batch was in
 
     @property
     def name(self) -> str:
@@ -145,8 +146,11 @@ class GrantedStream:
         """
         reserve = (self.queued_end - played_end) / cfg.sample_rate
         if cfg.paced and silent > cfg.stream_timeout and reserve < cfg.stream_timeout:
+            # the reserve its last batch left says which side was late: about lead_time, the owner then stalled
+            # for the whole silence; much less, it was already behind (late batches, or a slow way to the driver)
             return (f'no setpoints from {self.grant.owner or "the stream owner"} for {silent:.3f} s '
-                    f'({max(reserve, 0.0) * 1e3:.0f} ms of setpoints left)')
+                    f'({max(reserve, 0.0) * 1e3:.0f} ms of setpoints left; its last batch had left '
+                    f'{self.reserve_after_batch * 1e3:.0f} ms)')
         if self.queued_end > self.grant.first_sequence and played_end >= self.queued_end and holding:
             return f'the rig ran out of setpoints at sample {self.queued_end} before the end of the stream'
         return ''
