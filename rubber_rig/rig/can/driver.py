@@ -239,9 +239,7 @@ class RigDriver:
             # pipeline was empty (or idle rig): the feedback clock starts now
             self.supervisor.last_feedback = self._clock()
         io.send_setpoints(first_sequence, x.tolist())
-        s.queued_end = first_sequence + x.size
-        s.last_queued = float(x[-1])
-        s.reserve_after_batch = (s.queued_end - self.controller_sequence - 1) / self.cfg.sample_rate
+        s.queued(first_sequence, x, self.controller_sequence + 1, self.cfg.sample_rate)
         return True
 
     def _local_stream(self, first_sequence):
