@@ -43,18 +43,20 @@ def billion_laughs(levels: int = 9) -> str:
     ('blocks:\n' + BLOCK * 200_000, f'more than the {MAX_BYTES} accepted'),
 ])
 def test_costly_yaml_is_refused_quickly_naming_the_limit(text, limit):
-    t0 = time.perf_counter()
+    # CPU time of this process, not the wall clock (a busy computer must not fail it): unbounded, these inputs cost
+    # minutes and gigabytes, orders of magnitude above the bound (bench_checks.py has the figures)
+    t0 = time.process_time()
     with pytest.raises(ProgramError, match=limit):
         Program.from_yaml_text(text, name='hostile')
-    assert time.perf_counter() - t0 < 0.5
+    assert time.process_time() - t0 < 0.5
 
 
 def test_ordinary_anchors_aliases_and_the_largest_program_still_load():
     data = load_bounded('base: &b {waveform: sine, frequency: 2 Hz}\nother: {<<: *b, amplitude: 1 mm}\n')
     assert data['other'] == {'waveform': 'sine', 'frequency': '2 Hz', 'amplitude': '1 mm'}
-    t0 = time.perf_counter()
+    t0 = time.process_time()     # CPU time: a busy computer made the wall clock 5.009 s on CI once
     program = Program.from_yaml_text('blocks:\n' + BLOCK * MAX_BLOCKS)
-    assert len(program.blocks) == MAX_BLOCKS and time.perf_counter() - t0 < 5.0
+    assert len(program.blocks) == MAX_BLOCKS and time.process_time() - t0 < 5.0
     with pytest.raises(ProgramError, match=f'more than {MAX_BLOCKS} blocks'):
         Program.from_yaml_text('blocks:\n' + BLOCK * (MAX_BLOCKS + 1))
 
