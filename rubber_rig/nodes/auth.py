@@ -155,10 +155,10 @@ def annotate(status, auth: NodeAuth):
     return status
 
 
-def start_auth_diagnostics(node: Node, auth: NodeAuth, period: float = 1.0, timer: bool = True):
-    """Publish `auth`'s state on /diagnostics every `period` s (status ``<node>/auth``), for a node that has no
-    /diagnostics of its own: what it refused, from which channel, and why. Returns the publishing function; with
-    ``timer=False`` the node calls it itself (from its one timer: nodes/ticks.py).
+def start_auth_diagnostics(node: Node, auth: NodeAuth):
+    """The function that publishes `auth`'s state on /diagnostics (status ``<node>/auth``), for a node that has no
+    /diagnostics of its own: what it refused, from which channel, and why. The node calls it from its one timer
+    (nodes/ticks.py).
     """
     pub = node.create_publisher(DiagnosticArray, DIAGNOSTICS, 10)
     name = f'{node.get_fully_qualified_name()}/auth'
@@ -169,8 +169,6 @@ def start_auth_diagnostics(node: Node, auth: NodeAuth, period: float = 1.0, time
         msg.status.append(annotate(DiagnosticStatus(level=DiagnosticStatus.OK, name=name, hardware_id='rubber_rig',
                                                     message='signatures checked'), auth))
         pub.publish(msg)
-    if timer:
-        node.create_timer(period, publish)
     return publish
 
 

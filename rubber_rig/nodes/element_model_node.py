@@ -152,7 +152,7 @@ class ElementModelNode(Node):
         self.publish_parameters()
         self.ticks = NodeTicks(self, {   # one timer (nodes/ticks.py)
             'heartbeat': (PERIOD, start_heartbeat(self, lambda: self.predictor.model_name, timer=False)),
-            'diagnostics': (1.0, start_auth_diagnostics(self, self.auth, timer=False))})
+            'diagnostics': (1.0, start_auth_diagnostics(self, self.auth))})
         choice = self.predictor.choice
         self.get_logger().info(f'model {self.predictor.model_name} from {choice.source}: {self.predictor.params}, '
                                f'friction reversal threshold {choice.friction_reversal_threshold:g} m')
