@@ -59,6 +59,17 @@ def test_the_stream_starts_at_the_grant_and_stays_lead_ahead_of_the_measurement(
     assert sink.setpoints().size == 700 and s.runner.sequence == 800
 
 
+def test_the_view_says_how_far_the_owner_streamed_and_measured_and_how_old_its_latest_samples_are():
+    s, sink = session(), Sink()
+    assert s.view(10.0) == ('streamed to sample 100, measured to 100, rig playing unknown, '
+                            'latest sample batch never')
+    s.stream(sink, now=10.0)
+    s.measured(100, sink.setpoints()[:200], now=10.25)      # samples up to 299 arrived at 10.25 s
+    # 0.6 s later the rig plays 300 + 600 (its pace from that batch), the owner streamed 100 + 500
+    assert s.view(10.85) == ('streamed to sample 600, measured to 300, rig playing 900, '
+                             'latest sample batch 0.600 s ago')
+
+
 def test_a_resumed_block_runs_the_cycles_it_had_not_run_and_ends_once_measured():
     s, sink = session(), Sink()
     while s.measured_sequence < 1100:   # 10 cycles (10 Hz at 1 kHz) measured in 100-sample batches

@@ -296,9 +296,11 @@ class ExcitationNode(Node):
         return True
 
     def _end(self, reason: str, success: bool = False) -> None:
+        view = ''
         if self.session is not None:
+            view = f' ({self.session.view(self.clock())})'
             self.session.runner.abort(reason)
-        self.get_logger().warning(f'program stopped: {reason}')
+        self.get_logger().warning(f'program stopped: {reason}{view}')
         self._finish(success=success, ended=True)
 
     def _finish(self, success: bool, ended: bool = False) -> None:

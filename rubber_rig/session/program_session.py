@@ -174,6 +174,17 @@ class ProgramSession:
         playing = None if now is None else self.pace.playing(now)
         return measured if playing is None else max(measured, min(playing, measured + self.lead))
 
+    def view(self, now: float) -> str:
+        """What this owner knew at `now` [s], for the line that says why a program stopped: how far it streamed,
+        how far the rig was measured, where the pace put the rig and how old the latest sample batch was. A stream
+        lost with the latest batch fresh and the stream short of ``lead`` points at this owner's samples or
+        scheduling; one lost with the batches stale points at the sample path.
+        """
+        playing, last = self.pace.playing(now), self.pace.last_arrival
+        return (f'streamed to sample {self.runner.sequence}, measured to {self.measured_sequence}, '
+                f"rig playing {'unknown' if playing is None else playing}, latest sample batch "
+                f"{'never' if last is None else f'{now - last:.3f} s ago'}")
+
     # -- the setpoints ------------------------------------------------------------------------------------------
     def due(self, measured: Optional[int] = None) -> Iterator[SetpointChunk]:
         """The chunks that bring the stream ``lead`` ahead of ``measured`` (default: measured_sequence; see

@@ -51,15 +51,18 @@ class RigPace:
     def __init__(self, sample_rate: float, window: float = WINDOW):
         self.fs, self.window = float(sample_rate), float(window)
         self._origins: deque = deque()     # (arrival [s], origin [s]), origins increasing: a sliding minimum
+        self.last_arrival: Optional[float] = None   # [s] when the latest batch arrived
 
     def reset(self) -> None:
         """A new stream (the rig may have stood idle, and its sequence jumped): forget the pace."""
         self._origins.clear()
+        self.last_arrival = None
 
     def observe(self, end: int, now: float, stamp: Optional[float] = None) -> None:
         """A batch of samples up to (not including) sequence `end` arrived at `now` [s]; stamp [s]: when its last
         sample (end - 1) was measured, on the owner's clock's scale (None: unknown).
         """
+        self.last_arrival = float(now)
         origin = float(now) - int(end) / self.fs
         if stamp is not None and math.isfinite(stamp):
             measured = float(stamp) - (int(end) - 1) / self.fs
