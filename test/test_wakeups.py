@@ -19,6 +19,7 @@ simulated rig), with the watchdog still tripping on a silent bus when only the s
 Nothing here asserts a duration: the waits are for events (a frame taken, a wake-up counted), bounded generously
 so that a busy computer only makes them slower.
 """
+import os
 import threading
 import time
 import uuid
@@ -158,3 +159,40 @@ def test_a_receiving_thread_that_stops_on_a_failed_bus_is_said_once_in_the_drive
         drv.io.receive_all()
         said = [text for level, text in drv.take_events() if 'CAN receive stopped' in text]
         assert len(said) == 1 and 'the watchdog judges the silence' in said[0]
+
+
+@pytest.mark.ros
+def test_a_draining_subscription_reads_a_backlog_in_a_few_wake_ups_in_order():
+    # a node delayed by a busy computer finds 150 batches queued: rclpy's executor hands over one per wake-up (150
+    # wake-ups, each rebuilding its wait set); the draining subscription handles what is queued behind it, at most
+    # DRAIN_MOST (100) more per wake-up, in order. Bound: 2 wake-ups once all are queued; 15 leaves room for a busy
+    # computer that delivers them to the reader in pieces (the same process, over loopback)
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.node import Node
+    from std_msgs.msg import Int32
+
+    from rubber_rig.nodes import topics
+    from rubber_rig.nodes.draining import create_draining_subscription
+
+    from support.ros import ros_context, spin_until
+    with ros_context(20 + os.getpid() % 20) as context:
+        node = Node('drained', context=context)
+        got = []
+        create_draining_subscription(node, Int32, 'backlog', lambda m: got.append(m.data), topics.STREAM_QOS)
+        pub = node.create_publisher(Int32, 'backlog', topics.STREAM_QOS)
+        executor = SingleThreadedExecutor(context=context)
+        executor.add_node(node)
+        try:
+            assert spin_until(executor, lambda: pub.get_subscription_count() == 1, 10.0)
+            for i in range(150):
+                pub.publish(Int32(data=i))
+            time.sleep(0.5)                     # nothing runs the callbacks meanwhile: the reader's queue fills
+            wake_ups, deadline = 0, time.monotonic() + 20.0
+            while len(got) < 150 and time.monotonic() < deadline:
+                before = len(got)
+                executor.spin_once(timeout_sec=0.1)
+                wake_ups += len(got) > before
+        finally:
+            executor.shutdown()
+            node.destroy_node()
+    assert got == list(range(150)) and 2 <= wake_ups <= 15, (wake_ups, len(got))     # one per message: 150

@@ -71,6 +71,7 @@ from rubber_rig.models import load_parameter_set
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.auth import SAMPLES, SETPOINTS, declare_auth, start_auth_diagnostics
+from rubber_rig.nodes.draining import create_draining_subscription
 from rubber_rig.nodes.heartbeat import PERIOD, start_heartbeat
 from rubber_rig.nodes.params import ParameterError, declare
 from rubber_rig.nodes.spin import spin_node
@@ -144,10 +145,11 @@ class ElementModelNode(Node):
         self.pub_metrics = self.create_publisher(CycleMetrics, topics.CYCLE_METRICS, topics.EVENT_QOS)
         self.pub_params = self.create_publisher(ModelParameters, topics.MODEL_PARAMETERS, topics.LATCHED_QOS)
         self.auth = declare_auth(self)   # samples and setpoints must carry the rig key's signature (nodes/auth.py)
-        self.samples_topic = self.create_subscription(RigSampleBatch, topics.SAMPLES, self.on_samples,
-                                                      topics.STREAM_QOS).topic_name
-        self.setpoints_topic = self.create_subscription(SetpointBatch, topics.SETPOINTS, self.on_setpoints,
-                                                        topics.STREAM_QOS).topic_name
+        # a backlog (a busy computer delayed this node) is read in one wake-up, not one batch per executor cycle
+        self.samples_topic = create_draining_subscription(self, RigSampleBatch, topics.SAMPLES, self.on_samples,
+                                                          topics.STREAM_QOS).topic_name
+        self.setpoints_topic = create_draining_subscription(self, SetpointBatch, topics.SETPOINTS, self.on_setpoints,
+                                                            topics.STREAM_QOS).topic_name
         self._published_params = None
         self.publish_parameters()
         self.ticks = NodeTicks(self, {   # one timer (nodes/ticks.py)

@@ -68,6 +68,7 @@ from rubber_rig.nodes.auth import (
     STOP_STREAM,
     declare_auth,
 )
+from rubber_rig.nodes.draining import create_draining_subscription
 from rubber_rig.nodes.excitation_health import ProgramHealth
 from rubber_rig.nodes.excitation_params import declare_excitation_parameters
 from rubber_rig.nodes.excitation_recording import recorder_name, recorder_topic, recorder_view, samples_topic
@@ -110,8 +111,8 @@ class ExcitationNode(Node):
         self.pub_program = self.create_publisher(String, topics.PROGRAM, topics.LATCHED_QOS)
         self.pub_events = self.create_publisher(DetectorEvent, topics.EVENTS, topics.EVENT_QOS)
         self.create_subscription(CycleMetrics, topics.CYCLE_METRICS, self.on_cycle_metrics, topics.EVENT_QOS)
-        self.sub_samples = self.create_subscription(RigSampleBatch, topics.SAMPLES, self.on_samples,
-                                                    topics.STREAM_QOS)
+        self.sub_samples = create_draining_subscription(self, RigSampleBatch, topics.SAMPLES, self.on_samples,
+                                                        topics.STREAM_QOS)   # a backlog is read in one wake-up
         self.create_subscription(RigStatus, topics.STATUS, self.on_status, topics.LATCHED_QOS)
         self.create_subscription(RecorderStatus, topics.RECORDER_STATUS, self.on_recorder_status,
                                  topics.LATCHED_QOS)
@@ -296,11 +297,9 @@ class ExcitationNode(Node):
         return True
 
     def _end(self, reason: str, success: bool = False) -> None:
-        view = ''
-        if self.session is not None:
-            view = f' ({self.session.view(self.clock())})'
-            self.session.runner.abort(reason)
-        self.get_logger().warning(f'program stopped: {reason}{view}')
+        if (s := self.session) is not None:
+            s.runner.abort(reason)     # the line says what this node knew (session.view): whose lag ended it
+        self.get_logger().warning(f'program stopped: {reason}' + (f' ({s.view(self.clock())})' if s else ''))
         self._finish(success=success, ended=True)
 
     def _finish(self, success: bool, ended: bool = False) -> None:

@@ -161,7 +161,8 @@ class SuiteMonitor(Node):
     def unmatched(self) -> list[str]:
         """The live topics (samples, prediction, setpoints, cycle metrics, events) this monitor has no publisher for
         yet: what it would miss if a program started now. Under load DDS discovery can take seconds, and a block
-        whose cycle metrics went out before the match is missing from the table."""
+        whose cycle metrics went out before the match is missing from the table.
+        """
         return [self.resolve_topic_name(name) for name, s in self.live.items() if s.get_publisher_count() == 0]
 
     def recorder_subscribed(self, *names: str) -> bool:

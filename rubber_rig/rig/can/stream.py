@@ -126,7 +126,8 @@ class GrantedStream:
 
     def queued(self, first_sequence: int, setpoints: np.ndarray, played_end: int, sample_rate: float) -> None:
         """A batch of setpoints [m] from first_sequence went to the controller, which has played up to played_end
-        (the sequence after the last sample it played) at sample_rate [Hz]."""
+        (the sequence after the last sample it played) at sample_rate [Hz].
+        """
         self.queued_end = first_sequence + len(setpoints)
         self.last_queued = float(setpoints[-1])
         self.reserve_after_batch = (self.queued_end - played_end) / sample_rate
