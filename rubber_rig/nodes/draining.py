@@ -24,6 +24,7 @@ Here the callback, after the message the executor handed it, takes what is alrea
 """
 from __future__ import annotations
 
+import inspect
 from typing import Callable
 
 from rclpy.exceptions import InvalidHandle
@@ -34,14 +35,15 @@ DRAIN_MOST = 100    # messages taken after the one the executor handed over (1 s
 
 
 def create_draining_subscription(node: Node, msg_type, topic: str, callback: Callable, qos,
-                                 most: int = DRAIN_MOST) -> Subscription:
-    """``node.create_subscription(msg_type, topic, callback, qos)`` whose callback also handles, in order, up to
-    `most` messages already queued behind the one the executor took. `callback` takes the message only.
+                                 most: int = DRAIN_MOST, **kwargs) -> Subscription:
+    """``node.create_subscription(msg_type, topic, callback, qos, **kwargs)`` whose callback also handles, in
+    order, up to `most` messages already queued behind the one the executor took. `callback` takes the message (its
+    serialized bytes with ``raw=True``), or the message and its rmw MessageInfo dict, as rclpy's callbacks do.
     """
     subscription = None
+    with_info = len(inspect.signature(callback).parameters) == 2
 
-    def on_message(msg) -> None:
-        callback(msg)
+    def drain() -> None:
         for _ in range(most):
             try:
                 with subscription.handle:
@@ -50,7 +52,16 @@ def create_draining_subscription(node: Node, msg_type, topic: str, callback: Cal
                 return
             if taken is None:
                 return
-            callback(taken[0])
+            callback(*taken) if with_info else callback(taken[0])
 
-    subscription = node.create_subscription(msg_type, topic, on_message, qos)
+    def on_message(msg) -> None:
+        callback(msg)
+        drain()
+
+    def on_message_with_info(msg, info) -> None:
+        callback(msg, info)
+        drain()
+
+    subscription = node.create_subscription(msg_type, topic, on_message_with_info if with_info else on_message, qos,
+                                            **kwargs)
     return subscription

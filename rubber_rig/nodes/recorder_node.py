@@ -53,6 +53,7 @@ from msg_defs.msg import RecorderStatus, RigSampleBatch, SetpointBatch
 from msg_defs.srv import RecorderControl
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.auth import RECORDER_CONTROL, SAMPLES, SETPOINTS, annotate, declare_auth
+from rubber_rig.nodes.draining import create_draining_subscription
 from rubber_rig.nodes.heartbeat import PERIOD, start_heartbeat
 from rubber_rig.nodes.params import declare
 from rubber_rig.nodes.spin import spin_node
@@ -229,7 +230,7 @@ class RecorderNode(Node):
                              reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
             self.core.set_qos(name, offered)
-            sub = self.create_subscription(cls, name, self._callback(name, type_name), qos, raw=True)
+            sub = create_draining_subscription(self, cls, name, self._callback(name, type_name), qos, raw=True)
             self._subs[name] = (sub, type_name)
             self.get_logger().info(f'recording {name} [{type_name}] '
                                    f'({"reliable" if reliable else "best effort"}'

@@ -25,6 +25,7 @@ from rclpy.node import Node
 
 from msg_defs.msg import SetpointBatch
 from rubber_rig.nodes import topics
+from rubber_rig.nodes.draining import create_draining_subscription
 from rubber_rig.rig.can.gate import MUTE_AFTER, MUTE_FOR, StreamGate
 
 MAX_CHANNELS = 16   # owners' command channels the driver listens to at once
@@ -68,8 +69,8 @@ class CommandChannels:
                 self.node.destroy_subscription(self.subscriptions.pop(old))
         topic = topics.setpoint_stream_topic(self.node.get_fully_qualified_name(), owner)
         try:
-            self.subscriptions[owner] = self.node.create_subscription(
-                SetpointBatch, topic, lambda msg: self.on_setpoints(msg, owner), topics.STREAM_QOS)
+            self.subscriptions[owner] = create_draining_subscription(   # a backlog is read in one wake-up
+                self.node, SetpointBatch, topic, lambda msg: self.on_setpoints(msg, owner), topics.STREAM_QOS)
         except Exception as exc:   # noqa: BLE001 - rclpy raises several types for a name it cannot take
             return f'owner {owner!r} gives no valid topic name ({exc})'
         self.node.get_logger().info(f'listening for setpoints of {owner} on {topic}')
