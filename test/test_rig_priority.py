@@ -106,6 +106,7 @@ def test_a_node_started_as_a_process_runs_at_the_niceness_of_its_parameter(tmp_p
         proc.wait(20)
 
 
+@pytest.mark.ros     # SuiteProcesses is what starts the suite (test_markers); here it is only asked for commands
 def test_a_niced_suite_keeps_its_niceness_against_its_parameter_file(tmp_path):
     # SuiteProcesses(niceness=10) stands for a second station that would have a computer of its own: the parameter
     # file's nice (-10 rig_driver, -5 excitation) would set those two processes back above everything else
