@@ -203,10 +203,17 @@ class ByteCodec:
         return self.fields(int.from_bytes(data, 'little'), count)
 
 
+_COMPILED: dict = {}     # (source, constants with their types) -> function: each layout is compiled once
+
+
 def _compile(source: str, name: str, constants: dict):
     """The function `name` defined by `source`, with `constants` (scales and offsets, as the DBC gives them: an
-    int stays an int) as its globals.
+    int stays an int) as its globals; compiled once per process for each source and constants.
     """
-    namespace = dict(constants, __builtins__={'round': round, 'bytearray': bytearray})
-    exec(compile(source, f'<ByteCodec {name}>', 'exec'), namespace)     # noqa: S102 (our own source, no input)
-    return namespace[name]
+    key = (source, tuple((k, type(v), v) for k, v in sorted(constants.items())))
+    function = _COMPILED.get(key)
+    if function is None:
+        namespace = dict(constants, __builtins__={'round': round, 'bytearray': bytearray})
+        exec(compile(source, f'<ByteCodec {name}>', 'exec'), namespace)     # noqa: S102 (our own source)
+        function = _COMPILED[key] = namespace[name]
+    return function
