@@ -29,7 +29,6 @@ import tempfile
 os.environ.setdefault('OPENBLAS_NUM_THREADS', '1')
 
 import numpy as np  # noqa: E402
-
 from bench_scenario import CASES  # noqa: E402
 
 
