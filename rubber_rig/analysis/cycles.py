@@ -89,11 +89,11 @@ class CycleCutter:
 
     def feed(self, x) -> list:
         x = np.asarray(x, dtype=float).ravel()
-        out = []
-        for i in range(x.size):     # per-sample state machine; the per-cycle arithmetic is vectorised
-            xi, idx = float(x[i]), self._n + i
+        out, kept, n0 = [], self._x, self._n
+        for i, xi in enumerate(x.tolist()):    # per-sample state machine; the per-cycle arithmetic is vectorised
+            idx = n0 + i
             prev, self._prev = self._prev, xi
-            self._x.append(xi)
+            kept.append(xi)
             if self._start is not None and idx - self._start >= self.max_cycle_samples:
                 self._start = None                              # lost the excitation: start over
             if self._mean is None:

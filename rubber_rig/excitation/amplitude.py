@@ -98,12 +98,17 @@ class BlockLoop:
     def feed(self, phase: np.ndarray, x: np.ndarray):
         """Add measured displacement x [m] at commanded phases; finish every cycle a later sample shows complete."""
         c = np.floor(phase).astype(np.int64)
-        for cc in np.unique(c):
-            sel = c == cc
-            lst = self._pending.setdefault(int(cc), ([], []))
-            lst[0].append(phase[sel])
-            lst[1].append(x[sel])
-        last = int(c.max())
+        first, last = int(c.min()), int(c.max())
+        if first == last:       # the samples lie within one cycle (most batches): no sort and no selection
+            lst = self._pending.setdefault(first, ([], []))
+            lst[0].append(np.array(phase))
+            lst[1].append(np.array(x))
+        else:
+            for cc in np.unique(c):
+                sel = c == cc
+                lst = self._pending.setdefault(int(cc), ([], []))
+                lst[0].append(phase[sel])
+                lst[1].append(x[sel])
         for cc in sorted(k for k in self._pending if k < last):
             self._finish(cc)
 

@@ -83,6 +83,11 @@ class CycleCutter:
         """A sample batch: displacement x [m], measured f and predicted force [N], its first sample at t0 [s]."""
         self._queue.append((first_sequence, dt, x, f, predicted, t0, self._clock()))
 
+    @property
+    def waiting(self) -> int:
+        """Sample batches waiting for their block (cycles() may release them)."""
+        return len(self._queue)
+
     def restart(self) -> None:
         """A restarted driver: drop what waits and start the cycle detection afresh."""
         self._queue.clear()

@@ -298,21 +298,27 @@ class OnlinePredictor:
         bad = x.size - int(np.count_nonzero(good))
         self.nonfinite_samples += bad
         xs = x[good] if bad else x
-        total = np.full(x.size, np.nan)
-        branches = np.full((len(self.model.branch_names), x.size), np.nan)
         if xs.size:
             t, b = self.model.run(xs, return_branches=True)
             if not np.all(np.isfinite(t)):
                 # finite input, non-finite output: never carry such a state on; start afresh on the next batch
+                unpredicted = self._unpredicted(x.size)
                 self.restart()
                 self.next_sequence = first_sequence + len(x)
-                return total, branches
+                return unpredicted
             if bad:
+                total, branches = self._unpredicted(x.size)
                 total[good], branches[:, good] = t, b
             else:
                 total, branches = np.asarray(t), np.asarray(b)
+        else:
+            total, branches = self._unpredicted(x.size)
         self._remember(xs)
         return total, branches
+
+    def _unpredicted(self, n: int) -> tuple[np.ndarray, np.ndarray]:
+        """NaN force and branch forces for `n` samples (the ones the model skipped fill in)."""
+        return np.full(n, np.nan), np.full((len(self.model.branch_names), n), np.nan)
 
     # -- internals --------------------------------------------------------------------------------------
     def _rebuild(self, dt: float) -> None:

@@ -180,10 +180,14 @@ class Scenario:
         return None if self.started_at is None else self.now - self.started_at
 
     def _stalled(self, component: str) -> bool:
+        return component in self._stalled_now()
+
+    def _stalled_now(self) -> set:
+        """The components that miss their wake-ups now."""
         if self.started_at is None or not self.stalls:
-            return False
+            return set()
         t = self.now - self.started_at
-        return any(s.component == component and s.covers(t) for s in self.stalls)
+        return {s.component for s in self.stalls if s.covers(t)}
 
     # -- running ----------------------------------------------------------------------------------------------------
     def run(self, timeout: float = None, program=None) -> Outcome:
@@ -243,13 +247,14 @@ class Scenario:
             self.actions = [a for a in self.actions if a not in due]
             for _, action in due:
                 action(self)
-        if not self._stalled('controller'):
+        stalled = self._stalled_now()
+        if 'controller' not in stalled:
             self.controller.serve(self.rig.now)
-        if not self._stalled('driver'):
+        if 'driver' not in stalled:
             self._wake_driver()
-        if not self._stalled('element_model'):
+        if 'element_model' not in stalled and (self.model_inbox or self.cutter.waiting):
             self._wake_model()
-        if self.session is not None and self.now >= self._excitation_due and not self._stalled('excitation'):
+        if self.session is not None and self.now >= self._excitation_due and 'excitation' not in stalled:
             self._wake_excitation()
 
     def _wake_driver(self) -> None:

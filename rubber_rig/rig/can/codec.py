@@ -26,6 +26,11 @@ The CRC-8 of a frame is affine over GF(2) in its payload bits (crc(a ^ b) = crc(
 lengths), so :class:`ByteCodec` derives, once per message, the CRC of the all-zero payload and for each of the 8
 CRC bits the mask of payload bits whose parity flips it: a frame's CRC is then 8 AND-and-parity operations on
 its payload integer instead of a table lookup per byte; test_rig_codec checks it against :func:`crc8`.
+
+A frame of samples is encoded and decoded once per sample on each side of a simulated rig, so the per-signal loops
+are compiled once per layout (:func:`_compile`): each signal's step written out with its constants, the same
+operations in the same order as the loop they replace (the same ints and floats, to the bit), without the loop's
+zip, tuple unpacking and attribute look-ups.
 """
 from __future__ import annotations
 
@@ -110,24 +115,23 @@ class ByteCodec:
         self._crc_zero, self._crc_masks = self._crc_cache[key]
         self._crc_shift = 8 * (self.length - 1)
         self._payload_mask = (1 << self._crc_shift) - 1
+        self._crc = self._compile_crc()
+        self._encoders, self._readers = {}, {}   # compiled by number of values, by (start, count)
 
     def crc(self, payload: int) -> int:
         """CRC-8 of the payload (all bytes but the CRC's) given as its little-endian integer; = crc8()."""
-        crc = self._crc_zero
-        for j, mask in enumerate(self._crc_masks):
-            crc ^= ((payload & mask).bit_count() & 1) << j
-        return crc
+        return self._crc(payload)
 
     def encode(self, values) -> bytearray:
         """Payload (length bytes, CRC filled in) for physical `values` in the order of `names`; signals after
         the last value given are raw 0 (the unused slots of a packed frame).
+
+        raw = round((value - offset) / scale), saturated to the signal's integer range, at its start bit.
         """
-        payload = 0
-        for (shift, mask, _, scale, offset, lo, hi), value in zip(self._layout, values, strict=False):
-            raw = round((value - offset) / scale)
-            raw = lo if raw < lo else hi if raw > hi else raw
-            payload |= (raw & mask) << shift
-        return bytearray((payload | self.crc(payload) << self._crc_shift).to_bytes(self.length, 'little'))
+        encoder = self._encoders.get(len(values))
+        if encoder is None:
+            encoder = self._encoders[len(values)] = self._compile_encoder(min(len(values), len(self._layout)))
+        return encoder(values if len(values) <= len(self._layout) else values[:len(self._layout)])
 
     def check(self, data) -> str:
         """'' if data has this message's length and a matching CRC, else what is wrong."""
@@ -148,16 +152,68 @@ class ByteCodec:
         """Physical values (ints for unscaled integer signals) of the signals start, start + 1, ... up to `count`
         (default: all) of an unpacked frame.
         """
-        out = []
-        for shift, mask, sign, scale, offset in self._read[start:count]:
-            raw = frame >> shift & mask
-            if raw & sign:
-                raw -= sign << 1
-            out.append(raw if scale is None else raw * scale + offset)
-        return out
+        reader = self._readers.get((start, count))
+        if reader is None:
+            reader = self._readers[start, count] = self._compile_reader(range(len(self._read))[start:count])
+        return reader(frame)
+
+    # ---- the compiled loops
+    def _compile_crc(self):
+        """crc(payload): the CRC of the all-zero payload XOR, per CRC bit, the parity of the payload's bits under
+        that bit's mask (module docstring).
+        """
+        terms = ' ^ '.join(f'(((payload & {mask}).bit_count() & 1) << {j})' for j, mask in enumerate(self._crc_masks))
+        return _compile(f'def crc(payload):\n    return {self._crc_zero} ^ {terms}\n', 'crc', {})
+
+    def _compile_encoder(self, n: int):
+        """encode() of exactly `n` values: each signal's raw value, saturated, shifted into place."""
+        lines, names = ['def encode(values):'], {'crc': self._crc}
+        if n:
+            lines.append(f'    {", ".join(f"v{i}" for i in range(n))}, = values')
+        lines.append('    payload = 0')
+        for i, (shift, mask, _, scale, offset, lo, hi) in enumerate(self._layout[:n]):
+            names[f'scale{i}'], names[f'offset{i}'] = scale, offset
+            lines += [f'    raw = round((v{i} - offset{i}) / scale{i})',
+                      f'    raw = {lo} if raw < {lo} else {hi} if raw > {hi} else raw',
+                      f'    payload |= (raw & {mask}) << {shift}']
+        lines.append(f'    return bytearray((payload | crc(payload) << {self._crc_shift}).to_bytes({self.length}, '
+                     "'little'))")
+        return _compile('\n'.join(lines) + '\n', 'encode', names)
+
+    def _compile_reader(self, signals):
+        """fields() of the signals `signals` (indices): each one's raw bits, sign-extended, scaled."""
+        lines, names, out = ['def fields(frame):'], {}, []
+        for i in signals:
+            shift, mask, sign, scale, offset = self._read[i]
+            lines.append(f'    raw{i} = frame >> {shift} & {mask}')
+            if sign:
+                lines.append(f'    if raw{i} & {sign}:\n        raw{i} -= {sign << 1}')
+            if scale is None:
+                out.append(f'raw{i}')
+            else:
+                names[f'scale{i}'], names[f'offset{i}'] = scale, offset
+                out.append(f'raw{i} * scale{i} + offset{i}')
+        lines.append(f'    return [{", ".join(out)}]')
+        return _compile('\n'.join(lines) + '\n', 'fields', names)
 
     def decode(self, data, count: int = None) -> list:
         """Physical values (ints for unscaled integer signals) in the order of `names`, from one payload: all of
         them, or the first `count`.
         """
         return self.fields(int.from_bytes(data, 'little'), count)
+
+
+_COMPILED: dict = {}     # (source, constants with their types) -> function: each layout is compiled once
+
+
+def _compile(source: str, name: str, constants: dict):
+    """The function `name` defined by `source`, with `constants` (scales and offsets, as the DBC gives them: an
+    int stays an int) as its globals; compiled once per process for each source and constants.
+    """
+    key = (source, tuple((k, type(v), v) for k, v in sorted(constants.items())))
+    function = _COMPILED.get(key)
+    if function is None:
+        namespace = dict(constants, __builtins__={'round': round, 'bytearray': bytearray})
+        exec(compile(source, f'<ByteCodec {name}>', 'exec'), namespace)     # noqa: S102 (our own source)
+        function = _COMPILED[key] = namespace[name]
+    return function

@@ -128,6 +128,8 @@ class SampleFrames:
         """
         mod = self.feedback_modulus
         if self.profile == 'packed':
+            if len(x) == 1:     # at 1 kHz every frame carries one sample
+                return [self._message(self._fb, (first % mod, 1, x[0], f[0], u[0]))]
             values = [first % mod, len(x)]
             for sample in zip(x, f, u, strict=True):   # unused slots: 0
                 values += sample
@@ -152,7 +154,10 @@ class SampleFrames:
         if frame is None:
             raise MalformedFrame(codec.check(msg.data))
         if self.profile == 'packed':
-            seq, n = codec.fields(frame, 2)      # sequence and count: only the slots in use are decoded
+            v = codec.fields(frame, 5)           # sequence, count and the first sample's slot
+            if v[1] == 1:                        # at 1 kHz every frame carries one sample
+                return v[0], v[2:3], v[3:4], v[4:5]
+            seq, n = v[:2]                       # only the slots in use are decoded
             if not 1 <= n <= self.feedback_slots:
                 raise MalformedFrame(f'{codec.name}: count {n} outside 1..{self.feedback_slots}')
             v = codec.fields(frame, 2 + 3 * n, start=2)

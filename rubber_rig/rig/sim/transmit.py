@@ -75,6 +75,9 @@ class FeedbackTransmitter:
         frames; every frame that is full goes out now.
         """
         fx, ff, fu = self._fb
+        if not fx and self._per == 1 and not self.faults.faults and not self._jitter:
+            self._each_straight_out(first, xm, fm, u)
+            return
         if not fx:
             self._fb_first = first
         fx.extend(xm)
@@ -83,6 +86,16 @@ class FeedbackTransmitter:
         per = self._per      # defect feedback_six_per_frame: 6 samples (5 ms of latency) in each frame
         while len(self._fb[0]) >= per:
             self.send_feedback(per)
+
+    def _each_straight_out(self, first: int, xm: list, fm: list, u: list):
+        """queue_feedback() with one sample per frame and nothing injected (a simulated rig at 1 kHz): each sample
+        its frame, straight onto the bus - the frames send_feedback(1) would send, without the lists between.
+        """
+        encode, mask, put = self.frames.encode_feedback, self._seq_mask, self.put
+        for k in range(len(xm)):
+            for m in encode((first + k) & mask, xm[k:k + 1], fm[k:k + 1], u[k:k + 1]):
+                put(m)
+        self._fb_first = first + len(xm)
 
     def send_feedback(self, count: int = None):
         """Send the first `count` samples not yet sent (default: all; a packed frame may carry fewer than it
