@@ -38,7 +38,7 @@ from std_srvs.srv import Trigger
 
 from msg_defs.action import RunProgram
 from rubber_rig.nodes import awaitables
-from rubber_rig.nodes.executor import EXECUTOR_ENV, LeanExecutor, make_executor
+from rubber_rig.nodes.executor import EXECUTOR_ENV, EventsLoop, LeanExecutor, make_executor
 
 PATIENCE = 20.0   # [s] the longest any wait here waits for its event
 
@@ -85,11 +85,46 @@ class Spinning:
         self.node.destroy_node()
 
 
-def test_make_executor_gives_the_lean_executor_unless_the_environment_asks_for_rclpys(context, monkeypatch):
+def test_make_executor_gives_the_lean_executor_unless_the_environment_asks_for_another(context, monkeypatch):
     monkeypatch.delenv(EXECUTOR_ENV, raising=False)
     assert type(make_executor(context)) is LeanExecutor
     monkeypatch.setenv(EXECUTOR_ENV, 'rclpy')
     assert type(make_executor(context)) is SingleThreadedExecutor
+    monkeypatch.setenv(EXECUTOR_ENV, 'events')
+    plain, guarded = Node('lean_plain', context=context), Node('lean_guarded', context=context)
+    guarded.create_guard_condition(lambda: None)
+    assert type(make_executor(context, plain)) is EventsLoop
+    assert type(make_executor(context, guarded)) is LeanExecutor      # EventsExecutor refuses guard conditions
+
+    class WillGuard(Node):
+        uses_guard_conditions = True                                   # as rig_driver, whose configure makes one
+
+    assert type(make_executor(context, WillGuard('lean_will_guard', context=context))) is LeanExecutor
+
+
+def test_the_opt_in_events_loop_spins_timers_and_subscriptions_and_stops(context):
+    node = Node('events_loop', context=context)
+    received, ticks = [], []
+    pub = node.create_publisher(Int32, 'events_numbers', 10)
+    node.create_subscription(Int32, 'events_numbers', lambda m: received.append(m.data), 10)
+    node.create_timer(0.01, lambda: ticks.append(1))
+    loop = EventsLoop(context=context)
+    loop.add_node(node)
+    thread = threading.Thread(target=loop.spin, daemon=True)
+    thread.start()
+    try:
+        assert _until(lambda: len(ticks) >= 5)
+        assert _until(lambda: pub.get_subscription_count() == 1)
+        for k in range(20):
+            pub.publish(Int32(data=k))
+            time.sleep(0.001)
+        assert _until(lambda: len(received) == 20), received
+        assert received == list(range(20))
+    finally:
+        loop.shutdown(timeout_sec=5.0)
+        thread.join(5.0)
+        assert not thread.is_alive()
+        node.destroy_node()
 
 
 def test_timers_subscriptions_services_and_guard_conditions_run_and_the_wait_set_is_built_once(context):

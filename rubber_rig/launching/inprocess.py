@@ -81,7 +81,7 @@ class InProcessLauncher:
 
     def spin(self, node: Node) -> Node:
         """Spin an already constructed node (e.g. a test probe) in its own executor thread."""
-        executor = make_executor(context=self.context)
+        executor = make_executor(context=self.context, node=node)
         executor.add_node(node)
         thread = threading.Thread(target=self._spin, args=(executor,), name=f'spin-{node.get_name()}',
                                   daemon=True)

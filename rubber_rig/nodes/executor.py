@@ -61,7 +61,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.logging import get_logger
 from rclpy.task import Task
 from rclpy.timer import Timer
-from rclpy.utilities import timeout_sec_to_nsec
+from rclpy.utilities import get_default_context, timeout_sec_to_nsec
 from rclpy.waitable import NumberOfEntities
 
 EXECUTOR_ENV = 'RUBBER_RIG_EXECUTOR'   # 'rclpy': rclpy's SingleThreadedExecutor instead of LeanExecutor
@@ -351,13 +351,55 @@ class LeanExecutor(SingleThreadedExecutor):
                               count.num_clients, count.num_services, count.num_events, self._context.handle)
 
 
-def make_executor(context=None) -> SingleThreadedExecutor:
-    """The executor a node spins (nodes/spin.py, launching/inprocess.py): :class:`LeanExecutor`, or rclpy's
-    SingleThreadedExecutor when the environment sets ``RUBBER_RIG_EXECUTOR=rclpy``.
+EVENTS_SPIN_ONCE = 0.1    # [s] how long one spin_once of EventsLoop waits: how soon it sees a stop request
+
+
+class EventsLoop:
+    """rclpy's experimental EventsExecutor (``RUBBER_RIG_EXECUTOR=events``, opt-in), driven by ``spin_once``.
+
+    It dispatches from C++ callbacks of the middleware, with no wait set at all (about half of LeanExecutor's CPU
+    per message in the measurement of headroom_notes.md). What keeps it opt-in, as found in this rclpy (ros-rclpy
+    7.1.6): its ``spin()`` dispatched nothing (no timer callback in seconds, in the main thread or another), so
+    this loop calls ``spin_once``; it refuses any node that has a guard condition (``EventsExecutor::
+    UpdateEntitiesFromNodes`` raises "Guard conditions not supported"), so :func:`make_executor` gives such a node
+    (rig_driver: its bus-reading thread wakes it through one) a LeanExecutor; and it is experimental upstream.
+    """
+
+    def __init__(self, context=None):
+        from rclpy.experimental import EventsExecutor  # noqa: PLC0415 - only when asked for
+        self._context = context if context is not None else get_default_context()
+        self._executor = EventsExecutor(context=context)
+        self._stopped = False
+
+    def add_node(self, node) -> bool:
+        return self._executor.add_node(node)
+
+    def create_task(self, callback, *args, **kwargs):
+        return self._executor.create_task(callback, *args, **kwargs)
+
+    def spin(self) -> None:
+        while not self._stopped and self._context.ok():
+            self._executor.spin_once(EVENTS_SPIN_ONCE)
+
+    def shutdown(self, timeout_sec: Optional[float] = None) -> bool:
+        self._stopped = True
+        return self._executor.shutdown(timeout_sec)
+
+
+def make_executor(context=None, node=None):
+    """The executor a node spins (nodes/spin.py, launching/inprocess.py): :class:`LeanExecutor`; rclpy's
+    SingleThreadedExecutor when the environment sets ``RUBBER_RIG_EXECUTOR=rclpy``; :class:`EventsLoop` with
+    ``RUBBER_RIG_EXECUTOR=events``, unless ``node`` has a guard condition or will create one (its class says
+    ``uses_guard_conditions = True``): EventsExecutor refuses them.
     """
     choice = os.environ.get(EXECUTOR_ENV, 'lean').strip().lower()
     if choice == 'rclpy':
         return SingleThreadedExecutor(context=context)
-    if choice not in ('', 'lean'):
-        get_logger('rubber_rig').warning(f'{EXECUTOR_ENV}={choice!r} is neither "lean" nor "rclpy"; using lean')
+    if choice == 'events':
+        if node is None or not (list(node.guards) or getattr(node, 'uses_guard_conditions', False)):
+            return EventsLoop(context=context)
+        node.get_logger().info(f'{EXECUTOR_ENV}=events: this node has a guard condition, which rclpy\'s '
+                               'EventsExecutor refuses; spinning a LeanExecutor')
+    elif choice not in ('', 'lean'):
+        get_logger('rubber_rig').warning(f'{EXECUTOR_ENV}={choice!r} is not "lean", "rclpy" or "events"; using lean')
     return LeanExecutor(context=context)

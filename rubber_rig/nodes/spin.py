@@ -48,7 +48,7 @@ import threading
 from typing import Callable
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -79,7 +79,7 @@ class _Stop:
             raise KeyboardInterrupt   # still starting: abandon the start (nothing to clean up but the context)
 
 
-def _spin(executor: SingleThreadedExecutor, errors: list, name: str = 'node') -> None:
+def _spin(executor, errors: list, name: str = 'node') -> None:
     name_this_thread(EXECUTOR_THREAD)   # benchmarks count its wake-ups and CPU (rubber_rig.cpu)
     try:
         run_profiled(executor.spin, name)   # under cProfile if RUBBER_RIG_PROFILE_DIR is set
@@ -125,7 +125,7 @@ def spin_node(node_factory: Callable[[], Node], args=None) -> None:
             get_logger(exc.logger_name).fatal(str(exc))
             raise SystemExit(EXIT_BAD_PARAMETER) from None
         undeclared_overrides(node)   # a misspelt key in a parameter file must not pass silently
-        executor = make_executor()
+        executor = make_executor(node=node)
         executor.add_node(node)
         thread = threading.Thread(target=_spin, args=(executor, errors, node.get_fully_qualified_name()),
                                   name='executor', daemon=True)
