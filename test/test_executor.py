@@ -96,8 +96,12 @@ def test_make_executor_gives_the_lean_executor_unless_the_environment_asks_for_a
     assert type(make_executor(context, plain)) is EventsLoop
     assert type(make_executor(context, guarded)) is LeanExecutor      # EventsExecutor refuses guard conditions
 
+    raw = Node('lean_raw', context=context)
+    raw.create_subscription(Int32, 'lean_raw', lambda data: None, 10, raw=True)
+    assert type(make_executor(context, raw)) is LeanExecutor           # nor raw subscriptions (the recorder's)
+
     class WillGuard(Node):
-        uses_guard_conditions = True                                   # as rig_driver, whose configure makes one
+        events_executor_refuses = 'a guard condition'                  # as rig_driver, whose configure makes one
 
     assert type(make_executor(context, WillGuard('lean_will_guard', context=context))) is LeanExecutor
 

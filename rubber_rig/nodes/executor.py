@@ -361,8 +361,10 @@ class EventsLoop:
     per message in the measurement of headroom_notes.md). What keeps it opt-in, as found in this rclpy (ros-rclpy
     7.1.6): its ``spin()`` dispatched nothing (no timer callback in seconds, in the main thread or another), so
     this loop calls ``spin_once``; it refuses any node that has a guard condition (``EventsExecutor::
-    UpdateEntitiesFromNodes`` raises "Guard conditions not supported"), so :func:`make_executor` gives such a node
-    (rig_driver: its bus-reading thread wakes it through one) a LeanExecutor; and it is experimental upstream.
+    UpdateEntitiesFromNodes`` raises "Guard conditions not supported") and fails on the first message of a raw
+    subscription ("SystemError: null argument to internal routine"), so :func:`make_executor` gives a node with
+    either (rig_driver: its bus-reading thread wakes it through a guard condition; the recorder: it writes the
+    bytes it receives) a LeanExecutor; and it is experimental upstream.
     """
 
     def __init__(self, context=None):
@@ -389,17 +391,32 @@ class EventsLoop:
 def make_executor(context=None, node=None):
     """The executor a node spins (nodes/spin.py, launching/inprocess.py): :class:`LeanExecutor`; rclpy's
     SingleThreadedExecutor when the environment sets ``RUBBER_RIG_EXECUTOR=rclpy``; :class:`EventsLoop` with
-    ``RUBBER_RIG_EXECUTOR=events``, unless ``node`` has a guard condition or will create one (its class says
-    ``uses_guard_conditions = True``): EventsExecutor refuses them.
+    ``RUBBER_RIG_EXECUTOR=events``, unless ``node`` has or will have what EventsExecutor refuses (its class
+    says so in ``events_executor_refuses``).
     """
     choice = os.environ.get(EXECUTOR_ENV, 'lean').strip().lower()
     if choice == 'rclpy':
         return SingleThreadedExecutor(context=context)
     if choice == 'events':
-        if node is None or not (list(node.guards) or getattr(node, 'uses_guard_conditions', False)):
+        why = _events_refuse(node)
+        if not why:
             return EventsLoop(context=context)
-        node.get_logger().info(f'{EXECUTOR_ENV}=events: this node has a guard condition, which rclpy\'s '
-                               'EventsExecutor refuses; spinning a LeanExecutor')
+        node.get_logger().info(f'{EXECUTOR_ENV}=events: rclpy\'s EventsExecutor refuses {why}; spinning a '
+                               'LeanExecutor')
     elif choice not in ('', 'lean'):
         get_logger('rubber_rig').warning(f'{EXECUTOR_ENV}={choice!r} is not "lean", "rclpy" or "events"; using lean')
     return LeanExecutor(context=context)
+
+
+def _events_refuse(node) -> str:
+    """What of ``node`` rclpy's EventsExecutor refuses ('' if nothing): a guard condition ("Guard conditions not
+    supported"), or a raw subscription (``SystemError: null argument to internal routine`` on its first message,
+    found with the recorder), now or, as the node's class declares, later.
+    """
+    if node is None:
+        return ''
+    if list(node.guards):
+        return 'a guard condition'
+    if any(sub.raw for sub in node.subscriptions):
+        return 'raw subscriptions'
+    return getattr(node, 'events_executor_refuses', '')
