@@ -364,7 +364,10 @@ class EventsLoop:
     UpdateEntitiesFromNodes`` raises "Guard conditions not supported") and fails on the first message of a raw
     subscription ("SystemError: null argument to internal routine"), so :func:`make_executor` gives a node with
     either (rig_driver: its bus-reading thread wakes it through a guard condition; the recorder: it writes the
-    bytes it receives) a LeanExecutor; and it is experimental upstream.
+    bytes it receives) a LeanExecutor; the excitation keeps one too: its program runs as tasks that await futures,
+    and under EventsExecutor it took 31 % of a core at 5 wake-ups/s during a program (busy, never waiting; 14.5 %
+    under LeanExecutor in the same session). It is experimental upstream. What remains is element_model (and
+    the Foxglove view).
     """
 
     def __init__(self, context=None):
