@@ -38,7 +38,8 @@ from std_srvs.srv import Trigger
 
 from msg_defs.action import RunProgram
 from rubber_rig.nodes import awaitables
-from rubber_rig.nodes.executor import EXECUTOR_ENV, EventsLoop, LeanExecutor, make_executor
+from rubber_rig.nodes.executor import LeanExecutor
+from rubber_rig.nodes.executor_choice import EXECUTOR_ENV, EventsLoop, make_executor
 
 PATIENCE = 20.0   # [s] the longest any wait here waits for its event
 

@@ -38,7 +38,7 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from ..dds import configure_dds
-from ..nodes.executor import make_executor
+from ..nodes.executor_choice import make_executor
 from ..nodes.params import undeclared_overrides
 
 

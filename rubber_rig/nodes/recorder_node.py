@@ -100,7 +100,7 @@ def offered_qos(info) -> dict:
 
 class RecorderNode(Node):
 
-    events_executor_refuses = 'raw subscriptions (it writes the bytes it receives)'   # nodes.executor
+    events_executor_refuses = 'raw subscriptions (it writes the bytes it receives)'   # nodes.executor_choice
 
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)

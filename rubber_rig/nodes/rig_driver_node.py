@@ -89,7 +89,7 @@ from rubber_rig.rig.shutdown import ramp_to_rest
 
 class RigDriverNode(LifecycleNode):
 
-    events_executor_refuses = 'a guard condition (configure creates the bus thread\'s wake-up)'   # nodes.executor
+    events_executor_refuses = 'a guard condition (the bus thread\'s wake-up)'   # nodes.executor_choice
 
     def __init__(self, node_name: str = 'rig_driver', **kwargs):
         super().__init__(node_name, **kwargs)

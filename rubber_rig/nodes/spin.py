@@ -56,7 +56,7 @@ from rclpy.signals import SignalHandlerOptions
 from ..cpu import EXECUTOR_THREAD, name_this_thread, run_profiled
 from ..dds import configure_dds
 from ..rig.priority import set_process_nice
-from .executor import make_executor
+from .executor_choice import make_executor
 from .params import ParameterError, undeclared_overrides
 from .rclpy_compat import RCLError
 
