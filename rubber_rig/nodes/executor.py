@@ -18,9 +18,10 @@ rclpy's SingleThreadedExecutor (Jazzy, rclpy 7.1) does, in Python, on every wake
 timer, client, service, guard condition and waitable of every node through generators, filter each through its
 callback group, enter every handle through an ExitStack, create a new ``rcl`` wait set, add everything, wait, then
 look every entity up again in the lists of ready pointers (``x in list``: quadratic in the entity count). Our nodes
-have 16-40 entities each (a QoS event handler per publisher and subscription alone is two waitables), so that is
-most of the ~1 ms of CPU each wake-up cost. And every callback it runs triggers the executor's own guard condition
-twice (after the take, after the callback), so each message costs a second wake-up that finds nothing to do.
+have 16-70 entities each (every publisher alone brings four QoS event handlers, each a waitable), so that was most
+of the executor's share of the ~1 ms of CPU each wake-up cost (docs/benchmarks/headroom_notes.md). And every
+callback it runs triggers the executor's own guard condition twice (after the take, after the callback), so each
+message costs a second wake-up that finds nothing to do.
 
 :class:`LeanExecutor` is that executor with those two costs taken out, nothing else changed:
 
@@ -37,6 +38,7 @@ rclpy does; tasks (``create_task``, an action's execute, futures' done callbacks
 node's guard conditions are re-triggered when they fired but were not handled; timers, subscriptions, services,
 clients, waitables (actions, QoS events, lifecycle) are taken with rclpy's own ``_take_*`` methods. With
 ``nodes=`` given (``spin_until_future_complete`` on a subset, not used by the nodes) it falls back to rclpy's own.
+Which executor a node gets (this one, rclpy's, or the opt-in EventsExecutor): nodes/executor_choice.py.
 
 This is the installed rclpy's ``Executor`` API, partly its private methods (``_take_*``, ``_tasks``, ``_guard``,
 ``_sigint_gc``); test/test_executor.py exercises every entity kind through it, so an rclpy that changes them fails
