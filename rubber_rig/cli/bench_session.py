@@ -176,7 +176,7 @@ class BenchSession:
         if not goal_handle.accepted:
             raise CommandError('the excitation refused the program: another program is running on this ROS domain '
                                '(a second bench? give it its own --domain-id)')
-        run.future = goal_handle.get_result_async()
+        run.future = self.monitor.on_executor(goal_handle.get_result_async)   # (monitor.on_executor: why)
         try:
             while not run.future.done():
                 self.nodes.check()
@@ -184,7 +184,7 @@ class BenchSession:
                     run.recording_error = self.monitor.recorder_status.error
                     term.end_status()
                     term.line(f'RECORDING FAILED: {run.recording_error}; stopping the program (smooth ramp to rest)')
-                    goal_handle.cancel_goal_async()
+                    self.monitor.on_executor(goal_handle.cancel_goal_async)
                 self._show_progress(term, t_start)
                 self._show_events(term)
                 self._show_silent(term)
@@ -195,7 +195,7 @@ class BenchSession:
             run.interrupted = True
             term.end_status()
             term.line('interrupted: aborting the program (smooth ramp to rest) ...')
-            goal_handle.cancel_goal_async()
+            self.monitor.on_executor(goal_handle.cancel_goal_async)
             if not self.launcher.wait_for(run.future.done, ABORT_TIMEOUT):
                 term.line(f'warning: the program did not end within {ABORT_TIMEOUT:.0f} s of the abort '
                           '(no result from the excitation); the rig ramps to rest as the nodes shut down')

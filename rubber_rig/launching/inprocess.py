@@ -12,11 +12,12 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""Start nodes of the suite inside one Python process: one SingleThreadedExecutor per node, each in its own thread.
+"""Start nodes of the suite inside one Python process: one single-threaded executor per node, each in its own thread.
 
 Why not one MultiThreadedExecutor: measured on this machine (shared/notes/ros2-from-pypi.md, upstream rclpy
 #1223/#1452) it collapses to tens of messages per second as soon as a timer publishes to a subscription in the
-same process. One SingleThreadedExecutor per thread keeps kHz rates.
+same process. One single-threaded executor per thread keeps kHz rates: the nodes' own LeanExecutor
+(rubber_rig.nodes.executor: rclpy's SingleThreadedExecutor that keeps its wait set), as in their processes.
 
 The launch files (launch/rig_*.launch.py) start the *same node classes* as separate processes with the *same
 parameter files*: here every node gets ``--ros-args --params-file <file>`` exactly as launch_ros passes it, and
@@ -37,6 +38,7 @@ from rclpy.parameter import Parameter
 from rclpy.signals import SignalHandlerOptions
 
 from ..dds import configure_dds
+from ..nodes.executor_choice import make_executor
 from ..nodes.params import undeclared_overrides
 
 
@@ -79,7 +81,7 @@ class InProcessLauncher:
 
     def spin(self, node: Node) -> Node:
         """Spin an already constructed node (e.g. a test probe) in its own executor thread."""
-        executor = SingleThreadedExecutor(context=self.context)
+        executor = make_executor(context=self.context, node=node)
         executor.add_node(node)
         thread = threading.Thread(target=self._spin, args=(executor,), name=f'spin-{node.get_name()}',
                                   daemon=True)

@@ -81,6 +81,7 @@ from rubber_rig.session.recorder_watch import RecorderWatch
 
 
 class ExcitationNode(Node):
+    events_executor_refuses = 'tasks that await futures (a program ran it at 31 % of a core, 5 wake-ups/s)'
 
     def __init__(self, node_name: str = 'excitation', clock=None, **kwargs):
         super().__init__(node_name, **kwargs)

@@ -22,10 +22,12 @@ here, and wraps the two clients the main job needs: the excitation's ``run_progr
 from __future__ import annotations
 
 from collections import defaultdict
+from typing import Callable
 
 import numpy as np
 from rclpy.action import ActionClient
 from rclpy.node import Node
+from rclpy.task import Future
 from std_msgs.msg import String
 from std_srvs.srv import Trigger
 
@@ -151,7 +153,28 @@ class SuiteMonitor(Node):
         goal = RunProgram.Goal(program_path=program_path, program_yaml=program_yaml,
                                amplitude_control=amplitude_control)
         self.auth.sign(goal, RUN_PROGRAM)     # a rig takes goals only with its key's signature
-        return self.action.send_goal_async(goal, feedback_callback=lambda m: self.feedback.append(m.feedback))
+        return self.on_executor(lambda: self.action.send_goal_async(
+            goal, feedback_callback=lambda m: self.feedback.append(m.feedback)))
+
+    def on_executor(self, send: Callable[[], Future]) -> Future:
+        """``send()`` (a request of the action client returning its future) run on this node's executor thread;
+        returns a future with that future's result.
+
+        rclpy's ActionClient (Jazzy) records a request's sequence number only after sending it, without a lock: a
+        response the executor thread takes in between is dropped ("Ignoring unexpected goal response") and the
+        future never completes. The faster the executor waits (issue 37's LeanExecutor), the likelier that is, so
+        requests from another thread (the bench's main thread) are sent from the executor's own thread.
+        """
+        result = Future()
+
+        def chain(task: Future) -> None:
+            if task.exception() is not None:
+                result.set_exception(task.exception())
+                return
+            task.result().add_done_callback(lambda inner: result.set_result(inner.result()))
+
+        self.executor.create_task(send).add_done_callback(chain)
+        return result
 
     def recorder(self, command: int, path: str = ''):
         """Call the recorder's ~/control (RecorderControl.Request.START/STOP/SPLIT/SNAPSHOT); returns a future."""

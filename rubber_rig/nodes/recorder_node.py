@@ -100,6 +100,9 @@ def offered_qos(info) -> dict:
 
 
 class RecorderNode(Node):
+
+    events_executor_refuses = 'raw subscriptions (it writes the bytes it receives)'   # nodes.executor_choice
+
     def __init__(self, **kwargs):
         super().__init__('recorder', **kwargs)
         self.auth = declare_auth(self)     # samples and setpoints recorded only when signed; control requests too

@@ -89,6 +89,8 @@ from rubber_rig.rig.shutdown import ramp_to_rest
 
 class RigDriverNode(LifecycleNode):
 
+    events_executor_refuses = 'a guard condition (the bus thread\'s wake-up)'   # nodes.executor_choice
+
     def __init__(self, node_name: str = 'rig_driver', **kwargs):
         super().__init__(node_name, **kwargs)
         self.params = declare_rig_driver_parameters(self)   # the node's own parameters (RigConfig holds the rig's)

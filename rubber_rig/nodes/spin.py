@@ -12,10 +12,13 @@
 # See the License for the specific language governing permissions and
 # limitations under the License.
 
-"""The ``main()`` of every node: init, spin one SingleThreadedExecutor, shut down cleanly.
+"""The ``main()`` of every node: init, spin one single-threaded executor, shut down cleanly.
 
-SingleThreadedExecutor, not MultiThreadedExecutor: with a timer publishing to a subscription in the same
-process, rclpy's MultiThreadedExecutor collapses to tens of callbacks per second (rclpy #1223, measured here).
+Single-threaded, not MultiThreadedExecutor: with a timer publishing to a subscription in the same process,
+rclpy's MultiThreadedExecutor collapses to tens of callbacks per second (rclpy #1223, measured here). The executor
+is :class:`rubber_rig.nodes.executor.LeanExecutor`, rclpy's SingleThreadedExecutor that keeps its wait set while
+the node's entities stay the same (about half the CPU per message, issue 37); ``RUBBER_RIG_EXECUTOR=rclpy`` runs
+rclpy's own instead (for comparing, or should an rclpy update break the lean one).
 
 The DDS configuration (rubber_rig.dds.configure_dds: transport, discovery) is chosen before rclpy.init and
 logged with the ready line.
@@ -46,7 +49,7 @@ import threading
 from typing import Callable
 
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import ExternalShutdownException
 from rclpy.logging import get_logger
 from rclpy.node import Node
 from rclpy.signals import SignalHandlerOptions
@@ -54,6 +57,7 @@ from rclpy.signals import SignalHandlerOptions
 from ..cpu import EXECUTOR_THREAD, name_this_thread, run_profiled
 from ..dds import configure_dds
 from ..rig.priority import set_process_nice
+from .executor_choice import make_executor
 from .params import ParameterError, undeclared_overrides
 from .rclpy_compat import RCLError
 
@@ -76,7 +80,7 @@ class _Stop:
             raise KeyboardInterrupt   # still starting: abandon the start (nothing to clean up but the context)
 
 
-def _spin(executor: SingleThreadedExecutor, errors: list, name: str = 'node') -> None:
+def _spin(executor, errors: list, name: str = 'node') -> None:
     name_this_thread(EXECUTOR_THREAD)   # benchmarks count its wake-ups and CPU (rubber_rig.cpu)
     try:
         run_profiled(executor.spin, name)   # under cProfile if RUBBER_RIG_PROFILE_DIR is set
@@ -127,7 +131,7 @@ def spin_node(node_factory: Callable[[], Node], args=None) -> None:
         # a pause of the node's executor that nobody scheduled)
         gc.collect()
         gc.freeze()
-        executor = SingleThreadedExecutor()
+        executor = make_executor(node=node)
         executor.add_node(node)
         thread = threading.Thread(target=_spin, args=(executor, errors, node.get_fully_qualified_name()),
                                   name='executor', daemon=True)
