@@ -41,6 +41,8 @@ from rubber_rig.nodes import awaitables
 from rubber_rig.nodes.executor import LeanExecutor
 from rubber_rig.nodes.executor_choice import EXECUTOR_ENV, EventsLoop, make_executor
 
+pytestmark = pytest.mark.ros   # every test here runs real rclpy on a DDS domain of its own
+
 PATIENCE = 20.0   # [s] the longest any wait here waits for its event
 
 
