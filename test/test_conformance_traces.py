@@ -26,7 +26,7 @@ from rubber_rig.cli.conformance import EXIT_ABORTED, EXIT_FAIL, EXIT_INCOMPLETE,
 from rubber_rig.rig.can.frames import SampleFrames
 from rubber_rig.rig.can.protocol import PROTOCOL_VERSION, STATE_CODE, Protocol
 from rubber_rig.rig.config import RigConfig
-from rubber_rig.rig.conformance import active_stream
+from rubber_rig.rig.conformance import active_ramps, active_stream
 from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.host_timing import HostTiming, late_between, own_intervals
 from rubber_rig.rig.conformance.link import Envelope, judges
@@ -214,7 +214,7 @@ class CrashingHold(ConformanceRun):
     """
 
     def scenarios(self):
-        return (active_stream.s_listen, active_stream.s_identify, s_hold, active_stream.s_reset_moving)
+        return (active_stream.s_listen, active_stream.s_identify, s_hold, active_ramps.s_reset_moving)
 
 
 def test_a_scenario_that_fails_on_its_own_fails_its_requirements_and_the_run_goes_on():

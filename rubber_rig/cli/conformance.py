@@ -50,8 +50,8 @@ from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.defects import DEFECTS
 from rubber_rig.rig.conformance.host_timing import LATE_MIN, SIM_LATE_MIN
 from rubber_rig.rig.conformance.in_process import REFERENCE_AMBIENT, REFERENCE_SPRING, run_against_reference
-from rubber_rig.rig.conformance.kernel_counts import RUN_QUEUE_MIN, cpu_pressure, pressure_share
-from rubber_rig.rig.conformance.link import Aborted, Envelope
+from rubber_rig.rig.conformance.kernel_counts import OWN_WAITS, RUN_QUEUE_MIN, cpu_pressure, pressure_share
+from rubber_rig.rig.conformance.link import SCENARIO_THREAD, Aborted, Envelope
 from rubber_rig.rig.conformance.log_segments import check_log
 from rubber_rig.rig.conformance.reference_specimen import Ambient, ReferenceSpring
 from rubber_rig.rig.conformance.report import NOT_TESTED, to_junit, to_markdown
@@ -339,15 +339,16 @@ def _host_timing_fact(args, timing, pressure) -> str:
     task of this host waited for a CPU; None: not measured).
     """
     late = [b - a for a, b in timing.windows]
-    thresholds = {'receive loop and heartbeat': LATE_MIN, 'simulator': SIM_LATE_MIN,
-                  'reference controller': SIM_LATE_MIN, 'run-queue waits of the simulator': RUN_QUEUE_MIN}
+    thresholds = {'receive loop and heartbeat': LATE_MIN, SCENARIO_THREAD: LATE_MIN, 'simulator': SIM_LATE_MIN,
+                  'reference controller': SIM_LATE_MIN, 'run-queue waits of the simulator': RUN_QUEUE_MIN,
+                  OWN_WAITS: RUN_QUEUE_MIN}
     parts = [f'{name} {count} (' + (f'by {thresholds[name] * 1e3:g} ms or more, ' if name in thresholds else '')
              + f'{seconds:.3f} s)' for name, (count, seconds) in sorted(timing.sources.items())]
     who = ('the simulator' if args.sim else 'the reference controller' if args.reference else 'none')
     text = (f'host timing: this host ran late {len(late)} times' + (f": {', '.join(parts)}" if parts else '')
             + (f'; longest {max(late) * 1e3:.0f} ms' if late else '') + f' (process standing for the controller '
-            f'on this host: {who}); a timing requirement violated only by as much as this host was late is not '
-            'judged')
+            f'on this host: {who}); a timing requirement violated only by as much as this host was late, or a '
+            "scenario's FAIL where this host was late as long as the requirement's time tolerance, is not judged")
     if pressure is not None:
         text += (f'; CPU pressure: some task of this host waited for a CPU {pressure * 100:.0f} % of the run '
                  '(/proc/pressure/cpu, context only)')

@@ -33,6 +33,7 @@ import numpy as np
 
 LATE_MIN = 0.010     # [s] a wake-up this much later than due is recorded
 MARGIN = 0.005       # [s] a window is widened by this much on each side when a stretch of the trace is judged
+JOIN_GAP = 0.001     # [s] windows this close are one stretch of lateness (longest_late)
 SIM_LATE_MIN = 0.002  # [s] the simulator on this host logs each deadline it missed by this much (the 2 ms a
 #                      controller's feedback may jitter, CTRL-FB-2): python -m rubber_rig.rig.sim --timing-log
 
@@ -128,6 +129,25 @@ def late_total(windows, t0: float, t1: float) -> float:
             total += b - max(a, end)
             end = b
     return total
+
+
+def longest_late(windows, t0: float, t1: float, join: float = JOIN_GAP) -> float:
+    """The longest stretch [s] this host was late without a break, among the windows that overlap [t0, t1]
+    widened by MARGIN: windows of any source that overlap, or follow each other within `join` [s], are one
+    stretch (the same delay seen by several sources, or a task held back sample after sample). Unlike late_total,
+    many short delays spread over a long stretch do not add up: a view of the controller, or a reaction, is
+    only as stale as the longest single delay.
+    """
+    lo, hi = t0 - MARGIN, t1 + MARGIN
+    spans = sorted((a, b) for a, b in windows if a <= hi and b >= lo)
+    longest, start, end = 0.0, None, -float('inf')
+    for a, b in spans:
+        if start is None or a > end + join:
+            start, end = a, b
+        else:
+            end = max(end, b)
+        longest = max(longest, end - start)
+    return longest
 
 
 def own_intervals(windows, t, period: float):

@@ -20,6 +20,7 @@ the run (active.ConformanceRun) holds one; it is deliberately not the driver (se
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 from typing import TYPE_CHECKING
@@ -51,6 +52,8 @@ LEAD = 0.3                  # [s] setpoints streamed ahead of the controller: co
 #                             controller hold, then step to where the wave had moved on, and tripped the
 #                             tracking watch)
 IDENTIFY_TIMEOUT = 0.1      # [s] CTRL-ID-1
+REACTION = 0.1              # [s] a controller is given to react to a command (a ramp's start, the watchdog's ramp)
+RESET_TIME = 0.2            # [s] RESET is given to return a latched fault to idle (CTRL-FAULT-2)
 IDENTIFY_REPEATS = 5        # CTRL-ID-1: IDENTIFY is asked this many times, each must be answered
 RAMP_VELOCITY = 0.002       # [m/s] commanded velocity of the ramps the run asks for
 APPROACH_VELOCITY = 0.0005  # [m/s] of the stream towards a limit (CTRL-LIM-2): LEAD of it is 0.15 mm
@@ -63,6 +66,7 @@ TOO_FAST_FACTOR = 1.5       # CTRL-LIM-3 steps at this multiple of the rated vel
 LATCH_TIME = 3.0            # [s] a fault must stay latched this long without RESET (CTRL-FAULT-2)
 FOREIGN_ID = 0x7FE          # an identifier the DBC does not define: another node's traffic
 FOREIGN_PERIOD = 0.01       # [s] of that traffic while the host is silent (CTRL-WD-1)
+SCENARIO_THREAD = 'scenario thread'   # host_timing source: the run's thread that streams, commands and waits
 
 
 class Aborted(RuntimeError):
@@ -109,9 +113,10 @@ class ConformanceLink:
         self.trace.host_late = self.host_timing.windows
         self.host_timing_files = tuple(host_timing_files)
         # the kernel's count of this host's lateness, sampled by the receive loop (kernel_counts): the waits for a
-        # CPU of the processes standing for the controller (kernel.pids: the simulator with --sim), and the frames
-        # the socket under this run's bus dropped
-        self.kernel = KernelCounts(self.host_timing, bus if simulated is None else None)
+        # CPU of the processes standing for the controller (kernel.pids: the simulator with --sim) and of this
+        # run's own, and the frames the socket under this run's bus dropped
+        self.kernel = KernelCounts(self.host_timing, bus if simulated is None else None,
+                                   os.getpid() if simulated is None else None)
         self.results = Results()
         self.lock = threading.RLock()
         self.state, self.faults, self.identity = 'unconfigured', 0, None
@@ -202,7 +207,11 @@ class ConformanceLink:
         """
         sim = self.simulated
         if sim is None:
+            # the scenario thread's own lateness: it woke later than it asked (host_timing), so what it sent or saw
+            # next was late by this host, not by the controller (host_excuse)
+            due = time.time() + seconds
             time.sleep(seconds)
+            self.host_timing.due(due, time.time(), SCENARIO_THREAD)
             return
         for _ in range(max(1, int(round(seconds / sim.step)))):
             sim.t += sim.step
