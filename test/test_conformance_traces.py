@@ -369,3 +369,37 @@ def test_a_state_change_across_a_lost_status_frame_is_not_judged():
     trace.frames[3].signals['ST_Counter'] = 4
     res = check_offline(trace)
     assert 'holding -> idle' in res['CTRL-ST-2'].detail
+
+
+def _status_ahead_of_lost_feedback(lost: range) -> Trace:
+    """A controller ticking 1 s: feedback of each sample, and every 10 ms a status of the sample just taken; the
+    feedback of the samples `lost` never reached this host (its socket dropped them).
+    """
+    w = TraceWriter()
+    for k in range(1000):
+        t = k / FS
+        if k not in lost:
+            for msg in FRAMES.encode_feedback(k, [0.0], [0.0], [0.0]):
+                w.trace.add(msg, t + 2e-4)
+        if k % 10 == 0:
+            w._add('ControllerStatus', {'ST_State': STATE_CODE['running'], 'ST_Counter': w._count('st', 16),
+                                        'ST_Faults': 0, 'ST_LastSequence': k, 'ST_BufferLevel': 0}, t + 3e-4)
+    return w.done()
+
+
+def test_a_status_ahead_of_feedback_this_host_dropped_is_not_judged():
+    """30 samples of feedback lost: the status frames after them are up to 21 samples ahead of the feedback
+    received (at most 16 allowed). With no lateness recorded that fails CTRL-ST-3; where this host recorded the
+    drop (the stretch its socket lost them in) it is not judged; lateness of 5 ms just after cannot explain them.
+    """
+    lost = range(400, 430)
+    assert check_offline(_status_ahead_of_lost_feedback(range(0))).get('CTRL-ST-3').status == PASS
+    res = check_offline(_status_ahead_of_lost_feedback(lost))
+    assert res['CTRL-ST-3'].status == FAIL and '0..21 samples' in res['CTRL-ST-3'].measured, res['CTRL-ST-3']
+    trace = _status_ahead_of_lost_feedback(lost)
+    trace.host_late = [(0.399, 0.431)]
+    r = check_offline(trace)['CTRL-ST-3']
+    assert r.status == NOT_TESTED and 'not judged: this host was late by 26 ms' in r.detail, r    # 21 ms + MARGIN
+    trace = _status_ahead_of_lost_feedback(lost)
+    trace.host_late = [(0.425, 0.430)]
+    assert check_offline(trace)['CTRL-ST-3'].status == FAIL
