@@ -54,8 +54,8 @@ TIME_TOLERANCE = {
     'CTRL-LIM-1': (REACTION, 'the wait beyond LEAD before the ABORT that must stop at the limit'),
     'CTRL-LIM-2': (REACTION, 'the time a controller is given to react'),
     'CTRL-LIM-3': (REACTION, 'the time a controller is given to react'),
-    'CTRL-FAULT-1': (DEFAULT_HOST_TIMEOUT, 'the stated host timeout: a longer silence of this host trips the '
-                     "controller's watchdog, another fault bit"),
+    'CTRL-FAULT-1': (DEFAULT_HOST_TIMEOUT, 'the host timeout the controller states (this where it states none): a '
+                     "longer silence of this host trips the controller's watchdog, another fault bit"),
     'CTRL-FAULT-2': (RESET_TIME, 'the time RESET is given to return to idle'),
     'CTRL-WD-1': (REACTION, 'the time beyond the host timeout the ramp may begin'),
 }
