@@ -110,6 +110,17 @@ def test_a_fail_without_a_stretch_or_on_a_value_is_never_excused():
     assert {r.status for r in results.values()} == {FAIL}
 
 
+def test_a_reference_motion_not_taken_while_this_host_was_late_is_not_judged():
+    """CTRL-MEAS-1 is on values, never excused - but 'the controller did not take the reference motion' is a time:
+    its stretch carries LEAD as its tolerance (a stream underrun by this host).
+    """
+    results = Results()
+    results.put('CTRL-MEAS-1', FAIL, '0 samples of the reference motion received', 'not taken',
+                Stretch(10.0, 12.5, 's_reference', tolerance=LEAD))
+    assert excuse(results, [(11.0, 11.0 + 0.5 * LEAD)]) == []
+    assert excuse(results, [(11.0, 11.0 + 1.5 * LEAD)]) == ['CTRL-MEAS-1']
+
+
 def test_a_pass_is_never_touched_and_the_tolerance_is_the_requirements_own():
     results = Results()
     results.put('CTRL-ID-1', PASS, '5 answers')
