@@ -30,7 +30,7 @@ import pytest
 from rubber_rig.rig.conformance.active_ramps import _last_before
 from rubber_rig.rig.conformance.envelope import Envelope, Sample
 from rubber_rig.rig.conformance.host_excuse import TIME_TOLERANCE, excuse
-from rubber_rig.rig.conformance.host_timing import LATE_MIN, longest_late
+from rubber_rig.rig.conformance.host_timing import LATE_MIN, MARGIN, LateSpans, late_total, longest_late
 from rubber_rig.rig.conformance.kernel_counts import OWN_WAITS, KernelCounts
 from rubber_rig.rig.conformance.link import (
     IDENTIFY_TIMEOUT,
@@ -221,3 +221,21 @@ def test_the_ramp_starts_from_the_last_sample_that_arrived_before_the_command():
     start = _last_before(link, 10.2995, 5301)
     assert start.seq == 5299 and start.u == pytest.approx(299e-6)
     assert _last_before(link, 10.2995, 9000) is None        # a sequence far beyond: not the stream it went on from
+
+
+def test_late_spans_answer_as_late_total_does_for_many_stretches_at_once():
+    """A loaded run records over ten thousand windows and a periodic frame has ten thousand intervals: the union
+    of the windows, queried by bisection, gives every interval's lateness as late_total does one at a time.
+    """
+    rng = np.random.default_rng(3)
+    starts = np.sort(rng.uniform(0.0, 20.0, 2000))
+    windows = [(a, a + (rng.uniform(0.002, 0.4) if k % 40 == 0 else rng.uniform(0.002, 0.02)))
+               for k, a in enumerate(starts)]
+    lo = rng.uniform(-1.0, 21.0, 300)
+    hi = lo + rng.uniform(0.0, 0.2, 300)
+    spans = LateSpans(windows)
+    expected = [late_total(windows, a + MARGIN, b - MARGIN) for a, b in zip(lo, hi, strict=True)]
+    assert spans.total(lo, hi) == pytest.approx(expected, abs=1e-12)
+    covered = LateSpans(windows, MARGIN).covers(lo)
+    assert list(covered) == [any(a - MARGIN <= x <= b + MARGIN for a, b in windows) for x in lo]
+    assert LateSpans([]).total(lo, hi).tolist() == [0.0] * 300 and not LateSpans([]).covers(lo).any()
