@@ -20,8 +20,10 @@ the reference spring fitted on the samples received, the ramp judged from the la
 """
 import math
 import os
+import subprocess
 import sys
 import threading
+import time
 
 import can
 import numpy as np
@@ -239,3 +241,32 @@ def test_late_spans_answer_as_late_total_does_for_many_stretches_at_once():
     covered = LateSpans(windows, MARGIN).covers(lo)
     assert list(covered) == [any(a - MARGIN <= x <= b + MARGIN for a, b in windows) for x in lo]
     assert LateSpans([]).total(lo, hi).tolist() == [0.0] * 300 and not LateSpans([]).covers(lo).any()
+
+
+def test_a_simulator_outlives_no_run_killed_by_a_timeout():
+    """A run killed (SIGKILL, as subprocess.run's timeout does) took its simulator with it: orphaned simulators
+    kept loading this host for minutes after timed-out runs. The child of a process started with the run's
+    preexec_fn ends when that process is killed.
+    """
+    parent = subprocess.Popen([sys.executable, '-c', (
+        'import subprocess, sys, time\n'
+        'from rubber_rig.cli.conformance import _ends_with_this_process\n'
+        'p = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"], '
+        'preexec_fn=_ends_with_this_process())\n'
+        'print(p.pid, flush=True)\n'
+        'time.sleep(60)\n')], stdout=subprocess.PIPE, text=True)
+    child = int(parent.stdout.readline())
+    parent.kill()
+    parent.wait()
+    deadline = time.monotonic() + 10.0
+    state = 'S'
+    while time.monotonic() < deadline:
+        try:
+            with open(f'/proc/{child}/status', encoding='ascii') as f:
+                state = f.read().split('State:')[1].split()[0]
+        except FileNotFoundError:
+            state = 'gone'
+        if state in ('Z', 'X', 'gone'):
+            break
+        time.sleep(0.05)
+    assert state in ('Z', 'X', 'gone'), state       # exited (a zombie until init reaps it), not sleeping on

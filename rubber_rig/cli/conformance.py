@@ -29,11 +29,13 @@ Exit status: 0 every requirement checked passed, 1 a requirement failed, 2 usage
 left the envelope and was aborted, 4 (online) nothing failed but the run is incomplete: a requirement was not
 tested (e.g. CTRL-PWR-1 without --power-up). Offline, requirements a log does not show are listed, not failed.
 """
+import ctypes
 import datetime
 import hashlib
 import json
 import os
 import re
+import signal
 import subprocess
 import sys
 import tempfile
@@ -269,7 +271,7 @@ def run(args) -> int:
     watch = []        # the simulator's process: its waits for a CPU are this host's lateness (kernel_counts)
 
     def start_sim():
-        box['process'] = subprocess.Popen(sim_command, stdout=subprocess.DEVNULL)
+        box['process'] = subprocess.Popen(sim_command, stdout=subprocess.DEVNULL, preexec_fn=_ends_with_this_process())
         watch.append(box['process'].pid)
 
     def ask_operator():
@@ -308,6 +310,14 @@ def run(args) -> int:
     simulated = f" (simulated, defects: {', '.join(args.defect) or 'none'})" if args.sim else ''
     return _online_report(args, conf, results, f'bus {cfg.backend} {cfg.channel or ""}, {cfg.frame_profile} '
                           f'frames, {cfg.sample_rate:g} Hz', simulated, t0, pressure)
+
+
+def _ends_with_this_process():
+    """A preexec_fn: the kernel sends SIGTERM to the child when this process ends, however (PR_SET_PDEATHSIG): a
+    run killed by a timeout leaves no simulator loading the host for ever. None without prctl.
+    """
+    prctl = getattr(ctypes.CDLL(None, use_errno=True), 'prctl', None)    # looked up before the fork
+    return None if prctl is None else (lambda: prctl(1, signal.SIGTERM, 0, 0, 0))   # 1: PR_SET_PDEATHSIG
 
 
 def _reference(args) -> int:
