@@ -371,6 +371,28 @@ def test_a_state_change_across_a_lost_status_frame_is_not_judged():
     assert 'holding -> idle' in res['CTRL-ST-2'].detail
 
 
+def test_a_state_change_across_a_whole_counter_cycle_this_host_lost_is_not_judged():
+    """ST_Counter counts to 16: 16 status frames lost (160 ms) look like a step of one. running -> idle across
+    such a silence is judged illegal where nothing explains it, and not judged where this host was late then
+    (its socket dropped them); the counter then shows nothing wrong at all.
+    """
+    def trace_with_silence():
+        trace = Trace(FS)
+        times = [0.0, 0.01, 0.17, 0.18]           # 16 frames between the second and the third never arrived
+        for t, (state, counter) in zip(times, [('running', 1), ('running', 2), ('idle', 3), ('idle', 4)],
+                                       strict=True):
+            trace.add(PROTO.encode('ControllerStatus', {'ST_State': STATE_CODE[state], 'ST_Counter': counter,
+                                                        'ST_Faults': 0, 'ST_LastSequence': 0,
+                                                        'ST_BufferLevel': 0}), t)
+        return trace
+    res = check_offline(trace_with_silence())
+    assert res['CTRL-ST-2'].status == FAIL and 'running -> idle' in res['CTRL-ST-2'].detail
+    trace = trace_with_silence()
+    trace.host_late = [(0.012, 0.165)]
+    res = check_offline(trace)
+    assert res['CTRL-ST-2'].status == PASS, res['CTRL-ST-2']
+
+
 def _status_ahead_of_lost_feedback(lost: range) -> Trace:
     """A controller ticking 1 s: feedback of each sample, and every 10 ms a status of the sample just taken; the
     feedback of the samples `lost` never reached this host (its socket dropped them).
