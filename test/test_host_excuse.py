@@ -30,6 +30,7 @@ import numpy as np
 import pytest
 
 from rubber_rig.rig.conformance.active_ramps import _last_before
+from rubber_rig.rig.conformance.active_stream import _judge_applied
 from rubber_rig.rig.conformance.envelope import Envelope, Sample
 from rubber_rig.rig.conformance.host_excuse import TIME_TOLERANCE, excuse
 from rubber_rig.rig.conformance.host_timing import LATE_MIN, MARGIN, LateSpans, late_total, longest_late
@@ -270,3 +271,23 @@ def test_a_simulator_outlives_no_run_killed_by_a_timeout():
             break
         time.sleep(0.05)
     assert state in ('Z', 'X', 'gone'), state       # exited (a zombie until init reaps it), not sleeping on
+
+
+def test_a_stream_this_host_sent_late_is_not_judged_and_a_wrong_setpoint_still_fails():
+    """CTRL-STREAM-4 on a stream of 1000 setpoints, 100 of them sent by this host 150 ms after the controller had
+    ticked them (a stall longer than LEAD): not the controller's doing, not judged; one setpoint applied with
+    another value fails however late the others were.
+    """
+    bus = can.Bus(interface='virtual', channel='stream_sent_late', receive_own_messages=False)
+    link = ConformanceLink(bus, 1000.0, Envelope(-1e-3, 1e-3))
+    bus.shutdown()
+    samples = [Sample(10.0 + 0.001 * k, 2000 + k, 0.0, 1e-7 * k, 'running', 0.0) for k in range(1000)]
+    link.sent = {2000 + k: 1e-7 * k for k in range(1000)}
+    link.sent_at = {2000 + k: 10.0 + 0.001 * k - (0.3 if k < 900 else -0.15) for k in range(1000)}
+    _judge_applied(link, samples, 2000, 3000, 'stream')
+    r = link.results['CTRL-STREAM-4']
+    assert r.status == NOT_TESTED and 'late by 150 ms' in r.detail and '100 sent too late' in r.measured, r
+    link.results.clear()
+    link.sent[2500] = 5e-6                         # applied 0.05 mm, sent 5 um
+    _judge_applied(link, samples, 2000, 3000, 'stream')
+    assert link.results['CTRL-STREAM-4'].status == FAIL
