@@ -36,7 +36,6 @@ from rubber_rig.rig.conformance.host_excuse import TIME_TOLERANCE, excuse
 from rubber_rig.rig.conformance.host_timing import LATE_MIN, MARGIN, LateSpans, late_total, longest_late
 from rubber_rig.rig.conformance.kernel_counts import OWN_WAITS, KernelCounts
 from rubber_rig.rig.conformance.link import (
-    IDENTIFY_TIMEOUT,
     LEAD,
     REACTION,
     SCENARIO_THREAD,
@@ -126,13 +125,30 @@ def test_a_reference_motion_not_taken_while_this_host_was_late_is_not_judged():
 
 def test_a_pass_is_never_touched_and_the_tolerance_is_the_requirements_own():
     results = Results()
-    results.put('CTRL-ID-1', PASS, '5 answers')
+    results.put('CTRL-LIM-1', PASS, 'upwards: stopped at the limit')
     results.put('CTRL-STREAM-3', FAIL, 'resumed 0 of 500', 'underrun', Stretch(10.0, 11.0))
-    results.put('CTRL-ID-1', FAIL, 'answered in 180 ms', 'late', Stretch(20.0, 20.2))
-    windows = [(10.5, 10.5 + 0.9 * LEAD), (20.05, 20.05 + IDENTIFY_TIMEOUT)]   # 270 ms < LEAD; 100 ms = 100 ms
-    assert excuse(results, windows) == ['CTRL-ID-1']
+    results.put('CTRL-LIM-1', FAIL, 'downwards: stopped at 0.4007 mm', 'stop', Stretch(20.0, 20.2))
+    windows = [(10.5, 10.5 + 0.9 * LEAD), (20.05, 20.05 + REACTION)]   # 270 ms < LEAD; 100 ms = 100 ms
+    assert excuse(results, windows) == ['CTRL-LIM-1']
     assert results['CTRL-STREAM-3'].status == FAIL
-    assert results['CTRL-ID-1'].status == NOT_TESTED and '5 answers' in results['CTRL-ID-1'].measured
+    assert results['CTRL-LIM-1'].status == NOT_TESTED and 'upwards' in results['CTRL-LIM-1'].measured
+
+
+def test_what_no_delay_can_make_or_a_rule_of_its_own_decides_is_never_excused_by_a_stall():
+    """A setpoint applied beyond a limit, a fault cleared without RESET (infinite tolerance), CTRL-ID-1 and
+    CTRL-WD-1 (their own rules weigh the lateness against the violation): a 2 s stall leaves them failed. A ramp
+    that never began within 15 s is a time: only 15 s of lateness could explain it.
+    """
+    results = Results()
+    results.put('CTRL-LIM-2', FAIL, 'farthest applied 0.6 mm', 'beyond', Stretch(10.0, 12.0, tolerance=math.inf))
+    results.put('CTRL-FAULT-2', FAIL, 'cleared after 0.5 s', 'latch', Stretch(10.0, 12.0, tolerance=math.inf))
+    results.put('CTRL-ID-1', FAIL, 'answered in 900 ms', 'late', Stretch(10.0, 12.0))
+    results.put('CTRL-WD-1', FAIL, 'never ramped', 'silence', Stretch(10.0, 12.0))
+    results.put('CTRL-RAMP-1', FAIL, 'no ramp', 'no ramp to rest', Stretch(10.0, 25.0, excess=15.0,
+                                                                          tolerance=math.inf))
+    assert excuse(results, [(10.5, 12.5)]) == []
+    assert {r.status for r in results.values()} == {FAIL}
+    assert excuse(results, [(10.0, 25.0)]) == ['CTRL-RAMP-1']
 
 
 def test_a_stretch_of_its_own_tolerance_the_stated_host_timeout():

@@ -159,7 +159,8 @@ def _limited_abort(link, side: int):
     link.results.put('CTRL-LIM-1', PASS if ok else FAIL,
                      f'ABORT to {target * 1e3:.4f} mm with {name} {hl * 1e3:.4f} mm: farthest {far * 1e3:.4f} '
                      f'mm, stopped at {u[-1] * 1e3 if u else math.nan:.4f} mm',
-                     '' if ok else f"the controller's ramp must stop at {name}", Stretch(begun, link.now()))
+                     '' if ok else f"the controller's ramp must stop at {name}",
+                     Stretch(begun, link.now(), tolerance=math.inf if far * side > hl * side + 1.5 * LSB else None))
     link.limits(link.env.lower, link.env.upper)
     link.to_rest(link.position)
 
@@ -204,7 +205,8 @@ def _outside_limits(link, side: int, judge_latch: bool):
                      f'{far * 1e3:.4f} mm, faults {fault_names(faults)}, state {link.state}; fault ramp: '
                      f'{shape.describe()}',
                      '' if ok else shape.why() or f'a setpoint beyond {name} must never be applied, and must '
-                     'fault the rig', Stretch(t, link.now()))
+                     'fault the rig',    # beyond the limit: no delay of this host applies a setpoint
+                     Stretch(t, link.now(), tolerance=math.inf if far * side > hl * side + 1.5 * LSB else None))
     _judge_fault_bits(link, f'beyond {name}', faults, FAULT_DISPLACEMENT_LIMIT, t)
     if judge_latch:
         _judge_latch(link)
@@ -267,7 +269,9 @@ def _judge_latch(link):
                      + (f'{idle_at - t_reset:.3f} s after RESET (at most {RESET_TIME:g} s)' if idle_at is not None
                         else f'not within {link.now() - t_reset:.3f} s of RESET'),
                      '' if ok else f'a fault must latch until RESET (checked for {LATCH_TIME:g} s), which '
-                     'clears it', Stretch(t, link.now()))
+                     'clears it',      # a fault that clears itself is no delay; a slow RESET by its excess only
+                     Stretch(t, link.now(), excess=None if not latched else (
+                         idle_at if idle_at is not None else link.now()) - t_reset - RESET_TIME, tolerance=math.inf))
 
 
 @judges('CTRL-LIM-3', 'CTRL-FAULT-1')
@@ -314,7 +318,8 @@ def _too_fast(link, side: int, vmax: float, step: float, basis: str):
                      f'fastest applied {fastest:.4f} m/s, faults {fault_names(faults)}; fault ramp: '
                      f'{shape.describe()}',
                      '' if ok else shape.why() if fastest <= vmax * 1.02 + 2 * LSB * link.fs and faults else
-                     'a setpoint above the rated velocity must never be applied, and must fault')
+                     'a setpoint above the rated velocity must never be applied, and must fault',
+                     Stretch(t, link.now(), tolerance=math.inf if fastest > vmax * 1.02 + 2 * LSB * link.fs else None))
     _judge_fault_bits(link, 'too fast', faults, FAULT_VELOCITY_LIMIT, t)
     link.to_rest(0.0)
 

@@ -42,7 +42,7 @@ def _judge_ramp(link, target: float, code: int = CMD_ABORT):
     ramp = link._samples_since(t)
     if not done or not ramp:
         link.results.put('CTRL-RAMP-1', FAIL, f'{COMMAND[code]}: state {link.state} after {REST_TIMEOUT:g} s',
-                         'no ramp to rest', Stretch(t, link.now()))
+                         'no ramp to rest', Stretch(t, link.now(), excess=REST_TIMEOUT, tolerance=math.inf))
         link.to_rest(link.position)
         return
     start = _last_before(link, t, ramp[0].seq)
@@ -63,7 +63,9 @@ def _judge_ramp(link, target: float, code: int = CMD_ABORT):
                      f'state {link.state}',
                      '' if ok else shape.why() or 'the ramp must reach its target at the commanded velocity '
                      'without a step and end idle',
-                     Stretch(t, ramp[-1].t, excess=duration - allowed if duration > allowed else None))
+                     Stretch(t, ramp[-1].t, excess=duration - allowed if duration > allowed else None,
+                             # too long, and nothing else wrong: only lateness of the excess explains it
+                             tolerance=math.inf if shape.ok and abs(u[-1] - target) <= 1e-6 else None))
     link.to_rest()
 
 

@@ -35,13 +35,15 @@ every defect fails as before.
 from __future__ import annotations
 
 from .host_timing import late_total, longest_late, not_judged
-from .link import DEFAULT_HOST_TIMEOUT, IDENTIFY_TIMEOUT, LEAD, REACTION, RESET_TIME
+from .link import DEFAULT_HOST_TIMEOUT, LEAD, REACTION, RESET_TIME
 from .report import FAIL, NOT_TESTED
 
 #: requirement id -> (time tolerance [s], what it is): a delay of this host this long in a FAIL's stretch can
-#: have made it; requirements not listed (trace checks with rules of their own, values) are never excused here
+#: have made it; requirements not listed (trace checks, CTRL-ID-1 and CTRL-WD-1 with rules of their own that
+#: weigh the lateness against the violation, values) are never excused here. A verdict whose violation no delay
+#: can make (a setpoint applied beyond a limit, a fault that clears itself) or that is a time (a ramp too long, no
+#: ramp at all) gives its stretch an infinite tolerance: only lateness of its excess, if any, then explains it
 TIME_TOLERANCE = {
-    'CTRL-ID-1': (IDENTIFY_TIMEOUT, 'the time an IDENTIFY answer is given'),
     'CTRL-PWR-1': (REACTION, 'the time a controller is given to react'),
     'CTRL-STREAM-1': (LEAD, 'how far ahead the run streams: a longer delay underruns the stream'),
     'CTRL-STREAM-2': (LEAD, 'how far ahead the run streams'),
@@ -57,7 +59,6 @@ TIME_TOLERANCE = {
     'CTRL-FAULT-1': (DEFAULT_HOST_TIMEOUT, 'the host timeout the controller states (this where it states none): a '
                      "longer silence of this host trips the controller's watchdog, another fault bit"),
     'CTRL-FAULT-2': (RESET_TIME, 'the time RESET is given to return to idle'),
-    'CTRL-WD-1': (REACTION, 'the time beyond the host timeout the ramp may begin'),
 }
 
 
