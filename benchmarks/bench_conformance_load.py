@@ -44,13 +44,17 @@ ARGS = ('--sim', '--power-up', '--envelope', '1mm', '--reference-spring', '10kN/
 
 
 def verdicts(junit) -> dict:
-    """Requirement id -> 'pass' | 'FAIL' | 'not judged' (this host was late) | 'not tested' from a JUnit report."""
+    """Requirement id -> ('pass' | 'FAIL' | 'not judged' (this host was late) | 'not tested', the message) from a
+    JUnit report.
+    """
     out = {}
     for case in ET.parse(junit).getroot().iter('testcase'):
-        skipped = case.find('skipped')
-        out[case.get('name')] = ('FAIL' if case.find('failure') is not None else
-                                 'not judged' if skipped is not None and 'this host was late' in
-                                 skipped.get('message', '') else 'not tested' if skipped is not None else 'pass')
+        skipped, failure = case.find('skipped'), case.find('failure')
+        message = (failure if failure is not None else skipped).get('message', '') \
+            if failure is not None or skipped is not None else ''
+        out[case.get('name')] = ('FAIL' if failure is not None else
+                                 'not judged' if skipped is not None and 'this host was late' in message else
+                                 'not tested' if skipped is not None else 'pass', message)
     return out
 
 
@@ -64,7 +68,9 @@ def one_run(extra: list) -> tuple:
                               timeout=600)
         found = verdicts(junit) if os.path.exists(junit) else {}
     fact = next((line for line in proc.stdout.splitlines() if 'host timing:' in line), proc.stderr[-300:])
-    return proc.returncode, found, fact
+    aborted = next((line.strip() for line in (proc.stdout + proc.stderr).splitlines()
+                    if 'ABORTED:' in line or 'aborted:' in line), '')
+    return proc.returncode, found, fact + ('\n  ' + aborted if aborted else '')
 
 
 def main(argv=None) -> int:
@@ -81,14 +87,16 @@ def main(argv=None) -> int:
     for run in range(1, args.runs + 1):
         rc, found, fact = one_run(extra)
         statuses.append(rc)
-        for rid, verdict in found.items():
+        for rid, (verdict, _) in found.items():
             tally[rid][verdict] += 1
-        failed = sorted(rid for rid, v in found.items() if v == 'FAIL')
+        failed = sorted(rid for rid, (v, _) in found.items() if v == 'FAIL')
         print(f'run {run}: exit status {rc}, load average {" ".join(f"{x:.2f}" for x in os.getloadavg())}, '
               f'failed: {", ".join(failed) or "none"}\n  {fact.strip()}', flush=True)
+        for rid in failed:
+            print(f'  FAIL {rid}: {found[rid][1][:300]}', flush=True)
     print(f'\n| requirement | pass | FAIL | not judged (host late) | of {args.runs} runs |')
     print('| --- | --- | --- | --- | --- |')
-    for rid in sorted(set(TIMING) | {r for r, c in tally.items() if c['FAIL']}):
+    for rid in sorted(set(TIMING) | {r for r, c in tally.items() if c['FAIL'] or c['not judged']}):
         c = tally[rid]
         print(f"| {rid} | {c['pass']} | {c['FAIL']} | {c['not judged']} | {sum(c.values())} |")
     print(f'\nexit statuses: {statuses}')

@@ -68,10 +68,10 @@ def _junit(path) -> dict:
     return out
 
 
-def _conformance(tmp_path, *args):
+def _conformance(tmp_path, *args, timeout=120):
     junit = tmp_path / 'report.xml'
     proc = subprocess.run([sys.executable, '-m', 'rubber_rig.cli.main', 'conformance', *args, '--junit', str(junit)],
-                          capture_output=True, text=True, timeout=120)
+                          capture_output=True, text=True, timeout=timeout)
     return proc, (_junit(junit) if junit.exists() else {})
 
 
@@ -123,17 +123,18 @@ def test_conformance_in_private_netns(inner):
 
 
 @pytest.mark.slow
-@pytest.mark.timeout(300)
+@pytest.mark.timeout(340)
 def test_the_simulator_in_a_process_of_its_own_passes_conformance_over_a_real_bus():
     """End-to-end tier (make test): `rubber-rig conformance --sim` against the simulator in a process of its own
     over python-can's udp_multicast, in a private network namespace: every requirement not judged on this
     host's timing or on the simulator keeping up in real time passes (the wiring of bus, codec, driver and
-    simulator across processes). Those are the system tier's (test_conformance_in_private_netns).
+    simulator across processes), or, on a host so loaded that it was late where a scenario judged, is not judged
+    for that (host_excuse) - never failed. Those are the system tier's (test_conformance_in_private_netns).
     """
     if in_private_netns():
         pytest.skip('already inside the namespace')
     rc, out = rerun_in_private_netns(f'{HERE}::test_correct_simulator_passes_every_requirement_apart_from_timing',
-                                     timeout=240)
+                                     timeout=300)
     if rc is None:
         pytest.skip(out)
     assert rc == 0 and '1 passed' in out and 'failed' not in out, out
@@ -150,10 +151,15 @@ REAL_TIME = TIMING | {'CTRL-FB-1', 'CTRL-SEQ-1', 'CTRL-STREAM-4', 'CTRL-ST-2', '
 @inside
 def test_correct_simulator_passes_every_requirement_apart_from_timing(tmp_path):
     assert in_private_netns()
-    proc, online = _conformance(tmp_path, '--sim', '--power-up', '--envelope', '1mm', *MEASURED)
+    # a run under a load average of 9-12 on two cores takes 60-150 s
+    proc, online = _conformance(tmp_path, '--sim', '--power-up', '--envelope', '1mm', *MEASURED, timeout=240)
     assert set(online) == CTRL, proc.stdout[-3000:] + proc.stderr[-2000:]
-    assert {k for k, v in online.items() if v != 'pass'} <= REAL_TIME, proc.stdout[-3000:]
-    assert len(CTRL - REAL_TIME) >= 15       # the wiring: frames, limits, ramps, faults, reset, power-up, identity
+    # beyond what a simulator must keep up with in real time, nothing fails: a scenario's verdict where this host
+    # was late longer than the requirement allows is not judged ('host late'), the run incomplete
+    assert {k for k, v in online.items() if v not in ('pass', 'host late')} <= REAL_TIME, proc.stdout[-3000:]
+    wiring = {k for k, v in online.items() if v == 'pass'} - REAL_TIME
+    # the wiring: frames, limits, ramps, faults, reset, power-up, identity, measured values - nearly all shown
+    assert len(CTRL - REAL_TIME) >= 15 and len(wiring) >= len(CTRL - REAL_TIME) - 3, proc.stdout[-3000:]
 
 
 @inside

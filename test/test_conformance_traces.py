@@ -26,7 +26,7 @@ from rubber_rig.cli.conformance import EXIT_ABORTED, EXIT_FAIL, EXIT_INCOMPLETE,
 from rubber_rig.rig.can.frames import SampleFrames
 from rubber_rig.rig.can.protocol import PROTOCOL_VERSION, STATE_CODE, Protocol
 from rubber_rig.rig.config import RigConfig
-from rubber_rig.rig.conformance import active_stream
+from rubber_rig.rig.conformance import active_ramps, active_stream
 from rubber_rig.rig.conformance.active import ConformanceRun
 from rubber_rig.rig.conformance.host_timing import HostTiming, late_between, own_intervals
 from rubber_rig.rig.conformance.link import Envelope, judges
@@ -214,7 +214,7 @@ class CrashingHold(ConformanceRun):
     """
 
     def scenarios(self):
-        return (active_stream.s_listen, active_stream.s_identify, s_hold, active_stream.s_reset_moving)
+        return (active_stream.s_listen, active_stream.s_identify, s_hold, active_ramps.s_reset_moving)
 
 
 def test_a_scenario_that_fails_on_its_own_fails_its_requirements_and_the_run_goes_on():
@@ -369,3 +369,59 @@ def test_a_state_change_across_a_lost_status_frame_is_not_judged():
     trace.frames[3].signals['ST_Counter'] = 4
     res = check_offline(trace)
     assert 'holding -> idle' in res['CTRL-ST-2'].detail
+
+
+def test_a_state_change_across_a_whole_counter_cycle_this_host_lost_is_not_judged():
+    """ST_Counter counts to 16: 16 status frames lost (160 ms) look like a step of one. running -> idle across
+    such a silence is judged illegal where nothing explains it, and not judged where this host was late then
+    (its socket dropped them); the counter then shows nothing wrong at all.
+    """
+    def trace_with_silence():
+        trace = Trace(FS)
+        times = [0.0, 0.01, 0.17, 0.18]           # 16 frames between the second and the third never arrived
+        for t, (state, counter) in zip(times, [('running', 1), ('running', 2), ('idle', 3), ('idle', 4)],
+                                       strict=True):
+            trace.add(PROTO.encode('ControllerStatus', {'ST_State': STATE_CODE[state], 'ST_Counter': counter,
+                                                        'ST_Faults': 0, 'ST_LastSequence': 0,
+                                                        'ST_BufferLevel': 0}), t)
+        return trace
+    res = check_offline(trace_with_silence())
+    assert res['CTRL-ST-2'].status == FAIL and 'running -> idle' in res['CTRL-ST-2'].detail
+    trace = trace_with_silence()
+    trace.host_late = [(0.012, 0.165)]
+    res = check_offline(trace)
+    assert res['CTRL-ST-2'].status == PASS, res['CTRL-ST-2']
+
+
+def _status_ahead_of_lost_feedback(lost: range) -> Trace:
+    """A controller ticking 1 s: feedback of each sample, and every 10 ms a status of the sample just taken; the
+    feedback of the samples `lost` never reached this host (its socket dropped them).
+    """
+    w = TraceWriter()
+    for k in range(1000):
+        t = k / FS
+        if k not in lost:
+            for msg in FRAMES.encode_feedback(k, [0.0], [0.0], [0.0]):
+                w.trace.add(msg, t + 2e-4)
+        if k % 10 == 0:
+            w._add('ControllerStatus', {'ST_State': STATE_CODE['running'], 'ST_Counter': w._count('st', 16),
+                                        'ST_Faults': 0, 'ST_LastSequence': k, 'ST_BufferLevel': 0}, t + 3e-4)
+    return w.done()
+
+
+def test_a_status_ahead_of_feedback_this_host_dropped_is_not_judged():
+    """30 samples of feedback lost: the status frames after them are up to 21 samples ahead of the feedback
+    received (at most 16 allowed). With no lateness recorded that fails CTRL-ST-3; where this host recorded the
+    drop (the stretch its socket lost them in) it is not judged; lateness of 5 ms just after cannot explain them.
+    """
+    lost = range(400, 430)
+    assert check_offline(_status_ahead_of_lost_feedback(range(0))).get('CTRL-ST-3').status == PASS
+    res = check_offline(_status_ahead_of_lost_feedback(lost))
+    assert res['CTRL-ST-3'].status == FAIL and '0..21 samples' in res['CTRL-ST-3'].measured, res['CTRL-ST-3']
+    trace = _status_ahead_of_lost_feedback(lost)
+    trace.host_late = [(0.399, 0.431)]
+    r = check_offline(trace)['CTRL-ST-3']
+    assert r.status == NOT_TESTED and 'not judged: this host was late by 26 ms' in r.detail, r    # 21 ms + MARGIN
+    trace = _status_ahead_of_lost_feedback(lost)
+    trace.host_late = [(0.425, 0.430)]
+    assert check_offline(trace)['CTRL-ST-3'].status == FAIL

@@ -30,16 +30,17 @@ from pathlib import Path
 import can
 
 from ..can.protocol import CMD_ABORT
-from . import active_faults, active_limits, active_power, active_stream, reference_specimen
+from . import active_faults, active_limits, active_power, active_ramps, active_stream, reference_specimen
+from .host_excuse import excuse
 from .link import Aborted, ConformanceLink
 from .passive import check_offline
-from .report import FAIL, NOT_TESTED, Results
+from .report import FAIL, NOT_TESTED, Results, Stretch
 from .requirements import REQUIREMENTS
 
 #: every scenario in the order a run takes them: functions of the run's ConformanceLink, each marked with the
 #: requirements it judges (link.judges); a run without --power-up leaves out the first
 SCENARIOS = (active_power.s_power_up, active_stream.s_listen, active_stream.s_identify, active_stream.s_stream,
-             active_stream.s_stale, reference_specimen.s_reference, active_stream.s_hold, active_stream.s_reset_moving,
+             active_stream.s_stale, reference_specimen.s_reference, active_ramps.s_hold, active_ramps.s_reset_moving,
              active_faults.s_bad_frames, active_faults.s_host_limits, active_faults.s_out_of_limits,
              active_limits.s_tightened_limits, active_faults.s_too_fast, active_faults.s_host_silence,
              active_faults.s_wrap)
@@ -97,19 +98,26 @@ class ConformanceRun:
 
         A scenario that fails on its own fails the requirements it had not judged, with the reason, and the run
         goes on from rest; only Aborted (the envelope left, or a controller that will not come to rest) ends it.
+        At the end, a scenario's FAIL that this host's lateness explains is not judged (host_excuse.excuse).
         """
         link = self.link
+        origin = link.now()
         link.start()
         try:
             for scenario in self.scenarios():
                 link.log(f'conformance: {scenario.__doc__.splitlines()[0].rstrip(".")}')
                 before = {rid: (r.status, r.measured) for rid, r in link.results.items()}
+                # a FAIL that names no stretch of its own judged the scenario so far (host_excuse)
+                started = link.now()
+                link.results.stamp = lambda name=scenario.__name__, t0=started: Stretch(t0, link.now(), name)
                 try:
                     scenario(link)
                 except Aborted:
                     raise
                 except Exception as exc:   # noqa: BLE001 - any failure of one scenario is that scenario's verdict
                     self._scenario_failed(scenario, exc, before)
+                finally:
+                    link.results.stamp = None
         except Aborted as exc:
             link.command(CMD_ABORT, 0.0)
             link.log(f'conformance: ABORTED: {exc}')
@@ -122,6 +130,10 @@ class ConformanceRun:
             for rid, r in passive.items():
                 if rid.startswith('CTRL'):
                     link.results.put(rid, r.status, r.measured, r.detail)
+        # every source of this host's lateness is in now: a scenario's FAIL it explains is not judged
+        excused = excuse(link.results, link.trace.host_late, origin)
+        if excused:
+            link.log(f'conformance: not judged, this host was late where they failed: {", ".join(excused)}')
         why = (f'run aborted: {link.deviation}' if link.deviation else
                f'a short run of {", ".join(sorted(link.only))} only' if link.only is not None else
                'needs the controller switched on during the run (--power-up)')

@@ -39,11 +39,13 @@ from .link import (
     LEAD,
     LSB,
     RAMP_VELOCITY,
+    REACTION,
+    RESET_TIME,
     REST_TIMEOUT,
     TOO_FAST_FACTOR,
     judges,
 )
-from .report import FAIL, NOT_TESTED, PASS
+from .report import FAIL, NOT_TESTED, PASS, Stretch
 from .shape import OWN_RAMP_VELOCITY, ramp_shape
 
 
@@ -139,11 +141,12 @@ def _limited_abort(link, side: int):
     """
     edge = link.env.upper if side > 0 else link.env.lower
     hl = 0.5 * edge
+    begun = link.now()
     link.limits(*((link.env.lower, hl) if side > 0 else (hl, link.env.upper)))
     p0 = min(link.position, 0.0) if side > 0 else max(link.position, 0.0)
     first = link.next_sequence() + 1000
     link.stream(first, link.ramp_to(link.position, p0, RAMP_VELOCITY), 0.2)
-    link._sleep(LEAD + 0.1)
+    link._sleep(LEAD + REACTION)
     t = link.now()
     target = 0.9 * edge
     link.command(CMD_ABORT, target, 5 * RAMP_VELOCITY)
@@ -156,7 +159,8 @@ def _limited_abort(link, side: int):
     link.results.put('CTRL-LIM-1', PASS if ok else FAIL,
                      f'ABORT to {target * 1e3:.4f} mm with {name} {hl * 1e3:.4f} mm: farthest {far * 1e3:.4f} '
                      f'mm, stopped at {u[-1] * 1e3 if u else math.nan:.4f} mm',
-                     '' if ok else f"the controller's ramp must stop at {name}")
+                     '' if ok else f"the controller's ramp must stop at {name}",
+                     Stretch(begun, link.now(), tolerance=math.inf if far * side > hl * side + 1.5 * LSB else None))
     link.limits(link.env.lower, link.env.upper)
     link.to_rest(link.position)
 
@@ -201,8 +205,9 @@ def _outside_limits(link, side: int, judge_latch: bool):
                      f'{far * 1e3:.4f} mm, faults {fault_names(faults)}, state {link.state}; fault ramp: '
                      f'{shape.describe()}',
                      '' if ok else shape.why() or f'a setpoint beyond {name} must never be applied, and must '
-                     'fault the rig')
-    _judge_fault_bits(link, f'beyond {name}', faults, FAULT_DISPLACEMENT_LIMIT)
+                     'fault the rig',    # beyond the limit: no delay of this host applies a setpoint
+                     Stretch(t, link.now(), tolerance=math.inf if far * side > hl * side + 1.5 * LSB else None))
+    _judge_fault_bits(link, f'beyond {name}', faults, FAULT_DISPLACEMENT_LIMIT, t)
     if judge_latch:
         _judge_latch(link)
     link.limits(link.env.lower, link.env.upper)
@@ -229,15 +234,17 @@ def _fault_bits_since(link, t: float) -> int:
     return bits
 
 
-def _judge_fault_bits(link, cause: str, bits: int, expected: int):
+def _judge_fault_bits(link, cause: str, bits: int, expected: int, since: float):
     """CTRL-FAULT-1: judged only where a fault was raised (a missing fault fails the scenario's own
-    requirement).
+    requirement), on the fault bits since `since` [s]. A silence of this host as long as the stated host timeout
+    trips the controller's watchdog, another bit: the FAIL's time tolerance (host_excuse).
     """
     if not bits:
         return
     ok = bits == expected
     link.results.put('CTRL-FAULT-1', PASS if ok else FAIL, f'{cause}: {fault_names(bits)}',
-                     '' if ok else f'expected exactly {fault_names(expected)}')
+                     '' if ok else f'expected exactly {fault_names(expected)}',
+                     Stretch(since, link.now(), tolerance=link.host_timeout))
 
 
 def _judge_latch(link):
@@ -251,14 +258,20 @@ def _judge_latch(link):
     latched = bool(states) and not cleared
     t_reset = link.now()
     link.command(CMD_RESET)
-    idle = link._wait(lambda: link.state == 'idle' and not link.faults, 0.2)
+    # idle is timed by the status frame's arrival on the bus, not by when this run read it (its view may lag)
+    link._wait(lambda: link.state == 'idle' and not link.faults, 1.0)
+    idle_at = next((s[0] for s in link._states_since(t_reset) if s[1] == 'idle' and not s[2]), None)
+    idle = idle_at is not None and idle_at - t_reset <= RESET_TIME
     ok = latched and idle
     held = f'{cleared[0][0] - t:.3f} s' if cleared else f'{LATCH_TIME:g} s'
     link.results.put('CTRL-FAULT-2', PASS if ok else FAIL,
                      f'fault held {held} without RESET ({len(states)} status frames); idle without faults '
-                     f'{link.now() - t_reset:.3f} s after RESET: {idle}',
+                     + (f'{idle_at - t_reset:.3f} s after RESET (at most {RESET_TIME:g} s)' if idle_at is not None
+                        else f'not within {link.now() - t_reset:.3f} s of RESET'),
                      '' if ok else f'a fault must latch until RESET (checked for {LATCH_TIME:g} s), which '
-                     'clears it')
+                     'clears it',      # a fault that clears itself is no delay; a slow RESET by its excess only
+                     Stretch(t, link.now(), excess=None if not latched else (
+                         idle_at if idle_at is not None else link.now()) - t_reset - RESET_TIME, tolerance=math.inf))
 
 
 @judges('CTRL-LIM-3', 'CTRL-FAULT-1')
@@ -305,8 +318,9 @@ def _too_fast(link, side: int, vmax: float, step: float, basis: str):
                      f'fastest applied {fastest:.4f} m/s, faults {fault_names(faults)}; fault ramp: '
                      f'{shape.describe()}',
                      '' if ok else shape.why() if fastest <= vmax * 1.02 + 2 * LSB * link.fs and faults else
-                     'a setpoint above the rated velocity must never be applied, and must fault')
-    _judge_fault_bits(link, 'too fast', faults, FAULT_VELOCITY_LIMIT)
+                     'a setpoint above the rated velocity must never be applied, and must fault',
+                     Stretch(t, link.now(), tolerance=math.inf if fastest > vmax * 1.02 + 2 * LSB * link.fs else None))
+    _judge_fault_bits(link, 'too fast', faults, FAULT_VELOCITY_LIMIT, t)
     link.to_rest(0.0)
 
 
@@ -351,7 +365,7 @@ def s_host_silence(link):
         link.results.put('CTRL-WD-1', NOT_TESTED, f'ramp began {delay:.3f} s after the last HostHeartbeat '
                          f'(stated host timeout {timeout:g} s), rest at {rest * 1e3:.4f} mm, faults '
                          f'{fault_names(faults)}', not_judged(late, 'between the last heartbeat and the ramp'))
-        _judge_fault_bits(link, 'host silence', faults, FAULT_WATCHDOG)
+        _judge_fault_bits(link, 'host silence', faults, FAULT_WATCHDOG, t_silent)
         link.to_rest(0.0)
         return
     link.results.put('CTRL-WD-1', PASS if ok else FAIL,
@@ -360,7 +374,7 @@ def s_host_silence(link):
                      f'{shape.describe()}',
                      '' if ok else shape.why() or 'host silence must ramp the rig to rest within the host '
                      'timeout, faulted')
-    _judge_fault_bits(link, 'host silence', faults, FAULT_WATCHDOG)
+    _judge_fault_bits(link, 'host silence', faults, FAULT_WATCHDOG, t_silent)
     link.to_rest(0.0)
 
 

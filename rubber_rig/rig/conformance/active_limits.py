@@ -77,7 +77,7 @@ def _tighten_under_queue(link, side: int):
     link._sleep(0.05)
     _judge_refusal(link, side, bound, u_now, queued_end, seen, t_limits)
     _judge_fault_bits(link, 'tighter limits with setpoints queued outside them', _fault_bits_since(link, t),
-                      FAULT_DISPLACEMENT_LIMIT)
+                      FAULT_DISPLACEMENT_LIMIT, t)
     link.limits(env.lower, env.upper)
     link.to_rest(link.position)
 

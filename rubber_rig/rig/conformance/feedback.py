@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..can.protocol import STATES, unwrap
-from .host_timing import MARGIN, explains, late_between, late_total, not_judged
+from .host_timing import MARGIN, LateSpans, explains, late_between, late_total, not_judged
 from .report import FAIL, NOT_TESTED, PASS, Results
 from .trace import Trace
 
@@ -152,12 +152,11 @@ def check_feedback(trace: Trace, results: Results, runs: list = None):
 def _feedback_timing(runs: list, windows: list, fs: float) -> tuple:
     """(rates [Hz], spreads [s], samples left out) of the runs, from every sample outside the host-late windows."""
     rates, spreads, left_out = [], [], 0
+    late = LateSpans(windows, MARGIN)
     for r in runs:
         seq, t = _every_sample(r)
         if windows:
-            keep = np.ones(t.size, dtype=bool)
-            for a, b in windows:
-                keep &= ~((t >= a - MARGIN) & (t <= b + MARGIN))
+            keep = ~late.covers(t)
             left_out += int(t.size - keep.sum())
             seq, t = seq[keep], t[keep]
         if t.size < 100:

@@ -33,6 +33,7 @@ import numpy as np
 
 LATE_MIN = 0.010     # [s] a wake-up this much later than due is recorded
 MARGIN = 0.005       # [s] a window is widened by this much on each side when a stretch of the trace is judged
+JOIN_GAP = 0.001     # [s] windows this close are one stretch of lateness (longest_late)
 SIM_LATE_MIN = 0.002  # [s] the simulator on this host logs each deadline it missed by this much (the 2 ms a
 #                      controller's feedback may jitter, CTRL-FB-2): python -m rubber_rig.rig.sim --timing-log
 
@@ -130,6 +131,66 @@ def late_total(windows, t0: float, t1: float) -> float:
     return total
 
 
+def longest_late(windows, t0: float, t1: float, join: float = JOIN_GAP) -> float:
+    """The longest stretch [s] this host was late without a break, among the windows that overlap [t0, t1]
+    widened by MARGIN: windows of any source that overlap, or follow each other within `join` [s], are one
+    stretch (the same delay seen by several sources, or a task held back sample after sample). Unlike late_total,
+    many short delays spread over a long stretch do not add up: a view of the controller, or a reaction, is
+    only as stale as the longest single delay.
+    """
+    lo, hi = t0 - MARGIN, t1 + MARGIN
+    spans = sorted((a, b) for a, b in windows if a <= hi and b >= lo)
+    longest, start, end = 0.0, None, -float('inf')
+    for a, b in spans:
+        if start is None or a > end + join:
+            start, end = a, b
+        else:
+            end = max(end, b)
+        longest = max(longest, end - start)
+    return longest
+
+
+class LateSpans:
+    """The union of lateness windows [(start, end) s], each widened by `widen` [s] on both sides, as disjoint
+    sorted spans: many stretches are then queried at once in O(log m) each (a run on a loaded host records over
+    ten thousand windows, and a periodic frame's check asks for every one of ten thousand intervals).
+    """
+
+    def __init__(self, windows, widen: float = 0.0):
+        starts, ends = [], []
+        for a, b in sorted(windows):
+            a, b = a - widen, b + widen
+            if ends and a <= ends[-1]:
+                ends[-1] = max(ends[-1], b)
+            else:
+                starts.append(a)
+                ends.append(b)
+        self.starts, self.ends = np.array(starts, dtype=float), np.array(ends, dtype=float)
+        self._before = np.concatenate(([0.0], np.cumsum(self.ends - self.starts)))   # covered before span k
+
+    def _covered_until(self, x):
+        """How long [s] the spans cover up to x (array)."""
+        j = np.searchsorted(self.starts, x, side='right') - 1
+        k = np.maximum(j, 0)
+        if not self.starts.size:
+            return np.zeros_like(x)
+        inside = np.minimum(x, self.ends[k]) - self.starts[k]
+        return np.where(j >= 0, self._before[k] + inside, 0.0)
+
+    def total(self, lo, hi):
+        """How long [s] the spans cover within each [lo, hi] (arrays of one shape): late_total, all at once."""
+        lo, hi = np.asarray(lo, dtype=float), np.asarray(hi, dtype=float)
+        return np.maximum(self._covered_until(hi) - self._covered_until(lo), 0.0)
+
+    def covers(self, t):
+        """Whether each time t [s] (array) lies within a span (ends included)."""
+        t = np.asarray(t, dtype=float)
+        if not self.starts.size:
+            return np.zeros(t.shape, dtype=bool)
+        j = np.searchsorted(self.starts, t, side='right') - 1
+        return (j >= 0) & (t <= self.ends[np.maximum(j, 0)])
+
+
 def own_intervals(windows, t, period: float):
     """The intervals between frames at times t [s] (shape (n,)) less this host's lateness around each, as far as it
     can explain them: only the part of an interval beyond `period` [s] can be the host's (a late host delays a
@@ -139,7 +200,7 @@ def own_intervals(windows, t, period: float):
     """
     t = np.asarray(t, dtype=float)
     dt = np.diff(t)
-    late = np.array([late_total(windows, a, b) for a, b in zip(t[:-1], t[1:], strict=True)])
+    late = LateSpans(windows).total(t[:-1] - MARGIN, t[1:] + MARGIN) if t.size else dt
     credited = np.minimum(late, np.maximum(dt - period, 0.0)) if dt.size else dt
     return dt - credited, credited, late
 

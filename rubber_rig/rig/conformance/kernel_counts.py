@@ -39,6 +39,7 @@ RUN_QUEUE_MIN = 0.002    # [s] a run-queue wait this long (within one sampling i
 #                         simulator's own missed deadlines (host_timing.SIM_LATE_MIN)
 SAMPLE_PERIOD = 0.005    # [s] the waits are read at most this often (a read costs ~20 us per task)
 PSI_CPU = '/proc/pressure/cpu'
+OWN_WAITS = 'run-queue waits of this run'   # host_timing source: the conformance run's own process
 
 
 def read_waits(pids) -> dict:
@@ -109,14 +110,17 @@ def pressure_share(before, after, seconds: float):
 class KernelCounts:
     """What the kernel counted of this host's lateness during a run on the wall clock, into `timing` (a
     host_timing.HostTiming): the run-queue waits of the processes `pids` (the simulator's, added when it starts)
-    and the drops of the socket under `bus` (None: no socket watched). sample(now) is called by the run's receive
-    loop; it reads at most every SAMPLE_PERIOD.
+    and of the run's own process `own_pid`, and the drops of the socket under `bus` (None: no socket watched).
+    sample(now) is called by the run's receive loop; it reads at most every SAMPLE_PERIOD.
     """
 
-    def __init__(self, timing, bus=None):
+    def __init__(self, timing, bus=None, own_pid=None):
         self.timing, self.pids = timing, []
         self._waits, self._drops, self._next = RunQueueWatch(), DropWatch(), 0.0
         self._socket = socket_inode(bus) if bus is not None else None
+        # this run's own process (None: not watched): its scenario and receive threads kept from a CPU saw and
+        # sent late - a stale view of the controller, a stream sent late (host_excuse)
+        self.own_pid, self._own = own_pid, RunQueueWatch()
 
     def sample(self, now: float):
         if now < self._next:
@@ -125,6 +129,9 @@ class KernelCounts:
         if self.pids:
             for t0, t1 in self._waits.update(now, read_waits(self.pids)):
                 self.timing.add(t0, t1, 'run-queue waits of the simulator')
+        if self.own_pid is not None:
+            for t0, t1 in self._own.update(now, read_waits([self.own_pid])):
+                self.timing.add(t0, t1, OWN_WAITS)
         if self._socket is not None:
             lost = self._drops.update(now, dropped(self._socket))
             if lost:

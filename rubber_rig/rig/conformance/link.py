@@ -20,6 +20,7 @@ the run (active.ConformanceRun) holds one; it is deliberately not the driver (se
 from __future__ import annotations
 
 import math
+import os
 import threading
 import time
 from typing import TYPE_CHECKING
@@ -39,6 +40,7 @@ from ..can.protocol import (
 from .envelope import Envelope, Sample
 from .host_timing import HostTiming
 from .kernel_counts import KernelCounts
+from .marks import Aborted, judges  # noqa: F401 - the scenarios import them from here too
 from .report import Results
 from .trace import Trace
 
@@ -51,6 +53,8 @@ LEAD = 0.3                  # [s] setpoints streamed ahead of the controller: co
 #                             controller hold, then step to where the wave had moved on, and tripped the
 #                             tracking watch)
 IDENTIFY_TIMEOUT = 0.1      # [s] CTRL-ID-1
+REACTION = 0.1              # [s] a controller is given to react to a command (a ramp's start, the watchdog's ramp)
+RESET_TIME = 0.2            # [s] RESET is given to return a latched fault to idle (CTRL-FAULT-2)
 IDENTIFY_REPEATS = 5        # CTRL-ID-1: IDENTIFY is asked this many times, each must be answered
 RAMP_VELOCITY = 0.002       # [m/s] commanded velocity of the ramps the run asks for
 APPROACH_VELOCITY = 0.0005  # [m/s] of the stream towards a limit (CTRL-LIM-2): LEAD of it is 0.15 mm
@@ -63,21 +67,7 @@ TOO_FAST_FACTOR = 1.5       # CTRL-LIM-3 steps at this multiple of the rated vel
 LATCH_TIME = 3.0            # [s] a fault must stay latched this long without RESET (CTRL-FAULT-2)
 FOREIGN_ID = 0x7FE          # an identifier the DBC does not define: another node's traffic
 FOREIGN_PERIOD = 0.01       # [s] of that traffic while the host is silent (CTRL-WD-1)
-
-
-class Aborted(RuntimeError):
-    """The run left the operator's envelope (or could not continue safely): ABORT was commanded."""
-
-
-def judges(*requirement_ids):
-    """Decorator of a scenario (a function of the ConformanceLink): the requirements it judges. A scenario that
-    fails on its own (an exception other than Aborted, e.g. a controller that does not do what the scenario needs)
-    fails those it had not judged yet, with the reason (active.ConformanceRun.run), and the run goes on.
-    """
-    def mark(scenario):
-        scenario.requirements = tuple(requirement_ids)
-        return scenario
-    return mark
+SCENARIO_THREAD = 'scenario thread'   # host_timing source: the run's thread that streams, commands and waits
 
 
 class ConformanceLink:
@@ -109,9 +99,10 @@ class ConformanceLink:
         self.trace.host_late = self.host_timing.windows
         self.host_timing_files = tuple(host_timing_files)
         # the kernel's count of this host's lateness, sampled by the receive loop (kernel_counts): the waits for a
-        # CPU of the processes standing for the controller (kernel.pids: the simulator with --sim), and the frames
-        # the socket under this run's bus dropped
-        self.kernel = KernelCounts(self.host_timing, bus if simulated is None else None)
+        # CPU of the processes standing for the controller (kernel.pids: the simulator with --sim) and of this
+        # run's own, and the frames the socket under this run's bus dropped
+        self.kernel = KernelCounts(self.host_timing, bus if simulated is None else None,
+                                   os.getpid() if simulated is None else None)
         self.results = Results()
         self.lock = threading.RLock()
         self.state, self.faults, self.identity = 'unconfigured', 0, None
@@ -130,6 +121,7 @@ class ConformanceLink:
         self._fb_ref = 0
         self._hb_counter = 0
         self._next_hb = 0.0
+        self._last_rx = -math.inf     # arrival time [s] of the latest controller frame read (catch_up)
         self._stop = threading.Event()
         self.position = 0.0         # last applied command reported [m]
         self._rx = threading.Thread(target=self._receive_loop, name='conformance-rx', daemon=True)
@@ -202,7 +194,10 @@ class ConformanceLink:
         """
         sim = self.simulated
         if sim is None:
+            # the scenario thread woke later than it asked: what it then sent or saw was late by this host
+            due = time.time() + seconds
             time.sleep(seconds)
+            self.host_timing.due(due, time.time(), SCENARIO_THREAD)
             return
         for _ in range(max(1, int(round(seconds / sim.step)))):
             sim.t += sim.step
@@ -253,6 +248,7 @@ class ConformanceLink:
             fr = self.trace.add(msg, t)
             if fr.malformed or fr.host is not False:
                 return
+            self._last_rx = max(self._last_rx, t)
             if fr.samples is not None:
                 self._on_feedback(fr)
             elif fr.name == 'ControllerStatus':
@@ -349,8 +345,19 @@ class ConformanceLink:
             self._pause(0.001)
         return sent
 
+    def catch_up(self, timeout: float = 1.0) -> bool:
+        """Wait until a controller frame that arrived (kernel time stamp) after now was read, so every one before
+        it was (the queue is read in order): the view scenarios act on lags the bus while this host starves the
+        receive thread. False if none came within `timeout` [s]; on simulated time the view is always current.
+        """
+        if self.simulated is not None:
+            return True
+        t = self.now()
+        return self._wait(lambda: self._last_rx >= t, timeout)
+
     def next_sequence(self, lead: float = LEAD) -> int:
-        """A sequence LEAD ahead of the last sample the controller reported."""
+        """A sequence LEAD ahead of the last sample the controller reported (after catching up with the bus)."""
+        self.catch_up()
         with self.lock:
             last = self.samples[-1].seq if self.samples else 0
         return last + 1 + int(lead * self.fs)
@@ -371,6 +378,7 @@ class ConformanceLink:
         if self.state == 'fault' or self.faults:
             self.command(CMD_RESET)
             self._wait(lambda: self.state == 'idle' and not self.faults, 1.0)
+        self.catch_up()        # the next scenario starts from where the controller is, not from a lagging view
         self.heartbeat = False
 
     def smooth(self, start: float, amplitude: float, frequency: float = WAVE_FREQUENCY):

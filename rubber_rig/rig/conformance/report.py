@@ -17,11 +17,26 @@
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 from .requirements import BY_ID, REQUIREMENTS
 
 PASS, FAIL, NOT_TESTED = 'pass', 'fail', 'not tested'
+
+
+@dataclass(frozen=True)
+class Stretch:
+    """The stretch [t0, t1] of the run [s, the trace's time base] a verdict judged, in `scenario`. `excess` [s]:
+    for a violation that is itself a time (a ramp too long), how far it went beyond its bound; `tolerance` [s]:
+    the time the requirement gives, where it is not the fixed one of host_excuse.TIME_TOLERANCE (the stated host
+    timeout). A FAIL in a stretch where this host was late enough is not judged (host_excuse).
+    """
+
+    t0: float
+    t1: float
+    scenario: str = ''
+    excess: float | None = None
+    tolerance: float | None = None
 
 
 @dataclass
@@ -43,9 +58,23 @@ class Results(dict):
     tested), with both measurements.
     """
 
-    def put(self, rid: str, status: str, measured: str = '', detail: str = ''):
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        # requirement id -> the Stretch of each FAIL put (None: a FAIL that names no stretch, never excused)
+        self.stretches = {}
+        # callable returning the Stretch of a FAIL put without one (the scenario so far; set by the run), or None
+        self.stamp = None
+
+    def put(self, rid: str, status: str, measured: str = '', detail: str = '', stretch: Stretch | None = None):
+        """Judge `rid`; a FAIL keeps `stretch` (default: self.stamp()) for host_excuse."""
         if rid not in BY_ID:
             raise KeyError(f'no requirement {rid}')
+        if status == FAIL:
+            if self.stamp is not None:       # the scenario so far, or the name of the scenario it is in
+                default = self.stamp()
+                stretch = default if stretch is None else stretch if stretch.scenario else \
+                    replace(stretch, scenario=default.scenario)
+            self.stretches.setdefault(rid, []).append(stretch)
         old = self.get(rid)
         new = Result(rid, status, measured, detail)
         if old is None or old.status == NOT_TESTED:

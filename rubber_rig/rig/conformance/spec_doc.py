@@ -14,8 +14,8 @@
 
 
 """The parts of docs/protocol.md that code defines, rendered from it: frames and signals, state codes and fault
-bits (rubber_rig.dbc), the tolerances of the offline checks (conformance.passive) and the simulator's deliberate
-defects (conformance.defects).
+bits (rubber_rig.dbc), the tolerances of the offline checks (conformance.passive), the simulator's deliberate
+defects (conformance.defects) and the time tolerances of the scenarios' verdicts (conformance.host_excuse).
 
 docs/protocol.md holds each between ``<!-- BEGIN GENERATED: name -->`` and ``<!-- END GENERATED: name -->``
 markers; test_protocol_spec fails when a block differs from what this module renders, so a change of the DBC
@@ -36,6 +36,7 @@ from ..can.protocol import DBC_PATH, PROTOCOL_VERSION, Protocol
 from ..reference.defects import REFERENCE_DEFECTS
 from . import passive
 from .defects import DEFECTS
+from .host_excuse import TIME_TOLERANCE
 
 DOC = Path(__file__).resolve().parents[3] / 'docs' / 'protocol.md'
 REGENERATE = 'python -m rubber_rig.rig.conformance.spec_doc'
@@ -188,8 +189,18 @@ def reference_defects_table() -> str:
     return '\n'.join(out) + '\n'
 
 
+def host_excuses_table() -> str:
+    """The time tolerance of each requirement a scenario judges (conformance/host_excuse.py): this host late this
+    long without a break in a FAIL's stretch makes it not judged.
+    """
+    out = ['| requirement | time tolerance | what it is |', '| --- | --- | --- |']
+    out += [f'| {rid} | {seconds * 1e3:g} ms | {_cell(what)} |' for rid, (seconds, what) in TIME_TOLERANCE.items()]
+    return '\n'.join(out) + '\n'
+
+
 GENERATORS = {'frames': frame_table, 'states': states_table, 'faults': faults_table,
-              'tolerances': tolerances_table, 'defects': defects_table, 'reference_defects': reference_defects_table}
+              'tolerances': tolerances_table, 'defects': defects_table, 'reference_defects': reference_defects_table,
+              'host_excuses': host_excuses_table}
 
 
 def generated_blocks(text: str) -> dict:
