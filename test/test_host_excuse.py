@@ -144,8 +144,8 @@ def test_what_no_delay_can_make_or_a_rule_of_its_own_decides_is_never_excused_by
     results.put('CTRL-FAULT-2', FAIL, 'cleared after 0.5 s', 'latch', Stretch(10.0, 12.0, tolerance=math.inf))
     results.put('CTRL-ID-1', FAIL, 'answered in 900 ms', 'late', Stretch(10.0, 12.0))
     results.put('CTRL-WD-1', FAIL, 'never ramped', 'silence', Stretch(10.0, 12.0))
-    results.put('CTRL-RAMP-1', FAIL, 'no ramp', 'no ramp to rest', Stretch(10.0, 25.0, excess=15.0,
-                                                                          tolerance=math.inf))
+    never = Stretch(10.0, 25.0, excess=15.0, tolerance=math.inf)
+    results.put('CTRL-RAMP-1', FAIL, 'no ramp', 'no ramp to rest', never)
     assert excuse(results, [(10.5, 12.5)]) == []
     assert {r.status for r in results.values()} == {FAIL}
     assert excuse(results, [(10.0, 25.0)]) == ['CTRL-RAMP-1']
