@@ -83,7 +83,9 @@ def _requirements():
 
 
 def _third_party_imports(*folders):
-    local = {p.stem for p in (ROOT / 'test').glob('*.py')} | {'rubber_rig'} | LOCAL_TEST_PACKAGES
+    # a test module, or a benchmark script importing its sibling (run from benchmarks/, it is on sys.path)
+    local = {p.stem for d in ('test', 'benchmarks') for p in (ROOT / d).glob('*.py')} | {'rubber_rig'} \
+        | LOCAL_TEST_PACKAGES
     found = {}
     for folder in folders:
         for f in sorted((ROOT / folder).rglob('*.py')):
