@@ -41,18 +41,15 @@ from rubber_rig.nodes import awaitables
 from rubber_rig.nodes.executor import LeanExecutor
 from rubber_rig.nodes.executor_choice import EXECUTOR_ENV, EventsLoop, make_executor
 
+from support.waiting import poll_until
+
 pytestmark = pytest.mark.ros   # every test here runs real rclpy on a DDS domain of its own
 
 PATIENCE = 20.0   # [s] the longest any wait here waits for its event
 
 
 def _until(condition, patience=PATIENCE, step=0.005):
-    end = time.monotonic() + patience
-    while not condition():
-        if time.monotonic() > end:
-            return False
-        time.sleep(step)
-    return True
+    return bool(poll_until(condition, patience, period=step))
 
 
 @pytest.fixture

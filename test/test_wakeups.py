@@ -33,16 +33,13 @@ from rubber_rig.rig.can.protocol import FAULT_WATCHDOG
 from rubber_rig.rig.can.receiver import BusReceiver
 from rubber_rig.session.cadence import Cadence
 
+from support.waiting import poll_until
+
 PATIENCE = 20.0   # [s] the longest any wait here waits for its event (a loaded machine is slow, never wrong)
 
 
 def _until(condition, patience=PATIENCE, step=0.005):
-    end = time.monotonic() + patience
-    while not condition():
-        if time.monotonic() > end:
-            return False
-        time.sleep(step)
-    return True
+    return bool(poll_until(condition, patience, period=step))
 
 
 # ---- one timer per node ------------------------------------------------------------------------------------------
