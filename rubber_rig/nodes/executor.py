@@ -64,6 +64,8 @@ from rclpy.timer import Timer
 from rclpy.utilities import timeout_sec_to_nsec
 from rclpy.waitable import NumberOfEntities
 
+from .rclpy_compat import RCLError
+
 _EVENT_HANDLE = '_EventHandler__event'   # EventHandler's one rcl event handle (name-mangled private attribute)
 _PLAIN_EVENT_HANDLERS = (EventHandler, QoSEventHandler)   # not subclasses that may add entities of their own
 
@@ -246,7 +248,11 @@ class LeanExecutor(SingleThreadedExecutor):
                         yield (self._make_handler(waitable, entities.owner[waitable], self._take_waitable),
                                waitable, entities.owner[waitable])
                 for tmr in timers_ready:
-                    if tmr.handle.is_timer_ready() and tmr.callback_group.can_execute(tmr):
+                    try:        # a timer destroyed since the wait (a lifecycle transition): rebuild, skip it
+                        ready_now = tmr.handle.is_timer_ready()
+                    except (InvalidHandle, RCLError):
+                        self._stale, ready_now = True, False
+                    if ready_now and tmr.callback_group.can_execute(tmr):
                         yielded_work = True
                         yield self._make_handler(tmr, entities.owner[tmr], self._take_timer), tmr, entities.owner[tmr]
                 for sub in subs_ready:
