@@ -188,6 +188,53 @@ def test_one_wake_up_per_message_where_rclpy_needs_two(context):
         spinning.stop()
 
 
+def test_a_polled_subscription_wakes_no_one_and_its_node_reads_it_in_order(context):
+    # the recorder, the excitation's samples, the peers' heartbeats (nodes/draining.py): LeanExecutor leaves a
+    # polled subscription out of its wait set; the node reads it from its tick with drain(). Whether a message
+    # was handled is asserted once the reader has acknowledged it (reliable QoS: it sits in the reader's queue)
+    from rubber_rig.nodes.draining import create_draining_subscription
+    node = Node('lean_polled', context=context)
+    polled, woken = [], []
+    qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
+    sub = create_draining_subscription(node, Int32, 'lean_polled', lambda m: polled.append(m.data), qos, polled=True)
+    node.create_subscription(Int32, 'lean_woken', lambda m: woken.append(m.data), qos)
+    pub_polled = node.create_publisher(Int32, 'lean_polled', qos)
+    pub_woken = node.create_publisher(Int32, 'lean_woken', qos)
+    spinning = Spinning(node, context)
+    try:
+        assert _until(lambda: pub_polled.get_subscription_count() == 1 and pub_woken.get_subscription_count() == 1)
+        turns = spinning.executor.turns
+        for k in range(30):
+            pub_polled.publish(Int32(data=k))
+        assert pub_polled.wait_for_all_acked(rclpy.duration.Duration(seconds=PATIENCE))
+        pub_woken.publish(Int32(data=1))
+        assert _until(lambda: woken == [1])
+        assert polled == [] and spinning.executor.turns - turns <= 5      # 30 queued, none woke the node
+        node.create_timer(0.01, sub.drain)                               # the node's tick reads them
+        assert _until(lambda: len(polled) == 30) and polled == list(range(30))
+    finally:
+        spinning.stop()
+
+
+def test_under_rclpys_own_executor_a_polled_subscription_still_delivers(context):
+    # RUBBER_RIG_EXECUTOR=rclpy: rclpy's executor knows nothing of polling; the messages wake the node as before
+    from rubber_rig.nodes.draining import create_draining_subscription
+    node = Node('rclpy_polled', context=context)
+    got = []
+    create_draining_subscription(node, Int32, 'rclpy_polled', lambda m: got.append(m.data), 100, polled=True)
+    pub = node.create_publisher(Int32, 'rclpy_polled', 100)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    try:
+        assert _until(lambda: executor.spin_once(timeout_sec=0.01) or pub.get_subscription_count() == 1)
+        for k in range(10):
+            pub.publish(Int32(data=k))
+        assert _until(lambda: executor.spin_once(timeout_sec=0.01) or len(got) == 10) and got == list(range(10))
+    finally:
+        executor.shutdown()
+        node.destroy_node()
+
+
 def test_entities_created_and_destroyed_while_spinning_and_coroutines_awaiting_timers(context):
     node = Node('lean_dynamic', context=context)
     log = []

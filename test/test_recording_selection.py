@@ -18,7 +18,7 @@ discovery is tested in test_recording_node.py.
 from types import SimpleNamespace
 
 from rubber_rig.recording.qos import qos_entry
-from rubber_rig.recording.selection import recorded_publishers, recorded_topics, subscription_qos
+from rubber_rig.recording.selection import in_arrival_order, recorded_publishers, recorded_topics, subscription_qos
 
 GRAPH = [('/rig1/samples', ['msg_defs/msg/RigSampleBatch']), ('/rig1/run_program/_action/status', ['x/msg/S']),
          ('/rig1/rig_driver/setpoint_stream/rig1/excitation', ['msg_defs/msg/SetpointBatch']),
@@ -50,3 +50,17 @@ def test_the_subscription_is_as_reliable_and_durable_as_every_publisher_and_deep
     assert subscription_qos([latched], 1000) == (True, True, 1000)
     assert subscription_qos([latched, stream], 1000) == (True, False, 5000)
     assert subscription_qos([stream, best], 1000) == (False, False, 5000)
+
+
+def test_topics_read_together_are_written_in_the_order_they_arrived():
+    # the recorder reads every topic at once each read_period; a recorder woken per message would have written
+    # them by arrival: so is this, and a topic's own order stands where times are equal
+    samples = [(b's0', {'received_timestamp': 10}), (b's1', {'received_timestamp': 30}),
+               (b's2', {'received_timestamp': 30})]
+    predictions = [(b'p0', {'received_timestamp': 20}), (b'p1', {'received_timestamp': 30})]
+    beats = [(b'b0', {'received_timestamp': 5})]
+    merged = in_arrival_order([('samples', samples), ('prediction', predictions), ('heartbeat', beats), ('x', [])])
+    assert [(key, taken[0]) for key, taken in merged] == [
+        ('heartbeat', b'b0'), ('samples', b's0'), ('prediction', b'p0'), ('samples', b's1'), ('samples', b's2'),
+        ('prediction', b'p1')]
+    assert merged[0][1][1] is beats[0][1]        # the message info goes with its message

@@ -148,11 +148,14 @@ class ElementModelNode(Node):
         # a backlog (a busy computer delayed this node) is read in one wake-up, not one batch per executor cycle
         self.samples_topic = create_draining_subscription(self, RigSampleBatch, topics.SAMPLES, self.on_samples,
                                                           topics.STREAM_QOS).topic_name
-        self.setpoints_topic = create_draining_subscription(self, SetpointBatch, topics.SETPOINTS, self.on_setpoints,
-                                                            topics.STREAM_QOS).topic_name
+        # setpoints come a lead time before their samples: read before each sample batch, no wake-up of their own
+        self.setpoints = create_draining_subscription(self, SetpointBatch, topics.SETPOINTS, self.on_setpoints,
+                                                      topics.STREAM_QOS, polled=True)
+        self.setpoints_topic = self.setpoints.topic_name
         self._published_params = None
         self.publish_parameters()
         self.ticks = NodeTicks(self, {   # one timer (nodes/ticks.py)
+            'setpoints': (PERIOD, self.setpoints.drain),   # also when no samples come
             'heartbeat': (PERIOD, start_heartbeat(self, lambda: self.predictor.model_name, timer=False)),
             'diagnostics': (1.0, start_auth_diagnostics(self, self.auth))})
         choice = self.predictor.choice
@@ -175,6 +178,7 @@ class ElementModelNode(Node):
         """A batch with a valid signature goes to the model; a forged one is refused (counted, named in
         /diagnostics): it neither enters the prediction nor makes a cycle the detectors judge.
         """
+        self.setpoints.drain()
         if not self.auth.refuse(self, msg, SAMPLES, self.samples_topic):
             self.take_samples(msg)
 

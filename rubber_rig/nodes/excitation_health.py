@@ -27,6 +27,7 @@ from msg_defs.msg import DetectorEvent, Heartbeat
 from rubber_rig.nodes import awaitables, topics
 from rubber_rig.nodes import conversions as conv
 from rubber_rig.nodes.auth import HEARTBEAT, annotate
+from rubber_rig.nodes.draining import create_draining_subscription
 from rubber_rig.session.peer_watch import PeerWatch, blind_detectors, program_diagnosis, result_message
 from rubber_rig.session.program_watch import Throttle
 
@@ -46,8 +47,9 @@ class ProgramHealth:
         self.feedback_due = Throttle(node.params.feedback_period)
         self.me = node.get_fully_qualified_name()
         self.peers = PeerWatch(self.me)   # the others' silences from their own beats; this node's own stalls
-        self.beat_topic = node.create_subscription(Heartbeat, topics.HEARTBEAT, self.on_beat,
-                                                   topics.HEARTBEAT_QOS).topic_name
+        self.beats = create_draining_subscription(node, Heartbeat, topics.HEARTBEAT, self.on_beat,
+                                                  topics.HEARTBEAT_QOS, polled=True)   # read by watch_peers
+        self.beat_topic = self.beats.topic_name
         self.pub_diagnostics = node.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
 
     def duties(self) -> dict:
@@ -101,6 +103,7 @@ class ProgramHealth:
         while a program runs, remember it for the goal's result. The rig driver's silence ends the program
         elsewhere (status_timeout).
         """
+        self.beats.drain()
         news = self.peers.watch(self.node.clock(), self.node.session is not None)
         log = self.node.get_logger()
         if news.stall:

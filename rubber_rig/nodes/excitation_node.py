@@ -112,11 +112,10 @@ class ExcitationNode(Node):
         self.pub_program = self.create_publisher(String, topics.PROGRAM, topics.LATCHED_QOS)
         self.pub_events = self.create_publisher(DetectorEvent, topics.EVENTS, topics.EVENT_QOS)
         self.create_subscription(CycleMetrics, topics.CYCLE_METRICS, self.on_cycle_metrics, topics.EVENT_QOS)
-        self.sub_samples = create_draining_subscription(self, RigSampleBatch, topics.SAMPLES, self.on_samples,
-                                                        topics.STREAM_QOS)   # a backlog is read in one wake-up
+        self.sub_samples = create_draining_subscription(   # read on the stream tick, not a wake-up per batch
+            self, RigSampleBatch, topics.SAMPLES, self.on_samples, topics.STREAM_QOS, polled=True)
         self.create_subscription(RigStatus, topics.STATUS, self.on_status, topics.LATCHED_QOS)
-        self.create_subscription(RecorderStatus, topics.RECORDER_STATUS, self.on_recorder_status,
-                                 topics.LATCHED_QOS)
+        self.create_subscription(RecorderStatus, topics.RECORDER_STATUS, self.on_recorder_status, topics.LATCHED_QOS)
         self.open_client = self.create_client(OpenStream, f'{self.params.rig_driver}/open_stream')
         self.stop_client = self.create_client(StopStream, f'{self.params.rig_driver}/stop_stream')
         self.create_service(Trigger, '~/abort', lambda req, res: services.on_abort(self, req, res))
@@ -127,6 +126,7 @@ class ExcitationNode(Node):
                                    goal_callback=self.admit_goal,
                                    cancel_callback=lambda _: CancelResponse.ACCEPT, **topics.ACTION_SERVICES_QOS)
         self.ticks = NodeTicks(self, {   # one timer (nodes/ticks.py): streaming first, then the health's duties
+            'samples': (self.params.stream_period, self.sub_samples.drain),   # what the rig measured, then
             'stream': (self.params.stream_period, self.stream), **self.health.duties(),
             'heartbeat': (PERIOD, start_heartbeat(self, lambda: self.state, timer=False))})
 

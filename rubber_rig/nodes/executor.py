@@ -64,6 +64,7 @@ from rclpy.timer import Timer
 from rclpy.utilities import timeout_sec_to_nsec
 from rclpy.waitable import NumberOfEntities
 
+from .draining import is_polled
 from .rclpy_compat import RCLError
 
 _EVENT_HANDLE = '_EventHandler__event'   # EventHandler's one rcl event handle (name-mangled private attribute)
@@ -83,11 +84,15 @@ class _Entities:
         self.guards, self.waitables = [], []
         self.owner = {}   # entity -> its node
         for node in nodes:
+            # a polled subscription wakes no one (nodes/draining.py), nor do its QoS events: Fast DDS signals them
+            # on the reader's status condition, which data waiting in the reader also sets (a busy loop)
+            polled = {id(entity) for sub in node.subscriptions if is_polled(sub)
+                      for entity in [sub, *sub.event_handlers]}
             for kind, entities in ((self.timers, node.timers), (self.subscriptions, node.subscriptions),
                                    (self.clients, node.clients), (self.services, node.services),
                                    (self.guards, node.guards), (self.waitables, node.waitables)):
                 for entity in entities:
-                    if keep(entity):
+                    if keep(entity) and id(entity) not in polled:
                         kind.append(entity)
                         self.owner[entity] = node
         self.node_guards = list(self.guards)

@@ -34,6 +34,7 @@ from rubber_rig.session.liveness import PERIOD, SILENT, OwnerSilence, OwnerWatch
 
 from . import topics
 from .auth import HEARTBEAT
+from .draining import create_draining_subscription
 
 
 def start_heartbeat(node: Node, state: Callable[[], str] = lambda: '', timer: bool = True) -> Callable[[], None]:
@@ -64,11 +65,17 @@ class Peers(liveness.Peers):
     """
 
     def __init__(self, node: Node, expected: list[str] | None = None, silent: float = SILENT,
-                 clock: Callable[[], float] = time.monotonic, auth=None):
+                 clock: Callable[[], float] = time.monotonic, auth=None, polled: bool = False):
         super().__init__(expected, silent, clock)
         self.auth = auth     # NodeAuth: beats without a valid signature are refused (counted in its verifier)
         self._node, self._topic = node, node.resolve_topic_name(topics.HEARTBEAT)
-        node.create_subscription(Heartbeat, topics.HEARTBEAT, self.on_beat, topics.HEARTBEAT_QOS)
+        # polled: the node calls read() from its tick; the beats wake it no more (nodes/draining.py)
+        self.subscription = create_draining_subscription(node, Heartbeat, topics.HEARTBEAT, self.on_beat,
+                                                         topics.HEARTBEAT_QOS, polled=polled)
+
+    def read(self) -> None:
+        """Handle the beats that arrived since the last read (a polled Peers)."""
+        self.subscription.drain()
 
     def on_beat(self, msg: Heartbeat) -> None:
         where = f'{self._topic} (beat of {msg.node})'

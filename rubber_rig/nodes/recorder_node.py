@@ -53,15 +53,15 @@ from msg_defs.msg import RecorderStatus, RigSampleBatch, SetpointBatch
 from msg_defs.srv import RecorderControl
 from rubber_rig.nodes import topics
 from rubber_rig.nodes.auth import RECORDER_CONTROL, SAMPLES, SETPOINTS, annotate, declare_auth
-from rubber_rig.nodes.draining import create_draining_subscription
+from rubber_rig.nodes.draining import create_draining_subscription, take_queued
 from rubber_rig.nodes.heartbeat import PERIOD, start_heartbeat
 from rubber_rig.nodes.params import declare
 from rubber_rig.nodes.spin import spin_node
 from rubber_rig.nodes.ticks import NodeTicks
 from rubber_rig.recording import Recorder, RecordingError, full_definition
 from rubber_rig.recording.metadata import BOOKKEEPING_TOPIC, bookkeeping_text, bookkeeping_topic
-from rubber_rig.recording.qos import qos_entry
-from rubber_rig.recording.selection import recorded_publishers, recorded_topics, subscription_qos
+from rubber_rig.recording.qos import offered_qos
+from rubber_rig.recording.selection import in_arrival_order, recorded_publishers, recorded_topics, subscription_qos
 from rubber_rig.recording.status_cadence import StatusCadence
 
 UNSUPPORTED_SEQUENCE = 2**63   # RMW_MESSAGE_INFO_SEQUENCE_NUMBER_UNSUPPORTED is UINT64_MAX
@@ -84,19 +84,6 @@ def message_class(type_name: str):
     """'pkg/msg/Type' -> the rosidl-generated class (needed to create a raw subscription)."""
     pkg, sub, name = type_name.split('/')
     return getattr(importlib.import_module(f'{pkg}.{sub}'), name)
-
-
-def _ns(duration) -> int:
-    return int(getattr(duration, 'nanoseconds', 0))
-
-
-def offered_qos(info) -> dict:
-    """Rclpy TopicEndpointInfo -> the rosbag2 offered_qos_profiles entry."""
-    q = info.qos_profile
-    return qos_entry(history=q.history, depth=q.depth, reliability=q.reliability, durability=q.durability,
-                     deadline_ns=_ns(q.deadline), lifespan_ns=_ns(q.lifespan), liveliness=q.liveliness,
-                     liveliness_lease_duration_ns=_ns(q.liveliness_lease_duration),
-                     avoid_ros_namespace_conventions=q.avoid_ros_namespace_conventions)
 
 
 class RecorderNode(Node):
@@ -127,6 +114,10 @@ class RecorderNode(Node):
                                range=(0.05, 60.0), units='s')
         discovery_period = declare(self, 'discovery_period', 0.25, 'look for new topics this often',
                                    range=(0.05, 60.0), units='s')
+        read_period = declare(self, 'read_period', 0.05,
+                              'read what arrived on the recorded topics this often: one wake-up for all of them, '
+                              'not one per message (each keeps its arrival time); history_depth must hold what '
+                              'arrives in this time', range=(0.001, 1.0), units='s')
         self.status_period = declare(self, 'status_period', 0.5,
                                      'publish recorder_status at least this often (and on every change)',
                                      range=(0.05, 10.0), units='s')
@@ -146,7 +137,7 @@ class RecorderNode(Node):
                              bookkeeping_topic=bookkeeping_topic(self.get_namespace()))
         # each closed file's bookkeeping, latched (and written into the file as the same message by the core)
         self._bookkeeping_pub = self.create_publisher(String, BOOKKEEPING_TOPIC, topics.LATCHED_QOS)
-        self._subs = {}                       # topic -> (subscription, type)
+        self._subs = {}                       # topic -> (subscription, type, what writes one of its messages)
         self._unrecordable = {}               # topic -> reason
         self._diag_pub = self.create_publisher(DiagnosticArray, topics.DIAGNOSTICS, 10)
         self._status_pub = self.create_publisher(RecorderStatus, topics.RECORDER_STATUS, topics.LATCHED_QOS)
@@ -156,6 +147,7 @@ class RecorderNode(Node):
         beat = start_heartbeat(self, lambda: 'recording' if self.core.recording else 'error' if self.core.error
                                else 'idle', timer=False)
         self.ticks = NodeTicks(self, {   # one timer for all of them (nodes/ticks.py)
+            'read': (read_period, self._guarded(self.read_topics)),
             'status': (min(0.1, self.status_period), self._guarded(self.update_status)), 'heartbeat': (PERIOD, beat),
             'discover': (discovery_period, self._guarded(self.discover)),
             'flush': (flush_period, self._guarded(self.flush)),
@@ -233,11 +225,19 @@ class RecorderNode(Node):
                              reliability=ReliabilityPolicy.RELIABLE if reliable else ReliabilityPolicy.BEST_EFFORT,
                              durability=DurabilityPolicy.TRANSIENT_LOCAL if latched else DurabilityPolicy.VOLATILE)
             self.core.set_qos(name, offered)
-            sub = create_draining_subscription(self, cls, name, self._callback(name, type_name), qos, raw=True)
-            self._subs[name] = (sub, type_name)
+            write = self._callback(name, type_name)
+            sub = create_draining_subscription(self, cls, name, write, qos, raw=True, polled=True)
+            self._subs[name] = (sub, type_name, write)
             self.get_logger().info(f'recording {name} [{type_name}] '
                                    f'({"reliable" if reliable else "best effort"}'
                                    f'{", transient local" if latched else ""})')
+
+    def read_topics(self) -> None:
+        """Write what arrived on every recorded topic since the last read, in the order it arrived (the topics'
+        messages interleaved by their receive time, as a recorder woken per message would have written them).
+        """
+        for write, (data, info) in in_arrival_order((write, take_queued(sub)) for sub, _, write in self._subs.values()):
+            write(data, info)
 
     def _callback(self, topic, type_name):
         write, clock = self.core.write, self.get_clock()
@@ -301,7 +301,7 @@ class RecorderNode(Node):
     def subscribed_topics(self) -> list:
         """(fully qualified topic, matched publishers) of the subscriptions matched with at least one publisher."""
         out = []
-        for name, (sub, _) in sorted(self._subs.items()):
+        for name, (sub, _, _) in sorted(self._subs.items()):
             try:
                 count = sub.get_publisher_count()
             except Exception:  # noqa: BLE001 - a subscription being destroyed

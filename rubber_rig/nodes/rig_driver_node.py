@@ -124,7 +124,7 @@ class RigDriverNode(LifecycleNode):
         accept_integers_for_doubles(self)
         self.add_on_set_parameters_callback(self.on_set_parameters)
         beat = start_heartbeat(self, lambda: self.rig.driver.status.state if self.rig else 'unconfigured', timer=False)
-        peers = Peers(self, silent=self.params.owner_timeout, auth=self.auth)   # owner silent: stream lost
+        peers = Peers(self, silent=self.params.owner_timeout, auth=self.auth, polled=True)   # owner silent: stream lost
         self.owner_watch, self.owner_silence = OwnerWatch(peers), OwnerSilence(peers)
         self.ticks = NodeTicks(self, {   # one timer: these, and the bus polls while active
             'status': (self.params.status_period, self.publish_status), 'heartbeat': (PERIOD, beat),
@@ -298,7 +298,10 @@ class RigDriverNode(LifecycleNode):
             self.publish_diagnostics()    # news (a fault, the owner silent or beating again): /diagnostics at once
 
     def watch_owner(self) -> None:
-        """A stream owner that beat and then went silent for owner_timeout (OwnerWatch) loses its stream."""
+        """A stream owner that beat and then went silent for owner_timeout (OwnerWatch) loses its stream (the
+        beats are read here, on the status tick: they wake the node no more).
+        """
+        self.owner_watch.peers.read()
         grant = self.rig.driver.stream if self.rig is not None and self.active else None
         if grant is None or not grant.owner:
             return

@@ -86,3 +86,18 @@ def parse_offered_qos(text: str) -> list:
         return []
     value = yaml.safe_load(text)
     return value if isinstance(value, list) else []
+
+
+def _ns(duration) -> int:
+    return int(getattr(duration, 'nanoseconds', 0))
+
+
+def offered_qos(info) -> dict:
+    """A publisher's endpoint info (rclpy's TopicEndpointInfo: ``qos_profile`` with rclpy's QoS fields) -> its
+    rosbag2 offered_qos_profiles entry (:func:`qos_entry`).
+    """
+    q = info.qos_profile
+    return qos_entry(history=q.history, depth=q.depth, reliability=q.reliability, durability=q.durability,
+                     deadline_ns=_ns(q.deadline), lifespan_ns=_ns(q.lifespan), liveliness=q.liveliness,
+                     liveliness_lease_duration_ns=_ns(q.liveliness_lease_duration),
+                     avoid_ros_namespace_conventions=q.avoid_ros_namespace_conventions)

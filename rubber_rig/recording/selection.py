@@ -23,6 +23,8 @@ the graph's topics and publishers as plain values).
   in the root namespace would otherwise record every other suite on the domain).
 - QoS: reliable only if every publisher is, transient-local only if every one is (as rosbag2 adapts its request),
   a history at least ``history_depth`` deep and as deep as any publisher's.
+- Reading: the node reads all its topics at once, every ``read_period`` (one wake-up, not one per message), and
+  writes what arrived in the order it arrived (:func:`in_arrival_order`), as a recorder woken per message would.
 """
 from __future__ import annotations
 
@@ -58,3 +60,14 @@ def subscription_qos(offered: list, history_depth: int) -> tuple[bool, bool, int
     reliable = all(q['reliability'] == 'reliable' for q in offered)
     latched = all(q['durability'] == 'transient_local' for q in offered)
     return reliable, latched, max([int(history_depth)] + [int(q['depth']) for q in offered])
+
+
+def in_arrival_order(per_topic) -> list:
+    """``per_topic``: (key, [(message, info), ...]) per topic, each list oldest first, ``info`` a dict with the
+    middleware's ``received_timestamp`` [ns]. Returns [(key, (message, info)), ...] of all topics by receive time
+    (stable: a topic's own order is kept, also where its times are equal or missing).
+    """
+    arrived = [(info.get('received_timestamp') or 0, topic, n, key, (message, info))
+               for topic, (key, taken) in enumerate(per_topic) for n, (message, info) in enumerate(taken)]
+    arrived.sort(key=lambda item: item[:3])
+    return [(key, taken) for *_, key, taken in arrived]
