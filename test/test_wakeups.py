@@ -193,3 +193,54 @@ def test_a_draining_subscription_reads_a_backlog_in_a_few_wake_ups_in_order():
             executor.shutdown()
             node.destroy_node()
     assert got == list(range(150)) and 2 <= wake_ups <= 15, (wake_ups, len(got))     # one per message: 150
+
+
+@pytest.mark.ros
+def test_ticks_from_events_hold_the_timer_back_and_it_ticks_again_when_they_stop():
+    # rig_driver's frames wake it once per batch and tick its duties then (NodeTicks.tick_now): the timer, kept for
+    # a silent bus (the watchdog), must not wake it a second time while batches come. On simulated time (the node
+    # takes /clock), stepped by the test: events every 0.05 s against a 0.1 s timer, then none for 0.3 s
+    from builtin_interfaces.msg import Time
+    from rclpy.node import Node
+    from rclpy.parameter import Parameter
+    from rosgraph_msgs.msg import Clock
+
+    from rubber_rig.nodes.executor import LeanExecutor
+    from rubber_rig.nodes.ticks import NodeTicks
+
+    from support.ros import ros_context
+    with ros_context(40 + os.getpid() % 20) as context:
+        node = Node('ticked', context=context, parameter_overrides=[Parameter('use_sim_time', value=True)])
+        clock_pub = Node('sim_clock', context=context).create_publisher(Clock, '/clock', 10)
+        executor = LeanExecutor(context=context)
+        executor.add_node(node)
+        spinner = threading.Thread(target=executor.spin, daemon=True)
+        spinner.start()
+
+        def set_time(seconds):
+            clock_pub.publish(Clock(clock=Time(sec=int(seconds), nanosec=round(seconds % 1 * 1e9))))
+            assert _until(lambda: abs(node.get_clock().now().nanoseconds * 1e-9 - seconds) < 1e-6), seconds
+
+        try:
+            assert _until(lambda: clock_pub.get_subscription_count() >= 1)
+            set_time(1.0)
+            ticks_seen, events_ticked, duty_runs = [0], [0], [0]
+            ticks = NodeTicks(node, {'status': (0.1, lambda: duty_runs.__setitem__(0, duty_runs[0] + 1))})
+            ticks.every_tick(lambda: ticks_seen.__setitem__(0, ticks_seen[0] + 1), 0.1)
+
+            def on_event():
+                ticks.tick_now()
+                events_ticked[0] += 1
+            event = node.create_guard_condition(on_event)
+            for k in range(1, 21):
+                set_time(1.0 + 0.05 * k)
+                event.trigger()
+                assert _until(lambda k=k: events_ticked[0] == k)
+            assert ticks_seen[0] == 20                  # every tick was an event's: the timer never fired
+            assert 10 <= duty_runs[0] <= 11             # the 0.1 s duty ran on schedule from the events (1 s)
+            set_time(2.0 + 0.3)                         # no event for 0.3 s: the timer ticks again
+            assert _until(lambda: ticks_seen[0] > 20)
+        finally:
+            executor.shutdown()
+            spinner.join(5.0)
+            node.destroy_node()

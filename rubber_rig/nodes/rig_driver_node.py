@@ -157,7 +157,7 @@ class RigDriverNode(LifecycleNode):
             return TransitionCallbackReturn.FAILURE
         self.batcher = SampleBatcher()
         self.pub_samples = self.create_lifecycle_publisher(RigSampleBatch, topics.SAMPLES, topics.STREAM_QOS)
-        self._frames_in = self.create_guard_condition(lambda: self.active and self.poll())
+        self._frames_in = self.create_guard_condition(lambda: self.active and self.ticks.tick_now())   # poll + duties
         self.pub_configuration.publish(String(data=configuration_text(self.config)))
         self.get_logger().info(f'rig open: backend {self.config.backend}, {self.config.sample_rate:g} Hz, '
                                f'{self.params.samples_per_batch(self.config.sample_rate)} samples per batch')

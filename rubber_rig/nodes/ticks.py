@@ -20,7 +20,9 @@ hands its duties to :class:`NodeTicks`, which keeps one timer at the shortest pe
 session.cadence.Cadence, with ``now`` from the node's clock (simulated with use_sim_time), which are due.
 
 ``every_tick``: a function run on every tick before the duties (rig_driver's bus poll while it is active), with
-the period it needs; the timer then ticks at the shorter of the two periods. Changing it replaces the timer (rclpy
+the period it needs; the timer then ticks at the shorter of the two periods. ``tick_now``: a tick from an event
+that woke the node anyway, which restarts the timer's period (rig_driver's frames: one wake-up per batch, not a
+batch's and a timer's). Changing it replaces the timer (rclpy
 timers keep their period), so the node still has one.
 """
 from __future__ import annotations
@@ -58,6 +60,15 @@ class NodeTicks:
             self._every_tick()
         for name in self.cadence.due(self.node.get_clock().now().nanoseconds * 1e-9):
             self.actions[name]()
+
+    def tick_now(self) -> None:
+        """A tick from an event that woke the node anyway (rig_driver's frames), and the timer's period starts
+        again: while such events come more often than the period, the timer never fires, and each of them is the
+        only wake-up (the timer still ticks when they stop: a silent bus is the watchdog's to see).
+        """
+        self.tick()
+        if self._timer is not None:
+            self._timer.reset()
 
     def _start(self, period: float) -> None:
         if self._timer is not None:
