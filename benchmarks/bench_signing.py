@@ -20,7 +20,7 @@ that takes at the suite's message rates, at 1 kHz and 10 kHz.
 What is timed is what a node does per message (rubber_rig.nodes.auth.NodeAuth on real rosidl messages): flatten
 the message's fields, encode them canonically (rubber_rig.security.canonical) and HMAC-SHA256 them, then, on the
 receiving side, the same plus the comparison and the replay check. Batch sizes are the shipped configuration's:
-a sample batch per 10 ms (10 samples at 1 kHz, 100 at 10 kHz) and a setpoint batch per stream_period 20 ms
+a sample batch per 10 ms (10 samples at 1 kHz, 100 at 10 kHz) and a setpoint batch per stream_period 40 ms
 (20 and 200 setpoints). The CPU share is per node and per core: signatures made and checked per second times
 their cost. A forged batch costs its receiver one verification (the tag is compared before anything else), so
 the refusal rate one core sustains is 1 / verify time. The recorder, which subscribes raw, also turns the CDR bytes
@@ -48,7 +48,7 @@ from rubber_rig.nodes.auth import HEARTBEAT, SAMPLES, SETPOINT_STREAM, NodeAuth
 
 KEY = bytes(range(32))
 SAMPLE_BATCH_PERIOD = 0.01     # [s] rig_sim.yaml: samples published every 10 ms
-SETPOINT_BATCH_PERIOD = 0.02   # [s] the excitation's stream_period
+SETPOINT_BATCH_PERIOD = 0.04   # [s] the excitation's stream_period (config/rig_sim.yaml)
 HEARTBEATS_PER_S = 4.0         # every node, every 0.25 s
 
 

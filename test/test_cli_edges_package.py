@@ -40,7 +40,7 @@ IMPORT_PROVIDER = {
     # tests and benchmarks
     'pytest': 'python3-pytest', '_pytest': 'python3-pytest', 'rosbags': 'python3-rosbags-pip',
     'catkin_pkg': 'python3-catkin-pkg',
-    'differint': 'differint', 'pytest_timeout': 'python3-pytest-timeout',
+    'differint': 'differint', 'pytest_timeout': 'python3-pytest-timeout', 'rosgraph_msgs': 'rosgraph_msgs',
     'ament_copyright': 'ament_copyright', 'ament_flake8': 'ament_flake8', 'ament_pep257': 'ament_pep257',
 }
 LOCAL_TEST_PACKAGES = {'support'}    # test/support: the tests' shared helpers

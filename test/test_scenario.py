@@ -90,7 +90,9 @@ def test_the_longest_stall_the_queue_covers_is_lead_time_less_the_reserve_and_on
     covered = LEAD_TIME - STREAM_TIMEOUT - STREAM_PERIOD
     o = Scenario(DURABILITY).stall('excitation', 2.0, covered - 0.01).run()
     assert o.completed, o.reason
-    o = Scenario(DURABILITY).stall('excitation', 2.0, covered + 0.05).run()
+    # at most lead_time less the reserve, plus the age of the samples the lead was measured from (a batch of
+    # 10 ms and its way): 0.87-0.89 s measured at stalls starting on and between the ticks
+    o = Scenario(DURABILITY).stall('excitation', 2.0, LEAD_TIME - STREAM_TIMEOUT + 0.05).run()
     assert not o.completed and 'setpoint stream lost' in o.reason
 
 

@@ -71,7 +71,7 @@ def declare_excitation_parameters(node: Node) -> ExcitationParams:
     lead_time = declare(node, 'lead_time', LEAD_TIME, 'how far ahead of the sample the rig plays (from when '
                         'its samples arrived) setpoints are streamed', range=(0.02, 5.0), units='s')
     batch_size = declare(node, 'batch_size', 50, 'setpoints per SetpointBatch', range=(1, 5000))
-    stream_period = declare(node, 'stream_period', 0.02, 'period of the streaming timer',
+    stream_period = declare(node, 'stream_period', 0.04, 'period of the streaming timer',
                             range=(0.001, 0.5), units='s')
     feedback_period = declare(node, 'feedback_period', 0.2, 'period of action feedback',
                               range=(0.01, 10.0), units='s')

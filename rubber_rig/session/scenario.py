@@ -77,7 +77,7 @@ class Scenario:
     OWNER = '/scenario/excitation'
 
     def __init__(self, program, rig: Optional[dict] = None, *, lead_time: float = LEAD_TIME,
-                 stream_period: float = 0.02, batch_size: int = 50, owner_timeout: float = OWNER_TIMEOUT,
+                 stream_period: float = 0.04, batch_size: int = 50, owner_timeout: float = OWNER_TIMEOUT,
                  poll_period: float = 0.002, amplitude_control: bool = False, model: Optional[ModelChoice] = None,
                  detectors: Optional[list] = None, record=None, start: float = 100.0):
         self.rig = SteppedRig(rig, step=poll_period, start=start)

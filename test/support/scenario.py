@@ -27,7 +27,7 @@ DURABILITY = Program.from_dict({
     'blocks': [{'name': 'durability', 'waveform': 'sine', 'amplitude': '1 mm', 'frequency': '10 Hz', 'cycles': 60},
                {'name': 'after', 'waveform': 'sine', 'amplitude': '0.5 mm', 'frequency': '5 Hz', 'cycles': 5}]})
 STREAM_TIMEOUT = RigConfig().stream_timeout
-STREAM_PERIOD = 0.02
+STREAM_PERIOD = 0.04
 
 
 def full_cycles(outcome, frequency=10.0, amplitude=1e-3):
