@@ -29,7 +29,8 @@ _spec.loader.exec_module(run_all)
 def test_every_listed_benchmark_is_a_script_and_every_script_is_listed():
     scripts = {p.name for p in (ROOT / 'benchmarks').glob('bench_*.py')}
     listed = {b.script for b in run_all.BENCHMARKS}
-    assert listed == scripts
+    assert scripts <= listed                                          # every bench_*.py has its run
+    assert all((ROOT / 'benchmarks' / name).is_file() for name in listed)   # (busy_load.py wraps one of them)
     assert len({b.name for b in run_all.BENCHMARKS}) == len(run_all.BENCHMARKS)
 
 
