@@ -247,38 +247,19 @@ class LeanExecutor(SingleThreadedExecutor):
                     self._stale = True
                     continue
                 timers_ready, subs_ready, clients_ready, services_ready, waitables_ready, timed_out = ready
-                for waitable in waitables_ready:
-                    if waitable.callback_group.can_execute(waitable):
-                        yielded_work = True
-                        yield (self._make_handler(waitable, entities.owner[waitable], self._take_waitable),
-                               waitable, entities.owner[waitable])
-                for tmr in timers_ready:
-                    try:        # a timer destroyed since the wait (a lifecycle transition): rebuild, skip it
-                        ready_now = tmr.handle.is_timer_ready()
-                    except (InvalidHandle, RCLError):
-                        self._stale, ready_now = True, False
-                    if ready_now and tmr.callback_group.can_execute(tmr):
-                        yielded_work = True
-                        yield self._make_handler(tmr, entities.owner[tmr], self._take_timer), tmr, entities.owner[tmr]
-                for sub in subs_ready:
-                    if sub.callback_group.can_execute(sub):
-                        yielded_work = True
-                        yield (self._make_handler(sub, entities.owner[sub], self._take_subscription),
-                               sub, entities.owner[sub])
-                for gc in entities.node_guards:
-                    if gc._executor_triggered and gc.callback_group.can_execute(gc):
-                        yielded_work = True
-                        yield (self._make_handler(gc, entities.owner[gc], self._take_guard_condition),
-                               gc, entities.owner[gc])
-                for client in clients_ready:
-                    if client.callback_group.can_execute(client):
-                        yielded_work = True
-                        yield (self._make_handler(client, entities.owner[client], self._take_client),
-                               client, entities.owner[client])
-                for srv in services_ready:
-                    if srv.callback_group.can_execute(srv):
-                        yielded_work = True
-                        yield self._make_handler(srv, entities.owner[srv], self._take_service), srv, entities.owner[srv]
+                # in rclpy's order; the lazy filters look at a timer or guard only when its turn comes (the
+                # handlers yielded before it have run by then)
+                for ready_kind, take in ((waitables_ready, self._take_waitable),
+                                         (self._timers_due(timers_ready), self._take_timer),
+                                         (subs_ready, self._take_subscription),
+                                         ((gc for gc in entities.node_guards if gc._executor_triggered),
+                                          self._take_guard_condition),
+                                         (clients_ready, self._take_client), (services_ready, self._take_service)):
+                    for entity in ready_kind:
+                        if entity.callback_group.can_execute(entity):
+                            yielded_work = True
+                            node = entities.owner[entity]
+                            yield self._make_handler(entity, node, take), entity, node
                 if timeout_nsec == 0 or timed_out:
                     raise TimeoutException()
         finally:
@@ -288,6 +269,18 @@ class LeanExecutor(SingleThreadedExecutor):
             raise ShutdownException()
         if condition():
             raise ConditionReachedException()
+
+    def _timers_due(self, timers):
+        """The `timers` the wait reported that are still ready now; one destroyed since the wait (a lifecycle
+        transition) is skipped and the entity list rebuilt.
+        """
+        for tmr in timers:
+            try:
+                ready_now = tmr.handle.is_timer_ready()
+            except (InvalidHandle, RCLError):
+                self._stale, ready_now = True, False
+            if ready_now:
+                yield tmr
 
     def _wait(self, entities: _Entities, timeout_timer, timeout_nsec: int):
         """Fill the kept wait set, wait, and return the ready entities; None when a handle is no longer valid."""
